@@ -1,0 +1,59 @@
+"""Helpers shared by the command-line front ends."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import sys
+import traceback
+from typing import Any
+
+from miro_gen.diagnostics import Diagnostics
+
+_MACRO_NAME = re.compile(r"[A-Za-z_]\w*$")
+
+
+def parse_defines(items: list[str], diag: Diagnostics) -> dict[str, str]:
+    """`-D NAME` / `-D NAME=VALUE` options as a macro table."""
+    out: dict[str, str] = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not _MACRO_NAME.match(name):
+            diag.error(None, f"invalid macro name in -D {item!r}")
+            continue
+        out[name] = value if sep else "1"
+    return out
+
+
+def internal_error(prog: str, exc: BaseException) -> int:
+    """Report a bug in the tool itself: one line, the traceback only with MIRO_DEBUG=1."""
+    print(
+        f"{prog}: internal error: {type(exc).__name__}: {exc}\n"
+        f"{prog}: this is a bug in miro-gen; please report it with the input that caused it "
+        "(set MIRO_DEBUG=1 for a traceback)",
+        file=sys.stderr,
+    )
+    if os.environ.get("MIRO_DEBUG"):
+        traceback.print_exc()
+    return 3
+
+
+def package_version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("miro-gen")
+    except PackageNotFoundError:  # running from a source checkout
+        return "0+unknown"
+
+
+class VersionAction(argparse.Action):
+    """`--version`, looking the version up only when asked (importlib.metadata is slow to load)."""
+
+    def __init__(self, option_strings: list[str], dest: str = argparse.SUPPRESS, **kw: Any) -> None:
+        super().__init__(option_strings, dest, nargs=0, help="show the version and exit", **kw)
+
+    def __call__(self, parser: argparse.ArgumentParser, *args: Any, **kw: Any) -> None:
+        print(f"{parser.prog} {package_version()}")
+        parser.exit()

@@ -1,0 +1,39 @@
+"""`miro`: the umbrella command. Sub-commands are added as the runtime grows."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+
+from miro_gen.cli.common import VersionAction
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="miro",
+        description="miro-gen: Miro (Middleware for Robots) in Python.",
+        epilog="The IDL compiler is `miro-idl` (also `miro idl`); see `miro-idl --help`.",
+    )
+    p.add_argument("--version", action=VersionAction)
+    sub = p.add_subparsers(dest="command", metavar="COMMAND")
+    sub.add_parser("idl", help="compile IDL files (same as miro-idl)", add_help=False)
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = list(sys.argv[1:] if argv is None else argv)
+    if args and args[0] == "idl":
+        from miro_gen.cli import idl
+
+        return idl.main(args[1:])
+    parser = build_parser()
+    ns = parser.parse_args(args)
+    if ns.command is None:
+        parser.print_help()
+        return 0
+    return 0  # pragma: no cover - every sub-command returns above
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
