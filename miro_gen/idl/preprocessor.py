@@ -1,0 +1,706 @@
+"""IDL preprocessor: the subset of the C preprocessor that IDL files use.
+
+Handles `#include "x"`/`<x>` (searched in the including file's folder, then the `-I` folders),
+`#define`/`#undef` (object-like and function-like macros), `#if/#ifdef/#ifndef/#elif/#else/#endif`
+with `defined(...)`, `#pragma once`, `#error`, `#warning` and `#line`. The `prefix`, `version` and
+`ID` pragmas are passed on to the parser as normalised `#pragma` lines, because their meaning
+depends on IDL scopes; other pragmas are dropped.
+
+Output is line-aligned: every output line comes from exactly one source line, recorded in
+`line_map`, so that the parser's positions map back to the original file, line and column.
+Comments are left in place for the lexer, which needs doc comments.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from bisect import bisect_right
+from typing import NamedTuple
+
+from miro_gen.diagnostics import Diagnostics, SourcePos
+
+MAX_INCLUDE_DEPTH = 200
+
+_DIRECTIVE = re.compile(r"\s*#\s*([A-Za-z_]\w*)?\s*(.*)$", re.S)
+_IDENT = re.compile(r"[A-Za-z_]\w*")
+# Pieces of a line that matter for comment tracking and macro expansion.
+_LEXEME = re.compile(
+    r'"(?:[^"\\\n]|\\.)*"?'  # string literal (possibly unterminated)
+    r"|'(?:[^'\\\n]|\\.)*'?"  # char literal
+    r"|//|/\*|\*/"
+    r"|[A-Za-z_]\w*"
+)
+_PASSED_PRAGMAS = ("prefix", "version", "ID")
+
+
+class Macro(NamedTuple):
+    name: str
+    params: tuple[str, ...] | None  # None for object-like macros
+    body: str
+
+
+class SourceText:
+    """Preprocessed text of one translation unit and the map back to the sources."""
+
+    __slots__ = ("_starts", "includes", "line_map", "paths", "text")
+
+    def __init__(
+        self,
+        text: str,
+        line_map: list[tuple[int, int, int]],
+        paths: list[str],
+        includes: dict[str, list[str]] | None = None,
+    ) -> None:
+        self.text = text
+        # For output line i (0-based): (index into `paths`, source line, file instance id).
+        self.line_map = line_map
+        self.paths = paths
+        # Direct includes of each file (display paths), in order of first inclusion.
+        self.includes: dict[str, list[str]] = includes if includes is not None else {}
+        self._starts: list[int] | None = None
+
+    def pos(self, line: int, col: int) -> SourcePos:
+        """Source position of 1-based output `line` and `col`."""
+        if 1 <= line <= len(self.line_map):
+            p, src_line, _ = self.line_map[line - 1]
+            return SourcePos(self.paths[p], src_line, col)
+        # Past the end (EOF errors): last line of the main file.
+        if self.line_map:
+            p, src_line, _ = self.line_map[-1]
+            return SourcePos(self.paths[p], src_line, col)
+        return SourcePos(self.paths[0] if self.paths else "<input>", 1, col)
+
+    def pos_at(self, offset: int) -> SourcePos:
+        """Source position of character `offset` of `text`."""
+        starts = self._line_starts()
+        line = bisect_right(starts, offset)
+        return self.pos(line, offset - starts[line - 1] + 1)
+
+    def instance_at(self, offset: int) -> int:
+        """File-instance id of the line holding character `offset` of `text`."""
+        return self.instance(bisect_right(self._line_starts(), offset))
+
+    def _line_starts(self) -> list[int]:
+        starts = self._starts
+        if starts is None:
+            starts = [0]
+            find = self.text.find
+            i = find("\n")
+            while i >= 0:
+                starts.append(i + 1)
+                i = find("\n", i + 1)
+            self._starts = starts
+        return starts
+
+    def instance(self, line: int) -> int:
+        """File-instance id of 1-based output `line` (each inclusion of a file is an instance)."""
+        if 1 <= line <= len(self.line_map):
+            return self.line_map[line - 1][2]
+        return 0
+
+
+class _Cond:
+    __slots__ = ("active", "done", "else_seen", "parent_active", "pos")
+
+    def __init__(self, parent_active: bool, active: bool, pos: SourcePos) -> None:
+        self.parent_active = parent_active
+        self.active = parent_active and active
+        self.done = active  # some branch was taken
+        self.else_seen = False
+        self.pos = pos
+
+
+class Preprocessor:
+    """Preprocesses one IDL file (and its includes) into a `SourceText`."""
+
+    def __init__(
+        self,
+        include_dirs: list[str] | tuple[str, ...] = (),
+        defines: dict[str, str] | None = None,
+        diagnostics: Diagnostics | None = None,
+    ) -> None:
+        self.include_dirs = list(include_dirs)
+        self.diag = diagnostics if diagnostics is not None else Diagnostics()
+        self._initial_macros: dict[str, Macro] = {"__MIRO_IDL__": Macro("__MIRO_IDL__", None, "1")}
+        for name, value in (defines or {}).items():
+            self._initial_macros[name] = Macro(name, None, value)
+        self._file_cache: dict[str, str | None] = {}
+
+    # -- public -------------------------------------------------------------------------------
+    def run(self, path: str) -> SourceText:
+        self.macros = dict(self._initial_macros)
+        self._macro_re: re.Pattern[str] | None = None
+        self._out: list[str] = []
+        self._map: list[tuple[int, int, int]] = []
+        self._paths: list[str] = []
+        self._path_index: dict[str, int] = {}
+        self._includes: dict[str, list[str]] = {}
+        self._once: set[str] = set()
+        self._instances = 0
+        self._depth = 0
+        text = self._read(path)
+        if text is None:
+            self.diag.error(None, f"cannot read '{path}'")
+        else:
+            self._process(path, text)
+        return SourceText("\n".join(self._out) + "\n", self._map, self._paths, self._includes)
+
+    # -- files --------------------------------------------------------------------------------
+    def _read(self, path: str) -> str | None:
+        if path in self._file_cache:
+            return self._file_cache[path]
+        try:
+            with open(path, "rb") as f:
+                data = f.read()
+        except OSError:
+            self._file_cache[path] = None
+            return None
+        try:
+            text = data.decode("utf-8")
+        except UnicodeDecodeError:
+            text = data.decode("latin-1")  # IDL source is ISO Latin-1 by the standard
+        if text.startswith("\ufeff"):
+            text = text[1:]
+        self._file_cache[path] = text
+        return text
+
+    def _path_id(self, path: str) -> int:
+        idx = self._path_index.get(path)
+        if idx is None:
+            idx = len(self._paths)
+            self._paths.append(path)
+            self._path_index[path] = idx
+        return idx
+
+    def _find_include(self, name: str, current: str) -> str | None:
+        if os.path.isabs(name):
+            return name if os.path.isfile(name) else None
+        dirs = [os.path.dirname(current), *self.include_dirs]
+        for d in dirs:
+            candidate = os.path.normpath(os.path.join(d, name)) if d else os.path.normpath(name)
+            if os.path.isfile(candidate):
+                return candidate
+        return None
+
+    # -- main loop ----------------------------------------------------------------------------
+    def _process(self, path: str, text: str) -> None:
+        pid = self._path_id(path)
+        self._includes.setdefault(path, [])
+        instance = self._instances
+        self._instances += 1
+        lines = text.split("\n")
+        n = len(lines)
+        conds: list[_Cond] = []
+        in_comment = False
+        comment_start: SourcePos | None = None
+        line_offset = 0  # adjusted by #line
+        out = self._out
+        out_map = self._map
+        i = 0
+        while i < n:
+            raw = lines[i]
+            lineno = i + 1
+            first = i
+            if raw.endswith("\r"):
+                raw = raw[:-1]
+            # Splice continuation lines (backslash-newline); they become empty output lines.
+            while raw.endswith("\\") and i + 1 < n:
+                i += 1
+                nxt = lines[i]
+                if nxt.endswith("\r"):
+                    nxt = nxt[:-1]
+                raw = raw[:-1] + nxt
+            extra = i - first
+            i += 1
+            active = not conds or conds[-1].active
+            src_line = lineno + line_offset
+
+            if not in_comment and raw.lstrip().startswith("#"):
+                pos = SourcePos(path, src_line, raw.index("#") + 1)
+                emitted = self._directive(raw, pos, path, conds, active)
+                if emitted is None:
+                    out.append("")
+                    out_map.append((pid, src_line, instance))
+                elif isinstance(emitted, tuple):  # "#line" change
+                    new_line, new_path = emitted
+                    out.append("")
+                    out_map.append((pid, src_line, instance))
+                    line_offset = new_line - (lineno + extra) - 1
+                    if new_path is not None:
+                        pid = self._path_id(new_path)
+                        path = new_path
+                else:
+                    out.append(emitted)
+                    out_map.append((pid, src_line, instance))
+            else:
+                start_in_comment = in_comment
+                if in_comment or "/*" in raw:
+                    _, in_comment, opened = _segments(raw, in_comment)
+                    if opened is not None:
+                        comment_start = SourcePos(path, src_line, opened + 1)
+                if active:
+                    if self.macros and self._macro_pattern().search(raw):
+                        raw = self._expand_line(raw, start_in_comment, SourcePos(path, src_line, 1))
+                    out.append(raw)
+                else:
+                    # Keep comment delimiters balanced for the lexer: an inactive line is blank.
+                    out.append("")
+                out_map.append((pid, src_line, instance))
+            for k in range(extra):
+                out.append("")
+                out_map.append((pid, src_line + k + 1, instance))
+        if in_comment and comment_start is not None:
+            self.diag.error(comment_start, "unterminated comment")
+        for c in conds:
+            self.diag.error(c.pos, "unterminated conditional directive (missing #endif)")
+
+    # -- directives ---------------------------------------------------------------------------
+    def _directive(
+        self, line: str, pos: SourcePos, path: str, conds: list[_Cond], active: bool
+    ) -> str | tuple[int, str | None] | None:
+        m = _DIRECTIVE.match(line)
+        assert m is not None
+        name = m.group(1) or ""
+        rest = _strip_comments(m.group(2)).strip()
+
+        # Conditionals are interpreted even in inactive regions.
+        if name in ("if", "ifdef", "ifndef"):
+            if not active:
+                conds.append(_Cond(False, False, pos))
+                return None
+            if name == "if":
+                value = self._eval_condition(rest, pos)
+            else:
+                ident = _IDENT.match(rest)
+                if not ident:
+                    self.diag.error(pos, f"#{name} needs a macro name")
+                    value = False
+                else:
+                    value = (ident.group(0) in self.macros) == (name == "ifdef")
+            conds.append(_Cond(True, value, pos))
+            return None
+        if name == "elif":
+            if not conds or conds[-1].else_seen:
+                self.diag.error(pos, "#elif without #if" if not conds else "#elif after #else")
+                return None
+            c = conds[-1]
+            if c.parent_active and not c.done:
+                value = self._eval_condition(rest, pos)
+                c.active = value
+                c.done = value
+            else:
+                c.active = False
+            return None
+        if name == "else":
+            if not conds or conds[-1].else_seen:
+                self.diag.error(pos, "#else without #if" if not conds else "#else after #else")
+                return None
+            c = conds[-1]
+            c.else_seen = True
+            c.active = c.parent_active and not c.done
+            c.done = True
+            return None
+        if name == "endif":
+            if not conds:
+                self.diag.error(pos, "#endif without #if")
+            else:
+                conds.pop()
+            return None
+        if not active:
+            return None
+
+        if name == "":
+            if rest and rest[0].isdigit():  # "# 12 "file"" line marker
+                return self._line_directive(rest, pos)
+            return None
+        if name == "include":
+            self._include(rest, pos, path)
+            return None
+        if name == "define":
+            self._define(rest, pos)
+            return None
+        if name == "undef":
+            ident = _IDENT.match(rest)
+            if ident:
+                self.macros.pop(ident.group(0), None)
+                self._macro_re = None
+            else:
+                self.diag.error(pos, "#undef needs a macro name")
+            return None
+        if name == "pragma":
+            words = rest.split(None, 1)
+            if not words:
+                return None
+            if words[0] == "once":
+                self._once.add(os.path.realpath(path))
+                return None
+            if words[0] in _PASSED_PRAGMAS:
+                return "#pragma " + rest
+            return None  # other pragmas (omniORB, DDS keylist, ...) do not affect the AST
+        if name == "error":
+            self.diag.error(pos, f"#error {rest}".rstrip())
+            return None
+        if name == "warning":
+            self.diag.warning(pos, f"#warning {rest}".rstrip())
+            return None
+        if name == "line":
+            return self._line_directive(rest, pos)
+        if name in ("ident", "sccs"):
+            return None
+        self.diag.error(pos, f"unknown preprocessor directive '#{name}'")
+        return None
+
+    def _line_directive(self, rest: str, pos: SourcePos) -> tuple[int, str | None] | None:
+        m = re.match(r'(\d+)(?:\s+"([^"]*)")?', rest)
+        if not m:
+            self.diag.error(pos, "malformed #line directive")
+            return None
+        return int(m.group(1)), m.group(2)
+
+    def _include(self, rest: str, pos: SourcePos, current: str) -> None:
+        if rest and rest[0] not in '"<' and self.macros:
+            rest = self._expand_text(rest, pos).strip()
+        m = re.match(r'"([^"]+)"|<([^>]+)>', rest)
+        if not m:
+            self.diag.error(pos, '#include expects "FILE" or <FILE>')
+            return
+        name = m.group(1) or m.group(2)
+        found = self._find_include(name, current)
+        if found is None:
+            searched = [os.path.dirname(current) or ".", *self.include_dirs]
+            self.diag.error(
+                pos, f"cannot find include file '{name}' (searched: {', '.join(searched)})"
+            )
+            return
+        incs = self._includes.setdefault(current, [])
+        if found not in incs:
+            incs.append(found)
+        if os.path.realpath(found) in self._once:
+            return
+        text = self._read(found)
+        if text is None:
+            self.diag.error(pos, f"cannot read include file '{found}'")
+            return
+        if self._depth >= MAX_INCLUDE_DEPTH:
+            self.diag.error(pos, f"#include nested too deeply (more than {MAX_INCLUDE_DEPTH})")
+            return
+        self._depth += 1
+        try:
+            self._process(found, text)
+        finally:
+            self._depth -= 1
+
+    def _define(self, rest: str, pos: SourcePos) -> None:
+        m = re.match(r"([A-Za-z_]\w*)(\(([^)]*)\))?\s*(.*)$", rest, re.S)
+        if not m:
+            self.diag.error(pos, "#define needs a macro name")
+            return
+        name = m.group(1)
+        params: tuple[str, ...] | None = None
+        if m.group(2) is not None:
+            plist = [p.strip() for p in m.group(3).split(",")] if m.group(3).strip() else []
+            if any(not _IDENT.fullmatch(p) for p in plist):
+                self.diag.error(pos, f"malformed parameter list in #define {name}")
+                return
+            params = tuple(plist)
+        self.macros[name] = Macro(name, params, m.group(4).strip())
+        self._macro_re = None
+
+    # -- macro expansion ----------------------------------------------------------------------
+    def _macro_pattern(self) -> re.Pattern[str]:
+        if self._macro_re is None:
+            names = sorted(self.macros, key=len, reverse=True)
+            self._macro_re = re.compile(r"\b(?:" + "|".join(map(re.escape, names)) + r")\b")
+        return self._macro_re
+
+    def _expand_line(self, line: str, in_comment: bool, pos: SourcePos) -> str:
+        """Expand macros in the code parts of `line` (not in comments or literals)."""
+        segments, _, _ = _segments(line, in_comment)
+        return "".join(self._expand_text(t, pos) if code else t for t, code in segments)
+
+    def _expand_text(self, text: str, pos: SourcePos, hide: frozenset[str] = frozenset()) -> str:
+        """Expand macros in a code fragment without comments; string literals are kept."""
+        out: list[str] = []
+        i = 0
+        n = len(text)
+        while i < n:
+            m = _LEXEME.search(text, i)
+            if m is None:
+                out.append(text[i:])
+                break
+            out.append(text[i : m.start()])
+            tok = m.group(0)
+            i = m.end()
+            macro = self.macros.get(tok)
+            if macro is None or tok in hide or not (tok[0].isalpha() or tok[0] == "_"):
+                out.append(tok)
+                continue
+            if macro.params is None:
+                out.append(self._expand_text(macro.body, pos, hide | {tok}))
+                continue
+            # Function-like: needs "(" args ")" on the same line.
+            j = i
+            while j < n and text[j] in " \t":
+                j += 1
+            if j >= n or text[j] != "(":
+                out.append(tok)
+                continue
+            args, end = _split_args(text, j)
+            if end < 0:
+                self.diag.error(pos, f"unterminated argument list for macro '{tok}'")
+                out.append(text[m.start() :])
+                break
+            if len(args) != len(macro.params) and not (not macro.params and args == [""]):
+                self.diag.error(
+                    pos,
+                    f"macro '{tok}' expects {len(macro.params)} arguments, got {len(args)}",
+                )
+                out.append(text[m.start() : end])
+                i = end
+                continue
+            expanded_args = {
+                p: self._expand_text(a.strip(), pos, hide)
+                for p, a in zip(macro.params, args, strict=False)
+            }
+            body = _substitute_params(macro.body, expanded_args)
+            out.append(self._expand_text(body, pos, hide | {tok}))
+            i = end
+        return "".join(out)
+
+    # -- #if expressions ----------------------------------------------------------------------
+    def _eval_condition(self, expr: str, pos: SourcePos) -> bool:
+        # Replace defined(X) / defined X before expanding macros.
+        def repl(m: re.Match[str]) -> str:
+            return "1" if (m.group(1) or m.group(2)) in self.macros else "0"
+
+        expr = re.sub(r"\bdefined\s*(?:\(\s*([A-Za-z_]\w*)\s*\)|([A-Za-z_]\w*))", repl, expr)
+        expr = self._expand_text(expr, pos)
+        try:
+            return _CondParser(expr).parse() != 0
+        except _CondError as e:
+            self.diag.error(pos, f"invalid #if expression: {e}")
+            return False
+
+
+def _segments(line: str, in_comment: bool) -> tuple[list[tuple[str, bool]], bool, int | None]:
+    """Split `line` into (text, is_code) pieces given the block-comment state at its start.
+
+    Returns the pieces, the block-comment state at the end of the line and, when a block comment
+    is still open there, the 0-based column where it began on this line (None if it began earlier).
+    """
+    pieces: list[tuple[str, bool]] = []
+    i = 0
+    code_start = 0
+    opened: int | None = None
+    n = len(line)
+    while i < n:
+        if in_comment:
+            end = line.find("*/", i)
+            if end < 0:
+                pieces.append((line[code_start:], False))
+                return pieces, True, opened
+            pieces.append((line[code_start : end + 2], False))
+            i = code_start = end + 2
+            in_comment = False
+            opened = None
+            continue
+        m = _LEXEME.search(line, i)
+        if m is None:
+            break
+        tok = m.group(0)
+        if tok == "//":
+            pieces.append((line[code_start : m.start()], True))
+            pieces.append((line[m.start() :], False))
+            return pieces, False, None
+        if tok == "/*":
+            pieces.append((line[code_start : m.start()], True))
+            code_start = m.start()
+            opened = m.start()
+            in_comment = True
+            i = m.end()
+            continue
+        i = m.end()
+    pieces.append((line[code_start:], True))
+    return pieces, False, None
+
+
+def _substitute_params(body: str, args: dict[str, str]) -> str:
+    """Replace a function-like macro's parameter names in its body by the (expanded) arguments."""
+    return _IDENT.sub(lambda m: args.get(m.group(0), m.group(0)), body)
+
+
+def _strip_comments(text: str) -> str:
+    """Remove comments from a directive's text (keeping string literals)."""
+    out: list[str] = []
+    i = 0
+    while True:
+        m = _LEXEME.search(text, i)
+        if m is None:
+            out.append(text[i:])
+            break
+        tok = m.group(0)
+        if tok == "//":
+            out.append(text[i : m.start()])
+            break
+        if tok == "/*":
+            out.append(text[i : m.start()] + " ")
+            end = text.find("*/", m.end())
+            if end < 0:
+                break
+            i = end + 2
+            continue
+        out.append(text[i : m.end()])
+        i = m.end()
+    return "".join(out)
+
+
+def _split_args(text: str, open_paren: int) -> tuple[list[str], int]:
+    """Split a macro call's arguments; returns (args, index after ')') or ([], -1)."""
+    depth = 0
+    args: list[str] = []
+    start = open_paren + 1
+    i = open_paren
+    n = len(text)
+    while i < n:
+        c = text[i]
+        if c in "\"'":
+            m = _LEXEME.match(text, i)
+            i = m.end() if m else i + 1
+            continue
+        if c == "(":
+            depth += 1
+        elif c == ")":
+            depth -= 1
+            if depth == 0:
+                args.append(text[start:i])
+                return args, i + 1
+        elif c == "," and depth == 1:
+            args.append(text[start:i])
+            start = i + 1
+        i += 1
+    return [], -1
+
+
+class _CondError(Exception):
+    pass
+
+
+_COND_TOKEN = re.compile(
+    r"\s*(?:(0[xX][0-9a-fA-F]+|\d+)[uUlL]*|('(?:[^'\\]|\\.)*')|([A-Za-z_]\w*)"
+    r"|(\|\||&&|==|!=|<=|>=|<<|>>|[-+*/%()<>!~&|^?:]))"
+)
+_BINARY_PREC = {
+    "||": 1, "&&": 2, "|": 3, "^": 4, "&": 5, "==": 6, "!=": 6,
+    "<": 7, ">": 7, "<=": 7, ">=": 7, "<<": 8, ">>": 8, "+": 9, "-": 9, "*": 10, "/": 10, "%": 10,
+}  # fmt: skip
+
+
+class _CondParser:
+    """Evaluates a preprocessor `#if` expression (after macro expansion) as C does."""
+
+    def __init__(self, text: str) -> None:
+        self.tokens: list[tuple[str, object]] = []
+        i = 0
+        text = text.rstrip()
+        while i < len(text):
+            m = _COND_TOKEN.match(text, i)
+            if not m or m.end() == i:
+                raise _CondError(f"unexpected '{text[i:].strip()[:20]}'")
+            if m.group(1) is not None:
+                lit = m.group(1)
+                value = (
+                    int(lit, 16)
+                    if lit[:2].lower() == "0x"
+                    else int(lit, 8 if lit.startswith("0") and len(lit) > 1 else 10)
+                )
+                self.tokens.append(("num", value))
+            elif m.group(2) is not None:
+                body = m.group(2)[1:-1]
+                value = ord(body.encode().decode("unicode_escape")[0]) if body else 0
+                self.tokens.append(("num", value))
+            elif m.group(3) is not None:
+                self.tokens.append(("num", 1 if m.group(3) == "true" else 0))
+            else:
+                self.tokens.append(("op", m.group(4)))
+            i = m.end()
+        self.i = 0
+
+    def parse(self) -> int:
+        if not self.tokens:
+            raise _CondError("empty expression")
+        v = self._ternary()
+        if self.i != len(self.tokens):
+            raise _CondError(f"unexpected '{self.tokens[self.i][1]}'")
+        return v
+
+    def _peek(self) -> str | None:
+        if self.i < len(self.tokens) and self.tokens[self.i][0] == "op":
+            return str(self.tokens[self.i][1])
+        return None
+
+    def _ternary(self) -> int:
+        cond = self._binary(1)
+        if self._peek() == "?":
+            self.i += 1
+            a = self._ternary()
+            if self._peek() != ":":
+                raise _CondError("expected ':'")
+            self.i += 1
+            b = self._ternary()
+            return a if cond else b
+        return cond
+
+    def _binary(self, min_prec: int) -> int:
+        left = self._unary()
+        while True:
+            op = self._peek()
+            prec = _BINARY_PREC.get(op or "")
+            if op is None or prec is None or prec < min_prec:
+                return left
+            self.i += 1
+            right = self._binary(prec + 1)
+            left = _apply(op, left, right)
+
+    def _unary(self) -> int:
+        if self.i >= len(self.tokens):
+            raise _CondError("unexpected end of expression")
+        kind, value = self.tokens[self.i]
+        self.i += 1
+        if kind == "num":
+            assert isinstance(value, int)
+            return value
+        if value == "(":
+            v = self._ternary()
+            if self._peek() != ")":
+                raise _CondError("expected ')'")
+            self.i += 1
+            return v
+        if value == "!":
+            return int(not self._unary())
+        if value == "-":
+            return -self._unary()
+        if value == "+":
+            return self._unary()
+        if value == "~":
+            return ~self._unary()
+        raise _CondError(f"unexpected '{value}'")
+
+
+def _apply(op: str, a: int, b: int) -> int:
+    if op in ("/", "%"):
+        if b == 0:
+            raise _CondError("division by zero")
+        q = abs(a) // abs(b) * (1 if (a >= 0) == (b >= 0) else -1)
+        return q if op == "/" else a - q * b
+    if op in ("<<", ">>") and not 0 <= b < 64:
+        raise _CondError("shift count out of range")
+    result: int = {
+        "||": lambda: int(bool(a) or bool(b)), "&&": lambda: int(bool(a) and bool(b)),
+        "|": lambda: a | b, "^": lambda: a ^ b, "&": lambda: a & b,
+        "==": lambda: int(a == b), "!=": lambda: int(a != b), "<": lambda: int(a < b),
+        ">": lambda: int(a > b), "<=": lambda: int(a <= b), ">=": lambda: int(a >= b),
+        "<<": lambda: a << b, ">>": lambda: a >> b, "+": lambda: a + b, "-": lambda: a - b,
+        "*": lambda: a * b,
+    }[op]()  # fmt: skip
+    return result
