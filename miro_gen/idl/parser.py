@@ -585,8 +585,8 @@ class _AstBuilder:
 
     # -- annotations --------------------------------------------------------------------------
     def annotation_appl(self, c: _Children) -> ast.Annotation:
-        name, args = c
-        return ast.Annotation(name, args or {}, name.pos)
+        at, name, args = c
+        return ast.Annotation(name, args or {}, self.pos(at))
 
     def annotation_name(self, c: _Children) -> ast.ScopedName:
         # Annotation names may be keywords (`@default`, `@oneway`): no reserved-word check.
