@@ -17,7 +17,7 @@ def module(i: int) -> str:
 /// Module number {i}: sensors and their interfaces.
 module M{i} {{
   const long SIZE = {i % 50 + 1};
-  const unsigned long long MASK = (1ULL_PLACEHOLDER << {i % 60}) | 0x{i:x};
+  const unsigned long long MASK = (1 << {i % 60}) | 0x{i:x};
   const double SCALE = {i}.5 * 2.0;
   const string NAME = "module {i}";
   enum Mode {{ IDLE, RUNNING, STOPPED, FAULT }};
@@ -64,7 +64,7 @@ module M{i} {{
 
 def main() -> None:
     n = int(sys.argv[1]) if len(sys.argv) > 1 else 200
-    text = "".join(module(i) for i in range(n)).replace("1ULL_PLACEHOLDER", "1")
+    text = "".join(module(i) for i in range(n))
     sys.stdout.write(text)
 
 
