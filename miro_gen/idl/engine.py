@@ -319,7 +319,8 @@ class Engine:
         match = self.master.match
         shr, gt = self.shr, self.gt
         end_state = self.end
-        state_stack = [self.start]
+        state = self.start
+        state_stack = [state]
         value_stack: list[Any] = []
         pos = 0
         tok: Any
@@ -338,7 +339,7 @@ class Engine:
                 if kind == "IDENT":
                     kw = keywords.get(text[start:pos])
                     if kw is not None:
-                        actions = states[state_stack[-1]]
+                        actions = states[state]
                         if kw in actions:
                             # LALR rows merge contexts: when both could follow, ask for real.
                             if "IDENT" not in actions or self._accepts(state_stack, kw):
@@ -347,7 +348,7 @@ class Engine:
                             kind = kw  # neither fits: report the keyword
                 elif (
                     kind == shr
-                    and gt in states[state_stack[-1]]
+                    and gt in states[state]
                     and self._accepts(state_stack, gt)  # `>>` closing two template lists
                 ):
                     pos = start + 1
@@ -360,10 +361,11 @@ class Engine:
                     tok = None
             # ---- feed it ---------------------------------------------------------------
             while True:
-                act = states[state_stack[-1]].get(kind)
+                act = states[state].get(kind)
                 if act is None:
-                    raise self._unexpected(kind, text, start, state_stack[-1])
+                    raise self._unexpected(kind, text, start, state)
                 if act >= 0:
+                    state = act
                     state_stack.append(act)
                     value_stack.append(tok)
                     break
@@ -375,9 +377,10 @@ class Engine:
                 else:
                     children = []
                 value = children[pick] if cb is None else cb(children)
-                state_stack.append(states[state_stack[-1]][origin])
+                state = states[state_stack[-1]][origin]
+                state_stack.append(state)
                 value_stack.append(value)
-                if state_stack[-1] == end_state and kind == "$END":
+                if state == end_state and kind == "$END":
                     return value
 
     def _accepts(self, state_stack: list[int], kind: str) -> bool:
