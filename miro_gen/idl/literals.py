@@ -18,18 +18,31 @@ class LiteralError(ValueError):
     """A malformed literal; the message is ready for the user."""
 
 
+MAX_INTEGER_DIGITS = 30  # 2**64 has 20 decimal digits; longer literals are out of range anyway
+
+
 def decode_integer(text: str) -> int:
+    if len(text.lstrip("0")) > MAX_INTEGER_DIGITS:
+        raise LiteralError(f"integer literal {shorten(text)} is too large for any IDL integer type")
     if text[:2] in ("0x", "0X"):
         return int(text[2:], 16)
     if len(text) > 1 and text[0] == "0":
         if any(c in "89" for c in text):
-            raise LiteralError(f"invalid digit in octal literal '{text}'")
+            raise LiteralError(f"invalid digit in octal literal '{shorten(text)}'")
         return int(text, 8)
     return int(text)
 
 
+def shorten(text: str, limit: int = 24) -> str:
+    """A literal as quoted in a message: long ones are cut."""
+    return text if len(text) <= limit else f"{text[: limit - 3]}..."
+
+
 def decode_float(text: str) -> float:
-    return float(text)
+    value = float(text)
+    if value == float("inf"):
+        raise LiteralError(f"floating-point literal {shorten(text)} is out of range")
+    return value
 
 
 def decode_fixed(text: str) -> Decimal:
@@ -58,7 +71,10 @@ def decode_escapes(body: str, wide: bool) -> str:
         if m.group(4) is not None:
             if not wide:
                 raise LiteralError("'\\u' escapes are only allowed in wide literals")
-            return chr(int(m.group(4), 16))
+            code = int(m.group(4), 16)
+            if 0xD800 <= code <= 0xDFFF:
+                raise LiteralError(f"'\\u{m.group(4)}' is a UTF-16 surrogate, not a character")
+            return chr(code)
         raise LiteralError(f"unknown escape sequence '\\{m.group(5)}'")
 
     return _ESCAPE.sub(repl, body)

@@ -19,8 +19,12 @@ from bisect import bisect_right
 from typing import NamedTuple
 
 from miro_gen.diagnostics import Diagnostics, SourcePos
+from miro_gen.idl.literals import LiteralError, decode_char, decode_integer
 
 MAX_INCLUDE_DEPTH = 200
+MAX_EXPANSION_DEPTH = 200
+MAX_EXPANDED_LINE = 1_000_000
+MAX_CONDITION_DEPTH = 2_000
 
 _DIRECTIVE = re.compile(r"\s*#\s*([A-Za-z_]\w*)?\s*(.*)$", re.S)
 _IDENT = re.compile(r"[A-Za-z_]\w*")
@@ -43,7 +47,7 @@ class Macro(NamedTuple):
 class SourceText:
     """Preprocessed text of one translation unit and the map back to the sources."""
 
-    __slots__ = ("_starts", "includes", "line_map", "paths", "text")
+    __slots__ = ("_starts", "col_maps", "includes", "line_map", "paths", "text")
 
     def __init__(
         self,
@@ -51,6 +55,7 @@ class SourceText:
         line_map: list[tuple[int, int, int]],
         paths: list[str],
         includes: dict[str, list[str]] | None = None,
+        col_maps: dict[int, list[tuple[int, int, bool]]] | None = None,
     ) -> None:
         self.text = text
         # For output line i (0-based): (index into `paths`, source line, file instance id).
@@ -58,12 +63,21 @@ class SourceText:
         self.paths = paths
         # Direct includes of each file (display paths), in order of first inclusion.
         self.includes: dict[str, list[str]] = includes if includes is not None else {}
+        # For lines changed by macro expansion (by 0-based output line): column pieces
+        # (output column, source column, verbatim), 0-based, sorted by output column.
+        self.col_maps: dict[int, list[tuple[int, int, bool]]] = col_maps or {}
         self._starts: list[int] | None = None
 
     def pos(self, line: int, col: int) -> SourcePos:
         """Source position of 1-based output `line` and `col`."""
         if 1 <= line <= len(self.line_map):
             p, src_line, _ = self.line_map[line - 1]
+            cmap = self.col_maps.get(line - 1) if self.col_maps else None
+            if cmap:
+                i = bisect_right(cmap, (col - 1, 1 << 62, True)) - 1
+                if i >= 0:
+                    out_col, src_col, verbatim = cmap[i]
+                    col = src_col + (col - 1 - out_col if verbatim else 0) + 1
             return SourcePos(self.paths[p], src_line, col)
         # Past the end (EOF errors): last line of the main file.
         if self.line_map:
@@ -136,6 +150,7 @@ class Preprocessor:
         self._paths: list[str] = []
         self._path_index: dict[str, int] = {}
         self._includes: dict[str, list[str]] = {}
+        self._col_maps: dict[int, list[tuple[int, int, bool]]] = {}
         self._once: set[str] = set()
         self._instances = 0
         self._depth = 0
@@ -144,7 +159,9 @@ class Preprocessor:
             self.diag.error(None, f"cannot read '{path}'")
         else:
             self._process(path, text)
-        return SourceText("\n".join(self._out) + "\n", self._map, self._paths, self._includes)
+        return SourceText(
+            "\n".join(self._out) + "\n", self._map, self._paths, self._includes, self._col_maps
+        )
 
     # -- files --------------------------------------------------------------------------------
     def _read(self, path: str) -> str | None:
@@ -218,9 +235,15 @@ class Preprocessor:
 
             if not in_comment and raw.lstrip().startswith("#"):
                 pos = SourcePos(path, src_line, raw.index("#") + 1)
+                comment_tail = ""
+                if "/*" in raw:  # a block comment may start on a directive line
+                    _, in_comment, opened = _segments(raw, False)
+                    if opened is not None:
+                        comment_start = SourcePos(path, src_line, opened + 1)
+                        comment_tail = " " * opened + raw[opened:]  # the lexer must see '/*'
                 emitted = self._directive(raw, pos, path, conds, active)
                 if emitted is None:
-                    out.append("")
+                    out.append(comment_tail)
                     out_map.append((pid, src_line, instance))
                 elif isinstance(emitted, tuple):  # "#line" change
                     new_line, new_path = emitted
@@ -231,7 +254,7 @@ class Preprocessor:
                         pid = self._path_id(new_path)
                         path = new_path
                 else:
-                    out.append(emitted)
+                    out.append(emitted + comment_tail[len(emitted) :])
                     out_map.append((pid, src_line, instance))
             else:
                 start_in_comment = in_comment
@@ -241,7 +264,10 @@ class Preprocessor:
                         comment_start = SourcePos(path, src_line, opened + 1)
                 if active:
                     if self.macros and self._macro_pattern().search(raw):
-                        raw = self._expand_line(raw, start_in_comment, SourcePos(path, src_line, 1))
+                        raw, cmap = self._expand_line(
+                            raw, start_in_comment, SourcePos(path, src_line, 1)
+                        )
+                        self._col_maps[len(out)] = cmap
                     out.append(raw)
                 else:
                     # Keep comment delimiters balanced for the lexer: an inactive line is blank.
@@ -352,11 +378,15 @@ class Preprocessor:
         return None
 
     def _line_directive(self, rest: str, pos: SourcePos) -> tuple[int, str | None] | None:
-        m = re.match(r'(\d+)(?:\s+"([^"]*)")?', rest)
-        if not m:
-            self.diag.error(pos, "malformed #line directive")
+        m = re.fullmatch(r'([0-9]+)(?:\s+"([^"]*)")?(?:\s+[0-9]+)*\s*', rest)
+        if not m or len(m.group(1)) > 10:
+            self.diag.error(pos, 'malformed #line directive: expected #line NUMBER ["FILE"]')
             return None
-        return int(m.group(1)), m.group(2)
+        line = int(m.group(1))
+        if line < 1:
+            self.diag.error(pos, f"#line number must be positive, not {line}")
+            return None
+        return line, m.group(2)
 
     def _include(self, rest: str, pos: SourcePos, current: str) -> None:
         if rest and rest[0] not in '"<' and self.macros:
@@ -414,58 +444,106 @@ class Preprocessor:
             self._macro_re = re.compile(r"\b(?:" + "|".join(map(re.escape, names)) + r")\b")
         return self._macro_re
 
-    def _expand_line(self, line: str, in_comment: bool, pos: SourcePos) -> str:
-        """Expand macros in the code parts of `line` (not in comments or literals)."""
-        segments, _, _ = _segments(line, in_comment)
-        return "".join(self._expand_text(t, pos) if code else t for t, code in segments)
+    def _expand_line(
+        self, line: str, in_comment: bool, pos: SourcePos
+    ) -> tuple[str, list[tuple[int, int, bool]]]:
+        """Expand macros in the code parts of `line` (not in comments or literals).
 
-    def _expand_text(self, text: str, pos: SourcePos, hide: frozenset[str] = frozenset()) -> str:
-        """Expand macros in a code fragment without comments; string literals are kept."""
+        Also returns the line's column map: (output column, source column, verbatim) pieces,
+        so that positions in expanded text point back into the original line.
+        """
+        segments, _, _ = _segments(line, in_comment)
         out: list[str] = []
-        i = 0
+        cmap: list[tuple[int, int, bool]] = []
+        out_len = src_off = 0
+        for text, code in segments:
+            if code:
+                pieces: list[tuple[int, int, bool]] = []
+                try:
+                    expanded = self._expand_text(text, pos, pieces=pieces)
+                except _ExpansionError as e:
+                    self.diag.error(pos, str(e))
+                    expanded, pieces = text, [(0, 0, True)]
+                cmap.extend((out_len + o, src_off + src, v) for o, src, v in pieces)
+            else:
+                expanded = text
+                cmap.append((out_len, src_off, True))
+            out.append(expanded)
+            out_len += len(expanded)
+            src_off += len(text)
+        return "".join(out), cmap
+
+    def _expand_text(
+        self,
+        text: str,
+        pos: SourcePos,
+        hide: frozenset[str] = frozenset(),
+        pieces: list[tuple[int, int, bool]] | None = None,
+        depth: int = 0,
+    ) -> str:
+        """Expand macros in a code fragment without comments; string literals are kept.
+
+        `pieces` (top level only) receives (output offset, source offset, verbatim) for each
+        piece of output: verbatim text, or the expansion of the macro invoked at that offset.
+        """
+        if depth > MAX_EXPANSION_DEPTH:
+            raise _ExpansionError(f"macro expansion nested more than {MAX_EXPANSION_DEPTH} deep")
+        out: list[str] = []
+        out_len = 0
+
+        def emit(piece: str, src: int, verbatim: bool) -> None:
+            nonlocal out_len
+            if not piece:
+                return
+            if pieces is not None:
+                pieces.append((out_len, src, verbatim))
+            out.append(piece)
+            out_len += len(piece)
+            if out_len > MAX_EXPANDED_LINE:
+                raise _ExpansionError("macro expansion is too large (over 1 MB on one line)")
+
+        i = verbatim_from = 0
         n = len(text)
-        while i < n:
+        while True:
             m = _LEXEME.search(text, i)
             if m is None:
-                out.append(text[i:])
                 break
-            out.append(text[i : m.start()])
             tok = m.group(0)
             i = m.end()
             macro = self.macros.get(tok)
             if macro is None or tok in hide or not (tok[0].isalpha() or tok[0] == "_"):
-                out.append(tok)
                 continue
             if macro.params is None:
-                out.append(self._expand_text(macro.body, pos, hide | {tok}))
-                continue
-            # Function-like: needs "(" args ")" on the same line.
-            j = i
-            while j < n and text[j] in " \t":
-                j += 1
-            if j >= n or text[j] != "(":
-                out.append(tok)
-                continue
-            args, end = _split_args(text, j)
-            if end < 0:
-                self.diag.error(pos, f"unterminated argument list for macro '{tok}'")
-                out.append(text[m.start() :])
-                break
-            if len(args) != len(macro.params) and not (not macro.params and args == [""]):
-                self.diag.error(
-                    pos,
-                    f"macro '{tok}' expects {len(macro.params)} arguments, got {len(args)}",
-                )
-                out.append(text[m.start() : end])
-                i = end
-                continue
-            expanded_args = {
-                p: self._expand_text(a.strip(), pos, hide)
-                for p, a in zip(macro.params, args, strict=False)
-            }
-            body = _substitute_params(macro.body, expanded_args)
-            out.append(self._expand_text(body, pos, hide | {tok}))
-            i = end
+                end = i
+                expansion = self._expand_text(macro.body, pos, hide | {tok}, None, depth + 1)
+            else:
+                # Function-like: needs "(" args ")" on the same line; otherwise not a call.
+                j = i
+                while j < n and text[j] in " \t":
+                    j += 1
+                if j >= n or text[j] != "(":
+                    continue
+                args, end = _split_args(text, j)
+                if end < 0:
+                    self.diag.error(pos, f"unterminated argument list for macro '{tok}'")
+                    break
+                if len(args) != len(macro.params) and not (not macro.params and args == [""]):
+                    self.diag.error(
+                        pos,
+                        f"macro '{tok}' expects {len(macro.params)} arguments, got {len(args)}",
+                    )
+                    i = end
+                    continue
+                expanded_args = {
+                    p: self._expand_text(a.strip(), pos, hide, None, depth + 1)
+                    for p, a in zip(macro.params, args, strict=False)
+                }
+                body = _substitute_params(macro.body, expanded_args)
+                expansion = self._expand_text(body, pos, hide | {tok}, None, depth + 1)
+            emit(text[verbatim_from : m.start()], verbatim_from, True)
+            emit(expansion, m.start(), False)
+            verbatim_from = i = end
+        emit(text[verbatim_from:], verbatim_from, True)
         return "".join(out)
 
     # -- #if expressions ----------------------------------------------------------------------
@@ -521,8 +599,9 @@ def _segments(line: str, in_comment: bool) -> tuple[list[tuple[str, bool]], bool
             i = m.end()
             continue
         i = m.end()
-    pieces.append((line[code_start:], True))
-    return pieces, False, None
+    # Also reached for an empty line, which leaves a block comment open.
+    pieces.append((line[code_start:], not in_comment))
+    return pieces, in_comment, opened if in_comment else None
 
 
 def _substitute_params(body: str, args: dict[str, str]) -> str:
@@ -586,6 +665,10 @@ class _CondError(Exception):
     pass
 
 
+class _ExpansionError(Exception):
+    """Macro expansion that would not end or would not fit."""
+
+
 _COND_TOKEN = re.compile(
     r"\s*(?:(0[xX][0-9a-fA-F]+|\d+)[uUlL]*|('(?:[^'\\]|\\.)*')|([A-Za-z_]\w*)"
     r"|(\|\||&&|==|!=|<=|>=|<<|>>|[-+*/%()<>!~&|^?:]))"
@@ -608,16 +691,16 @@ class _CondParser:
             if not m or m.end() == i:
                 raise _CondError(f"unexpected '{text[i:].strip()[:20]}'")
             if m.group(1) is not None:
-                lit = m.group(1)
-                value = (
-                    int(lit, 16)
-                    if lit[:2].lower() == "0x"
-                    else int(lit, 8 if lit.startswith("0") and len(lit) > 1 else 10)
-                )
+                try:
+                    value = decode_integer(m.group(1))
+                except (LiteralError, ValueError) as e:
+                    raise _CondError(str(e)) from None
                 self.tokens.append(("num", value))
             elif m.group(2) is not None:
-                body = m.group(2)[1:-1]
-                value = ord(body.encode().decode("unicode_escape")[0]) if body else 0
+                try:
+                    value = ord(decode_char(m.group(2)))
+                except LiteralError as e:
+                    raise _CondError(str(e)) from None
                 self.tokens.append(("num", value))
             elif m.group(3) is not None:
                 self.tokens.append(("num", 1 if m.group(3) == "true" else 0))
@@ -625,6 +708,7 @@ class _CondParser:
                 self.tokens.append(("op", m.group(4)))
             i = m.end()
         self.i = 0
+        self.depth = 0
 
     def parse(self) -> int:
         if not self.tokens:
@@ -670,6 +754,10 @@ class _CondParser:
         if kind == "num":
             assert isinstance(value, int)
             return value
+        if value in ("(", "!", "-", "+", "~"):
+            self.depth += 1
+            if self.depth > MAX_CONDITION_DEPTH:
+                raise _CondError("expression nested too deeply")
         if value == "(":
             v = self._ternary()
             if self._peek() != ")":
