@@ -30,6 +30,10 @@ from operator import itemgetter
 from typing import Any
 
 ENGINE_FORMAT = 4  # bump when the table layout below changes
+# Parser stack entries allowed: thousands of nesting levels (about 4 entries per module), far
+# beyond real IDL; deeper input is reported where it happens instead of exhausting recursion
+# in the later passes.
+MAX_STACK = 20_000
 
 # Scan order for regex terminals (most specific first).
 _REGEX_ORDER = (
@@ -291,6 +295,7 @@ class Engine:
         transformer: Any,
         describe: Callable[[str], str],
         unsupported: dict[str, str],
+        reserved: frozenset[str] = frozenset(),
     ) -> None:
         self.states: list[dict[str, int]] = tables["states"]
         self.start: int = tables["start"]
@@ -306,6 +311,7 @@ class Engine:
         self.strings: dict[str, str] = tables["strings"]
         self.describe = describe
         self.unsupported = unsupported
+        self.reserved = reserved  # words that are keywords in every context
 
     def parse(self, text: str, comments: list[tuple[int, str]]) -> Any:
         """Parse `text`; its comments are appended to `comments` as (offset, text)."""
@@ -315,6 +321,7 @@ class Engine:
         states = self.states
         rules = self.rules
         keywords = self.keywords
+        reserved = self.reserved
         kept = self.kept_terms
         match = self.master.match
         shr, gt = self.shr, self.gt
@@ -324,6 +331,7 @@ class Engine:
         value_stack: list[Any] = []
         pos = 0
         tok: Any
+        after_at = False  # annotation names may be keywords: @default, @oneway
         while True:
             # ---- scan one token ----------------------------------------------------------
             m = match(text, pos)
@@ -337,15 +345,24 @@ class Engine:
                 tok = None
             else:
                 if kind == "IDENT":
-                    kw = keywords.get(text[start:pos])
-                    if kw is not None:
+                    word = text[start:pos]
+                    kw = keywords.get(word)
+                    # After '@', reserved words are annotation names (`@default`, `@oneway`).
+                    if kw is not None and not (after_at and word in reserved):
                         actions = states[state]
                         if kw in actions:
                             # LALR rows merge contexts: when both could follow, ask for real.
-                            if "IDENT" not in actions or self._accepts(state_stack, kw):
+                            if (
+                                word in reserved
+                                or "IDENT" not in actions
+                                or self._accepts(state_stack, kw)
+                            ):
                                 kind = kw
-                        elif "IDENT" not in actions:
-                            kind = kw  # neither fits: report the keyword
+                        elif word not in reserved:
+                            if "IDENT" not in actions:
+                                kind = kw  # neither fits: report the keyword
+                        elif not self._keyword_as_name(text, pos, state_stack):
+                            kind = kw  # reserved: a syntax error that names it
                 elif (
                     kind == shr
                     and gt in states[state]
@@ -353,6 +370,7 @@ class Engine:
                 ):
                     pos = start + 1
                     kind = gt
+                after_at = kind == "AT"
                 if kind in kept:
                     tok = Tok(text[start:pos])
                     tok.type = kind
@@ -363,11 +381,13 @@ class Engine:
             while True:
                 act = states[state].get(kind)
                 if act is None:
-                    raise self._unexpected(kind, text, start, state)
+                    raise self._unexpected(kind, text, start, state_stack)
                 if act >= 0:
                     state = act
                     state_stack.append(act)
                     value_stack.append(tok)
+                    if len(state_stack) > MAX_STACK:
+                        raise ParseFailure(start, "declarations or expressions nested too deeply")
                     break
                 size, origin, cb, pick = rules[~act]
                 if size:
@@ -382,6 +402,15 @@ class Engine:
                 value_stack.append(value)
                 if state == end_state and kind == "$END":
                     return value
+
+    def _keyword_as_name(self, text: str, end: int, state_stack: list[int]) -> bool:
+        """Whether a misplaced reserved word ending at `end` reads as a name (`long in;`), so
+        that it is scanned as an identifier, reported by the transformer, and parsing goes on;
+        followed by a name (`module M {` inside an interface) it is a misplaced declaration."""
+        nxt = self.master.match(text, end)
+        if nxt is not None and nxt.lastgroup == "IDENT":
+            return False
+        return "IDENT" in self.states[state_stack[-1]] and self._accepts(state_stack, "IDENT")
 
     def _accepts(self, state_stack: list[int], kind: str) -> bool:
         """Whether `kind` would be shifted after the reductions it triggers (no side effects)."""
@@ -399,11 +428,19 @@ class Engine:
             stack.append(states[stack[-1]][origin])
 
     # ---- syntax errors --------------------------------------------------------------------
-    def _expected(self, state: int) -> list[str]:
-        return sorted({self.describe(s) for s in self.states[state] if s.isupper() or s == "$END"})
+    def _expected(self, state_stack: list[int]) -> list[str]:
+        """What could really come next (LALR rows list more: their lookaheads merge contexts)."""
+        row = self.states[state_stack[-1]]
+        return sorted(
+            {
+                self.describe(s)
+                for s in row
+                if (s.isupper() or s == "$END") and self._accepts(state_stack, s)
+            }
+        )
 
-    def _unexpected(self, kind: str, text: str, start: int, state: int) -> ParseFailure:
-        expected = self._expected(state)
+    def _unexpected(self, kind: str, text: str, start: int, state_stack: list[int]) -> ParseFailure:
+        expected = self._expected(state_stack)
         if kind == "$END":
             what = "end of file"
             if len(expected) > 8:
@@ -414,8 +451,23 @@ class Engine:
             m = self.master.match(text, start)
             value = text[m.start(m.lastgroup) : m.end()] if m and m.lastgroup else text[start]
             what = f"'{value}'"
-            if kind == "IDENT" and value in self.keywords:
+            if value in self.keywords:
                 what = f"keyword '{value}'"
+                if value == "void":
+                    return ParseFailure(start, "'void' can only be the return type of an operation")
+                # `module M {` where no module may be: a misplaced declaration; `long module;`:
+                # a keyword meant as a name. The next token tells them apart.
+                nxt = self.master.match(text, start + len(value))
+                named = nxt is not None and nxt.lastgroup == "IDENT"
+                if value in _DECLARATION_KEYWORDS and (named or "identifier" not in expected):
+                    article = "an" if value[0] in "aeiou" else "a"
+                    return ParseFailure(start, f"{article} {value} declaration is not allowed here")
+                if value in self.reserved and "identifier" in expected:
+                    return ParseFailure(
+                        start,
+                        f"'{value}' is a keyword and cannot be used as a name here "
+                        f"(write '_{value}' to use it as an identifier)",
+                    )
             if kind == "IDENT" and value in self.unsupported:
                 return ParseFailure(
                     start, f"{self.unsupported[value]} are not supported by miro-idl"
@@ -437,6 +489,11 @@ class Engine:
         else:
             msg = f"unexpected character {ch!r}"
         return ParseFailure(pos, msg)
+
+
+_DECLARATION_KEYWORDS = frozenset(
+    ["module", "interface", "valuetype", "exception", "typedef", "const", "native"]
+)
 
 
 def _join(items: list[str]) -> str:

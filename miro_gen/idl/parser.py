@@ -73,7 +73,11 @@ class _AstBuilder:
                 self.diag.error(self.pos(tok), f"invalid identifier '{v}'")
             return v[1:]
         if v in RESERVED:
-            self.diag.error(self.pos(tok), f"'{v}' is a keyword; write '_{v}' to use it as a name")
+            self.diag.error(
+                self.pos(tok),
+                f"'{v}' is a keyword and cannot be used as a name here "
+                f"(write '_{v}' to use it as an identifier)",
+            )
             return v
         lv = v.lower()
         kw = RESERVED_FOLDED.get(lv)
@@ -751,12 +755,16 @@ def get_engine() -> Engine:
                 return f"'{strings[name]}'"
             return name.lower()
 
-        _engine = Engine(tables, _builder, describe, UNSUPPORTED_CONSTRUCTS)
+        _engine = Engine(tables, _builder, describe, UNSUPPORTED_CONSTRUCTS, RESERVED)
     return _engine
 
 
-def parse(src: SourceText, diag: Diagnostics) -> list[Any]:
-    """Parse preprocessed IDL into a list of top-level definitions (empty after a syntax error)."""
+def parse(src: SourceText, diag: Diagnostics) -> list[Any] | None:
+    """Parse preprocessed IDL into its top-level definitions; None after a syntax error.
+
+    Problems found in well-formed syntax (a bad literal, a keyword used as a name) are reported
+    but do not stop the parse, so the resolver can report its own problems too.
+    """
     engine = get_engine()
     comments: list[tuple[int, str]] = []
     with _lock:
@@ -765,7 +773,7 @@ def parse(src: SourceText, diag: Diagnostics) -> list[Any]:
             result = engine.parse(src.text, comments)
         except ParseFailure as e:
             diag.error(src.pos_at(e.offset), e.message)
-            return []
+            return None
         finally:
             named = _builder.named
             _builder.begin(SourceText("", [], []), Diagnostics())
