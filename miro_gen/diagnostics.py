@@ -75,7 +75,27 @@ class Diagnostics:
         if self.has_errors:
             raise CompileError(self.items)
 
+    def sorted_items(self) -> list[Diagnostic]:
+        """Diagnostics in source order (files in order of first mention); each note stays after
+        the diagnostic it belongs to. Different phases report in their own order otherwise."""
+        groups: list[list[Diagnostic]] = []
+        for d in self.items:
+            if d.severity == "note" and groups:
+                groups[-1].append(d)
+            else:
+                groups.append([d])
+        rank: dict[str, int] = {}
+        for d in self.items:
+            if d.pos is not None:
+                rank.setdefault(d.pos.path, len(rank))
+
+        def key(group: list[Diagnostic]) -> tuple[int, int, int]:
+            pos = group[0].pos
+            return (-1, 0, 0) if pos is None else (rank[pos.path], pos.line, pos.col)
+
+        return [d for group in sorted(groups, key=key) for d in group]
+
     def print(self, stream: TextIO | None = None) -> None:
         out = stream if stream is not None else sys.stderr
-        for d in self.items:
+        for d in self.sorted_items():
             print(d, file=out)

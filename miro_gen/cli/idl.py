@@ -77,6 +77,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     # the growing AST (about 10% of the run time on large files).
     gc.disable()
     args = build_parser().parse_args(argv)
+    from miro_gen.idl.frontend import RECURSION_LIMIT
+
+    sys.setrecursionlimit(max(sys.getrecursionlimit(), RECURSION_LIMIT))  # see frontend.py
     diag = Diagnostics()
     defines = parse_defines(args.defines, diag)
     for f in args.files:
@@ -92,6 +95,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 1
     except KeyboardInterrupt:
         return 130
+    except RecursionError:
+        diag.print()
+        print("miro-idl: error: the input is nested too deeply to process", file=sys.stderr)
+        return 1
     except Exception as e:  # a bug in miro-idl, not in the input
         diag.print()
         return internal_error("miro-idl", e)

@@ -55,7 +55,6 @@ class Target(NamedTuple):
 
 
 ANY = Target("any")
-ANY_INTEGER = Target("int", "long long")  # bounds and sizes: checked for range by the caller
 ARRAY_BOUND_MAX = 2**32 - 1
 
 
@@ -68,6 +67,20 @@ class EvalError(Exception):
 
 # A name resolver: returns (kind, value) of a constant or enumerator, or raises EvalError.
 NameLookup = Callable[[ast.NameRef], tuple[str, ast.ConstValue]]
+
+
+def plural(kind: str) -> str:
+    return {
+        "int": "integers",
+        "float": "floating-point values",
+        "fixed": "fixed-point values",
+        "char": "characters",
+        "wchar": "wide characters",
+        "bool": "booleans",
+        "string": "strings",
+        "wstring": "wide strings",
+        "enum": "enumerators",
+    }.get(kind, kind)
 
 
 def describe(kind: str) -> str:
@@ -96,7 +109,8 @@ class Evaluator:
             kind, value = self._eval(expr, target)
             return self._convert(kind, value, target, expr.pos)
         except EvalError as e:
-            self.diag.error(e.pos, e.message)
+            if e.message:  # empty: already reported (an undeclared name)
+                self.diag.error(e.pos, e.message)
             return None
 
     # -- evaluation ---------------------------------------------------------------------------
@@ -129,7 +143,7 @@ class Evaluator:
         if kind in ("float", "fixed") and e.op in "-+":
             assert isinstance(v, (float, Decimal))
             return kind, (-v if e.op == "-" else v)
-        raise EvalError(e.pos, f"operator '{e.op}' cannot be applied to {describe(kind)}")
+        raise EvalError(e.pos, f"operator '{e.op}' cannot be applied to {plural(kind)}")
 
     def _binary(
         self, e: ast.BinaryOp, kl: str, vl: ast.ConstValue, kr: str, vr: ast.ConstValue
@@ -151,9 +165,7 @@ class Evaluator:
         if kl == "float":
             assert isinstance(vl, float) and isinstance(vr, float)
             if op not in "+-*/":
-                raise EvalError(
-                    e.pos, f"operator '{op}' cannot be applied to floating-point values"
-                )
+                raise EvalError(e.pos, f"operator '{op}' cannot be applied to {plural(kl)}")
             if op == "/" and vr == 0.0:
                 raise EvalError(e.pos, "division by zero")
             result = {"+": vl + vr, "-": vl - vr, "*": vl * vr}.get(op)
@@ -164,7 +176,7 @@ class Evaluator:
         if kl == "fixed":
             assert isinstance(vl, Decimal) and isinstance(vr, Decimal)
             if op not in "+-*/":
-                raise EvalError(e.pos, f"operator '{op}' cannot be applied to fixed-point values")
+                raise EvalError(e.pos, f"operator '{op}' cannot be applied to {plural(kl)}")
             if op == "/" and vr == 0:
                 raise EvalError(e.pos, "division by zero")
             ctx = FIXED_CONTEXT
@@ -172,7 +184,7 @@ class Evaluator:
                 "+": ctx.add, "-": ctx.subtract, "*": ctx.multiply, "/": ctx.divide,
             }[op](vl, vr)  # fmt: skip
             return "fixed", value_d
-        raise EvalError(e.pos, f"operator '{op}' cannot be applied to {describe(kl)} values")
+        raise EvalError(e.pos, f"operator '{op}' cannot be applied to {plural(kl)}")
 
     @staticmethod
     def _int_op(op: str, a: int, b: int, pos: SourcePos) -> int:
@@ -201,8 +213,10 @@ class Evaluator:
 
     @staticmethod
     def _check64(v: int, pos: SourcePos) -> int:
-        if v < -(2**63) or v > 2**64 - 1:
-            raise EvalError(pos, "integer overflow in constant expression (beyond 64 bits)")
+        if v < -(2**63):
+            raise EvalError(pos, f"value {v} is too small for any IDL integer type")
+        if v > 2**64 - 1:
+            raise EvalError(pos, f"value {v} is too large for any IDL integer type")
         return v
 
     # -- conversion to the target -------------------------------------------------------------
@@ -252,16 +266,18 @@ class Evaluator:
                     )
             return d
         if t in ("char", "wchar"):
-            if kind == "char" or (t == "wchar" and kind == "wchar"):
+            if kind == t:  # narrow and wide literals do not mix (IDL 4.2 section 7.2.6.2.1)
                 return v
-            raise EvalError(pos, f"{describe(kind)} cannot initialise a {target.name or t}")
+            hint = " (write L'x' for a wide character)" if kind == "char" else ""
+            raise EvalError(pos, f"{describe(kind)} cannot initialise a {t}{hint}")
         if t == "bool":
             if kind != "bool":
                 raise EvalError(pos, f"{describe(kind)} cannot initialise a boolean")
             return v
         if t in ("string", "wstring"):
-            if kind != t and not (t == "wstring" and kind == "string"):
-                raise EvalError(pos, f"{describe(kind)} cannot initialise a {t}")
+            if kind != t:  # narrow and wide literals do not mix (IDL 4.2 section 7.2.6.3)
+                hint = ' (write L"..." for a wide string)' if kind == "string" else ""
+                raise EvalError(pos, f"{describe(kind)} cannot initialise a {t}{hint}")
             assert isinstance(v, str)
             if target.bound is not None and len(v) > target.bound:
                 raise EvalError(

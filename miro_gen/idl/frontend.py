@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import sys
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 
-from miro_gen.diagnostics import CompileError, Diagnostics
+from miro_gen.diagnostics import CompileError, Diagnostics, SourcePos
 from miro_gen.idl import ast
 from miro_gen.idl.parser import parse
 from miro_gen.idl.preprocessor import Preprocessor
@@ -22,14 +24,47 @@ def compile_idl(
     Problems are collected in `diagnostics`; `CompileError` is raised if any of them is an error.
     """
     diag = diagnostics if diagnostics is not None else Diagnostics()
+    resolver = Resolver(diag)
+    try:
+        with _recursion_limit(RECURSION_LIMIT):
+            return _compile(path, include_dirs, defines, diag, resolver)
+    except RecursionError:
+        where = resolver.last_pos or SourcePos(path, 1, 1)
+        diag.error(where, "declarations or expressions nested too deeply for miro-idl")
+        raise CompileError(diag.items) from None
+
+
+# Pathologically nested input (thousands of levels) recurses in the resolver and the constant
+# evaluator; Python 3.11 runs Python-to-Python calls without growing the C stack, so a higher
+# limit is safe, and beyond it the user gets a message instead of a traceback.
+RECURSION_LIMIT = 20_000
+
+
+@contextmanager
+def _recursion_limit(limit: int) -> Iterator[None]:
+    old = sys.getrecursionlimit()
+    sys.setrecursionlimit(max(old, limit))
+    try:
+        yield
+    finally:
+        sys.setrecursionlimit(old)
+
+
+def _compile(
+    path: str,
+    include_dirs: Sequence[str],
+    defines: dict[str, str] | None,
+    diag: Diagnostics,
+    resolver: Resolver,
+) -> ast.Specification:
     before = diag.error_count
     src = Preprocessor(list(include_dirs), defines, diag).run(path)
     if diag.error_count > before:
         raise CompileError(diag.items)
     definitions = parse(src, diag)
-    if diag.error_count > before:
+    if definitions is None:  # a syntax error: nothing to resolve
         raise CompileError(diag.items)
-    declarations = Resolver(diag).resolve(definitions)
+    declarations = resolver.resolve(definitions)
     if diag.error_count > before:
         raise CompileError(diag.items)
     return ast.Specification(path, definitions, declarations, src.includes)

@@ -26,7 +26,6 @@ from miro_gen.diagnostics import Diagnostics, SourcePos
 from miro_gen.idl import ast
 from miro_gen.idl.constants import (
     ANY,
-    ANY_INTEGER,
     ARRAY_BOUND_MAX,
     FLOAT_TYPES,
     INT_RANGES,
@@ -71,6 +70,8 @@ KNOWN_ANNOTATIONS = frozenset(
         "empty",
     ]
 )
+# Integer-valued annotations and their ranges (DDS-XTypes 1.3: member ids have 28 bits).
+_ANNOTATION_LIMITS = {"id": 0x0FFFFFFF, "position": 0xFFFF, "bit_bound": 64}
 _CONTEXT_ID = re.compile(r"[A-Za-z][A-Za-z0-9._]*\*?$")
 _DISCRIMINATOR_BASES = frozenset([*INT_RANGES, "char", "wchar", "boolean"])
 
@@ -140,8 +141,9 @@ class Resolver:
         self.forwards: list[ast.Forward] = []
         self.user_annotations: set[str] = set()
         self.evaluator = Evaluator(self._lookup_constant, diag)
+        self.last_pos: SourcePos | None = None
         self._scope: Scope = self.global_scope
-        self._type_prefixes: dict[int, str] = {}  # id(scope) -> typeprefix
+        self.type_prefixes: list[tuple[tuple[str, ...], str]] = []  # (scope path, prefix)
         self._decl_scopes: dict[int, Scope] = {}  # id(interface/valuetype) -> its scope
         self._scope_owners: dict[int, Any] = {}  # id(scope) -> interface/valuetype
         self._inherited: dict[int, dict[str, tuple[str, Any, ast.Decl]]] = {}
@@ -267,7 +269,7 @@ class Resolver:
             if inner is None:
                 self.diag.error(
                     name.pos,
-                    f"'{entry.name}' is a {entry.what}, not a scope; cannot find '{part}' in it",
+                    f"'{entry.name}' is {_a(entry.what)}, not a scope; cannot find '{part}' in it",
                 )
                 return None
             hits = self._find_in(inner, part.lower())
@@ -321,6 +323,7 @@ class Resolver:
         self._scope = prev
 
     def _definition(self, d: Any, scope: Scope, frame: Frame) -> None:
+        self.last_pos = getattr(d, "pos", self.last_pos)  # for failures without a position
         handler = self._handlers.get(type(d))
         if handler is None:  # pragma: no cover - the grammar produces nothing else
             raise TypeError(f"unexpected definition {type(d).__name__}")
@@ -426,18 +429,15 @@ class Resolver:
             return
         if entry.scope is None or entry.what not in ("module", "interface", "valuetype"):
             self.diag.error(
-                t.pos, f"typeprefix needs a module, interface or value type, not a {entry.what}"
+                t.pos, f"typeprefix needs a module, interface or value type, not {_a(entry.what)}"
             )
             return
-        if entry.scope is scope:
-            frame.base = t.value
-        self._type_prefixes[id(entry.scope)] = t.value
+        # Applied when repository ids are finished: the prefix goes before the scope's own name
+        # and those of everything in it (CORBA 3.0 section 3.15.2), wherever the typeprefix is.
+        self.type_prefixes.append((entry.scope.path, t.value))
 
     def _frame_for(self, inner: Scope, decl: ast.Decl, frame: Frame) -> Frame:
-        base = self._type_prefixes.get(id(inner))
-        if base is None:
-            base = _join(frame.prefix(decl.instance), decl.name)
-        return Frame(inner, base, decl.instance)
+        return Frame(inner, _join(frame.prefix(decl.instance), decl.name), decl.instance)
 
     # -- interfaces ---------------------------------------------------------------------------
     def _forward(self, f: ast.Forward, scope: Scope, frame: Frame) -> None:
@@ -548,7 +548,7 @@ class Resolver:
                     continue
                 node = node.full
             if not isinstance(node, ast.Interface):
-                self.diag.error(bname.pos, f"'{bname}' is a {b.what}, not an interface")
+                self.diag.error(bname.pos, f"'{bname}' is {_a(b.what)}, not an interface")
                 self.diag.note(b.pos, f"'{b.name}' declared here")
                 continue
             if id(node) in seen:
@@ -695,7 +695,7 @@ class Resolver:
             if e is None:
                 continue
             if not isinstance(e.node, ast.Exception_):
-                self.diag.error(n.pos, f"'{n}' is a {e.what}, not an exception")
+                self.diag.error(n.pos, f"'{n}' is {_a(e.what)}, not an exception")
                 continue
             out.append(e.node)
         return out
@@ -718,7 +718,7 @@ class Resolver:
                 else b.node
             )
             if not isinstance(node, ast.ValueType):
-                self.diag.error(bname.pos, f"'{bname}' is a {b.what}, not a value type")
+                self.diag.error(bname.pos, f"'{bname}' is {_a(b.what)}, not a value type")
                 continue
             if k > 0 and not node.abstract:
                 self.diag.error(
@@ -745,7 +745,16 @@ class Resolver:
                 else s_entry.node
             )
             if not isinstance(node, ast.Interface):
-                self.diag.error(sname.pos, f"'{sname}' is a {s_entry.what}, not an interface")
+                self.diag.error(sname.pos, f"'{sname}' is {_a(s_entry.what)}, not an interface")
+                continue
+            concrete = [x for x in v.supports if not x.abstract]
+            if not node.abstract and concrete:
+                self.diag.error(
+                    sname.pos,
+                    f"value type '{v.name}' cannot support '{sname}': it already supports "
+                    f"'{concrete[0].scoped_name}', and a value type may support only one "
+                    "non-abstract interface",
+                )
                 continue
             v.supports.append(node)
             s = self._scope_of(node)
@@ -815,7 +824,9 @@ class Resolver:
                 )
                 node = self._unalias(node) if isinstance(node, ast.Typedef) else node
                 if not isinstance(node, ast.Struct):
-                    self.diag.error(s.base_name.pos, f"'{s.base_name}' is a {b.what}, not a struct")
+                    self.diag.error(
+                        s.base_name.pos, f"'{s.base_name}' is {_a(b.what)}, not a struct"
+                    )
                 else:
                     s.base = node
         sub = self._frame_for(inner, s, frame)
@@ -877,8 +888,10 @@ class Resolver:
         if entry is not None:
             entry.scope = inner
         sub = self._frame_for(inner, u, frame)
-        self._annotations(u.switch_annotations, scope)
-        u.switch_type = self._type(u.switch_type, scope, "discriminator type", frame=frame)
+        # The union's scope starts at the '(' after `switch` (CORBA 3.0 section 3.20.2): an enum
+        # defined there belongs to the union.
+        self._annotations(u.switch_annotations, inner)
+        u.switch_type = self._type(u.switch_type, inner, "discriminator type", frame=sub)
         disc = self._unalias(u.switch_type)
         target: Target | None
         if isinstance(disc, ast.Enum):
@@ -974,6 +987,8 @@ class Resolver:
 
     def _const_target(self, typ: Any, pos: SourcePos) -> Target | None:
         t = self._unalias(typ)
+        if isinstance(t, ast.NamedType) and t.decl is None:
+            return None  # an unresolved name, already reported
         if isinstance(t, ast.Typedef):  # aliased array
             self.diag.error(pos, "a constant cannot have an array type")
             return None
@@ -1028,7 +1043,7 @@ class Resolver:
                 return t
             node = entry.node
             if not _is_type(node):
-                self.diag.error(t.name.pos, f"'{t.name}' is a {entry.what}, not a type")
+                self.diag.error(t.name.pos, f"'{t.name}' is {_a(entry.what)}, not a type")
                 self.diag.note(entry.pos, f"'{entry.name}' declared here")
                 return t
             t.decl = node
@@ -1138,8 +1153,12 @@ class Resolver:
             self._scope = prev
 
     def _positive(self, expr: ast.Expr, what: str, scope: Scope) -> int | None:
-        v = self._eval(expr, ANY_INTEGER, scope)
-        if isinstance(v, int) and not isinstance(v, bool):
+        v = self._eval(expr, ANY, scope)
+        if v is not None and (not isinstance(v, int) or isinstance(v, bool)):
+            shown = v.scoped_name if isinstance(v, ast.EnumValue) else repr(v)
+            self.diag.error(expr.pos, f"{what} must be a positive integer, not {shown}")
+            return None
+        if isinstance(v, int):
             if v <= 0:
                 self.diag.error(expr.pos, f"{what} must be positive, not {v}")
                 return None
@@ -1162,7 +1181,7 @@ class Resolver:
     def _lookup_constant(self, ref: ast.NameRef) -> tuple[str, ast.ConstValue]:
         entry = self.lookup(ref.name, self._scope)
         if entry is None:
-            raise EvalError(ref.pos, f"'{ref.name}' cannot be used in this expression")
+            raise EvalError(ref.pos, "")  # already reported by lookup
         node = entry.node
         if isinstance(node, ast.Enumerator) and node.enum is not None:
             return "enum", ast.EnumValue(node.enum, node.name, node.ordinal)
@@ -1170,7 +1189,7 @@ class Resolver:
             if node.value is None:
                 raise EvalError(ref.pos, f"constant '{ref.name}' has no valid value")
             return _kind_of_const(node, self._unalias(node.type)), node.value
-        raise EvalError(ref.pos, f"'{ref.name}' is a {entry.what}, not a constant")
+        raise EvalError(ref.pos, f"'{ref.name}' is {_a(entry.what)}, not a constant")
 
     def _annotations(self, anns: list[ast.Annotation], scope: Scope) -> None:
         if not anns:
@@ -1193,10 +1212,11 @@ class Resolver:
                 value = self._annotation_arg(expr)
                 if value is not None:
                     a.params[key] = value
-            if name == "id" or name == "position" or name == "bit_bound":
+            if name in _ANNOTATION_LIMITS:
                 v = a.params.get("value")
-                if not isinstance(v, int) or isinstance(v, bool) or v < 0:
-                    self.diag.error(a.pos, f"@{name} needs a non-negative integer")
+                limit = _ANNOTATION_LIMITS[name]
+                if not isinstance(v, int) or isinstance(v, bool) or not 0 <= v <= limit:
+                    self.diag.error(a.pos, f"@{name} needs an integer from 0 to {limit}")
 
     def _annotation_arg(self, expr: ast.Expr) -> ast.ConstValue | None:
         # A bare identifier that names nothing is an enumerator-like word (FINAL, SEQUENTIAL, ...).
@@ -1215,6 +1235,13 @@ class Resolver:
     # repository ids
     # =========================================================================================
     def _finish_repo_ids(self) -> None:
+        # typeprefix: the innermost scope wins, so apply outer ones first.
+        for scope_path, prefix in sorted(self.type_prefixes, key=lambda tp: len(tp[0])):
+            n = len(scope_path)
+            for d in self.declarations:
+                if d.scope_path[:n] == scope_path:
+                    version = self.repo_parts[id(d)][1]
+                    self.repo_parts[id(d)] = ("/".join((prefix, *d.scope_path[n - 1 :])), version)
         for d in self.declarations:
             key = id(d)
             explicit = self.explicit_ids.get(key)
@@ -1244,6 +1271,11 @@ class Resolver:
                         e.repo_id = f"IDL:{parts[0]}:{parts[1]}"
 
     _handlers: dict[type, Any] = {}
+
+
+def _a(word: str) -> str:
+    """`word` with its indefinite article: "an interface", "a struct"."""
+    return f"{'an' if word[:1] in 'aeiou' else 'a'} {word}"
 
 
 def _all_struct_members(s: ast.Struct) -> list[ast.Member]:
