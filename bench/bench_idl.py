@@ -65,6 +65,30 @@ def measure(cmds: dict[str, list[str]], repeat: int, env: dict[str, str]) -> dic
     return times
 
 
+OURS = "miro-idl --ast-json"
+THEIRS = "omniidl -bdump"
+
+
+def compare(
+    title: str,
+    idl: Path,
+    ours: list[str],
+    omniidl: str | None,
+    repeat: int,
+    env: dict[str, str],
+) -> dict[str, list[float]]:
+    """Time both compilers on `idl` and print a table; returns the times by command."""
+    cmds = {OURS: [*ours, "--ast-json", str(idl)]}
+    if omniidl:
+        cmds[THEIRS] = [omniidl, "-bdump", str(idl)]
+    times = measure(cmds, repeat, env)
+    print()
+    print(f"{title:24} {'median s':>9} {'min s':>8}")
+    for name, ts in times.items():
+        print(f"{name:24} {statistics.median(ts):9.3f} {min(ts):8.3f}")
+    return times
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -88,31 +112,16 @@ def main() -> int:
         print(f"omniidl:    {omniidl or 'not installed (apt-get install omniidl)'}")
 
         time_once([*ours, "--ast-json", str(big)], env)  # warm-up: bytecode and grammar cache
-        cmds = {"miro-idl --ast-json": [*ours, "--ast-json", str(big)]}
+        times = compare("large file", big, ours, omniidl, args.repeat, env)
         if omniidl:
-            cmds["omniidl -bdump"] = [omniidl, "-bdump", str(big)]
-        times = measure(cmds, args.repeat, env)
-        print()
-        print(f"{'large file':24} {'median s':>9} {'min s':>8}")
-        for name, ts in times.items():
-            print(f"{name:24} {statistics.median(ts):9.3f} {min(ts):8.3f}")
-        if omniidl:
-            ratio = statistics.median(times["miro-idl --ast-json"]) / statistics.median(
-                times["omniidl -bdump"]
-            )
+            ratio = statistics.median(times[OURS]) / statistics.median(times[THEIRS])
             verdict = "ok" if ratio <= RATIO_TARGET else "MISSED"
             print(f"ratio miro-idl / omniidl: {ratio:.2f} (target <= {RATIO_TARGET}: {verdict})")
             ok &= ratio <= RATIO_TARGET
 
-        tiny_cmds = {"miro-idl --ast-json": [*ours, "--ast-json", str(tiny)]}
-        if omniidl:
-            tiny_cmds["omniidl -bdump"] = [omniidl, "-bdump", str(tiny)]
-        tiny_times = measure(tiny_cmds, args.repeat, env)
-        print()
-        print(f"{'tiny file (Example.idl)':24} {'median s':>9} {'min s':>8}")
-        for name, ts in tiny_times.items():
-            print(f"{name:24} {statistics.median(ts):9.3f} {min(ts):8.3f}")
-        tiny_median = statistics.median(tiny_times["miro-idl --ast-json"])
+        tiny_median = statistics.median(
+            compare("tiny file (Example.idl)", tiny, ours, omniidl, args.repeat, env)[OURS]
+        )
         verdict = "ok" if tiny_median < TINY_TARGET_S else "MISSED"
         print(
             f"miro-idl on a tiny file: {tiny_median:.3f} s (target < {TINY_TARGET_S} s: {verdict})"

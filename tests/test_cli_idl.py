@@ -9,21 +9,12 @@ import sys
 from pathlib import Path
 
 import pytest
+from miro_cli import run_miro_idl
 
 ROOT = Path(__file__).resolve().parents[1]
 ERROR_LINE = re.compile(
     r"^(?P<path>.+?):(?P<line>\d+):(?P<col>\d+): (?P<sev>error|warning|note): .+$"
 )
-
-
-def miro_idl(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "miro_gen.cli.idl", *args],
-        capture_output=True,
-        text=True,
-        cwd=cwd or ROOT,
-        timeout=60,
-    )
 
 
 def write(path: Path, text: str) -> Path:
@@ -33,7 +24,7 @@ def write(path: Path, text: str) -> Path:
 
 
 def test_help_documents_every_flag() -> None:
-    out = miro_idl("--help")
+    out = run_miro_idl("--help")
     assert out.returncode == 0
     for flag in ("-I DIR", "-D NAME[=VALUE]", "-o OUTDIR", "--check", "--ast-json", "--version"):
         assert flag in out.stdout, flag
@@ -41,13 +32,13 @@ def test_help_documents_every_flag() -> None:
 
 
 def test_version() -> None:
-    out = miro_idl("--version")
+    out = run_miro_idl("--version")
     assert out.returncode == 0
     assert out.stdout.startswith("miro-idl ")
 
 
 def test_ast_json_of_the_manual_example() -> None:
-    out = miro_idl("--ast-json", "idl/Example.idl")
+    out = run_miro_idl("--ast-json", "idl/Example.idl")
     assert out.returncode == 0, out.stderr
     doc = json.loads(out.stdout)
     assert doc["files"] == ["idl/Example.idl"]
@@ -68,7 +59,7 @@ def test_ast_json_of_the_manual_example() -> None:
 
 def test_errors_are_reported_in_compiler_format_without_traceback(tmp_path: Path) -> None:
     bad = write(tmp_path / "bad.idl", "module M {\n  struct S { long x };\n};\n")
-    out = miro_idl("--ast-json", str(bad))
+    out = run_miro_idl("--ast-json", str(bad))
     assert out.returncode == 1
     assert out.stdout == ""
     assert "Traceback" not in out.stderr
@@ -83,7 +74,7 @@ def test_errors_are_reported_in_compiler_format_without_traceback(tmp_path: Path
 def test_every_file_is_checked_and_all_errors_reported(tmp_path: Path) -> None:
     a = write(tmp_path / "a.idl", "const long A = 1 / 0;\nconst short B = 70000;\n")
     b = write(tmp_path / "b.idl", "typedef Undeclared T;\n")
-    out = miro_idl("--ast-json", str(a), str(b))
+    out = run_miro_idl("--ast-json", str(a), str(b))
     assert out.returncode == 1
     errors = [ln for ln in out.stderr.splitlines() if ": error: " in ln]
     assert any(ln.startswith(f"{a}:1:") and "division by zero" in ln for ln in errors)
@@ -92,7 +83,7 @@ def test_every_file_is_checked_and_all_errors_reported(tmp_path: Path) -> None:
 
 
 def test_missing_file() -> None:
-    out = miro_idl("--ast-json", "does/not/exist.idl")
+    out = run_miro_idl("--ast-json", "does/not/exist.idl")
     assert out.returncode == 1
     assert "cannot read 'does/not/exist.idl'" in out.stderr
     assert "Traceback" not in out.stderr
@@ -109,7 +100,7 @@ def test_include_dirs_and_defines(tmp_path: Path) -> None:
         "module Miro { struct Stamped { TimeIDL time; long data[SIZE]; }; };\n"
         "#endif\n",
     )
-    out = miro_idl(
+    out = run_miro_idl(
         "-I", str(tmp_path / "inc"), "-D", "WITH_STAMP", "-D", "SIZE=4", "--ast-json", str(main)
     )
     assert out.returncode == 0, out.stderr
@@ -119,32 +110,32 @@ def test_include_dirs_and_defines(tmp_path: Path) -> None:
     assert stamped["members"][0]["type"] == "Miro::TimeIDL"
     assert stamped["members"][1]["dims"] == [4]
     # Without -I the include is an error naming the file and the searched folders.
-    out = miro_idl("--ast-json", str(main))
+    out = run_miro_idl("--ast-json", str(main))
     assert out.returncode == 1
     assert f"{main}:1:1: error: cannot find include file 'Time.idl'" in out.stderr
     assert str(tmp_path / "src") in out.stderr
     # -I attached to its value (-Idir) works as in other compilers.
-    out = miro_idl(f"-I{tmp_path / 'inc'}", "--ast-json", str(main))
+    out = run_miro_idl(f"-I{tmp_path / 'inc'}", "--ast-json", str(main))
     assert out.returncode == 0, out.stderr
 
 
 def test_bad_define_is_an_error(tmp_path: Path) -> None:
     f = write(tmp_path / "x.idl", "const long X = 1;\n")
-    out = miro_idl("-D", "1BAD=2", "--ast-json", str(f))
+    out = run_miro_idl("-D", "1BAD=2", "--ast-json", str(f))
     assert out.returncode == 1
     assert "invalid macro name" in out.stderr
 
 
 def test_check_and_ast_json_are_exclusive(tmp_path: Path) -> None:
     f = write(tmp_path / "x.idl", "const long X = 1;\n")
-    out = miro_idl("--check", "--ast-json", str(f))
+    out = run_miro_idl("--check", "--ast-json", str(f))
     assert out.returncode == 2
     assert "not allowed with" in out.stderr
 
 
 def test_warnings_do_not_fail(tmp_path: Path) -> None:
     f = write(tmp_path / "w.idl", "struct S { @custom_thing long x; };\n")
-    out = miro_idl("--ast-json", str(f))
+    out = run_miro_idl("--ast-json", str(f))
     assert out.returncode == 0
     assert f"{f}:1:12: warning: unknown annotation '@custom_thing'" in out.stderr
     member = json.loads(out.stdout)["declarations"][0]["members"][0]

@@ -9,16 +9,14 @@ huge identifiers) must not crash, run out of stack or hang.
 
 from __future__ import annotations
 
-import os
 import re
-import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from miro_cli import run_miro_idl
 
 from miro_gen.diagnostics import CompileError
 from miro_gen.idl.frontend import compile_idl
@@ -401,21 +399,6 @@ def test_random_text_in_process(tmp_path: Path, text: str) -> None:
     check_compile(tmp_path / "random.idl", text.encode("utf-8", errors="surrogatepass"))
 
 
-def run_cli(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
-    env = dict(os.environ)
-    env["PYTHONPATH"] = str(REPO_ROOT) + os.pathsep + env.get("PYTHONPATH", "")
-    env.pop("MIRO_DEBUG", None)
-    return subprocess.run(
-        [sys.executable, "-m", "miro_gen.cli.idl", *args],
-        cwd=cwd,
-        env=env,
-        capture_output=True,
-        text=True,
-        errors="replace",
-        timeout=120,
-    )
-
-
 _DIAG_LINE = re.compile(r"^(.+):(\d+):(\d+): (error|warning|note): .+$")
 
 
@@ -435,7 +418,7 @@ def test_mutated_idl_cli(
     tmp_path: Path, seed: int, ops: list[tuple[Any, ...]], latin1: bool
 ) -> None:
     (tmp_path / "fuzz.idl").write_bytes(to_bytes(mutate(SEEDS[seed], ops), latin1))
-    r = run_cli("--ast-json", "fuzz.idl", cwd=tmp_path)
+    r = run_miro_idl("--ast-json", "fuzz.idl", cwd=tmp_path)
     assert "Traceback" not in r.stderr, r.stderr
     assert r.returncode in (0, 1), r.stderr
     if r.returncode == 1:
@@ -507,7 +490,7 @@ def test_1mb_number_does_not_hang(tmp_path: Path) -> None:
 )
 def test_pathological_input_cli(tmp_path: Path, name: str) -> None:
     (tmp_path / "p.idl").write_text(PATHOLOGICAL[name], encoding="utf-8")
-    r = run_cli("--ast-json", "p.idl", cwd=tmp_path)
+    r = run_miro_idl("--ast-json", "p.idl", cwd=tmp_path)
     assert "Traceback" not in r.stderr
     assert r.returncode in (0, 1), r.stderr[-2000:]
 
@@ -527,7 +510,7 @@ CLI_CRASHERS = {
 def test_cli_known_crashers(tmp_path: Path, text: str) -> None:
     """Each once ended in an internal error; now each is reported at its position."""
     (tmp_path / "c.idl").write_text(text, encoding="utf-8")
-    r = run_cli("--ast-json", "c.idl", cwd=tmp_path)
+    r = run_miro_idl("--ast-json", "c.idl", cwd=tmp_path)
     assert "Traceback" not in r.stderr
     assert r.returncode == 1, r.stderr
     assert re.search(r"^c\.idl:1:\d+: error: ", r.stderr, re.M), r.stderr

@@ -8,12 +8,11 @@ from __future__ import annotations
 
 import json
 import os
-import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
 import pytest
+from miro_cli import run_miro_idl
 
 from miro_gen.diagnostics import CompileError, Diagnostic, Diagnostics
 from miro_gen.idl.ast_json import specifications_json
@@ -101,20 +100,6 @@ def compile_without_crash(main: Path) -> None:
         crash = f"RecursionError: {e}"
     if crash is not None:
         pytest.fail(crash, pytrace=False)
-
-
-def run_cli(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
-    env = dict(os.environ)
-    env["PYTHONPATH"] = str(REPO_ROOT) + os.pathsep + env.get("PYTHONPATH", "")
-    env.pop("MIRO_DEBUG", None)
-    return subprocess.run(
-        [sys.executable, "-m", "miro_gen.cli.idl", *args],
-        cwd=cwd,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
 
 
 # -- include search -----------------------------------------------------------------------------
@@ -363,7 +348,7 @@ def test_cli_define_options(tmp_path: Path) -> None:
         tmp_path / "m.idl",
         "#ifdef FLAG\nconst long flag = FLAG;\n#endif\nconst long size = SIZE;\n",
     )
-    r = run_cli("-D", "FLAG", "-D", "SIZE=7", "--ast-json", "m.idl", cwd=tmp_path)
+    r = run_miro_idl("-D", "FLAG", "-D", "SIZE=7", "--ast-json", "m.idl", cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     got = {d["name"]: d["value"] for d in json.loads(r.stdout)["declarations"]}
     assert got == {"flag": 1, "size": 7}
@@ -639,7 +624,7 @@ def test_cli_reports_included_file_positions(tmp_path: Path) -> None:
     write(tmp_path / "inc" / "syntax.idl", "\nstruct T { long t; }\n")
     write(tmp_path / "a.idl", '#include "types.idl"\n')
     write(tmp_path / "b.idl", "#include <syntax.idl>\nconst long c = 1;\n")
-    r = run_cli("-I", "inc", "--ast-json", "a.idl", "b.idl", cwd=tmp_path)
+    r = run_miro_idl("-I", "inc", "--ast-json", "a.idl", "b.idl", cwd=tmp_path)
     assert r.returncode == 1
     assert r.stdout == ""
     assert "Traceback" not in r.stderr
@@ -700,7 +685,7 @@ def test_cli_pragma_prefix_scoping(tmp_path: Path) -> None:
     write(
         tmp_path / "main.idl", '#pragma prefix "a.org"\n#include "b.idl"\nstruct Y { long a; };\n'
     )
-    r = run_cli("--ast-json", "main.idl", cwd=tmp_path)
+    r = run_miro_idl("--ast-json", "main.idl", cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     got = {d["name"]: d for d in json.loads(r.stdout)["declarations"]}
     assert got["X"]["repo_id"] == "IDL:X:1.0"
@@ -795,7 +780,7 @@ def test_latin1_file(tmp_path: Path) -> None:
 def test_cli_latin1_and_bom(tmp_path: Path) -> None:
     write(tmp_path / "l.idl", b'\xef\xbb\xbf#include "x.idl"\nconst long B = A;\n')
     write(tmp_path / "x.idl", b"// \xe9t\xe9\r\nconst long A = 1;\r\n")
-    r = run_cli("--ast-json", "l.idl", cwd=tmp_path)
+    r = run_miro_idl("--ast-json", "l.idl", cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     got = {d["name"]: d["value"] for d in json.loads(r.stdout)["declarations"]}
     assert got == {"A": 1, "B": 1}

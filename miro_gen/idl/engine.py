@@ -249,16 +249,22 @@ def _bind(recipe: dict[str, Any], transformer: Any) -> tuple[Callback | None, in
     return (lambda children: method(filt(children))), 0
 
 
+def _select(out: list[Any], children: list[Any], include: list[tuple[int, bool, int]]) -> list[Any]:
+    """Append the kept `children` to `out`, with None placeholders for absent `[x]`s and the
+    items of repetition lists spliced in (Lark's child filtering)."""
+    for i, expand, nones in include:
+        if nones:
+            out.extend([None] * nones)
+        if expand:
+            out.extend(children[i])
+        else:
+            out.append(children[i])
+    return out
+
+
 def _filter(include: list[tuple[int, bool, int]], trailing: int) -> Callback:
     def select(children: list[Any]) -> list[Any]:
-        out: list[Any] = []
-        for i, expand, nones in include:
-            if nones:
-                out.extend([None] * nones)
-            if expand:
-                out.extend(children[i])
-            else:
-                out.append(children[i])
+        out = _select([], children, include)
         if trailing:
             out.extend([None] * trailing)
         return out
@@ -271,13 +277,7 @@ def _repetition(include: list[tuple[int, bool, int]], left_recursive: bool) -> C
 
     def build(children: list[Any]) -> _Rep:
         out: _Rep = children[0] if left_recursive else _Rep()
-        for i, expand, nones in rest:
-            if nones:
-                out.extend([None] * nones)
-            if expand:
-                out.extend(children[i])
-            else:
-                out.append(children[i])
+        _select(out, children, rest)
         return out
 
     return build

@@ -712,11 +712,7 @@ class Resolver:
             b = self.lookup(bname, scope)
             if b is None:
                 continue
-            node = (
-                b.node.full
-                if isinstance(b.node, ast.Forward) and b.node.full is not None
-                else b.node
-            )
+            node = _completed(b.node)
             if not isinstance(node, ast.ValueType):
                 self.diag.error(bname.pos, f"'{bname}' is {_a(b.what)}, not a value type")
                 continue
@@ -739,11 +735,7 @@ class Resolver:
             s_entry = self.lookup(sname, scope)
             if s_entry is None:
                 continue
-            node = (
-                s_entry.node.full
-                if isinstance(s_entry.node, ast.Forward) and s_entry.node.full is not None
-                else s_entry.node
-            )
+            node = _completed(s_entry.node)
             if not isinstance(node, ast.Interface):
                 self.diag.error(sname.pos, f"'{sname}' is {_a(s_entry.what)}, not an interface")
                 continue
@@ -817,11 +809,7 @@ class Resolver:
         if s.base_name is not None:
             b = self.lookup(s.base_name, scope)
             if b is not None:
-                node = (
-                    b.node.full
-                    if isinstance(b.node, ast.Forward) and b.node.full is not None
-                    else b.node
-                )
+                node = _completed(b.node)
                 node = self._unalias(node) if isinstance(node, ast.Typedef) else node
                 if not isinstance(node, ast.Struct):
                     self.diag.error(
@@ -1271,6 +1259,13 @@ class Resolver:
                         e.repo_id = f"IDL:{parts[0]}:{parts[1]}"
 
     _handlers: dict[type, Any] = {}
+
+
+def _completed(node: Any) -> Any:
+    """A forward declaration's full declaration once it has been seen; otherwise `node`."""
+    if isinstance(node, ast.Forward) and node.full is not None:
+        return node.full
+    return node
 
 
 def _a(word: str) -> str:

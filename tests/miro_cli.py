@@ -1,0 +1,28 @@
+"""Running the project's command-line tools as a user does, for the tests."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def run_miro_idl(
+    *args: str, cwd: Path | None = None, timeout: float = 120
+) -> subprocess.CompletedProcess[str]:
+    """`miro-idl ARGS` in `cwd` (default: the repository), from this checkout, no debug output."""
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(REPO) + os.pathsep + env.get("PYTHONPATH", "")
+    env.pop("MIRO_DEBUG", None)
+    return subprocess.run(
+        [sys.executable, "-m", "miro_gen.cli.idl", *args],
+        cwd=cwd or REPO,
+        env=env,
+        capture_output=True,
+        text=True,
+        errors="replace",
+        timeout=timeout,
+    )
