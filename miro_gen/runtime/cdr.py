@@ -1,0 +1,467 @@
+"""Support for the CDR codecs that `miro-idl` generates (OMG CDR, XCDR1, as Cyclone DDS writes it).
+
+Generated code does the fixed-layout work itself with precompiled `struct.Struct`s; this module
+holds what is shared: the encapsulation header, strings, bulk sequences of primitives, unions,
+object references, and the checks that make decoding of malformed input fail at once with
+`MARSHAL` (every length is compared with the bytes that remain before anything is allocated).
+
+Offsets count from the start of the buffer, which begins with the 4-byte encapsulation header;
+alignment is relative to the end of that header, so the padding before a value of alignment `a`
+at offset `o` is `(4 - o) & (a - 1)`.
+"""
+
+from __future__ import annotations
+
+import sys
+from array import array
+from collections.abc import Callable, Sequence
+from itertools import chain
+from struct import Struct
+from struct import error as StructError
+from typing import Any, ClassVar, Final, NamedTuple
+
+from miro_gen.exceptions import BAD_PARAM, MARSHAL
+
+HEADER_LE: Final = b"\x00\x01\x00\x00"  # CDR_LE encapsulation, what we write
+LE: Final = 0  # endianness index into the (little, big) Struct pairs of generated code
+BE: Final = 1
+NATIVE: Final = LE if sys.byteorder == "little" else BE
+ZEROS: Final = tuple(b"\0" * n for n in range(8))
+
+DecodeErrors: Final = (StructError, IndexError, ValueError, OverflowError, UnicodeDecodeError)
+EncodeErrors: Final = (StructError, TypeError, ValueError, OverflowError, AttributeError)
+
+_U32: Final = (Struct("<I"), Struct(">I"))
+_U32_LE: Final = _U32[LE]
+_XCDR2_KINDS: Final = {6, 7, 8, 9, 10, 11}
+
+
+def pair(fmt: str) -> tuple[Struct, Struct]:
+    """Little- and big-endian `Struct`s for `fmt` (no byte-order prefix)."""
+    return Struct("<" + fmt), Struct(">" + fmt)
+
+
+def header_endianness(data: bytes | bytearray | memoryview) -> int:
+    """Check the encapsulation header; the endianness index of the data that follows."""
+    if len(data) < 4:
+        raise MARSHAL(f"{len(data)} bytes is too short for a CDR encapsulation header")
+    kind = data[1]
+    if data[0] != 0 or kind not in (0, 1):
+        if data[0] == 0 and kind in _XCDR2_KINDS:
+            raise MARSHAL(f"XCDR2 encapsulation (kind {kind}) is not supported; expected XCDR1")
+        raise MARSHAL(f"unknown CDR encapsulation kind {data[0]:02x} {kind:02x}")
+    return LE if kind == 1 else BE
+
+
+# ---- strings ----------------------------------------------------------------------------------
+
+
+def put_string(buf: bytearray, value: str, bound: int | None, what: str) -> None:
+    """A string: aligned ulong length (bytes + NUL), UTF-8 bytes, NUL."""
+    if not isinstance(value, str):
+        raise BAD_PARAM(f"{what}: expected str, got {type(value).__name__}")
+    raw = value.encode("utf-8")
+    if bound is not None and len(raw) > bound:
+        raise BAD_PARAM(f"{what}: {len(raw)} bytes is longer than the bound {bound}")
+    if b"\0" in raw:
+        raise BAD_PARAM(f"{what}: strings cannot contain NUL characters")
+    buf += ZEROS[-len(buf) & 3]
+    buf += _U32_LE.pack(len(raw) + 1)
+    buf += raw
+    buf.append(0)
+
+
+def get_string(
+    data: bytes | bytearray | memoryview, off: int, e: int, bound: int | None, what: str
+) -> tuple[str, int]:
+    off += -off & 3
+    (n,) = _U32[e].unpack_from(data, off)
+    off += 4
+    if n == 0:  # some writers encode "" without its NUL
+        return "", off
+    if n > len(data) - off:
+        raise MARSHAL(f"{what}: string length {n} exceeds the {len(data) - off} bytes left")
+    end = off + n
+    if data[end - 1] != 0:
+        raise MARSHAL(f"{what}: string is not NUL-terminated")
+    if bound is not None and n - 1 > bound:
+        raise MARSHAL(f"{what}: string of {n - 1} bytes exceeds its bound {bound}")
+    try:
+        return str(data[off : end - 1], "utf-8"), end
+    except UnicodeDecodeError:
+        raise MARSHAL(f"{what}: string is not valid UTF-8") from None
+
+
+# ---- sequences ---------------------------------------------------------------------------------
+
+
+def put_length(buf: bytearray, n: int, bound: int | None, what: str) -> None:
+    """The ulong length of a sequence, checked against its bound."""
+    if bound is not None and n > bound:
+        raise BAD_PARAM(f"{what}: {n} elements is more than the bound {bound}")
+    buf += ZEROS[-len(buf) & 3]
+    buf += _U32_LE.pack(n)
+
+
+def get_length(
+    data: bytes | bytearray | memoryview,
+    off: int,
+    e: int,
+    bound: int | None,
+    min_size: int,
+    what: str,
+) -> tuple[int, int]:
+    """A sequence length, checked against its bound and against the bytes left
+    (`min_size`: the fewest bytes one element can take), before anything is allocated."""
+    off += -off & 3
+    (n,) = _U32[e].unpack_from(data, off)
+    off += 4
+    if bound is not None and n > bound:
+        raise MARSHAL(f"{what}: {n} elements exceeds the bound {bound}")
+    left = len(data) - off
+    if n * max(min_size, 1) > max(left, 0) + (0 if min_size else 1 << 20):
+        raise MARSHAL(f"{what}: {n} elements cannot fit in the {left} bytes left")
+    return n, off
+
+
+def put_octets(buf: bytearray, value: bytes | bytearray, bound: int | None, what: str) -> None:
+    put_length(buf, len(value), bound, what)
+    buf += value
+
+
+def get_octets(
+    data: bytes | bytearray | memoryview, off: int, e: int, bound: int | None, what: str
+) -> tuple[bytes, int]:
+    n, off = get_length(data, off, e, bound, 1, what)
+    return bytes(data[off : off + n]), off + n
+
+
+def put_primitives(
+    buf: bytearray, values: Sequence[Any], code: str, size: int, bound: int | None, what: str
+) -> None:
+    """A sequence of one primitive type, in bulk (`code`: an `array` type code)."""
+    n = len(values)
+    put_length(buf, n, bound, what)
+    if n:
+        buf += ZEROS[(4 - len(buf)) & (size - 1)]
+        raw = array(code, values)
+        if NATIVE != LE:
+            raw.byteswap()
+        buf += raw.tobytes()
+
+
+def get_primitives(
+    data: bytes | bytearray | memoryview,
+    off: int,
+    e: int,
+    code: str,
+    size: int,
+    bound: int | None,
+    what: str,
+) -> tuple[list[Any], int]:
+    n, off = get_length(data, off, e, bound, size, what)
+    if not n:
+        return [], off
+    off += (4 - off) & (size - 1)
+    end = off + n * size
+    if end > len(data):
+        raise MARSHAL(f"{what}: {n} elements cannot fit in the {len(data) - off} bytes left")
+    raw = array(code)
+    raw.frombytes(data[off:end])
+    if e != NATIVE:
+        raw.byteswap()
+    return raw.tolist(), end
+
+
+def put_booleans(buf: bytearray, values: Sequence[bool], bound: int | None, what: str) -> None:
+    put_length(buf, len(values), bound, what)
+    buf += bytes(map(bool, values))
+
+
+def get_booleans(
+    data: bytes | bytearray | memoryview, off: int, e: int, bound: int | None, what: str
+) -> tuple[list[bool], int]:
+    n, off = get_length(data, off, e, bound, 1, what)
+    return [b != 0 for b in data[off : off + n]], off + n
+
+
+def put_chars(buf: bytearray, values: Sequence[str], bound: int | None, what: str) -> None:
+    put_length(buf, len(values), bound, what)
+    try:
+        buf += "".join(values).encode("latin-1")
+    except UnicodeEncodeError:
+        raise BAD_PARAM(f"{what}: characters must be ISO Latin-1") from None
+
+
+def get_chars(
+    data: bytes | bytearray | memoryview, off: int, e: int, bound: int | None, what: str
+) -> tuple[list[str], int]:
+    n, off = get_length(data, off, e, bound, 1, what)
+    return list(str(data[off : off + n], "latin-1")), off + n
+
+
+def check_length(values: Sequence[Any], n: int, what: str) -> None:
+    """Arrays have a fixed length."""
+    if len(values) != n:
+        raise BAD_PARAM(f"{what}: array needs exactly {n} elements, got {len(values)}")
+
+
+def enum_value(table: tuple[Any, ...], value: int, what: str) -> Any:
+    """The enumerator with ordinal `value` (enums are ulongs on the wire); unknown: MARSHAL."""
+    if value < len(table):
+        return table[value]
+    raise MARSHAL(f"{what}: {value} is not a valid enumerator ordinal (0 to {len(table) - 1})")
+
+
+# ---- generated data types ----------------------------------------------------------------------
+
+
+class IdlType:
+    """What every generated struct, union and exception carries: its IDL identity, its data
+    schema (the flattened IDL text of the type, for logs and tools) and the schema's hash."""
+
+    __slots__ = ()
+
+    _repo_id: ClassVar[str] = ""
+    _type_name: ClassVar[str] = ""
+    _type_hash: ClassVar[str] = ""
+    _data_schema: ClassVar[str] = ""
+
+    def serialize(self) -> bytes:
+        raise NotImplementedError  # pragma: no cover - generated classes implement it
+
+
+# ---- unions ------------------------------------------------------------------------------------
+
+
+class IdlUnion(IdlType):
+    """Base of generated unions: discriminator `_d`, value `_v`, one property per branch.
+
+    `U(branch=value)` selects a branch (the discriminator becomes the branch's first label, or
+    for the default branch a value no label uses, chosen as Cyclone DDS does); `U(d, v)` sets
+    both; `U()` is the first branch with its type's default value.
+    """
+
+    __slots__ = ("_d", "_v")
+
+    _type_name: ClassVar[str] = ""
+    _branches: ClassVar[dict[str, tuple[Any, ...]]] = {}  # branch -> labels (empty: default)
+    _labels: ClassVar[dict[Any, str]] = {}  # label -> branch
+    _default_branch: ClassVar[str | None] = None
+    _default_discriminator: ClassVar[Any] = None
+    _zero: ClassVar[dict[str, Callable[[], Any]]] = {}  # branch -> default value factory
+
+    def __init__(self, *args: Any, **branch: Any) -> None:
+        if args:
+            if len(args) != 2 or branch:
+                raise TypeError(
+                    f"{type(self).__name__}() takes (discriminator, value) or one branch=value"
+                )
+            self._d, self._v = args
+            return
+        if len(branch) > 1:
+            raise TypeError(f"{type(self).__name__}() takes a single branch=value")
+        if branch:
+            ((name, value),) = branch.items()
+        else:
+            name = next(iter(self._branches))
+            value = self._zero[name]()
+        self._set(name, value)
+
+    def _set(self, name: str, value: Any) -> None:
+        labels = self._branches.get(name)
+        if labels is None:
+            raise TypeError(f"{type(self).__name__} has no branch '{name}'")
+        self._d = labels[0] if labels else self._default_discriminator
+        self._v = value
+
+    def _get(self, name: str) -> Any:
+        active = self._branch()
+        if active != name:
+            raise AttributeError(
+                f"{type(self).__name__}: branch '{name}' is not active "
+                f"(discriminator {self._d!r} selects {active or 'no branch'})"
+            )
+        return self._v
+
+    def _branch(self) -> str | None:
+        """The branch the discriminator selects (None: no branch is active)."""
+        return self._labels.get(self._d, self._default_branch)
+
+    def __eq__(self, other: object) -> bool:
+        return type(other) is type(self) and (self._d, self._v) == (other._d, other._v)
+
+    __hash__ = None  # type: ignore[assignment]  # mutable
+
+    def __repr__(self) -> str:
+        """`U(branch=value)` when the discriminator is the branch's usual one, else `U(d, v)`."""
+        name = self._branch()
+        if name is not None:
+            labels = self._branches[name]
+            if self._d == (labels[0] if labels else self._default_discriminator):
+                return f"{type(self).__name__}({name}={self._v!r})"
+        return f"{type(self).__name__}({self._d!r}, {self._v!r})"
+
+
+def default_discriminator(kind: str, labels: set[Any], enum_size: int = 0) -> Any:
+    """The discriminator a union's default branch gets, chosen as Cyclone DDS chooses it."""
+    if kind == "enum":
+        return next(i for i in range(enum_size + 1) if i not in labels)
+    if kind == "boolean":
+        return True not in labels
+    if kind == "char":
+        return next(chr(i) for i in range(256) if chr(i) not in labels)
+    if kind in ("octet", "uint8") or kind.startswith("unsigned"):
+        return next(i for i in range(1 << 64) if i not in labels)
+    i = -1
+    while i in labels:
+        i -= 1
+    return i
+
+
+# ---- object references -------------------------------------------------------------------------
+
+
+class ObjectRef(NamedTuple):
+    """A reference to a remote object: its repository id, the endpoint that serves it, and its
+    key there. Travels as two strings and an octet sequence; the nil reference is all empty."""
+
+    repo_id: str = ""
+    endpoint: str = ""
+    key: bytes = b""
+
+    def __bool__(self) -> bool:
+        return bool(self.endpoint or self.key)
+
+
+def put_object(buf: bytearray, ref: Any, what: str) -> None:
+    """An object reference: an `ObjectRef`, a stub (its `_ref`), or None (nil)."""
+    if ref is None:
+        ref = ObjectRef()
+    elif not isinstance(ref, ObjectRef):
+        ref = getattr(ref, "_ref", None)
+        if not isinstance(ref, ObjectRef):
+            raise BAD_PARAM(f"{what}: expected an object reference or a stub")
+    put_string(buf, ref.repo_id, None, what)
+    put_string(buf, ref.endpoint, None, what)
+    put_octets(buf, ref.key, None, what)
+
+
+def get_object(
+    data: bytes | bytearray | memoryview, off: int, e: int, what: str
+) -> tuple[ObjectRef, int]:
+    repo_id, off = get_string(data, off, e, None, what)
+    endpoint, off = get_string(data, off, e, None, what)
+    key, off = get_octets(data, off, e, None, what)
+    return ObjectRef(repo_id, endpoint, key), off
+
+
+def marshal_error(what: str, exc: BaseException) -> MARSHAL:
+    """The MARSHAL error for data that ran out or did not decode (from generated decoders)."""
+    if isinstance(exc, MARSHAL):
+        return exc
+    if isinstance(exc, StructError | IndexError):
+        return MARSHAL(f"{what}: data is truncated")
+    return MARSHAL(f"{what}: {exc}")
+
+
+def encode_error(what: str, exc: BaseException) -> BAD_PARAM:
+    """The BAD_PARAM error for a value that does not fit its IDL type (from generated encoders)."""
+    if isinstance(exc, BAD_PARAM):
+        return exc
+    return BAD_PARAM(f"{what}: {exc}")
+
+
+# ---- bulk helpers for generated code ---------------------------------------------------------
+
+Buffer = bytes | bytearray | memoryview
+
+
+def put_flat(
+    buf: bytearray,
+    values: Sequence[Any],
+    getter: Callable[[Any], Any],
+    count: int,
+    code: str,
+    size: int,
+    bound: int | None,
+    what: str,
+) -> None:
+    """A sequence of structs whose `count` members all have one primitive type, in bulk."""
+    n = len(values)
+    put_length(buf, n, bound, what)
+    if n:
+        buf += ZEROS[(4 - len(buf)) & (size - 1)]
+        flat = (
+            array(code, map(getter, values))
+            if count == 1
+            else array(code, chain.from_iterable(map(getter, values)))
+        )
+        if NATIVE != LE:
+            flat.byteswap()
+        buf += flat.tobytes()
+
+
+def get_flat(
+    data: Buffer,
+    off: int,
+    e: int,
+    cls: Callable[..., Any],
+    count: int,
+    code: str,
+    size: int,
+    bound: int | None,
+    what: str,
+) -> tuple[list[Any], int]:
+    n, off = get_length(data, off, e, bound, size * count, what)
+    if not n:
+        return [], off
+    off += (4 - off) & (size - 1)
+    end = off + n * count * size
+    if end > len(data):
+        raise MARSHAL(f"{what}: {n} elements cannot fit in the {len(data) - off} bytes left")
+    raw = array(code)
+    raw.frombytes(data[off:end])
+    if e != NATIVE:
+        raw.byteswap()
+    it = iter(raw.tolist())
+    return list(map(cls, *([it] * count))), end
+
+
+def flatten(
+    value: Sequence[Any], dims: tuple[int, ...], what: str, convert: Any = None
+) -> list[Any]:
+    """The elements of a (multi-dimensional) array in row order, checking every length."""
+    rows: list[Any] = [value]
+    for n in dims:
+        nxt: list[Any] = []
+        for row in rows:
+            check_length(row, n, what)
+            nxt.extend(row)
+        rows = nxt
+    return list(map(convert, rows)) if convert is not None else rows
+
+
+def reshape(values: Sequence[Any], dims: tuple[int, ...]) -> list[Any]:
+    """Row-order `values` as nested lists of shape `dims`."""
+    out: list[Any] = list(values)
+    for n in reversed(dims[1:]):
+        out = [out[i : i + n] for i in range(0, len(out), n)]
+    return out
+
+
+def enums(table: tuple[Any, ...], values: Sequence[int], what: str) -> list[Any]:
+    """Enumerators for wire values; MARSHAL for a value that names none."""
+    try:
+        return [table[v] for v in values]
+    except IndexError:
+        bad = next(v for v in values if v >= len(table))
+        raise MARSHAL(f"{what}: {bad} is not a valid enumerator ordinal") from None
+
+
+def exception_text(exc: Any) -> str:
+    """`str()` of a generated user exception: its IDL name and fields."""
+    import dataclasses
+
+    fields = ", ".join(f"{f.name}={getattr(exc, f.name)!r}" for f in dataclasses.fields(exc))
+    return f"{exc._type_name}({fields})"

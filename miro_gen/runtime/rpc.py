@@ -1,0 +1,260 @@
+"""Stubs, skeletons and the transport-neutral invoker they call through.
+
+A generated stub (client proxy) marshals its `in`/`inout` arguments into a CDR body and calls
+`Invoker.invoke(ref, operation, body)`; a transport (ZeroMQ, or `LocalInvoker` in-process)
+delivers the body to the servant's skeleton, whose dispatch table unmarshals the arguments,
+calls the implementation and marshals the results. Replies say `OK`, `USER_EXCEPTION` (an IDL
+exception, identified by its repository id) or `SYSTEM_EXCEPTION` (a CORBA-style failure).
+"""
+
+from __future__ import annotations
+
+import enum
+import itertools
+import threading
+from abc import ABC
+from collections.abc import Callable
+from typing import Any, ClassVar, NamedTuple, Protocol
+
+from miro_gen.exceptions import (
+    BAD_OPERATION,
+    MARSHAL,
+    NO_IMPLEMENT,
+    OBJECT_NOT_EXIST,
+    SYSTEM_EXCEPTIONS,
+    UNKNOWN,
+    CompletionStatus,
+    SystemException,
+    UserException,
+)
+from miro_gen.runtime.cdr import (
+    HEADER_LE,
+    ObjectRef,
+    get_string,
+    header_endianness,
+    pair,
+    put_string,
+)
+
+DEFAULT_TIMEOUT = 10.0  # seconds a call waits for its reply unless the stub says otherwise
+
+
+class ReplyStatus(enum.IntEnum):
+    OK = 0
+    USER_EXCEPTION = 1
+    SYSTEM_EXCEPTION = 2
+
+
+class Reply(NamedTuple):
+    """What a call returns: a status, a CDR body, and for exceptions their repository id."""
+
+    status: ReplyStatus
+    body: bytes
+    repo_id: str = ""
+
+
+class Invoker(Protocol):
+    """Delivers requests to the object a reference names; transports implement it."""
+
+    def invoke(
+        self,
+        ref: ObjectRef,
+        operation: str,
+        body: bytes,
+        *,
+        oneway: bool = False,
+        timeout: float | None = None,
+    ) -> Reply | None:
+        """Send a request; the reply (None for oneway calls)."""
+        ...
+
+    def reference_for(self, servant: Servant) -> ObjectRef:
+        """A reference to a local servant, so it can be passed as an argument."""
+        ...
+
+
+# ---- system exceptions on the wire -------------------------------------------------------------
+
+_SYSTEM_BODY = pair("II")
+
+
+def system_exception_reply(exc: SystemException) -> Reply:
+    buf = bytearray(HEADER_LE)
+    buf += _SYSTEM_BODY[0].pack(exc.minor & 0xFFFFFFFF, int(exc.completed))
+    put_string(buf, exc.message, None, "system exception message")
+    return Reply(ReplyStatus.SYSTEM_EXCEPTION, bytes(buf), exc._repo_id)
+
+
+def raise_system_exception(reply: Reply) -> None:
+    cls = SYSTEM_EXCEPTIONS.get(reply.repo_id, UNKNOWN)
+    try:
+        e = header_endianness(reply.body)
+        minor, completed = _SYSTEM_BODY[e].unpack_from(reply.body, 4)
+        message, _ = get_string(reply.body, 12, e, None, "system exception message")
+        status = CompletionStatus(completed)
+    except Exception:  # a malformed system exception is still a failure of the call
+        minor, status, message = 0, CompletionStatus.MAYBE, f"{reply.repo_id} (malformed)"
+    raise cls(message, minor, status)
+
+
+def raise_user_exception(reply: Reply, declared: tuple[type[UserException], ...]) -> None:
+    for cls in declared:
+        if cls._repo_id == reply.repo_id:
+            raise cls.deserialize(reply.body)  # type: ignore[attr-defined]
+    raise UNKNOWN(
+        f"the server raised {reply.repo_id}, which this operation does not declare",
+        completed=CompletionStatus.YES,
+    )
+
+
+# ---- stubs --------------------------------------------------------------------------------------
+
+
+class Stub:
+    """Base of generated client proxies: holds the object reference and the invoker."""
+
+    __slots__ = ("_invoker", "_ref", "_timeout")
+
+    _repo_id: ClassVar[str] = "IDL:omg.org/CORBA/Object:1.0"
+
+    def __init__(self, ref: ObjectRef, invoker: Invoker, timeout: float | None = None) -> None:
+        self._ref = ref
+        self._invoker = invoker
+        self._timeout = DEFAULT_TIMEOUT if timeout is None else timeout
+
+    def _call(
+        self, operation: str, body: bytes, declared: tuple[type[UserException], ...] = ()
+    ) -> bytes:
+        """Invoke and return the reply body; raise what the server raised."""
+        reply = self._invoker.invoke(self._ref, operation, body, timeout=self._timeout)
+        if reply is None:
+            raise MARSHAL(f"no reply to {operation}", completed=CompletionStatus.MAYBE)
+        if reply.status == ReplyStatus.OK:
+            return reply.body
+        if reply.status == ReplyStatus.USER_EXCEPTION:
+            raise_user_exception(reply, declared)
+        raise_system_exception(reply)
+        raise AssertionError("unreachable")  # pragma: no cover
+
+    def _send(self, operation: str, body: bytes) -> None:
+        """Invoke a oneway operation: no reply is awaited."""
+        self._invoker.invoke(self._ref, operation, body, oneway=True, timeout=self._timeout)
+
+    def _narrow(self, cls: type[Stub]) -> Any:
+        return cls(self._ref, self._invoker, self._timeout)
+
+    def __repr__(self) -> str:
+        return f"<{type(self).__name__} stub for {self._ref.endpoint or '?'} key={self._ref.key!r}>"
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Stub) and other._ref == self._ref
+
+    def __hash__(self) -> int:
+        return hash(self._ref)
+
+
+def make_stub(cls: type[Any], ref: ObjectRef, invoker: Invoker) -> Any:
+    """A stub of `cls` for a reference received in a reply or a request (None for nil)."""
+    return cls(ref, invoker) if ref else None
+
+
+def to_ref(value: Any, invoker: Invoker) -> Any:
+    """What an object-reference argument travels as: stubs and references as they are, a local
+    servant as a reference the invoker makes for it."""
+    if isinstance(value, Servant):
+        return invoker.reference_for(value)
+    return value
+
+
+# ---- skeletons ---------------------------------------------------------------------------------
+
+Dispatcher = Callable[[Any, bytes, "Invoker"], bytes]
+
+
+class Servant(ABC):  # noqa: B024 - generated subclasses declare the abstract methods
+    """Base of generated skeletons. `_dispatch` maps operation names to functions that
+    unmarshal the request, call the implementation and marshal the results."""
+
+    _repo_id: ClassVar[str] = "IDL:omg.org/CORBA/Object:1.0"
+    _dispatch: ClassVar[dict[str, Dispatcher]] = {}
+
+    def _invoke(self, operation: str, body: bytes, invoker: Invoker) -> Reply:
+        """Run one request: a reply, whatever the implementation did."""
+        handler = self._dispatch.get(operation)
+        if handler is None:
+            return system_exception_reply(
+                BAD_OPERATION(f"{self._repo_id} has no operation '{operation}'")
+            )
+        try:
+            return Reply(ReplyStatus.OK, handler(self, body, invoker))
+        except UserException as exc:
+            return Reply(ReplyStatus.USER_EXCEPTION, exc.serialize(), exc._repo_id)  # type: ignore[attr-defined]
+        except SystemException as exc:
+            return system_exception_reply(exc)
+        except NotImplementedError as exc:
+            return system_exception_reply(
+                NO_IMPLEMENT(f"{operation}: {exc}", completed=CompletionStatus.NO)
+            )
+        except Exception as exc:  # the servant's bug: the client gets UNKNOWN, not a hang
+            return system_exception_reply(
+                UNKNOWN(
+                    f"{operation} raised {type(exc).__name__}: {exc}",
+                    completed=CompletionStatus.MAYBE,
+                )
+            )
+
+
+def merge_dispatch(*tables: dict[str, Dispatcher]) -> dict[str, Dispatcher]:
+    """The dispatch table of a skeleton: its bases' operations, then its own."""
+    out: dict[str, Dispatcher] = {}
+    for table in tables:
+        out.update(table)
+    return out
+
+
+# ---- in-process transport ----------------------------------------------------------------------
+
+
+class LocalInvoker:
+    """An in-process transport for tests and single-process use: requests are marshalled to
+    bytes and dispatched to registered servants directly."""
+
+    def __init__(self, endpoint: str = "inproc://local") -> None:
+        self.endpoint = endpoint
+        self._servants: dict[bytes, Servant] = {}
+        self._keys = itertools.count(1)
+        self._lock = threading.Lock()
+
+    def register(self, servant: Servant, key: bytes | None = None) -> ObjectRef:
+        with self._lock:
+            if key is None:
+                key = f"obj{next(self._keys)}".encode()
+            self._servants[key] = servant
+        return ObjectRef(servant._repo_id, self.endpoint, key)
+
+    def reference_for(self, servant: Servant) -> ObjectRef:
+        with self._lock:
+            for key, s in self._servants.items():
+                if s is servant:
+                    return ObjectRef(servant._repo_id, self.endpoint, key)
+        return self.register(servant)
+
+    def stub(self, cls: type[Any], servant: Servant) -> Any:
+        """A stub of `cls` talking to `servant` through this invoker."""
+        return cls(self.reference_for(servant), self)
+
+    def invoke(
+        self,
+        ref: ObjectRef,
+        operation: str,
+        body: bytes,
+        *,
+        oneway: bool = False,
+        timeout: float | None = None,
+    ) -> Reply | None:
+        servant = self._servants.get(ref.key) if ref.endpoint == self.endpoint else None
+        if servant is None:
+            reply = system_exception_reply(OBJECT_NOT_EXIST(f"no object with key {ref.key!r}"))
+        else:
+            reply = servant._invoke(operation, bytes(body), self)
+        return None if oneway else Reply(reply.status, bytes(reply.body), reply.repo_id)
