@@ -7,6 +7,7 @@ import gc
 import os
 import sys
 from collections.abc import Sequence
+from typing import Any
 
 from miro_gen.cli.common import VersionAction, internal_error, parse_defines
 from miro_gen.diagnostics import CompileError, Diagnostics
@@ -123,11 +124,37 @@ def _run(args: argparse.Namespace, defines: dict[str, str], diag: Diagnostics) -
         sys.stdout.write(dumps(specifications_json(list(args.files), specs)))
         sys.stdout.flush()
         return 0
-    print(
-        "miro-idl: code generation is not available yet; use --ast-json to see the resolved AST",
-        file=sys.stderr,
-    )
-    return 2
+    return _generate(args, specs, diag)
+
+
+def _generate(args: argparse.Namespace, specs: list[Any], diag: Diagnostics) -> int:
+    from pathlib import Path
+
+    from miro_gen.codegen import generate
+
+    outdir = Path(args.outdir)
+    modules = generate.build_modules(zip(specs, args.files, strict=True), diag)
+    if diag.has_errors:
+        diag.print()
+        return 1
+    files = generate.generated_files(modules, outdir)
+    for module in generate.missing_imports(modules, files, outdir):
+        print(
+            f"miro-idl: warning: the generated code imports {module}, which is not generated: "
+            f"compile the IDL file it comes from too",
+            file=sys.stderr,
+        )
+    changed = generate.changed_files(files, outdir)
+    if args.check:
+        for rel in changed:
+            print(f"miro-idl: {outdir / rel} is out of date", file=sys.stderr)
+        return 1 if changed else 0
+    generate.write_files(files, changed, outdir)
+    for rel in changed:
+        print(f"wrote {outdir / rel}")
+    if not changed:
+        print(f"miro-idl: {len(files)} files in {outdir} are up to date")
+    return 0
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -1,0 +1,83 @@
+"""The Jinja environment of the Python back end: templates/idl/ and the filters they use."""
+
+from __future__ import annotations
+
+import textwrap
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+import jinja2
+
+from miro_gen import __version__
+from miro_gen.codegen.model import PyModule
+
+LINE = 100
+
+
+def template_dir() -> Path:
+    """templates/ in a source checkout, or the copy installed inside the package."""
+    checkout = Path(__file__).resolve().parents[2] / "templates"
+    if (checkout / "idl").is_dir():
+        return checkout
+    return Path(__file__).resolve().parents[1] / "templates"
+
+
+def pyrepr(value: Any) -> str:
+    """A Python literal: strings always in double quotes (as ruff formats them)."""
+    if isinstance(value, str):
+        text = repr(value)
+        if text.startswith("'") and '"' not in value:
+            text = '"' + text[1:-1].replace("\\'", "'") + '"'
+        return text
+    return repr(value)
+
+
+def docstring(text: str | None, indent: int, fallback: str | None = None) -> str:
+    """A docstring literal for IDL doc text, wrapped to the line length and escaped."""
+    body = (text or fallback or "").strip()
+    body = body.replace("\\", "\\\\").replace('"""', '\\"\\"\\"')
+    if body.endswith('"'):
+        body += " "
+    width = LINE - indent - 6
+    paragraphs = [textwrap.fill(p, width) if len(p) > width else p for p in body.split("\n\n")]
+    lines = "\n\n".join(paragraphs).split("\n")
+    if len(lines) == 1:
+        return f'"""{lines[0]}"""'
+    pad = " " * indent
+    rest = "\n".join(pad + line if line else "" for line in lines[1:])
+    return f'"""{lines[0]}\n{rest}\n{pad}"""'
+
+
+@cache
+def environment() -> jinja2.Environment:
+    env = jinja2.Environment(
+        loader=jinja2.FileSystemLoader(str(template_dir())),
+        trim_blocks=True,
+        lstrip_blocks=True,
+        keep_trailing_newline=True,
+        undefined=jinja2.StrictUndefined,
+        autoescape=False,
+    )
+    env.filters["pyrepr"] = pyrepr
+    env.filters["docstring"] = docstring
+    env.globals["version"] = __version__
+    return env
+
+
+def render_module(module: PyModule) -> str:
+    """The module's code; it exempts itself from the line-length rule only when it must
+    (long IDL names and literals can make lines longer than the project's limit)."""
+    template = environment().get_template("idl/module.py.j2")
+    text = template.render(m=module, long_lines=False)
+    if any(len(line) > LINE for line in text.split("\n")):
+        text = template.render(m=module, long_lines=True)
+    return text
+
+
+def render_package_init(doc: str, modules: list[str], subpackages: list[tuple[str, str]]) -> str:
+    return (
+        environment()
+        .get_template("idl/package_init.py.j2")
+        .render(doc=doc, modules=modules, subpackages=subpackages)
+    )
