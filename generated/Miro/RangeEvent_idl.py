@@ -103,10 +103,10 @@ def _enc_RangeScanEventIDL(_buf: bytearray, _v: RangeScanEventIDL) -> None:
         None,
         "Miro::RangeScanEventIDL.range",
     )
-    for _x1 in _v._range:
+    for _x0 in _v._range:
         _cdr.put_primitives(
             _buf,
-            _x1,
+            _x0,
             "i",
             4,
             None,
@@ -115,8 +115,8 @@ def _enc_RangeScanEventIDL(_buf: bytearray, _v: RangeScanEventIDL) -> None:
 
 
 def _dec_RangeScanEventIDL(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[RangeScanEventIDL, int]:
-    _f0, _off = _m_Miro_Time_idl._dec_TimeIDL(_data, _off, _e)
-    _n1, _off = _cdr.get_length(
+    _f1, _off = _m_Miro_Time_idl._dec_TimeIDL(_data, _off, _e)
+    _n4, _off = _cdr.get_length(
         _data,
         _off,
         _e,
@@ -124,9 +124,9 @@ def _dec_RangeScanEventIDL(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Rang
         4,
         "Miro::RangeScanEventIDL.range",
     )
-    _f1 = []
-    for _ in range(_n1):
-        _x1, _off = _cdr.get_primitives(
+    _f2 = []
+    for _ in range(_n4):
+        _x3, _off = _cdr.get_primitives(
             _data,
             _off,
             _e,
@@ -135,8 +135,8 @@ def _dec_RangeScanEventIDL(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Rang
             None,
             "Miro::RangeScanEventIDL.range",
         )
-        _f1.append(_x1)
-    return RangeScanEventIDL(_f0, _f1), _off
+        _f2.append(_x3)
+    return RangeScanEventIDL(_f1, _f2), _off
 
 
 @_dc.dataclass(slots=True)
@@ -356,15 +356,15 @@ def _enc_RangeBunchEventIDL(_buf: bytearray, _v: RangeBunchEventIDL) -> None:
         None,
         "Miro::RangeBunchEventIDL.sensor",
     )
-    for _x1 in _v.sensor:
-        _enc_RangeSensorIDL(_buf, _x1)
+    for _x0 in _v.sensor:
+        _enc_RangeSensorIDL(_buf, _x0)
 
 
 def _dec_RangeBunchEventIDL(
     _data: _cdr.Buffer, _off: int, _e: int
 ) -> tuple[RangeBunchEventIDL, int]:
-    _f0, _off = _m_Miro_Time_idl._dec_TimeIDL(_data, _off, _e)
-    _n1, _off = _cdr.get_length(
+    _f1, _off = _m_Miro_Time_idl._dec_TimeIDL(_data, _off, _e)
+    _n4, _off = _cdr.get_length(
         _data,
         _off,
         _e,
@@ -372,8 +372,8 @@ def _dec_RangeBunchEventIDL(
         8,
         "Miro::RangeBunchEventIDL.sensor",
     )
-    _f1 = []
-    for _ in range(_n1):
-        _x1, _off = _dec_RangeSensorIDL(_data, _off, _e)
-        _f1.append(_x1)
-    return RangeBunchEventIDL(_f0, _f1), _off
+    _f2 = []
+    for _ in range(_n4):
+        _x3, _off = _dec_RangeSensorIDL(_data, _off, _e)
+        _f2.append(_x3)
+    return RangeBunchEventIDL(_f1, _f2), _off

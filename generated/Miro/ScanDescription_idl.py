@@ -250,13 +250,13 @@ def _enc_SensorGroupIDL(_buf: bytearray, _v: SensorGroupIDL) -> None:
         None,
         "Miro::SensorGroupIDL.sensor",
     )
-    for _x1 in _v.sensor:
-        _enc_SensorPositionIDL(_buf, _x1)
+    for _x0 in _v.sensor:
+        _enc_SensorPositionIDL(_buf, _x0)
 
 
 def _dec_SensorGroupIDL(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[SensorGroupIDL, int]:
-    _f0, _off = _dec_SensorDescriptionIDL(_data, _off, _e)
-    _n1, _off = _cdr.get_length(
+    _f1, _off = _dec_SensorDescriptionIDL(_data, _off, _e)
+    _n4, _off = _cdr.get_length(
         _data,
         _off,
         _e,
@@ -264,11 +264,11 @@ def _dec_SensorGroupIDL(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[SensorG
         33,
         "Miro::SensorGroupIDL.sensor",
     )
-    _f1 = []
-    for _ in range(_n1):
-        _x1, _off = _dec_SensorPositionIDL(_data, _off, _e)
-        _f1.append(_x1)
-    return SensorGroupIDL(_f0, _f1), _off
+    _f2 = []
+    for _ in range(_n4):
+        _x3, _off = _dec_SensorPositionIDL(_data, _off, _e)
+        _f2.append(_x3)
+    return SensorGroupIDL(_f1, _f2), _off
 
 
 SensorGroupSeqIDL: _t.TypeAlias = list[SensorGroupIDL]
@@ -367,24 +367,24 @@ def _enc_ScanDescriptionIDL(_buf: bytearray, _v: ScanDescriptionIDL) -> None:
         None,
         "Miro::ScanDescriptionIDL.group",
     )
-    for _x1 in _v.group:
-        _enc_SensorGroupIDL(_buf, _x1)
+    for _x0 in _v.group:
+        _enc_SensorGroupIDL(_buf, _x0)
 
 
 def _dec_ScanDescriptionIDL(
     _data: _cdr.Buffer, _off: int, _e: int
 ) -> tuple[ScanDescriptionIDL, int]:
     _off += (4 - _off) & 3
-    _t0 = _U3[_e](_data, _off)
+    _t1 = _U3[_e](_data, _off)
     _off += 4
-    _f1, _off = _cdr.get_string(
+    _f2, _off = _cdr.get_string(
         _data,
         _off,
         _e,
         None,
         "Miro::ScanDescriptionIDL.eventName",
     )
-    _n1, _off = _cdr.get_length(
+    _n5, _off = _cdr.get_length(
         _data,
         _off,
         _e,
@@ -392,8 +392,8 @@ def _dec_ScanDescriptionIDL(
         20,
         "Miro::ScanDescriptionIDL.group",
     )
-    _f2 = []
-    for _ in range(_n1):
-        _x1, _off = _dec_SensorGroupIDL(_data, _off, _e)
-        _f2.append(_x1)
-    return ScanDescriptionIDL(_t0[0], _f1, _f2), _off
+    _f3 = []
+    for _ in range(_n5):
+        _x4, _off = _dec_SensorGroupIDL(_data, _off, _e)
+        _f3.append(_x4)
+    return ScanDescriptionIDL(_t1[0], _f2, _f3), _off

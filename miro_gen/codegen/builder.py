@@ -101,6 +101,13 @@ class Builder:
             visit(d)
         return out
 
+    def _ambiguous(self, name: str, code: str) -> str:
+        """Note a name pycodestyle calls ambiguous (l, O, I): the module exempts itself from that
+        rule (E741 variables, E742 classes, E743 functions) rather than rename IDL names."""
+        if name in ("l", "O", "I"):
+            self.m.noqa.add(code)
+        return name
+
     def _module(self, place: Place, poa: bool = False) -> PyModule:
         name = place.poa_module if poa else place.module
         m = self.modules.get(name)
@@ -145,6 +152,7 @@ class Builder:
             self.nested.setdefault(id(container), []).append((names.py_name(d.name), place.cls))
 
     def _add(self, item: Item) -> Item:
+        self._ambiguous(item.name, "E741" if item.kind in ("typedef", "const") else "E742")
         item.nested = self.nested.pop(id(item.decl), [])
         self.m.items.append(item)
         self.m.exports.append(item.name)
@@ -250,7 +258,10 @@ class Builder:
             doc=d.doc,
             repo_id=d.repo_id,
             scoped_name=d.scoped_name,
-            enumerators=[(_enumerator_name(e.name), e.ordinal, e.doc) for e in d.enumerators],
+            enumerators=[
+                (self._ambiguous(_enumerator_name(e.name), "E741"), e.ordinal, e.doc)
+                for e in d.enumerators
+            ],
         )
         self._add(item)
         # Enumerators belong to the scope enclosing the enum (CORBA): module constants, or
@@ -289,7 +300,8 @@ class Builder:
         for m in members:
             shape = shape_of(m.type, m.pos, m.dims)
             ann = self.annotation(shape) if not m.dims else self.annotation(shape, use_alias=False)
-            out.append(Field(names.py_name(m.name, reserved), ann, self.default(shape), m.doc))
+            name = self._ambiguous(names.py_name(m.name, reserved), "E741")
+            out.append(Field(name, ann, self.default(shape), m.doc))
         return out
 
     def _struct(self, d: ast.Struct) -> None:
@@ -365,7 +377,7 @@ class Builder:
         default_branch = None
         used: set[Any] = set()
         for case in d.cases:
-            name = names.py_name(case.name)
+            name = self._ambiguous(names.py_name(case.name), "E743")
             shape = shape_of(case.type, case.pos, case.dims)
             values = [v for v in case.labels if v is not None]
             used.update(v.ordinal if isinstance(v, ast.EnumValue) else v for v in values)
@@ -543,7 +555,7 @@ class Builder:
         for op in d.operations:
             ops.append(
                 self._operation(
-                    names.py_name(op.name),
+                    self._ambiguous(names.py_name(op.name), "E743"),
                     op.name,
                     op.doc,
                     op.oneway,
@@ -613,7 +625,7 @@ class Builder:
             result_annotations.append(self.annotation(shape, in_op=True))
         for mode, pname, ptype, ppos in params:
             shape = shape_of(ptype, ppos)
-            py = names.py_name(pname, names.PARAMETER_NAMES)
+            py = self._ambiguous(names.py_name(pname, names.PARAMETER_NAMES), "E741")
             ann = self.annotation(shape, in_op=True)
             py_params.append(Param(py, ann, mode))
             if mode in ("in", "inout"):
@@ -876,7 +888,7 @@ class Builder:
                         what=what,
                     )
                 ]
-            var = f"_x{depth}"
+            var = self._temp("x")
             return [
                 Step(
                     "put_seq",
@@ -888,7 +900,7 @@ class Builder:
                 )
             ]
         if k == "array":
-            var = f"_x{depth}"
+            var = self._temp("x")
             inner = _sub_array(shape)
             return [
                 Step(
@@ -963,7 +975,7 @@ class Builder:
                         what=what,
                     )
                 ]
-            item = f"_x{depth}"
+            item = self._temp("x")
             return [
                 Step(
                     "get_seq",
@@ -972,12 +984,12 @@ class Builder:
                     size=min_size(elem),
                     what=what,
                     expr=item,
-                    count=depth,
+                    count=next(self._temps),
                     body=self.decode_value(elem, item, what, depth + 1, inv),
                 )
             ]
         if k == "array":
-            item = f"_x{depth}"
+            item = self._temp("x")
             inner = _sub_array(shape)
             return [
                 Step(

@@ -297,6 +297,7 @@ class PyModule:
     getters: dict[str, tuple[str, ...]] = field(default_factory=dict)  # variable -> attributes
     exports: list[str] = field(default_factory=list)
     uses: set[str] = field(default_factory=set)  # runtime modules used: dc, enum, abc, decimal, ...
+    noqa: set[str] = field(default_factory=set)  # ruff rules the whole module is exempt from
 
     @property
     def name(self) -> str:

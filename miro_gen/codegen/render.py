@@ -69,9 +69,9 @@ def render_module(module: PyModule) -> str:
     """The module's code; it exempts itself from the line-length rule only when it must
     (long IDL names and literals can make lines longer than the project's limit)."""
     template = environment().get_template("idl/module.py.j2")
-    text = template.render(m=module, long_lines=False)
+    text = template.render(m=module, noqa=sorted(module.noqa))
     if any(len(line) > LINE for line in text.split("\n")):
-        text = template.render(m=module, long_lines=True)
+        text = template.render(m=module, noqa=sorted({*module.noqa, "E501"}))
     return text
 
 
