@@ -11,6 +11,5 @@ def test_generated_is_fresh() -> None:
     idl = sorted(glob.glob(str(REPO / "idl" / "*.idl")))
     out = run_miro_idl("-I", "idl", "--check", *idl)
     assert out.returncode == 0, (
-        "generated/ is stale; run `miro-idl -I idl idl/*.idl` and commit the result:\n"
-        + out.stderr
+        "generated/ is stale; run `miro-idl -I idl idl/*.idl` and commit the result:\n" + out.stderr
     )
