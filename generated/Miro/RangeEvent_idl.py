@@ -49,7 +49,7 @@ class RangeScanEventIDL(_cdr.IdlType):
 
     time: _m_Miro_Time_idl.TimeIDL = _dc.field(default_factory=_m_Miro_Time_idl.TimeIDL)
     """Time the scan was acquired."""
-    _range: RangeScanIDL = _dc.field(default_factory=list)
+    range: RangeScanIDL = _dc.field(default_factory=list)
     """The readings of every group, in millimetres (see RangeGroupIDL)."""
 
     _repo_id = "IDL:Miro/RangeScanEventIDL:1.0"
@@ -99,11 +99,11 @@ def _enc_RangeScanEventIDL(_buf: bytearray, _v: RangeScanEventIDL) -> None:
     _m_Miro_Time_idl._enc_TimeIDL(_buf, _v.time)
     _cdr.put_length(
         _buf,
-        len(_v._range),
+        len(_v.range),
         None,
         "Miro::RangeScanEventIDL.range",
     )
-    for _x0 in _v._range:
+    for _x0 in _v.range:
         _cdr.put_primitives(
             _buf,
             _x0,
@@ -149,7 +149,7 @@ class RangeGroupEventIDL(_cdr.IdlType):
     """Time the group was read."""
     group: int = 0
     """Number of the group, an index into ScanDescriptionIDL::group."""
-    _range: RangeGroupIDL = _dc.field(default_factory=list)
+    range: RangeGroupIDL = _dc.field(default_factory=list)
     """The readings of the group, in millimetres (see RangeGroupIDL)."""
 
     _repo_id = "IDL:Miro/RangeGroupEventIDL:1.0"
@@ -199,7 +199,7 @@ def _enc_RangeGroupEventIDL(_buf: bytearray, _v: RangeGroupEventIDL) -> None:
     _buf += _P0(_v.group)
     _cdr.put_primitives(
         _buf,
-        _v._range,
+        _v.range,
         "i",
         4,
         None,
@@ -234,7 +234,7 @@ class RangeSensorIDL(_cdr.IdlType):
     """Number of the group the sensor belongs to."""
     index: int = 0
     """Index of the sensor within its group."""
-    _range: int = 0
+    range: int = 0
     """The reading in millimetres, or HORIZON_RANGE / INVALID_RANGE (see RangeSensor)."""
 
     _repo_id = "IDL:Miro/RangeSensorIDL:1.0"
@@ -273,7 +273,7 @@ def _enc_RangeSensorIDL(_buf: bytearray, _v: RangeSensorIDL) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 1]
     _buf += _P1(_v.group, _v.index)
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P2(_v._range)
+    _buf += _P2(_v.range)
 
 
 def _dec_RangeSensorIDL(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[RangeSensorIDL, int]:

@@ -377,7 +377,7 @@ class Builder:
         default_branch = None
         used: set[Any] = set()
         for case in d.cases:
-            name = self._ambiguous(names.py_name(case.name), "E743")
+            name = self._ambiguous(names.py_name(case.name, names.CLASS_BODY), "E743")
             shape = shape_of(case.type, case.pos, case.dims)
             values = [v for v in case.labels if v is not None]
             used.update(v.ordinal if isinstance(v, ast.EnumValue) else v for v in values)
@@ -555,7 +555,7 @@ class Builder:
         for op in d.operations:
             ops.append(
                 self._operation(
-                    self._ambiguous(names.py_name(op.name), "E743"),
+                    self._ambiguous(names.py_name(op.name, names.CLASS_BODY), "E743"),
                     op.name,
                     op.doc,
                     op.oneway,

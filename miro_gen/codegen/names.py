@@ -3,8 +3,9 @@
 Rules (documented in docs/CODEGEN.md):
 
 * an IDL identifier that is a Python keyword gets a leading underscore (`_from`, `_None`), as the
-  OMG IDL-to-Python mapping says; so do the few builtins that generated code names in annotations
-  (`str`, `int`, `list`, ...) and names that generated classes already use (`serialize`);
+  OMG IDL-to-Python mapping says; so do the few builtins that generated code uses where the name
+  would shadow them (a member `str` or `list`, a parameter `len`; a member `range` stays), and
+  names that generated classes already use (`serialize`);
 * IDL module `Miro` is package `Miro`, nested modules are subpackages, the global scope is
   `_GlobalIDL`; skeletons are in the package with `__POA` appended to its top-level name;
 * declarations nested in an interface, struct or union live at module level as `Outer_Inner`
@@ -22,39 +23,32 @@ from miro_gen.idl import ast
 GLOBAL_PACKAGE = "_GlobalIDL"
 POA_SUFFIX = "__POA"
 
-# Builtins that generated code uses by name: a class, field or parameter with one of these names
-# would shadow them (and confuse type checkers).
-SHADOWING = frozenset(
-    [
-        "bool",
-        "bytes",
-        "dict",
-        "float",
-        "int",
-        "list",
-        "object",
-        "str",
-        "tuple",
-        "type",
-        "len",
-        "range",
-        "super",
-        "isinstance",
-        "property",
-        "staticmethod",
-        "classmethod",
-        "Exception",
-    ]
+# Builtins that generated code names, by where a name would shadow them. Only these are escaped:
+# a struct member called `range` stays `range`.
+#  - class bodies (fields, union branches, methods): annotations and decorators there;
+CLASS_BODY = frozenset(
+    ["bool", "bytes", "dict", "float", "int", "list", "str", "tuple"]
+) | frozenset(["classmethod", "property", "staticmethod"])
+#  - function parameters: what generated method bodies call;
+PARAMETERS = frozenset(
+    ["self", "bytearray", "bytes", "chr", "len", "list", "map", "ord", "range", "tuple"]
+)
+#  - module level (types, constants): everything generated code names.
+SHADOWING = (
+    CLASS_BODY
+    | (PARAMETERS - {"self"})
+    | frozenset(["Exception", "isinstance", "iter", "object", "super", "type"])
 )
 # Attributes that generated classes define.
-STRUCT_ATTRIBUTES = frozenset(["serialize", "deserialize"])
+STRUCT_ATTRIBUTES = CLASS_BODY | {"serialize", "deserialize"}
 EXCEPTION_ATTRIBUTES = STRUCT_ATTRIBUTES | {"args", "with_traceback", "add_note"}
-PARAMETER_NAMES = frozenset(["self"])
+PARAMETER_NAMES = PARAMETERS
 
 
-def py_name(name: str, taken: frozenset[str] = frozenset()) -> str:
-    """The Python identifier for an IDL identifier (keywords and shadowing names escaped)."""
-    if keyword.iskeyword(name) or name in SHADOWING or name in taken:
+def py_name(name: str, taken: frozenset[str] = SHADOWING) -> str:
+    """The Python identifier for an IDL identifier: Python keywords, and the names in `taken`
+    (builtins that would be shadowed where the name lives), get a leading underscore."""
+    if keyword.iskeyword(name) or name in taken:
         return "_" + name
     return name
 

@@ -18,6 +18,7 @@ from collections.abc import Callable, Sequence
 from itertools import chain
 from struct import Struct
 from struct import error as StructError
+from struct import pack as struct_pack
 from typing import Any, ClassVar, Final, NamedTuple
 
 from miro_gen.exceptions import BAD_PARAM, MARSHAL
@@ -33,7 +34,14 @@ EncodeErrors: Final = (StructError, TypeError, ValueError, OverflowError, Attrib
 
 _U32: Final = (Struct("<I"), Struct(">I"))
 _U32_LE: Final = _U32[LE]
+_U32_UNPACK: Final = (_U32[LE].unpack_from, _U32[BE].unpack_from)
+# Elements that may take no bytes at all (empty structs): a claimed count beyond the bytes left
+# plus this many is refused anyway, so a lying length cannot allocate millions of objects.
+_EMPTY_ELEMENTS: Final = 1 << 16
 _XCDR2_KINDS: Final = {6, 7, 8, 9, 10, 11}
+# struct format letters whose array type code differs ("i" is a C int in both on every platform
+# this runs on; "?" has no array type: booleans travel as bytes).
+_ARRAY_CODES: Final = {"?": "B"}
 
 
 def pair(fmt: str) -> tuple[Struct, Struct]:
@@ -114,13 +122,12 @@ def get_length(
     """A sequence length, checked against its bound and against the bytes left
     (`min_size`: the fewest bytes one element can take), before anything is allocated."""
     off += -off & 3
-    (n,) = _U32[e].unpack_from(data, off)
+    n = _U32_UNPACK[e](data, off)[0]
     off += 4
     if bound is not None and n > bound:
         raise MARSHAL(f"{what}: {n} elements exceeds the bound {bound}")
-    left = len(data) - off
-    if n * max(min_size, 1) > max(left, 0) + (0 if min_size else 1 << 20):
-        raise MARSHAL(f"{what}: {n} elements cannot fit in the {left} bytes left")
+    if n and (n * min_size if min_size else n - _EMPTY_ELEMENTS) > len(data) - off:
+        raise MARSHAL(f"{what}: {n} elements cannot fit in the {len(data) - off} bytes left")
     return n, off
 
 
@@ -139,15 +146,12 @@ def get_octets(
 def put_primitives(
     buf: bytearray, values: Sequence[Any], code: str, size: int, bound: int | None, what: str
 ) -> None:
-    """A sequence of one primitive type, in bulk (`code`: an `array` type code)."""
+    """A sequence of one primitive type (`code`: a struct format letter), in bulk."""
     n = len(values)
     put_length(buf, n, bound, what)
     if n:
         buf += ZEROS[(4 - len(buf)) & (size - 1)]
-        raw = array(code, values)
-        if NATIVE != LE:
-            raw.byteswap()
-        buf += raw.tobytes()
+        buf += struct_pack(f"<{n}{code}", *values)
 
 
 def get_primitives(
@@ -166,11 +170,22 @@ def get_primitives(
     end = off + n * size
     if end > len(data):
         raise MARSHAL(f"{what}: {n} elements cannot fit in the {len(data) - off} bytes left")
-    raw = array(code)
+    return _values(data, off, end, e, code), end
+
+
+def _values(
+    data: bytes | bytearray | memoryview, off: int, end: int, e: int, code: str
+) -> list[Any]:
+    """The primitives in data[off:end]: a view cast to the type in native order (fastest),
+    or through a byte-swapped array for the other byte order."""
+    if e == NATIVE:
+        view: Any = memoryview(data)[off:end]
+        values: list[Any] = view.cast(code).tolist()
+        return values
+    raw = array(_ARRAY_CODES.get(code, code))
     raw.frombytes(data[off:end])
-    if e != NATIVE:
-        raw.byteswap()
-    return raw.tolist(), end
+    raw.byteswap()
+    return raw.tolist()
 
 
 def put_booleans(buf: bytearray, values: Sequence[bool], bound: int | None, what: str) -> None:
@@ -392,14 +407,8 @@ def put_flat(
     put_length(buf, n, bound, what)
     if n:
         buf += ZEROS[(4 - len(buf)) & (size - 1)]
-        flat = (
-            array(code, map(getter, values))
-            if count == 1
-            else array(code, chain.from_iterable(map(getter, values)))
-        )
-        if NATIVE != LE:
-            flat.byteswap()
-        buf += flat.tobytes()
+        flat = map(getter, values) if count == 1 else chain.from_iterable(map(getter, values))
+        buf += struct_pack(f"<{n * count}{code}", *flat)
 
 
 def get_flat(
@@ -420,11 +429,7 @@ def get_flat(
     end = off + n * count * size
     if end > len(data):
         raise MARSHAL(f"{what}: {n} elements cannot fit in the {len(data) - off} bytes left")
-    raw = array(code)
-    raw.frombytes(data[off:end])
-    if e != NATIVE:
-        raw.byteswap()
-    it = iter(raw.tolist())
+    it = iter(_values(data, off, end, e, code))
     return list(map(cls, *([it] * count))), end
 
 
