@@ -76,6 +76,7 @@ class GpsFixQualityIDL(_enum.IntEnum):
 
 
 _GpsFixQualityIDL_T: tuple[GpsFixQualityIDL, ...] = tuple(GpsFixQualityIDL)
+_GpsFixQualityIDL_W: dict[int, int] = {_i: _i for _i in range(len(GpsFixQualityIDL))}
 GPS_FIX_INVALID: _t.Final = GpsFixQualityIDL.GPS_FIX_INVALID
 GPS_FIX_GPS: _t.Final = GpsFixQualityIDL.GPS_FIX_GPS
 GPS_FIX_DGPS: _t.Final = GpsFixQualityIDL.GPS_FIX_DGPS
@@ -104,6 +105,7 @@ class GpsFixModeIDL(_enum.IntEnum):
 
 
 _GpsFixModeIDL_T: tuple[GpsFixModeIDL, ...] = tuple(GpsFixModeIDL)
+_GpsFixModeIDL_W: dict[int, int] = {_i: _i for _i in range(len(GpsFixModeIDL))}
 GPS_MODE_UNKNOWN: _t.Final = GpsFixModeIDL.GPS_MODE_UNKNOWN
 GPS_MODE_NO_FIX: _t.Final = GpsFixModeIDL.GPS_MODE_NO_FIX
 GPS_MODE_2D: _t.Final = GpsFixModeIDL.GPS_MODE_2D
@@ -257,7 +259,7 @@ def _enc_GpsDataIDL(_buf: bytearray, _v: GpsDataIDL) -> None:
     _m_Miro_Time_idl._enc_TimeIDL(_buf, _v.utcTime)
     _buf += _P0(_v.valid)
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P1(_v.quality, _v.mode)
+    _buf += _P1(_GpsFixQualityIDL_W[_v.quality], _GpsFixModeIDL_W[_v.mode])
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
     _buf += _P2(
         _v.latitude,

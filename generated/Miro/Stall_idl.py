@@ -30,6 +30,7 @@ class Stall_StatusIDL(_enum.IntEnum):
 
 
 _Stall_StatusIDL_T: tuple[Stall_StatusIDL, ...] = tuple(Stall_StatusIDL)
+_Stall_StatusIDL_W: dict[int, int] = {_i: _i for _i in range(len(Stall_StatusIDL))}
 
 
 class Stall(_rpc.Stub):

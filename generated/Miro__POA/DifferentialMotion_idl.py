@@ -67,14 +67,15 @@ class DifferentialMotion(_m_Miro__POA_Motion_idl.Motion):
         """
 
     def _op_getMinMaxLRVelocity(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
-        (
-            _o_minLTranslation,
-            _o_maxLTranslation,
-            _o_minRTranslation,
-            _o_maxRTranslation,
-        ) = self.getMinMaxLRVelocity()
+        _results = self.getMinMaxLRVelocity()
         _buf = bytearray(_cdr.HEADER_LE)
         try:
+            (
+                _o_minLTranslation,
+                _o_maxLTranslation,
+                _o_minRTranslation,
+                _o_maxRTranslation,
+            ) = _results
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
             _buf += _P1(
                 _o_minLTranslation,
@@ -82,8 +83,8 @@ class DifferentialMotion(_m_Miro__POA_Motion_idl.Motion):
                 _o_minRTranslation,
                 _o_maxRTranslation,
             )
-        except _cdr.EncodeErrors as _x:
-            raise _cdr.encode_error("Miro::DifferentialMotion::getMinMaxLRVelocity", _x) from None
+        except _cdr.ResultErrors as _x:
+            raise _cdr.result_error("Miro::DifferentialMotion::getMinMaxLRVelocity", _x) from None
         return bytes(_buf)
 
     @_abc.abstractmethod
@@ -96,13 +97,14 @@ class DifferentialMotion(_m_Miro__POA_Motion_idl.Motion):
         """
 
     def _op_getTargetLRVelocity(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
-        _o_left, _o_right = self.getTargetLRVelocity()
+        _results = self.getTargetLRVelocity()
         _buf = bytearray(_cdr.HEADER_LE)
         try:
+            _o_left, _o_right = _results
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
             _buf += _P0(_o_left, _o_right)
-        except _cdr.EncodeErrors as _x:
-            raise _cdr.encode_error("Miro::DifferentialMotion::getTargetLRVelocity", _x) from None
+        except _cdr.ResultErrors as _x:
+            raise _cdr.result_error("Miro::DifferentialMotion::getTargetLRVelocity", _x) from None
         return bytes(_buf)
 
     _dispatch = _rpc.merge_dispatch(

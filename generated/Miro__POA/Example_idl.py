@@ -53,8 +53,8 @@ class Example(_rpc.Servant):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _m_Miro_Example_idl._enc_ExampleStructIDL(_buf, _r)
-        except _cdr.EncodeErrors as _x:
-            raise _cdr.encode_error("Miro::Example::getData", _x) from None
+        except _cdr.ResultErrors as _x:
+            raise _cdr.result_error("Miro::Example::getData", _x) from None
         return bytes(_buf)
 
     _dispatch = _rpc.merge_dispatch(

@@ -34,8 +34,8 @@ class Gps(_rpc.Servant):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _m_Miro_Gps_idl._enc_GpsDataIDL(_buf, _r)
-        except _cdr.EncodeErrors as _x:
-            raise _cdr.encode_error("Miro::Gps::getData", _x) from None
+        except _cdr.ResultErrors as _x:
+            raise _cdr.result_error("Miro::Gps::getData", _x) from None
         return bytes(_buf)
 
     @_abc.abstractmethod
@@ -49,8 +49,8 @@ class Gps(_rpc.Servant):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _m_Miro_Gps_idl._enc_GpsDataIDL(_buf, _r)
-        except _cdr.EncodeErrors as _x:
-            raise _cdr.encode_error("Miro::Gps::getWaitData", _x) from None
+        except _cdr.ResultErrors as _x:
+            raise _cdr.result_error("Miro::Gps::getWaitData", _x) from None
         return bytes(_buf)
 
     _dispatch = _rpc.merge_dispatch(

@@ -33,8 +33,8 @@ class InertialSensor(_rpc.Servant):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _m_Miro_InertialSensor_idl._enc_InertialDataIDL(_buf, _r)
-        except _cdr.EncodeErrors as _x:
-            raise _cdr.encode_error("Miro::InertialSensor::getData", _x) from None
+        except _cdr.ResultErrors as _x:
+            raise _cdr.result_error("Miro::InertialSensor::getData", _x) from None
         return bytes(_buf)
 
     @_abc.abstractmethod
@@ -48,8 +48,8 @@ class InertialSensor(_rpc.Servant):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _m_Miro_InertialSensor_idl._enc_InertialDataIDL(_buf, _r)
-        except _cdr.EncodeErrors as _x:
-            raise _cdr.encode_error("Miro::InertialSensor::getWaitData", _x) from None
+        except _cdr.ResultErrors as _x:
+            raise _cdr.result_error("Miro::InertialSensor::getWaitData", _x) from None
         return bytes(_buf)
 
     _dispatch = _rpc.merge_dispatch(

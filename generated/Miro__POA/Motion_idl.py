@@ -83,20 +83,16 @@ class Motion(_rpc.Servant):
         """
 
     def _op_getMinMaxVelocity(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
-        (
-            _o_minTranslation,
-            _o_maxTranslation,
-            _o_minRotation,
-            _o_maxRotation,
-        ) = self.getMinMaxVelocity()
+        _results = self.getMinMaxVelocity()
         _buf = bytearray(_cdr.HEADER_LE)
         try:
+            _o_minTranslation, _o_maxTranslation, _o_minRotation, _o_maxRotation = _results
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
             _buf += _P0(_o_minTranslation, _o_maxTranslation)
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
             _buf += _P1(_o_minRotation, _o_maxRotation)
-        except _cdr.EncodeErrors as _x:
-            raise _cdr.encode_error("Miro::Motion::getMinMaxVelocity", _x) from None
+        except _cdr.ResultErrors as _x:
+            raise _cdr.result_error("Miro::Motion::getMinMaxVelocity", _x) from None
         return bytes(_buf)
 
     @_abc.abstractmethod
@@ -112,8 +108,8 @@ class Motion(_rpc.Servant):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _m_Miro_Velocity_idl._enc_VelocityIDL(_buf, _r)
-        except _cdr.EncodeErrors as _x:
-            raise _cdr.encode_error("Miro::Motion::getTargetVelocity", _x) from None
+        except _cdr.ResultErrors as _x:
+            raise _cdr.result_error("Miro::Motion::getTargetVelocity", _x) from None
         return bytes(_buf)
 
     _dispatch = _rpc.merge_dispatch(

@@ -83,8 +83,8 @@ class Odometry(_rpc.Servant):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _m_Miro_Position_idl._enc_PositionIDL(_buf, _r)
-        except _cdr.EncodeErrors as _x:
-            raise _cdr.encode_error("Miro::Odometry::getPosition", _x) from None
+        except _cdr.ResultErrors as _x:
+            raise _cdr.result_error("Miro::Odometry::getPosition", _x) from None
         return bytes(_buf)
 
     @_abc.abstractmethod
@@ -98,8 +98,8 @@ class Odometry(_rpc.Servant):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _m_Miro_Position_idl._enc_PositionIDL(_buf, _r)
-        except _cdr.EncodeErrors as _x:
-            raise _cdr.encode_error("Miro::Odometry::getWaitPosition", _x) from None
+        except _cdr.ResultErrors as _x:
+            raise _cdr.result_error("Miro::Odometry::getWaitPosition", _x) from None
         return bytes(_buf)
 
     @_abc.abstractmethod
@@ -115,8 +115,8 @@ class Odometry(_rpc.Servant):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _m_Miro_Position_idl._enc_PositionIDL(_buf, _r)
-        except _cdr.EncodeErrors as _x:
-            raise _cdr.encode_error("Miro::Odometry::getRawPosition", _x) from None
+        except _cdr.ResultErrors as _x:
+            raise _cdr.result_error("Miro::Odometry::getRawPosition", _x) from None
         return bytes(_buf)
 
     @_abc.abstractmethod
@@ -130,8 +130,8 @@ class Odometry(_rpc.Servant):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _m_Miro_Position_idl._enc_PositionIDL(_buf, _r)
-        except _cdr.EncodeErrors as _x:
-            raise _cdr.encode_error("Miro::Odometry::getWaitRawPosition", _x) from None
+        except _cdr.ResultErrors as _x:
+            raise _cdr.result_error("Miro::Odometry::getWaitRawPosition", _x) from None
         return bytes(_buf)
 
     @_abc.abstractmethod
@@ -143,8 +143,8 @@ class Odometry(_rpc.Servant):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _m_Miro_Velocity_idl._enc_VelocityIDL(_buf, _r)
-        except _cdr.EncodeErrors as _x:
-            raise _cdr.encode_error("Miro::Odometry::getVelocity", _x) from None
+        except _cdr.ResultErrors as _x:
+            raise _cdr.result_error("Miro::Odometry::getVelocity", _x) from None
         return bytes(_buf)
 
     @_abc.abstractmethod
@@ -158,8 +158,8 @@ class Odometry(_rpc.Servant):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _m_Miro_Velocity_idl._enc_VelocityIDL(_buf, _r)
-        except _cdr.EncodeErrors as _x:
-            raise _cdr.encode_error("Miro::Odometry::getWaitVelocity", _x) from None
+        except _cdr.ResultErrors as _x:
+            raise _cdr.result_error("Miro::Odometry::getWaitVelocity", _x) from None
         return bytes(_buf)
 
     @_abc.abstractmethod
@@ -171,8 +171,8 @@ class Odometry(_rpc.Servant):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _m_Miro_MotionStatus_idl._enc_MotionStatusIDL(_buf, _r)
-        except _cdr.EncodeErrors as _x:
-            raise _cdr.encode_error("Miro::Odometry::getStatus", _x) from None
+        except _cdr.ResultErrors as _x:
+            raise _cdr.result_error("Miro::Odometry::getStatus", _x) from None
         return bytes(_buf)
 
     @_abc.abstractmethod
@@ -186,8 +186,8 @@ class Odometry(_rpc.Servant):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _m_Miro_MotionStatus_idl._enc_MotionStatusIDL(_buf, _r)
-        except _cdr.EncodeErrors as _x:
-            raise _cdr.encode_error("Miro::Odometry::getWaitStatus", _x) from None
+        except _cdr.ResultErrors as _x:
+            raise _cdr.result_error("Miro::Odometry::getWaitStatus", _x) from None
         return bytes(_buf)
 
     _dispatch = _rpc.merge_dispatch(

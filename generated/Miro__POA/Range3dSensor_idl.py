@@ -30,8 +30,8 @@ class Range3dSensor(_rpc.Servant):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _m_Miro_Range3dSensor_idl._enc_Range3dDescriptionIDL(_buf, _r)
-        except _cdr.EncodeErrors as _x:
-            raise _cdr.encode_error("Miro::Range3dSensor::getDescription", _x) from None
+        except _cdr.ResultErrors as _x:
+            raise _cdr.result_error("Miro::Range3dSensor::getDescription", _x) from None
         return bytes(_buf)
 
     @_abc.abstractmethod
@@ -43,8 +43,8 @@ class Range3dSensor(_rpc.Servant):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _m_Miro_Range3dSensor_idl._enc_Range3dScanEventIDL(_buf, _r)
-        except _cdr.EncodeErrors as _x:
-            raise _cdr.encode_error("Miro::Range3dSensor::getScan", _x) from None
+        except _cdr.ResultErrors as _x:
+            raise _cdr.result_error("Miro::Range3dSensor::getScan", _x) from None
         return bytes(_buf)
 
     @_abc.abstractmethod
@@ -58,8 +58,8 @@ class Range3dSensor(_rpc.Servant):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _m_Miro_Range3dSensor_idl._enc_Range3dScanEventIDL(_buf, _r)
-        except _cdr.EncodeErrors as _x:
-            raise _cdr.encode_error("Miro::Range3dSensor::getWaitScan", _x) from None
+        except _cdr.ResultErrors as _x:
+            raise _cdr.result_error("Miro::Range3dSensor::getWaitScan", _x) from None
         return bytes(_buf)
 
     _dispatch = _rpc.merge_dispatch(

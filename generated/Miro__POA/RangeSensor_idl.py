@@ -40,8 +40,8 @@ class RangeSensor(_rpc.Servant):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _m_Miro_ScanDescription_idl._enc_ScanDescriptionIDL(_buf, _r)
-        except _cdr.EncodeErrors as _x:
-            raise _cdr.encode_error("Miro::RangeSensor::getScanDescription", _x) from None
+        except _cdr.ResultErrors as _x:
+            raise _cdr.result_error("Miro::RangeSensor::getScanDescription", _x) from None
         return bytes(_buf)
 
     @_abc.abstractmethod
@@ -53,8 +53,8 @@ class RangeSensor(_rpc.Servant):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _m_Miro_RangeEvent_idl._enc_RangeScanEventIDL(_buf, _r)
-        except _cdr.EncodeErrors as _x:
-            raise _cdr.encode_error("Miro::RangeSensor::getFullScan", _x) from None
+        except _cdr.ResultErrors as _x:
+            raise _cdr.result_error("Miro::RangeSensor::getFullScan", _x) from None
         return bytes(_buf)
 
     @_abc.abstractmethod
@@ -68,8 +68,8 @@ class RangeSensor(_rpc.Servant):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _m_Miro_RangeEvent_idl._enc_RangeScanEventIDL(_buf, _r)
-        except _cdr.EncodeErrors as _x:
-            raise _cdr.encode_error("Miro::RangeSensor::getWaitFullScan", _x) from None
+        except _cdr.ResultErrors as _x:
+            raise _cdr.result_error("Miro::RangeSensor::getWaitFullScan", _x) from None
         return bytes(_buf)
 
     @_abc.abstractmethod
@@ -94,8 +94,8 @@ class RangeSensor(_rpc.Servant):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _m_Miro_RangeEvent_idl._enc_RangeGroupEventIDL(_buf, _r)
-        except _cdr.EncodeErrors as _x:
-            raise _cdr.encode_error("Miro::RangeSensor::getGroup", _x) from None
+        except _cdr.ResultErrors as _x:
+            raise _cdr.result_error("Miro::RangeSensor::getGroup", _x) from None
         return bytes(_buf)
 
     @_abc.abstractmethod
@@ -121,8 +121,8 @@ class RangeSensor(_rpc.Servant):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _m_Miro_RangeEvent_idl._enc_RangeGroupEventIDL(_buf, _r)
-        except _cdr.EncodeErrors as _x:
-            raise _cdr.encode_error("Miro::RangeSensor::getWaitGroup", _x) from None
+        except _cdr.ResultErrors as _x:
+            raise _cdr.result_error("Miro::RangeSensor::getWaitGroup", _x) from None
         return bytes(_buf)
 
     _dispatch = _rpc.merge_dispatch(

@@ -35,8 +35,8 @@ class Stall(_rpc.Servant):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _buf += _P0(_r)
-        except _cdr.EncodeErrors as _x:
-            raise _cdr.encode_error("Miro::Stall::isStalled", _x) from None
+        except _cdr.ResultErrors as _x:
+            raise _cdr.result_error("Miro::Stall::isStalled", _x) from None
         return bytes(_buf)
 
     @_abc.abstractmethod

@@ -32,8 +32,8 @@ class myExample(_rpc.Servant):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _m_Miro_myExample_idl._enc_myExampleIDL(_buf, _r)
-        except _cdr.EncodeErrors as _x:
-            raise _cdr.encode_error("Miro::myExample::getString", _x) from None
+        except _cdr.ResultErrors as _x:
+            raise _cdr.result_error("Miro::myExample::getString", _x) from None
         return bytes(_buf)
 
     _dispatch = _rpc.merge_dispatch(

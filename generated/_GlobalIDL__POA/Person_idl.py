@@ -68,8 +68,8 @@ class Person(_rpc.Servant):
         try:
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
             _buf += _P1(_r)
-        except _cdr.EncodeErrors as _x:
-            raise _cdr.encode_error("Person::getHeight", _x) from None
+        except _cdr.ResultErrors as _x:
+            raise _cdr.result_error("Person::getHeight", _x) from None
         return bytes(_buf)
 
     @_abc.abstractmethod
@@ -82,8 +82,8 @@ class Person(_rpc.Servant):
         try:
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
             _buf += _P1(_r)
-        except _cdr.EncodeErrors as _x:
-            raise _cdr.encode_error("Person::getWaist", _x) from None
+        except _cdr.ResultErrors as _x:
+            raise _cdr.result_error("Person::getWaist", _x) from None
         return bytes(_buf)
 
     @_abc.abstractmethod
@@ -95,8 +95,8 @@ class Person(_rpc.Servant):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _buf += _P2(ord(_r))
-        except _cdr.EncodeErrors as _x:
-            raise _cdr.encode_error("Person::getHair", _x) from None
+        except _cdr.ResultErrors as _x:
+            raise _cdr.result_error("Person::getHair", _x) from None
         return bytes(_buf)
 
     @_abc.abstractmethod
@@ -109,8 +109,8 @@ class Person(_rpc.Servant):
         try:
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
             _buf += _P3(_r)
-        except _cdr.EncodeErrors as _x:
-            raise _cdr.encode_error("Person::getAge", _x) from None
+        except _cdr.ResultErrors as _x:
+            raise _cdr.result_error("Person::getAge", _x) from None
         return bytes(_buf)
 
     @_abc.abstractmethod
@@ -122,8 +122,8 @@ class Person(_rpc.Servant):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _m__GlobalIDL_Person_idl._enc_PersonTraitsIDL(_buf, _r)
-        except _cdr.EncodeErrors as _x:
-            raise _cdr.encode_error("Person::getTraits", _x) from None
+        except _cdr.ResultErrors as _x:
+            raise _cdr.result_error("Person::getTraits", _x) from None
         return bytes(_buf)
 
     _dispatch = _rpc.merge_dispatch(

@@ -181,7 +181,10 @@ class Builder:
         return f"{head}.{prefix}{tail}" if head else f"{prefix}{tail}"
 
     def annotation(self, shape: Shape, use_alias: bool = True, in_op: bool = False) -> str:
-        if use_alias and shape.alias is not None:
+        """The type hint of a value. Object references inside an operation's arguments and
+        results arrive as stubs, but as `ObjectRef` inside data types; so a typedef holding
+        references is spelled out there rather than named (its alias says `ObjectRef`)."""
+        if use_alias and shape.alias is not None and not (in_op and _holds_object(shape)):
             return self.ref(shape.alias)
         k = shape.kind
         if k == "prim":
@@ -192,7 +195,7 @@ class Builder:
             return "bytes"
         if k in ("seq", "array"):
             inner = shape.elem if k == "seq" else _sub_array(shape)
-            return f"list[{self.annotation(inner)}]"  # type: ignore[arg-type]
+            return f"list[{self.annotation(inner, in_op=in_op)}]"  # type: ignore[arg-type]
         if k in ("enum", "struct", "union", "exception"):
             return self.ref(shape.decl)
         if k == "object":
@@ -750,12 +753,19 @@ class Builder:
         return steps
 
     def _pack_expr(self, shape: Shape, expr: str, what: str) -> str:
+        if shape.kind == "enum":
+            return f"{self._enum_wire(shape.decl)}[{expr}]"
         if shape.kind != "array":
             return f"{shape.prim.to_wire}({expr})" if shape.prim and shape.prim.to_wire else expr
-        u = shape.elem.prim if shape.elem and shape.elem.kind == "prim" else None
-        if len(shape.dims) == 1 and not (u and u.to_wire):
+        elem = shape.elem
+        assert elem is not None
+        if elem.kind == "enum":
+            to_wire: str | None = f"{self._enum_wire(elem.decl)}.__getitem__"
+        else:
+            to_wire = elem.prim.to_wire if elem.prim else None
+        if len(shape.dims) == 1 and not to_wire:
             return f"*{expr}"
-        conv = f", {u.to_wire}" if u and u.to_wire else ""
+        conv = f", {to_wire}" if to_wire else ""
         return f"*_cdr.flatten({expr}, {shape.dims}, {what!r}{conv})"
 
     def decode_members(
@@ -809,10 +819,15 @@ class Builder:
             return f"{shape.prim.from_wire}({value})"
         return value
 
-    def _enum_table(self, decl: Any) -> str:
+    def _enum_table(self, decl: Any, suffix: str = "T") -> str:
+        """The tuple of an enum's members by ordinal (`_E_T`), or with suffix "W" the dict that
+        checks a value is one of its ordinals before it is encoded (`_E_W`)."""
         cls = self.ref(decl)
         head, _, tail = cls.rpartition(".")
-        return f"{head}._{tail}_T" if head else f"_{tail}_T"
+        return f"{head}._{tail}_{suffix}" if head else f"_{tail}_{suffix}"
+
+    def _enum_wire(self, decl: Any) -> str:
+        return self._enum_table(decl, "W")
 
     def _flat(self, shape: Shape) -> tuple[str, str, int, int] | None:
         """A struct whose members are all one numeric primitive: sequences of it move in bulk.
@@ -858,7 +873,17 @@ class Builder:
         if k == "seq":
             elem = shape.elem
             assert elem is not None
-            if elem.kind == "enum" or (elem.kind == "prim" and elem.prim and elem.prim.array):
+            if elem.kind == "enum":
+                return [
+                    Step(
+                        "put_enums",
+                        expr=expr,
+                        codec=self._enum_wire(elem.decl),
+                        bound=shape.bound,
+                        what=what,
+                    )
+                ]
+            if elem.kind == "prim" and elem.prim and elem.prim.array:
                 u = elem.unit
                 return [
                     Step(
@@ -1002,6 +1027,14 @@ class Builder:
                 )
             ]
         raise AssertionError(k)  # pragma: no cover
+
+
+def _holds_object(shape: Shape) -> bool:
+    """Whether a value of this shape is, or is a list of, object references."""
+    s: Shape | None = shape
+    while s is not None and s.kind in ("seq", "array"):
+        s = s.elem
+    return s is not None and s.kind == "object"
 
 
 def _sub_array(shape: Shape) -> Shape:

@@ -3,9 +3,10 @@
 Rules (documented in docs/CODEGEN.md):
 
 * an IDL identifier that is a Python keyword gets a leading underscore (`_from`, `_None`), as the
-  OMG IDL-to-Python mapping says; so do the few builtins that generated code uses where the name
-  would shadow them (a member `str` or `list`, a parameter `len`; a member `range` stays), and
-  names that generated classes already use (`serialize`);
+  OMG IDL-to-Python mapping says (which counts `print` and `exec` as keywords: `_print`); so do
+  the few builtins that generated code uses where the name would shadow them (a member `str` or
+  `list`, a parameter `len`; a member `range` stays), and names that generated classes already
+  use (`serialize`);
 * IDL module `Miro` is package `Miro`, nested modules are subpackages, the global scope is
   `_GlobalIDL`; skeletons are in the package with `__POA` appended to its top-level name;
 * declarations nested in an interface, struct or union live at module level as `Outer_Inner`
@@ -45,10 +46,15 @@ EXCEPTION_ATTRIBUTES = STRUCT_ATTRIBUTES | {"args", "with_traceback", "add_note"
 PARAMETER_NAMES = PARAMETERS
 
 
+# Keywords of the Python the OMG mapping was written for: it (and omniORBpy) escape them too.
+OMG_KEYWORDS = frozenset(["exec", "print"])
+
+
 def py_name(name: str, taken: frozenset[str] = SHADOWING) -> str:
-    """The Python identifier for an IDL identifier: Python keywords, and the names in `taken`
-    (builtins that would be shadowed where the name lives), get a leading underscore."""
-    if keyword.iskeyword(name) or name in taken:
+    """The Python identifier for an IDL identifier: Python keywords (and the mapping's `print`,
+    `exec`), and the names in `taken` (builtins that would be shadowed where the name lives),
+    get a leading underscore."""
+    if keyword.iskeyword(name) or name in OMG_KEYWORDS or name in taken:
         return "_" + name
     return name
 

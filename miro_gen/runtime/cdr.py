@@ -21,7 +21,7 @@ from struct import error as StructError
 from struct import pack as struct_pack
 from typing import Any, ClassVar, Final, NamedTuple
 
-from miro_gen.exceptions import BAD_PARAM, MARSHAL
+from miro_gen.exceptions import BAD_PARAM, MARSHAL, CompletionStatus
 
 HEADER_LE: Final = b"\x00\x01\x00\x00"  # CDR_LE encapsulation, what we write
 LE: Final = 0  # endianness index into the (little, big) Struct pairs of generated code
@@ -30,7 +30,7 @@ NATIVE: Final = LE if sys.byteorder == "little" else BE
 ZEROS: Final = tuple(b"\0" * n for n in range(8))
 
 DecodeErrors: Final = (StructError, IndexError, ValueError, OverflowError, UnicodeDecodeError)
-EncodeErrors: Final = (StructError, TypeError, ValueError, OverflowError, AttributeError)
+EncodeErrors: Final = (StructError, TypeError, ValueError, OverflowError, AttributeError, KeyError)
 
 _U32: Final = (Struct("<I"), Struct(">I"))
 _U32_LE: Final = _U32[LE]
@@ -152,6 +152,13 @@ def put_primitives(
     if n:
         buf += ZEROS[(4 - len(buf)) & (size - 1)]
         buf += struct_pack(f"<{n}{code}", *values)
+
+
+def put_enums(
+    buf: bytearray, values: Sequence[Any], wire: dict[int, int], bound: int | None, what: str
+) -> None:
+    """A sequence of enumerators; `wire` maps each valid ordinal to itself (KeyError if not)."""
+    put_primitives(buf, [wire[v] for v in values], "I", 4, bound, what)
 
 
 def get_primitives(
@@ -384,7 +391,21 @@ def encode_error(what: str, exc: BaseException) -> BAD_PARAM:
     """The BAD_PARAM error for a value that does not fit its IDL type (from generated encoders)."""
     if isinstance(exc, BAD_PARAM):
         return exc
+    if isinstance(exc, KeyError):  # only the enum ordinal checks (`_E_W[v]`) raise it
+        return BAD_PARAM(f"{what}: {exc.args[0]!r} is not one of its enumerators")
     return BAD_PARAM(f"{what}: {exc}")
+
+
+ResultErrors: Final = (*EncodeErrors, BAD_PARAM)
+
+
+def result_error(what: str, exc: BaseException) -> MARSHAL:
+    """The error for results a servant returned that do not fit their IDL types (from generated
+    skeletons): MARSHAL, completed YES, since the operation has run; a client must not take it
+    for a call that can safely be repeated."""
+    problem = encode_error(what, exc).message
+    done = CompletionStatus.YES
+    return MARSHAL(f"{problem} (in the results the servant returned)", completed=done)
 
 
 # ---- bulk helpers for generated code ---------------------------------------------------------

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import enum
 import itertools
+import queue
 import threading
 from abc import ABC
 from collections.abc import Callable
@@ -79,10 +80,19 @@ _SYSTEM_BODY = pair("II")
 
 
 def system_exception_reply(exc: SystemException) -> Reply:
+    """The reply that carries a system exception. Never fails: a message that is not text, or
+    a minor code that is not a 32-bit number, is sent as best it can be."""
+    message = exc.message
+    if not isinstance(message, str):
+        message = repr(message)
+    message = message.replace("\0", "\\0").encode("utf-8", "replace").decode("utf-8")
+    minor = exc.minor if isinstance(exc.minor, int) else 0
+    completed = exc.completed if isinstance(exc.completed, int) else CompletionStatus.MAYBE
     buf = bytearray(HEADER_LE)
-    buf += _SYSTEM_BODY[0].pack(exc.minor & 0xFFFFFFFF, int(exc.completed))
-    put_string(buf, exc.message, None, "system exception message")
-    return Reply(ReplyStatus.SYSTEM_EXCEPTION, bytes(buf), exc._repo_id)
+    buf += _SYSTEM_BODY[0].pack(minor & 0xFFFFFFFF, int(completed) & 0xFFFFFFFF)
+    put_string(buf, message, None, "system exception message")
+    repo_id = exc._repo_id if isinstance(exc._repo_id, str) else UNKNOWN._repo_id
+    return Reply(ReplyStatus.SYSTEM_EXCEPTION, bytes(buf), repo_id)
 
 
 def raise_system_exception(reply: Reply) -> None:
@@ -179,7 +189,7 @@ class Servant(ABC):  # noqa: B024 - generated subclasses declare the abstract me
     _dispatch: ClassVar[dict[str, Dispatcher]] = {}
 
     def _invoke(self, operation: str, body: bytes, invoker: Invoker) -> Reply:
-        """Run one request: a reply, whatever the implementation did."""
+        """Run one request: a reply, whatever the implementation did or raised."""
         handler = self._dispatch.get(operation)
         if handler is None:
             return system_exception_reply(
@@ -188,7 +198,7 @@ class Servant(ABC):  # noqa: B024 - generated subclasses declare the abstract me
         try:
             return Reply(ReplyStatus.OK, handler(self, body, invoker))
         except UserException as exc:
-            return Reply(ReplyStatus.USER_EXCEPTION, exc.serialize(), exc._repo_id)  # type: ignore[attr-defined]
+            return _user_exception_reply(operation, exc)
         except SystemException as exc:
             return system_exception_reply(exc)
         except NotImplementedError as exc:
@@ -196,12 +206,32 @@ class Servant(ABC):  # noqa: B024 - generated subclasses declare the abstract me
                 NO_IMPLEMENT(f"{operation}: {exc}", completed=CompletionStatus.NO)
             )
         except Exception as exc:  # the servant's bug: the client gets UNKNOWN, not a hang
-            return system_exception_reply(
-                UNKNOWN(
-                    f"{operation} raised {type(exc).__name__}: {exc}",
-                    completed=CompletionStatus.MAYBE,
-                )
+            return system_exception_reply(_unknown(operation, exc))
+
+
+def _unknown(operation: str, exc: BaseException) -> UNKNOWN:
+    try:
+        text = f"{operation} raised {type(exc).__name__}: {exc}"
+    except Exception:  # an exception whose str() fails
+        text = f"{operation} raised {type(exc).__name__}"
+    return UNKNOWN(text, completed=CompletionStatus.MAYBE)
+
+
+def _user_exception_reply(operation: str, exc: UserException) -> Reply:
+    """The reply for an IDL exception the servant raised; UNKNOWN if it cannot be sent (the
+    base class itself, or fields that do not fit their types)."""
+    serialize = getattr(exc, "serialize", None)
+    if serialize is None:
+        return system_exception_reply(_unknown(operation, exc))
+    try:
+        return Reply(ReplyStatus.USER_EXCEPTION, serialize(), exc._repo_id)
+    except Exception as bad:
+        return system_exception_reply(
+            UNKNOWN(
+                f"{operation} raised {exc._repo_id}, which could not be sent: {bad}",
+                completed=CompletionStatus.YES,
             )
+        )
 
 
 def merge_dispatch(*tables: dict[str, Dispatcher]) -> dict[str, Dispatcher]:
@@ -217,13 +247,15 @@ def merge_dispatch(*tables: dict[str, Dispatcher]) -> dict[str, Dispatcher]:
 
 class LocalInvoker:
     """An in-process transport for tests and single-process use: requests are marshalled to
-    bytes and dispatched to registered servants directly."""
+    bytes and dispatched to registered servants directly. Oneway requests run in order on a
+    worker thread, so the caller does not wait for them, as over a network."""
 
     def __init__(self, endpoint: str = "inproc://local") -> None:
         self.endpoint = endpoint
         self._servants: dict[bytes, Servant] = {}
         self._keys = itertools.count(1)
         self._lock = threading.Lock()
+        self._oneway: queue.SimpleQueue[tuple[Servant, str, bytes]] | None = None
 
     def register(self, servant: Servant, key: bytes | None = None) -> ObjectRef:
         with self._lock:
@@ -253,8 +285,25 @@ class LocalInvoker:
         timeout: float | None = None,
     ) -> Reply | None:
         servant = self._servants.get(ref.key) if ref.endpoint == self.endpoint else None
+        if oneway:
+            if servant is not None:
+                self._oneway_queue().put((servant, operation, bytes(body)))
+            return None
         if servant is None:
-            reply = system_exception_reply(OBJECT_NOT_EXIST(f"no object with key {ref.key!r}"))
-        else:
-            reply = servant._invoke(operation, bytes(body), self)
-        return None if oneway else Reply(reply.status, bytes(reply.body), reply.repo_id)
+            return system_exception_reply(OBJECT_NOT_EXIST(f"no object with key {ref.key!r}"))
+        reply = servant._invoke(operation, bytes(body), self)
+        return Reply(reply.status, bytes(reply.body), reply.repo_id)
+
+    def _oneway_queue(self) -> queue.SimpleQueue[tuple[Servant, str, bytes]]:
+        with self._lock:
+            if self._oneway is None:
+                self._oneway = queue.SimpleQueue()
+                threading.Thread(
+                    target=self._run_oneway, args=(self._oneway,), name="oneway", daemon=True
+                ).start()
+            return self._oneway
+
+    def _run_oneway(self, requests: queue.SimpleQueue[tuple[Servant, str, bytes]]) -> None:
+        while True:
+            servant, operation, body = requests.get()
+            servant._invoke(operation, body, self)  # a oneway call's reply goes nowhere
