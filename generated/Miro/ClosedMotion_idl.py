@@ -21,20 +21,24 @@ _U1 = (_S1[0].unpack_from, _S1[1].unpack_from)
 
 
 class ClosedMotion(_rpc.Stub):
-    """Motion commands given as a distance or angle to cover, not a velocity. The base's
-    controller drives until the target is reached. Units: millimetres and radians (Miro's
-    convention); positive angles are counter-clockwise.
+    """Motion commands given as a distance or angle to cover, not a velocity.
+
+    The base's controller drives until the target is reached. Units:
+    millimetres and radians (Miro's convention); positive angles are
+    counter-clockwise.
     """
 
     __slots__ = ()
     _repo_id = "IDL:Miro/ClosedMotion:1.0"
 
     def rotateToPosition(self, angle: float) -> None:
-        """Turn in place to an absolute heading. @param angle Target heading in radians, in the
-        odometry's frame (see PositionIDL::heading); -PI < angle <= PI.
+        """Turn in place to an absolute heading.
 
-        @throw EOutOfBounds angle is outside -PI < angle <= PI. @throw EDevIO The command
-        could not be sent to the device.
+        @param angle Target heading in radians, in the odometry's frame
+        (see PositionIDL::heading); -PI < angle <= PI.
+
+        @throw EOutOfBounds angle is outside -PI < angle <= PI.
+        @throw EDevIO The command could not be sent to the device.
         """
         _buf = bytearray(_cdr.HEADER_LE)
         try:
@@ -49,11 +53,13 @@ class ClosedMotion(_rpc.Stub):
         )
 
     def rotateRelative(self, angle: float) -> None:
-        """Turn in place by an angle relative to the current heading. @param angle Angle to turn
-        in radians, positive counter-clockwise; -2 PI < angle <= 2 PI.
+        """Turn in place by an angle relative to the current heading.
 
-        @throw EOutOfBounds angle is outside -2 PI < angle <= 2 PI. @throw EDevIO The command
-        could not be sent to the device.
+        @param angle Angle to turn in radians, positive counter-clockwise;
+        -2 PI < angle <= 2 PI.
+
+        @throw EOutOfBounds angle is outside -2 PI < angle <= 2 PI.
+        @throw EDevIO The command could not be sent to the device.
         """
         _buf = bytearray(_cdr.HEADER_LE)
         try:
@@ -68,12 +74,13 @@ class ClosedMotion(_rpc.Stub):
         )
 
     def translateRelative(self, distance: int) -> None:
-        """Drive straight for a distance from the current position. @param distance Distance in
-        millimetres; negative values drive backwards.
+        """Drive straight for a distance from the current position.
 
-        @throw EOutOfBounds The distance exceeds what the controller can drive in one closed
-        motion (a few metres on most bases). @throw EDevIO The command could not be sent to
-        the device.
+        @param distance Distance in millimetres; negative values drive backwards.
+
+        @throw EOutOfBounds The distance exceeds what the controller can
+        drive in one closed motion (a few metres on most bases).
+        @throw EDevIO The command could not be sent to the device.
         """
         _buf = bytearray(_cdr.HEADER_LE)
         try:

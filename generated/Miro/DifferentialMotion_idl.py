@@ -21,24 +21,28 @@ _U1 = (_S1[0].unpack_from, _S1[1].unpack_from)
 
 
 class DifferentialMotion(_m_Miro_Motion_idl.Motion):
-    """Motion control of a differential-drive base (e.g. Pioneer, Sparrow). A differential drive
-    steers by driving its left and right wheels at different speeds; this interface adds per-
-    wheel commands. Wheel velocities are in mm/s at the wheel's contact point (Miro's
+    """Motion control of a differential-drive base (e.g. Pioneer, Sparrow).
+
+    A differential drive steers by driving its left and right wheels at
+    different speeds; this interface adds per-wheel commands. Wheel
+    velocities are in mm/s at the wheel's contact point (Miro's
     convention); negative values turn the wheel backwards.
 
-    With wheel base b (mm) the two views are related by translation = (left + right) / 2 and
-    rotation = (right - left) / b.
+    With wheel base b (mm) the two views are related by
+    translation = (left + right) / 2 and rotation = (right - left) / b.
     """
 
     __slots__ = ()
     _repo_id = "IDL:Miro/DifferentialMotion:1.0"
 
     def setLRVelocity(self, left: int, right: int) -> None:
-        """Set the velocity of each wheel and start moving. @param left Velocity of the left
-        wheel in mm/s. @param right Velocity of the right wheel in mm/s.
+        """Set the velocity of each wheel and start moving.
 
-        @throw EOutOfBounds A velocity is outside the limits of getMinMaxLRVelocity. @throw
-        EDevIO The command could not be sent to the device.
+        @param left Velocity of the left wheel in mm/s.
+        @param right Velocity of the right wheel in mm/s.
+
+        @throw EOutOfBounds A velocity is outside the limits of getMinMaxLRVelocity.
+        @throw EDevIO The command could not be sent to the device.
         """
         _buf = bytearray(_cdr.HEADER_LE)
         try:
@@ -53,10 +57,12 @@ class DifferentialMotion(_m_Miro_Motion_idl.Motion):
         )
 
     def getMinMaxLRVelocity(self) -> tuple[int, int, int, int]:
-        """Return the range of wheel velocities setLRVelocity accepts. @param minLTranslation
-        Lowest left-wheel velocity in mm/s. @param maxLTranslation Highest left-wheel velocity
-        in mm/s. @param minRTranslation Lowest right-wheel velocity in mm/s. @param
-        maxRTranslation Highest right-wheel velocity in mm/s.
+        """Return the range of wheel velocities setLRVelocity accepts.
+
+        @param minLTranslation Lowest left-wheel velocity in mm/s.
+        @param maxLTranslation Highest left-wheel velocity in mm/s.
+        @param minRTranslation Lowest right-wheel velocity in mm/s.
+        @param maxRTranslation Highest right-wheel velocity in mm/s.
         """
         _buf = bytearray(_cdr.HEADER_LE)
         _data = self._call("getMinMaxLRVelocity", bytes(_buf), ())
@@ -75,11 +81,13 @@ class DifferentialMotion(_m_Miro_Motion_idl.Motion):
         return _o_minLTranslation, _o_maxLTranslation, _o_minRTranslation, _o_maxRTranslation
 
     def getTargetLRVelocity(self) -> tuple[int, int]:
-        """Return the wheel velocities the base is currently commanded to drive at. Reflects the
-        last setLRVelocity, or the last Motion::setVelocity converted to wheel velocities.
+        """Return the wheel velocities the base is currently commanded to drive at.
 
-        @param left Commanded left-wheel velocity in mm/s. @param right Commanded right-wheel
-        velocity in mm/s.
+        Reflects the last setLRVelocity, or the last Motion::setVelocity
+        converted to wheel velocities.
+
+        @param left Commanded left-wheel velocity in mm/s.
+        @param right Commanded right-wheel velocity in mm/s.
         """
         _buf = bytearray(_cdr.HEADER_LE)
         _data = self._call("getTargetLRVelocity", bytes(_buf), ())

@@ -18,10 +18,12 @@ __all__ = [
 
 @_dc.dataclass(eq=False)
 class ETimeOut(_exc.UserException, _cdr.IdlType):
-    """A blocking call waited too long for the device. Raised by the "getWait..." operations when
-    no new reading arrives in time; Miro's servers typically give up after five times the
-    device's normal report period. It usually means that the hardware stopped reporting or
-    that the host is overloaded.
+    """A blocking call waited too long for the device.
+
+    Raised by the "getWait..." operations when no new reading arrives
+    in time; Miro's servers typically give up after five times the
+    device's normal report period. It usually means that the hardware
+    stopped reporting or that the host is overloaded.
     """
 
     what: str = ""
@@ -77,9 +79,11 @@ def _dec_ETimeOut(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[ETimeOut, int
 
 @_dc.dataclass(eq=False)
 class EOutOfBounds(_exc.UserException, _cdr.IdlType):
-    """A parameter was outside the range the server accepts. For example a velocity beyond the
-    limits reported by Motion::getMinMaxVelocity, or an index of a sensor group that does not
-    exist.
+    """A parameter was outside the range the server accepts.
+
+    For example a velocity beyond the limits reported by
+    Motion::getMinMaxVelocity, or an index of a sensor group that does
+    not exist.
     """
 
     what: str = ""
@@ -135,9 +139,11 @@ def _dec_EOutOfBounds(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[EOutOfBou
 
 @_dc.dataclass(eq=False)
 class EDevIO(_exc.UserException, _cdr.IdlType):
-    """Communication with the hardware device failed. Raised when the server could not read from
-    or write to the device it controls: the device is broken, disconnected, or answered in a
-    way the driver does not understand.
+    """Communication with the hardware device failed.
+
+    Raised when the server could not read from or write to the device it
+    controls: the device is broken, disconnected, or answered in a way
+    the driver does not understand.
     """
 
     what: str = ""

@@ -50,9 +50,10 @@ _U3 = (_S3[0].unpack_from, _S3[1].unpack_from)
 
 
 class GpsFixQualityIDL(_enum.IntEnum):
-    """Quality of a position fix, as reported in field 6 of the NMEA GGA sentence. The
-    enumerators are in the order of the GGA codes, so each one's ordinal is its GGA value (0
-    to 8).
+    """Quality of a position fix, as reported in field 6 of the NMEA GGA sentence.
+
+    The enumerators are in the order of the GGA codes, so each one's
+    ordinal is its GGA value (0 to 8).
     """
 
     GPS_FIX_INVALID = 0
@@ -89,9 +90,11 @@ GPS_FIX_SIMULATION: _t.Final = GpsFixQualityIDL.GPS_FIX_SIMULATION
 
 
 class GpsFixModeIDL(_enum.IntEnum):
-    """Dimension of a position fix, as reported in field 2 of the NMEA GSA sentence. The
-    enumerators are in the order of the GSA codes, so each one's ordinal is its GSA value (1
-    to 3); 0 means that no GSA sentence has been received.
+    """Dimension of a position fix, as reported in field 2 of the NMEA GSA sentence.
+
+    The enumerators are in the order of the GSA codes, so each one's
+    ordinal is its GSA value (1 to 3); 0 means that no GSA sentence has
+    been received.
     """
 
     GPS_MODE_UNKNOWN = 0
@@ -119,10 +122,12 @@ GpsSatelliteSeqIDL: _t.TypeAlias = list[int]
 @_dc.dataclass(slots=True)
 class GpsDataIDL(_cdr.IdlType):
     """One GPS reading: the state a driver assembles from the GGA, RMC, VTG and GSA sentences.
-    Returned by Gps::getData and published on the event channel with type name "Gps". Each
-    sentence updates the fields it carries; the others keep their last value. A floating-point
-    field for which no value has been received yet (or that the receiver leaves empty) is NaN;
-    such an integer field is 0.
+
+    Returned by Gps::getData and published on the event channel with
+    type name "Gps". Each sentence updates the fields it carries; the
+    others keep their last value. A floating-point field for which no
+    value has been received yet (or that the receiver leaves empty) is
+    NaN; such an integer field is 0.
 
     Coordinates are WGS 84.
     """
@@ -130,9 +135,11 @@ class GpsDataIDL(_cdr.IdlType):
     time: _m_Miro_Time_idl.TimeIDL = _dc.field(default_factory=_m_Miro_Time_idl.TimeIDL)
     """Host time at which the sentence completing this reading was received (Miro time stamp)."""
     utcTime: _m_Miro_Time_idl.TimeIDL = _dc.field(default_factory=_m_Miro_Time_idl.TimeIDL)
-    """UTC time of the fix as reported by the receiver (GGA/RMC time, RMC date). Seconds since
-    the Unix epoch when the date is known (from RMC). Until a date has been received, only the
-    time of day is known and this holds seconds since UTC midnight (so sec < 86400).
+    """UTC time of the fix as reported by the receiver (GGA/RMC time, RMC date).
+
+    Seconds since the Unix epoch when the date is known (from RMC).
+    Until a date has been received, only the time of day is known and
+    this holds seconds since UTC midnight (so sec < 86400).
     """
     valid: bool = False
     """TRUE when the receiver reports a valid fix (RMC status 'A', or GGA quality > 0)."""
@@ -147,8 +154,9 @@ class GpsDataIDL(_cdr.IdlType):
     altitude: float = 0.0
     """Altitude of the antenna above mean sea level (the geoid), in metres (GGA)."""
     geoidSeparation: float = 0.0
-    """Height of the geoid above the WGS 84 ellipsoid, in metres (GGA). The antenna's height
-    above the ellipsoid is altitude + geoidSeparation.
+    """Height of the geoid above the WGS 84 ellipsoid, in metres (GGA).
+
+    The antenna's height above the ellipsoid is altitude + geoidSeparation.
     """
     satellitesUsed: int = 0
     """Number of satellites used in the fix (GGA)."""
@@ -163,13 +171,15 @@ class GpsDataIDL(_cdr.IdlType):
     speed: float = 0.0
     """Speed over ground in metres per second (RMC knots or VTG km/h, converted)."""
     course: float = 0.0
-    """Course over ground in degrees, clockwise from true north, 0 to 360 (RMC/VTG). A compass
-    bearing, not Miro's counter-clockwise heading. Meaningless when the receiver is standing
-    still.
+    """Course over ground in degrees, clockwise from true north, 0 to 360 (RMC/VTG).
+
+    A compass bearing, not Miro's counter-clockwise heading. Meaningless
+    when the receiver is standing still.
     """
     magneticVariation: float = 0.0
-    """Magnetic variation in degrees, positive east (RMC). Magnetic course = course -
-    magneticVariation.
+    """Magnetic variation in degrees, positive east (RMC).
+
+    Magnetic course = course - magneticVariation.
     """
     dgpsAge: float = 0.0
     """Age of the differential corrections in seconds (GGA); NaN without differential fix."""
@@ -341,8 +351,9 @@ def _dec_GpsDataIDL(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[GpsDataIDL,
 @_dc.dataclass(slots=True)
 class GpsSentenceEventIDL(_cdr.IdlType):
     """One raw NMEA sentence, for clients that need sentences the driver does not interpret.
-    Published on the event channel with type name "GpsSentence" when the driver is configured
-    to forward raw sentences.
+
+    Published on the event channel with type name "GpsSentence" when the
+    driver is configured to forward raw sentences.
     """
 
     time: _m_Miro_Time_idl.TimeIDL = _dc.field(default_factory=_m_Miro_Time_idl.TimeIDL)
@@ -412,8 +423,11 @@ def _dec_GpsSentenceEventIDL(
 
 
 class Gps(_rpc.Stub):
-    """Access to a GPS receiver. Servers bind it as "Gps" in their naming context and publish
-    every new reading on the event channel with type name "Gps" (payload GpsDataIDL).
+    """Access to a GPS receiver.
+
+    Servers bind it as "Gps" in their naming context and publish every
+    new reading on the event channel with type name "Gps" (payload
+    GpsDataIDL).
     """
 
     __slots__ = ()
@@ -421,6 +435,7 @@ class Gps(_rpc.Stub):
 
     def getData(self) -> GpsDataIDL:
         """Return the latest reading.
+
         Fields not received yet are NaN or 0 (see GpsDataIDL).
         """
         _buf = bytearray(_cdr.HEADER_LE)
@@ -435,8 +450,10 @@ class Gps(_rpc.Stub):
         return _r
 
     def getWaitData(self) -> GpsDataIDL:
-        """Wait for the next reading and return it. @throw ETimeOut No new reading arrived within
-        the server's timeout (a few seconds; receivers report at about 1 Hz).
+        """Wait for the next reading and return it.
+
+        @throw ETimeOut No new reading arrived within the server's timeout
+        (a few seconds; receivers report at about 1 Hz).
         """
         _buf = bytearray(_cdr.HEADER_LE)
         _data = self._call("getWaitData", bytes(_buf), (_m_Miro_Exception_idl.ETimeOut,))

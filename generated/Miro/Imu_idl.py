@@ -12,10 +12,12 @@ __all__ = [
 
 
 class Imu(_m_Miro_InertialSensor_idl.InertialSensor):
-    """An inertial measurement unit. Servers bind it as "Imu" in their naming context and publish
-    every new reading on the event channel with type name "Imu" (payload InertialDataIDL). It
-    offers the operations of InertialSensor; it is a separate interface so that clients can
-    resolve an IMU by type.
+    """An inertial measurement unit.
+
+    Servers bind it as "Imu" in their naming context and publish every
+    new reading on the event channel with type name "Imu" (payload
+    InertialDataIDL). It offers the operations of InertialSensor; it is
+    a separate interface so that clients can resolve an IMU by type.
     """
 
     __slots__ = ()

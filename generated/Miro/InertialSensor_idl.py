@@ -85,8 +85,10 @@ def _dec_Vector3IDL(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Vector3IDL,
 @_dc.dataclass(slots=True)
 class QuaternionIDL(_cdr.IdlType):
     """A rotation in three dimensions as a unit quaternion (Hamilton convention, scalar part
-    first). The quaternion w + xi + yj + zk with w*w + x*x + y*y + z*z = 1; (1, 0, 0, 0) is no
-    rotation.
+    first).
+
+    The quaternion w + xi + yj + zk with w*w + x*x + y*y + z*z = 1;
+    (1, 0, 0, 0) is no rotation.
     """
 
     w: float = 0.0
@@ -145,10 +147,12 @@ def _dec_QuaternionIDL(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Quaterni
 
 @_dc.dataclass(slots=True)
 class EulerAnglesIDL(_cdr.IdlType):
-    """A rotation in three dimensions as roll, pitch and yaw angles, in radians. The rotation is
-    yaw about z, then pitch about the new y axis, then roll about the newest x axis (intrinsic
-    z-y'-x''). Every angle is positive counter-clockwise when looking down its axis towards
-    the origin (right-hand rule).
+    """A rotation in three dimensions as roll, pitch and yaw angles, in radians.
+
+    The rotation is yaw about z, then pitch about the new y axis, then
+    roll about the newest x axis (intrinsic z-y'-x''). Every angle is
+    positive counter-clockwise when looking down its axis towards the
+    origin (right-hand rule).
     """
 
     roll: float = 0.0
@@ -204,13 +208,16 @@ def _dec_EulerAnglesIDL(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[EulerAn
 
 @_dc.dataclass(slots=True)
 class InertialDataIDL(_cdr.IdlType):
-    """One reading of an inertial sensor. Returned by InertialSensor::getData and published on
-    the event channel (with type name "Imu" by Imu servers).
+    """One reading of an inertial sensor.
 
-    Frames: the body frame is the sensor's (or, when the driver knows the mounting, the
-    robot's) frame with x forward, y left and z up. The reference frame of the orientation is
-    level with z up; where its x axis points (magnetic north, true north, or the heading at
-    start-up) depends on the device and is documented by its driver.
+    Returned by InertialSensor::getData and published on the event
+    channel (with type name "Imu" by Imu servers).
+
+    Frames: the body frame is the sensor's (or, when the driver knows the
+    mounting, the robot's) frame with x forward, y left and z up. The
+    reference frame of the orientation is level with z up; where its x
+    axis points (magnetic north, true north, or the heading at start-up)
+    depends on the device and is documented by its driver.
 
     A quantity the device does not measure is NaN in every component.
     """
@@ -218,19 +225,24 @@ class InertialDataIDL(_cdr.IdlType):
     time: _m_Miro_Time_idl.TimeIDL = _dc.field(default_factory=_m_Miro_Time_idl.TimeIDL)
     """Time the reading was sampled."""
     acceleration: Vector3IDL = _dc.field(default_factory=Vector3IDL)
-    """Measured specific force in the body frame, in m/s^2. Includes gravity: a device lying
-    level and at rest reads about (0, 0, +9.81).
+    """Measured specific force in the body frame, in m/s^2.
+
+    Includes gravity: a device lying level and at rest reads about
+    (0, 0, +9.81).
     """
     angularRate: Vector3IDL = _dc.field(default_factory=Vector3IDL)
     """Angular velocity about the body axes, in rad/s (counter-clockwise positive)."""
     orientation: QuaternionIDL = _dc.field(default_factory=QuaternionIDL)
-    """Orientation of the body frame relative to the reference frame. Rotates vectors from body
-    to reference coordinates.
+    """Orientation of the body frame relative to the reference frame.
+
+    Rotates vectors from body to reference coordinates.
     """
     eulerAngles: EulerAnglesIDL = _dc.field(default_factory=EulerAnglesIDL)
-    """The same orientation as roll, pitch and yaw, in radians. Positive pitch lowers the nose (x
-    axis) and positive roll lifts the left side, by the right-hand rule in the x forward, y
-    left, z up frame. Positive yaw turns left, like Miro's heading.
+    """The same orientation as roll, pitch and yaw, in radians.
+
+    Positive pitch lowers the nose (x axis) and positive roll lifts the
+    left side, by the right-hand rule in the x forward, y left, z up
+    frame. Positive yaw turns left, like Miro's heading.
     """
     magneticField: Vector3IDL = _dc.field(default_factory=Vector3IDL)
     """Magnetic field in the body frame, in microtesla (as in Miro's Magnetometer)."""
@@ -318,9 +330,11 @@ def _dec_InertialDataIDL(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Inerti
 
 
 class InertialSensor(_rpc.Stub):
-    """Access to an inertial sensor. Servers publish every new reading on the event channel
-    (payload InertialDataIDL), under the event type name of the derived interface (e.g.
-    "Imu").
+    """Access to an inertial sensor.
+
+    Servers publish every new reading on the event channel (payload
+    InertialDataIDL), under the event type name of the derived interface
+    (e.g. "Imu").
     """
 
     __slots__ = ()
@@ -340,8 +354,10 @@ class InertialSensor(_rpc.Stub):
         return _r
 
     def getWaitData(self) -> InertialDataIDL:
-        """Wait for the next reading and return it. @throw ETimeOut No new reading arrived within
-        the server's timeout (about one second).
+        """Wait for the next reading and return it.
+
+        @throw ETimeOut No new reading arrived within the server's timeout
+        (about one second).
         """
         _buf = bytearray(_cdr.HEADER_LE)
         _data = self._call("getWaitData", bytes(_buf), (_m_Miro_Exception_idl.ETimeOut,))

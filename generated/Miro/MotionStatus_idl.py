@@ -19,8 +19,10 @@ __all__ = [
 
 @_dc.dataclass(slots=True)
 class MotionStatusIDL(_cdr.IdlType):
-    """The complete motion state of the mobile base at one instant. Returned by
-    Odometry::getStatus and published on the event channel with type name "Odometry".
+    """The complete motion state of the mobile base at one instant.
+
+    Returned by Odometry::getStatus and published on the event channel
+    with type name "Odometry".
     """
 
     time: _m_Miro_Time_idl.TimeIDL = _dc.field(default_factory=_m_Miro_Time_idl.TimeIDL)
@@ -105,8 +107,10 @@ def _dec_MotionStatusIDL(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Motion
 
 @_dc.dataclass(slots=True)
 class RawPositionIDL(_cdr.IdlType):
-    """The uncorrected odometry pose at one instant. Published on the event channel with type
-    name "RawPosition". See Odometry::getRawPosition for what "raw" means.
+    """The uncorrected odometry pose at one instant.
+
+    Published on the event channel with type name "RawPosition". See
+    Odometry::getRawPosition for what "raw" means.
     """
 
     time: _m_Miro_Time_idl.TimeIDL = _dc.field(default_factory=_m_Miro_Time_idl.TimeIDL)

@@ -22,21 +22,25 @@ _U1 = (_S1[0].unpack_from, _S1[1].unpack_from)
 
 
 class Motion(_rpc.Stub):
-    """Velocity control of a mobile base, common to all drive types. Servers bind it as "Motion"
-    in their naming context. Most bases implement a derived interface (DifferentialMotion,
-    SynchroMotion) that adds drive-specific operations.
+    """Velocity control of a mobile base, common to all drive types.
 
-    Units: mm/s for translation, rad/s for rotation (Miro's convention). Negative translation
-    drives backwards; positive rotation turns counter-clockwise (left), the direction in which
-    the odometry heading grows.
+    Servers bind it as "Motion" in their naming context. Most bases
+    implement a derived interface (DifferentialMotion, SynchroMotion)
+    that adds drive-specific operations.
+
+    Units: mm/s for translation, rad/s for rotation (Miro's convention).
+    Negative translation drives backwards; positive rotation turns
+    counter-clockwise (left), the direction in which the odometry
+    heading grows.
     """
 
     __slots__ = ()
     _repo_id = "IDL:Miro/Motion:1.0"
 
     def limp(self) -> None:
-        """Switch all drive motors off so that the base rolls freely. A passive halt: the base
-        stops driving but can be pushed around.
+        """Switch all drive motors off so that the base rolls freely.
+
+        A passive halt: the base stops driving but can be pushed around.
 
         @throw EDevIO The command could not be sent to the device.
         """
@@ -44,10 +48,12 @@ class Motion(_rpc.Stub):
         self._call("limp", bytes(_buf), (_m_Miro_Exception_idl.EDevIO,))
 
     def setVelocity(self, velocity: _m_Miro_Velocity_idl.VelocityIDL) -> None:
-        """Command a translational and rotational velocity and start moving. @param velocity The
-        requested velocity (mm/s, rad/s).
+        """Command a translational and rotational velocity and start moving.
 
-        @throw EOutOfBounds A component lies outside the limits reported by getMinMaxVelocity.
+        @param velocity The requested velocity (mm/s, rad/s).
+
+        @throw EOutOfBounds A component lies outside the limits reported
+        by getMinMaxVelocity.
         @throw EDevIO The command could not be sent to the device.
         """
         _buf = bytearray(_cdr.HEADER_LE)
@@ -62,15 +68,18 @@ class Motion(_rpc.Stub):
         )
 
     def getMinMaxVelocity(self) -> tuple[int, int, float, float]:
-        """Return the range of velocities setVelocity accepts. On a differential drive the two
-        components are not independent: full rotational speed is only reached when turning in
-        place. Such a base accepts any request within these limits and, where needed, reduces
-        the translation to reach the requested rotation; getTargetVelocity shows the result.
+        """Return the range of velocities setVelocity accepts.
+
+        On a differential drive the two components are not independent:
+        full rotational speed is only reached when turning in place. Such a
+        base accepts any request within these limits and, where needed,
+        reduces the translation to reach the requested rotation;
+        getTargetVelocity shows the result.
 
         @param minTranslation Lowest translational velocity in mm/s (negative: backwards).
-        @param maxTranslation Highest translational velocity in mm/s. @param minRotation
-        Lowest rotational velocity in rad/s (negative: clockwise). @param maxRotation Highest
-        rotational velocity in rad/s.
+        @param maxTranslation Highest translational velocity in mm/s.
+        @param minRotation Lowest rotational velocity in rad/s (negative: clockwise).
+        @param maxRotation Highest rotational velocity in rad/s.
         """
         _buf = bytearray(_cdr.HEADER_LE)
         _data = self._call("getMinMaxVelocity", bytes(_buf), ())
@@ -92,10 +101,12 @@ class Motion(_rpc.Stub):
         return _o_minTranslation, _o_maxTranslation, _o_minRotation, _o_maxRotation
 
     def getTargetVelocity(self) -> _m_Miro_Velocity_idl.VelocityIDL:
-        """Return the velocity the base is currently commanded to drive at. That is the velocity
-        of the last setVelocity (or of a derived interface's commands), after any adjustment
-        described in getMinMaxVelocity (mm/s, rad/s). It is the target, not a measurement: see
-        Odometry::getVelocity for that.
+        """Return the velocity the base is currently commanded to drive at.
+
+        That is the velocity of the last setVelocity (or of a derived
+        interface's commands), after any adjustment described in
+        getMinMaxVelocity (mm/s, rad/s). It is the target, not a
+        measurement: see Odometry::getVelocity for that.
         """
         _buf = bytearray(_cdr.HEADER_LE)
         _data = self._call("getTargetVelocity", bytes(_buf), ())

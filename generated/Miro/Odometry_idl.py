@@ -17,14 +17,16 @@ __all__ = [
 
 
 class Odometry(_rpc.Stub):
-    """Dead-reckoning pose and velocity of a mobile base. Servers bind it as "Odometry" in their
-    naming context. Besides answering calls, they publish every report on the event channel: -
-    type name "Odometry", payload MotionStatusIDL; - optionally type name "RawPosition",
-    payload RawPositionIDL.
+    """Dead-reckoning pose and velocity of a mobile base.
 
-    Reports arrive at the base's own pace (typically 10 Hz). The "getWait..." operations block
-    until the next report and raise ETimeOut when none arrives within about five report
-    periods.
+    Servers bind it as "Odometry" in their naming context. Besides
+    answering calls, they publish every report on the event channel:
+    - type name "Odometry", payload MotionStatusIDL;
+    - optionally type name "RawPosition", payload RawPositionIDL.
+
+    Reports arrive at the base's own pace (typically 10 Hz). The
+    "getWait..." operations block until the next report and raise
+    ETimeOut when none arrives within about five report periods.
 
     Units: millimetres, radians, mm/s, rad/s (Miro's convention).
     """
@@ -33,8 +35,10 @@ class Odometry(_rpc.Stub):
     _repo_id = "IDL:Miro/Odometry:1.0"
 
     def setPosition(self, position: _m_Miro_Position_idl.PositionIDL) -> None:
-        """Declare the robot's current pose to be the given one. Later reports continue from this
-        pose. The raw position is not affected.
+        """Declare the robot's current pose to be the given one.
+
+        Later reports continue from this pose. The raw position is not
+        affected.
 
         @param position The robot's pose in world coordinates (mm, rad).
         """
@@ -46,9 +50,11 @@ class Odometry(_rpc.Stub):
         self._call("setPosition", bytes(_buf), ())
 
     def updatePosition(self, deltaPosition: _m_Miro_Position_idl.PositionIDL) -> None:
-        """Correct the current pose by a relative amount. Adds deltaPosition.point to the current
-        point and deltaPosition.heading to the current heading (then normalised to -PI <
-        heading <= PI). The raw position is not affected.
+        """Correct the current pose by a relative amount.
+
+        Adds deltaPosition.point to the current point and
+        deltaPosition.heading to the current heading (then normalised to
+        -PI < heading <= PI). The raw position is not affected.
 
         @param deltaPosition Correction in world coordinates (mm, rad).
         """
@@ -73,8 +79,9 @@ class Odometry(_rpc.Stub):
         return _r
 
     def getWaitPosition(self) -> _m_Miro_Position_idl.PositionIDL:
-        """Wait for the next report and return its pose (mm, rad). @throw ETimeOut No report
-        arrived in time.
+        """Wait for the next report and return its pose (mm, rad).
+
+        @throw ETimeOut No report arrived in time.
         """
         _buf = bytearray(_cdr.HEADER_LE)
         _data = self._call("getWaitPosition", bytes(_buf), (_m_Miro_Exception_idl.ETimeOut,))
@@ -88,10 +95,12 @@ class Odometry(_rpc.Stub):
         return _r
 
     def getRawPosition(self) -> _m_Miro_Position_idl.PositionIDL:
-        """Return the latest uncorrected odometry pose (mm, rad). The raw position integrates the
-        wheel motion only: setPosition and updatePosition (e.g. from a localisation module)
-        never change it. It gives a frame that does not jump, for stamping locally perceived
-        data; it only drifts with the odometry error.
+        """Return the latest uncorrected odometry pose (mm, rad).
+
+        The raw position integrates the wheel motion only: setPosition and
+        updatePosition (e.g. from a localisation module) never change it.
+        It gives a frame that does not jump, for stamping locally
+        perceived data; it only drifts with the odometry error.
         """
         _buf = bytearray(_cdr.HEADER_LE)
         _data = self._call("getRawPosition", bytes(_buf), ())
@@ -105,8 +114,9 @@ class Odometry(_rpc.Stub):
         return _r
 
     def getWaitRawPosition(self) -> _m_Miro_Position_idl.PositionIDL:
-        """Wait for the next report and return its uncorrected pose (mm, rad). @throw ETimeOut No
-        report arrived in time.
+        """Wait for the next report and return its uncorrected pose (mm, rad).
+
+        @throw ETimeOut No report arrived in time.
         """
         _buf = bytearray(_cdr.HEADER_LE)
         _data = self._call("getWaitRawPosition", bytes(_buf), (_m_Miro_Exception_idl.ETimeOut,))
@@ -133,8 +143,9 @@ class Odometry(_rpc.Stub):
         return _r
 
     def getWaitVelocity(self) -> _m_Miro_Velocity_idl.VelocityIDL:
-        """Wait for the next report and return its velocity (mm/s, rad/s). @throw ETimeOut No
-        report arrived in time.
+        """Wait for the next report and return its velocity (mm/s, rad/s).
+
+        @throw ETimeOut No report arrived in time.
         """
         _buf = bytearray(_cdr.HEADER_LE)
         _data = self._call("getWaitVelocity", bytes(_buf), (_m_Miro_Exception_idl.ETimeOut,))
@@ -161,8 +172,9 @@ class Odometry(_rpc.Stub):
         return _r
 
     def getWaitStatus(self) -> _m_Miro_MotionStatus_idl.MotionStatusIDL:
-        """Wait for the next report and return it: time stamp, pose and velocity. @throw ETimeOut
-        No report arrived in time.
+        """Wait for the next report and return it: time stamp, pose and velocity.
+
+        @throw ETimeOut No report arrived in time.
         """
         _buf = bytearray(_cdr.HEADER_LE)
         _data = self._call("getWaitStatus", bytes(_buf), (_m_Miro_Exception_idl.ETimeOut,))

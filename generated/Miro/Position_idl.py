@@ -20,8 +20,10 @@ _U0 = (_S0[0].unpack_from, _S0[1].unpack_from)
 
 @_dc.dataclass(slots=True)
 class PositionIDL(_cdr.IdlType):
-    """The pose of the robot in the plane: a point and a heading. Also used for relative
-    corrections (Odometry::updatePosition), where both parts are differences.
+    """The pose of the robot in the plane: a point and a heading.
+
+    Also used for relative corrections (Odometry::updatePosition), where
+    both parts are differences.
     """
 
     point: _m_Miro_WorldPoint_idl.WorldPointIDL = _dc.field(
@@ -29,8 +31,10 @@ class PositionIDL(_cdr.IdlType):
     )
     """Location of the robot's reference point in world coordinates (mm)."""
     heading: float = 0.0
-    """Direction the robot faces, in radians. Measured from the world x axis, counter-clockwise
-    positive (seen from above), normalised to -PI < heading <= PI.
+    """Direction the robot faces, in radians.
+
+    Measured from the world x axis, counter-clockwise positive (seen
+    from above), normalised to -PI < heading <= PI.
     """
 
     _repo_id = "IDL:Miro/PositionIDL:1.0"

@@ -41,9 +41,11 @@ _G_Range3dPointIDL = _operator.attrgetter("x", "y", "z")
 
 @_dc.dataclass(slots=True)
 class Range3dPointIDL(_cdr.IdlType):
-    """One measured point, in the sensor's frame, in millimetres. The sensor frame has x along
-    the sensor's axis (forward), y left and z up. Single precision keeps scans compact; it
-    resolves better than 0.01 mm up to 100 m.
+    """One measured point, in the sensor's frame, in millimetres.
+
+    The sensor frame has x along the sensor's axis (forward), y left
+    and z up. Single precision keeps scans compact; it resolves better
+    than 0.01 mm up to 100 m.
     """
 
     x: float = 0.0
@@ -107,9 +109,10 @@ Range3dIntensitySeqIDL: _t.TypeAlias = list[float]
 
 @_dc.dataclass(slots=True)
 class Range3dMountingIDL(_cdr.IdlType):
-    """Where a 3-D range sensor is mounted on the robot. The pose of the sensor frame in the
-    robot frame (x forward, y left, z up, origin at the robot's centre of rotation on the
-    floor).
+    """Where a 3-D range sensor is mounted on the robot.
+
+    The pose of the sensor frame in the robot frame (x forward, y left,
+    z up, origin at the robot's centre of rotation on the floor).
     """
 
     x: float = 0.0
@@ -287,9 +290,11 @@ def _dec_Range3dDescriptionIDL(
 
 @_dc.dataclass(slots=True)
 class Range3dScanEventIDL(_cdr.IdlType):
-    """One 3-D scan: a cloud of points in the sensor's frame. Returned by Range3dSensor::getScan
-    and published on the event channel under Range3dDescriptionIDL::eventName. Only valid
-    returns are listed: beams that hit nothing within range, or gave no usable reading, are
+    """One 3-D scan: a cloud of points in the sensor's frame.
+
+    Returned by Range3dSensor::getScan and published on the event channel
+    under Range3dDescriptionIDL::eventName. Only valid returns are listed:
+    beams that hit nothing within range, or gave no usable reading, are
     left out.
     """
 
@@ -298,8 +303,10 @@ class Range3dScanEventIDL(_cdr.IdlType):
     point: Range3dPointSeqIDL = _dc.field(default_factory=list)
     """The measured points, in millimetres, in the sensor's frame."""
     intensity: Range3dIntensitySeqIDL = _dc.field(default_factory=list)
-    """Return strength of each point, in the device's own units. Either empty (the device does
-    not measure it) or as long as point, entry i belonging to point i.
+    """Return strength of each point, in the device's own units.
+
+    Either empty (the device does not measure it) or as long as point,
+    entry i belonging to point i.
     """
 
     _repo_id = "IDL:Miro/Range3dScanEventIDL:1.0"
@@ -435,8 +442,9 @@ class Range3dSensor(_rpc.Stub):
         return _r
 
     def getWaitScan(self) -> Range3dScanEventIDL:
-        """Wait for the next scan and return it. @throw ETimeOut No new scan arrived within about
-        five scan periods.
+        """Wait for the next scan and return it.
+
+        @throw ETimeOut No new scan arrived within about five scan periods.
         """
         _buf = bytearray(_cdr.HEADER_LE)
         _data = self._call("getWaitScan", bytes(_buf), (_m_Miro_Exception_idl.ETimeOut,))

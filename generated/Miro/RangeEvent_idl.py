@@ -32,10 +32,12 @@ _U2 = (_S2[0].unpack_from, _S2[1].unpack_from)
 
 
 RangeGroupIDL: _t.TypeAlias = list[int]
-"""The readings of one sensor group, in millimetres, in the order of its ScanDescription. Besides
-distances, an entry can hold RangeSensor::HORIZON_RANGE (nothing within range) or
-RangeSensor::INVALID_RANGE (masked sensor or no valid reading). A laser scan of 361 readings
-is one group of 361 entries.
+"""The readings of one sensor group, in millimetres, in the order of its ScanDescription.
+
+Besides distances, an entry can hold RangeSensor::HORIZON_RANGE
+(nothing within range) or RangeSensor::INVALID_RANGE (masked sensor
+or no valid reading). A laser scan of 361 readings is one group of
+361 entries.
 """
 
 

@@ -52,11 +52,13 @@ RangeSensor_BUNCHWISE: _t.Final = 3
 
 
 class RangeSensor(_rpc.Stub):
-    """Uniform access to range sensors: sonar, laser, infrared, bumpers. A client first asks for
-    the sensor's layout (getScanDescription) and then polls readings or subscribes to the
-    events the sensor publishes under ScanDescriptionIDL::eventName: RangeScanEventIDL,
-    RangeGroupEventIDL or RangeBunchEventIDL, as its scanType says. Distances are in
-    millimetres (Miro's convention).
+    """Uniform access to range sensors: sonar, laser, infrared, bumpers.
+
+    A client first asks for the sensor's layout (getScanDescription) and
+    then polls readings or subscribes to the events the sensor publishes
+    under ScanDescriptionIDL::eventName: RangeScanEventIDL,
+    RangeGroupEventIDL or RangeBunchEventIDL, as its scanType says.
+    Distances are in millimetres (Miro's convention).
     """
 
     __slots__ = ()
@@ -95,8 +97,9 @@ class RangeSensor(_rpc.Stub):
         return _r
 
     def getWaitFullScan(self) -> _m_Miro_RangeEvent_idl.RangeScanEventIDL:
-        """Wait for the next complete scan and return it. @throw ETimeOut No new scan arrived
-        within about five report periods.
+        """Wait for the next complete scan and return it.
+
+        @throw ETimeOut No new scan arrived within about five report periods.
         """
         _buf = bytearray(_cdr.HEADER_LE)
         _data = self._call("getWaitFullScan", bytes(_buf), (_m_Miro_Exception_idl.ETimeOut,))
@@ -110,8 +113,9 @@ class RangeSensor(_rpc.Stub):
         return _r
 
     def getGroup(self, id: int) -> _m_Miro_RangeEvent_idl.RangeGroupEventIDL:
-        """Return the latest readings of one group. @param id Number of the group, an index into
-        ScanDescriptionIDL::group.
+        """Return the latest readings of one group.
+
+        @param id Number of the group, an index into ScanDescriptionIDL::group.
 
         @throw EOutOfBounds There is no group with that number.
         """
@@ -132,11 +136,13 @@ class RangeSensor(_rpc.Stub):
         return _r
 
     def getWaitGroup(self, id: int) -> _m_Miro_RangeEvent_idl.RangeGroupEventIDL:
-        """Wait for the next readings of one group and return them. @param id Number of the
-        group, an index into ScanDescriptionIDL::group.
+        """Wait for the next readings of one group and return them.
 
-        @throw EOutOfBounds There is no group with that number. @throw ETimeOut No new
-        readings of the group arrived within about five report periods.
+        @param id Number of the group, an index into ScanDescriptionIDL::group.
+
+        @throw EOutOfBounds There is no group with that number.
+        @throw ETimeOut No new readings of the group arrived within about
+        five report periods.
         """
         _buf = bytearray(_cdr.HEADER_LE)
         try:

@@ -39,13 +39,16 @@ class SensorDescriptionIDL(_cdr.IdlType):
     minRange: int = 0
     """Shortest distance the sensors can measure, in millimetres."""
     maxRange: int = 0
-    """Longest distance the sensors can measure, in millimetres. Readings beyond it are reported
-    as RangeSensor::HORIZON_RANGE.
+    """Longest distance the sensors can measure, in millimetres.
+
+    Readings beyond it are reported as RangeSensor::HORIZON_RANGE.
     """
     focus: float = 0.0
-    """Opening angle of each sensor's beam, in radians (full cone width). About 0.4 rad for a
-    sonar; for a laser scanner, the angular spacing of its readings (e.g. PI / 360 for 361
-    readings over 180 degrees).
+    """Opening angle of each sensor's beam, in radians (full cone width).
+
+    About 0.4 rad for a sonar; for a laser scanner, the angular
+    spacing of its readings (e.g. PI / 360 for 361 readings over 180
+    degrees).
     """
 
     _repo_id = "IDL:Miro/SensorDescriptionIDL:1.0"
@@ -101,9 +104,11 @@ def _dec_SensorDescriptionIDL(
 
 @_dc.dataclass(slots=True)
 class SensorPositionIDL(_cdr.IdlType):
-    """Where one sensor sits on the robot and where it looks. Positions are polar, relative to
-    the robot's centre of rotation and its heading; angles are counter-clockwise positive
-    (Miro's convention: millimetres and radians).
+    """Where one sensor sits on the robot and where it looks.
+
+    Positions are polar, relative to the robot's centre of rotation and
+    its heading; angles are counter-clockwise positive (Miro's
+    convention: millimetres and radians).
     """
 
     height: int = 0
@@ -113,15 +118,18 @@ class SensorPositionIDL(_cdr.IdlType):
     alpha: float = 0.0
     """Direction from the centre axis to the sensor, relative to the robot's heading, in radians."""
     beta: float = 0.0
-    """Direction the sensor looks, relative to the direction alpha, in radians. 0 for a sensor
-    looking radially outwards (e.g. a sonar ring); for a laser scanner mounted at the front,
-    alpha + beta is the direction of each reading relative to the robot's heading.
+    """Direction the sensor looks, relative to the direction alpha, in radians.
+
+    0 for a sensor looking radially outwards (e.g. a sonar ring); for
+    a laser scanner mounted at the front, alpha + beta is the
+    direction of each reading relative to the robot's heading.
     """
     gamma: float = 0.0
     """Elevation of the sensor's axis above the horizontal plane, in radians."""
     masked: bool = False
-    """TRUE when the sensor is masked out (e.g. known to be broken). A masked sensor always
-    reports RangeSensor::INVALID_RANGE.
+    """TRUE when the sensor is masked out (e.g. known to be broken).
+
+    A masked sensor always reports RangeSensor::INVALID_RANGE.
     """
 
     _repo_id = "IDL:Miro/SensorPositionIDL:1.0"
@@ -182,8 +190,10 @@ SensorPositionSeqIDL: _t.TypeAlias = list[SensorPositionIDL]
 
 @_dc.dataclass(slots=True)
 class SensorGroupIDL(_cdr.IdlType):
-    """A group of sensors of the same kind, read out together. For example the front sonar ring,
-    or the 361 readings of one laser scan (one SensorPositionIDL per reading).
+    """A group of sensors of the same kind, read out together.
+
+    For example the front sonar ring, or the 361 readings of one laser
+    scan (one SensorPositionIDL per reading).
     """
 
     description: SensorDescriptionIDL = _dc.field(default_factory=SensorDescriptionIDL)
@@ -277,13 +287,17 @@ SensorGroupSeqIDL: _t.TypeAlias = list[SensorGroupIDL]
 
 @_dc.dataclass(slots=True)
 class ScanDescriptionIDL(_cdr.IdlType):
-    """The complete layout of a range sensor device. Sonar, laser, infrared and tactile sensors
-    are all described in this one form, so that clients can process their readings uniformly.
+    """The complete layout of a range sensor device.
+
+    Sonar, laser, infrared and tactile sensors are all described in this
+    one form, so that clients can process their readings uniformly.
     """
 
     scanType: int = 0
-    """How the sensor publishes its readings. One of RangeSensor::NONE_PUSHING (no events),
-    RangeSensor::FULL (RangeScanEventIDL), RangeSensor::GROUPWISE (RangeGroupEventIDL) or
+    """How the sensor publishes its readings.
+
+    One of RangeSensor::NONE_PUSHING (no events), RangeSensor::FULL
+    (RangeScanEventIDL), RangeSensor::GROUPWISE (RangeGroupEventIDL) or
     RangeSensor::BUNCHWISE (RangeBunchEventIDL).
     """
     eventName: str = ""

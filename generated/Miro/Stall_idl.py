@@ -34,9 +34,11 @@ _Stall_StatusIDL_W: dict[int, int] = {_i: _i for _i in range(len(Stall_StatusIDL
 
 
 class Stall(_rpc.Stub):
-    """Stall detection of a mobile base's drive. A drive stalls when its motors are blocked (e.g.
-    the robot pushes against an obstacle) and the controller cuts their power; the base does
-    not move again until the stall is cleared with unstall.
+    """Stall detection of a mobile base's drive.
+
+    A drive stalls when its motors are blocked (e.g. the robot pushes
+    against an obstacle) and the controller cuts their power; the base
+    does not move again until the stall is cleared with unstall.
     """
 
     __slots__ = ()
@@ -60,8 +62,9 @@ class Stall(_rpc.Stub):
         return _r
 
     def unstall(self) -> None:
-        """Clear a stall so that the base accepts motion commands again. @throw EDevIO The
-        command could not be sent to the device.
+        """Clear a stall so that the base accepts motion commands again.
+
+        @throw EDevIO The command could not be sent to the device.
         """
         _buf = bytearray(_cdr.HEADER_LE)
         self._call("unstall", bytes(_buf), (_m_Miro_Exception_idl.EDevIO,))

@@ -21,8 +21,10 @@ _U1 = (_S1[0].unpack_from, _S1[1].unpack_from)
 
 
 class SynchroMotion(_m_Miro_Motion_idl.Motion):
-    """Motion control of a synchro-drive base (e.g. the B21). A synchro drive has separate motors
-    for translation and for rotation, so the two can be commanded and limped independently.
+    """Motion control of a synchro-drive base (e.g. the B21).
+
+    A synchro drive has separate motors for translation and for
+    rotation, so the two can be commanded and limped independently.
     Units: mm/s and rad/s (Miro's convention).
     """
 
@@ -30,20 +32,22 @@ class SynchroMotion(_m_Miro_Motion_idl.Motion):
     _repo_id = "IDL:Miro/SynchroMotion:1.0"
 
     def rotateLimp(self) -> None:
-        """Switch the rotation motor off; the base can then be turned by hand. @throw EDevIO The
-        command could not be sent to the device.
+        """Switch the rotation motor off; the base can then be turned by hand.
+
+        @throw EDevIO The command could not be sent to the device.
         """
         _buf = bytearray(_cdr.HEADER_LE)
         self._call("rotateLimp", bytes(_buf), (_m_Miro_Exception_idl.EDevIO,))
 
     def rotate(self, velocity: float) -> None:
-        """Set the rotational velocity only and start turning. The translational velocity is left
-        as it is.
+        """Set the rotational velocity only and start turning.
+
+        The translational velocity is left as it is.
 
         @param velocity Rotational velocity in rad/s, positive counter-clockwise.
 
-        @throw EOutOfBounds The velocity is outside the limits of getMinMaxVelocity. @throw
-        EDevIO The command could not be sent to the device.
+        @throw EOutOfBounds The velocity is outside the limits of getMinMaxVelocity.
+        @throw EDevIO The command could not be sent to the device.
         """
         _buf = bytearray(_cdr.HEADER_LE)
         try:
@@ -58,20 +62,22 @@ class SynchroMotion(_m_Miro_Motion_idl.Motion):
         )
 
     def translateLimp(self) -> None:
-        """Switch the translation motor off; the base can then be pushed by hand. @throw EDevIO
-        The command could not be sent to the device.
+        """Switch the translation motor off; the base can then be pushed by hand.
+
+        @throw EDevIO The command could not be sent to the device.
         """
         _buf = bytearray(_cdr.HEADER_LE)
         self._call("translateLimp", bytes(_buf), (_m_Miro_Exception_idl.EDevIO,))
 
     def translate(self, velocity: int) -> None:
-        """Set the translational velocity only and start driving. The rotational velocity is left
-        as it is.
+        """Set the translational velocity only and start driving.
+
+        The rotational velocity is left as it is.
 
         @param velocity Translational velocity in mm/s, negative backwards.
 
-        @throw EOutOfBounds The velocity is outside the limits of getMinMaxVelocity. @throw
-        EDevIO The command could not be sent to the device.
+        @throw EOutOfBounds The velocity is outside the limits of getMinMaxVelocity.
+        @throw EDevIO The command could not be sent to the device.
         """
         _buf = bytearray(_cdr.HEADER_LE)
         try:

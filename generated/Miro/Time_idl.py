@@ -19,10 +19,12 @@ _U0 = (_S0[0].unpack_from, _S0[1].unpack_from)
 
 @_dc.dataclass(slots=True)
 class TimeIDL(_cdr.IdlType):
-    """A point in time, with microsecond resolution. Annotates sensor readings and events with
-    the time they were sampled. As in Miro (where it converts to and from ACE_Time_Value), it
-    counts from the Unix epoch, 1970-01-01 00:00:00 UTC, and is normalised so that 0 <= usec <
-    1000000.
+    """A point in time, with microsecond resolution.
+
+    Annotates sensor readings and events with the time they were
+    sampled. As in Miro (where it converts to and from ACE_Time_Value),
+    it counts from the Unix epoch, 1970-01-01 00:00:00 UTC, and is
+    normalised so that 0 <= usec < 1000000.
 
     Note: sec is a 32-bit signed number, as in Miro, so it overflows
     in January 2038.

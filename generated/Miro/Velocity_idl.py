@@ -22,15 +22,19 @@ _U1 = (_S1[0].unpack_from, _S1[1].unpack_from)
 
 @_dc.dataclass(slots=True)
 class VelocityIDL(_cdr.IdlType):
-    """Velocity of a mobile base: forward speed and turn rate. Units follow Miro's convention:
-    millimetres per second (as an integer) for translation, radians per second for rotation.
+    """Velocity of a mobile base: forward speed and turn rate.
+
+    Units follow Miro's convention: millimetres per second (as an
+    integer) for translation, radians per second for rotation.
     """
 
     translation: int = 0
     """Translational velocity in mm/s; negative values drive backwards."""
     rotation: float = 0.0
-    """Rotational velocity in rad/s; positive values turn counter-clockwise (left). Same sense as
-    PositionIDL::heading: a positive rotation makes the heading grow.
+    """Rotational velocity in rad/s; positive values turn counter-clockwise (left).
+
+    Same sense as PositionIDL::heading: a positive rotation makes the
+    heading grow.
     """
 
     _repo_id = "IDL:Miro/VelocityIDL:1.0"

@@ -19,8 +19,10 @@ _U0 = (_S0[0].unpack_from, _S0[1].unpack_from)
 
 @_dc.dataclass(slots=True)
 class WorldPointIDL(_cdr.IdlType):
-    """A point in two-dimensional world coordinates. Distances follow Miro's convention:
-    millimetres, not metres. The world frame is right-handed with its z axis pointing up.
+    """A point in two-dimensional world coordinates.
+
+    Distances follow Miro's convention: millimetres, not metres.
+    The world frame is right-handed with its z axis pointing up.
     """
 
     x: float = 0.0

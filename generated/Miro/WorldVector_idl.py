@@ -19,8 +19,9 @@ _U0 = (_S0[0].unpack_from, _S0[1].unpack_from)
 
 @_dc.dataclass(slots=True)
 class WorldVectorIDL(_cdr.IdlType):
-    """A two-dimensional vector (a difference of two world points). Distances follow Miro's
-    convention: millimetres, not metres.
+    """A two-dimensional vector (a difference of two world points).
+
+    Distances follow Miro's convention: millimetres, not metres.
     """
 
     dx: float = 0.0

@@ -24,14 +24,17 @@ _U1 = (_S1[0].unpack_from, _S1[1].unpack_from)
 
 @_dc.dataclass(slots=True)
 class myExampleIDL(_cdr.IdlType):
-    """A string held in a fixed-size character buffer, with its length. What myExample::getString
-    returns: the server copies a text into Buffer and tells the caller how many of its
-    characters are used.
+    """A string held in a fixed-size character buffer, with its length.
+
+    What myExample::getString returns: the server copies a text into
+    Buffer and tells the caller how many of its characters are used.
     """
 
     Buffer: list[str] = _dc.field(default_factory=lambda: ["\x00"] * 30)
-    """The characters of the string; only the first cmdLength are meaningful. Always 30
-    characters on the wire. Unused characters are conventionally set to '\\0'.
+    """The characters of the string; only the first cmdLength are meaningful.
+
+    Always 30 characters on the wire. Unused characters are
+    conventionally set to '\\0'.
     """
     cmdLength: int = 0
     """Number of characters of Buffer that hold the string (0 to 30)."""
@@ -92,6 +95,7 @@ class myExample(_rpc.Stub):
 
     def getString(self) -> myExampleIDL:
         """Return the string the server currently holds.
+
         @return The characters and their count.
         """
         _buf = bytearray(_cdr.HEADER_LE)

@@ -22,20 +22,24 @@ _U1 = (_S1[0].unpack_from, _S1[1].unpack_from)
 
 
 class ClosedMotion(_rpc.Servant):
-    """Motion commands given as a distance or angle to cover, not a velocity. The base's
-    controller drives until the target is reached. Units: millimetres and radians (Miro's
-    convention); positive angles are counter-clockwise.
+    """Motion commands given as a distance or angle to cover, not a velocity.
+
+    The base's controller drives until the target is reached. Units:
+    millimetres and radians (Miro's convention); positive angles are
+    counter-clockwise.
     """
 
     _repo_id = "IDL:Miro/ClosedMotion:1.0"
 
     @_abc.abstractmethod
     def rotateToPosition(self, angle: float) -> None:
-        """Turn in place to an absolute heading. @param angle Target heading in radians, in the
-        odometry's frame (see PositionIDL::heading); -PI < angle <= PI.
+        """Turn in place to an absolute heading.
 
-        @throw EOutOfBounds angle is outside -PI < angle <= PI. @throw EDevIO The command
-        could not be sent to the device.
+        @param angle Target heading in radians, in the odometry's frame
+        (see PositionIDL::heading); -PI < angle <= PI.
+
+        @throw EOutOfBounds angle is outside -PI < angle <= PI.
+        @throw EDevIO The command could not be sent to the device.
         """
 
     def _op_rotateToPosition(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
@@ -54,11 +58,13 @@ class ClosedMotion(_rpc.Servant):
 
     @_abc.abstractmethod
     def rotateRelative(self, angle: float) -> None:
-        """Turn in place by an angle relative to the current heading. @param angle Angle to turn
-        in radians, positive counter-clockwise; -2 PI < angle <= 2 PI.
+        """Turn in place by an angle relative to the current heading.
 
-        @throw EOutOfBounds angle is outside -2 PI < angle <= 2 PI. @throw EDevIO The command
-        could not be sent to the device.
+        @param angle Angle to turn in radians, positive counter-clockwise;
+        -2 PI < angle <= 2 PI.
+
+        @throw EOutOfBounds angle is outside -2 PI < angle <= 2 PI.
+        @throw EDevIO The command could not be sent to the device.
         """
 
     def _op_rotateRelative(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
@@ -77,12 +83,13 @@ class ClosedMotion(_rpc.Servant):
 
     @_abc.abstractmethod
     def translateRelative(self, distance: int) -> None:
-        """Drive straight for a distance from the current position. @param distance Distance in
-        millimetres; negative values drive backwards.
+        """Drive straight for a distance from the current position.
 
-        @throw EOutOfBounds The distance exceeds what the controller can drive in one closed
-        motion (a few metres on most bases). @throw EDevIO The command could not be sent to
-        the device.
+        @param distance Distance in millimetres; negative values drive backwards.
+
+        @throw EOutOfBounds The distance exceeds what the controller can
+        drive in one closed motion (a few metres on most bases).
+        @throw EDevIO The command could not be sent to the device.
         """
 
     def _op_translateRelative(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:

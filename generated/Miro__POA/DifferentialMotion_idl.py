@@ -23,24 +23,28 @@ _U1 = (_S1[0].unpack_from, _S1[1].unpack_from)
 
 
 class DifferentialMotion(_m_Miro__POA_Motion_idl.Motion):
-    """Motion control of a differential-drive base (e.g. Pioneer, Sparrow). A differential drive
-    steers by driving its left and right wheels at different speeds; this interface adds per-
-    wheel commands. Wheel velocities are in mm/s at the wheel's contact point (Miro's
+    """Motion control of a differential-drive base (e.g. Pioneer, Sparrow).
+
+    A differential drive steers by driving its left and right wheels at
+    different speeds; this interface adds per-wheel commands. Wheel
+    velocities are in mm/s at the wheel's contact point (Miro's
     convention); negative values turn the wheel backwards.
 
-    With wheel base b (mm) the two views are related by translation = (left + right) / 2 and
-    rotation = (right - left) / b.
+    With wheel base b (mm) the two views are related by
+    translation = (left + right) / 2 and rotation = (right - left) / b.
     """
 
     _repo_id = "IDL:Miro/DifferentialMotion:1.0"
 
     @_abc.abstractmethod
     def setLRVelocity(self, left: int, right: int) -> None:
-        """Set the velocity of each wheel and start moving. @param left Velocity of the left
-        wheel in mm/s. @param right Velocity of the right wheel in mm/s.
+        """Set the velocity of each wheel and start moving.
 
-        @throw EOutOfBounds A velocity is outside the limits of getMinMaxLRVelocity. @throw
-        EDevIO The command could not be sent to the device.
+        @param left Velocity of the left wheel in mm/s.
+        @param right Velocity of the right wheel in mm/s.
+
+        @throw EOutOfBounds A velocity is outside the limits of getMinMaxLRVelocity.
+        @throw EDevIO The command could not be sent to the device.
         """
 
     def _op_setLRVelocity(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
@@ -60,10 +64,12 @@ class DifferentialMotion(_m_Miro__POA_Motion_idl.Motion):
 
     @_abc.abstractmethod
     def getMinMaxLRVelocity(self) -> tuple[int, int, int, int]:
-        """Return the range of wheel velocities setLRVelocity accepts. @param minLTranslation
-        Lowest left-wheel velocity in mm/s. @param maxLTranslation Highest left-wheel velocity
-        in mm/s. @param minRTranslation Lowest right-wheel velocity in mm/s. @param
-        maxRTranslation Highest right-wheel velocity in mm/s.
+        """Return the range of wheel velocities setLRVelocity accepts.
+
+        @param minLTranslation Lowest left-wheel velocity in mm/s.
+        @param maxLTranslation Highest left-wheel velocity in mm/s.
+        @param minRTranslation Lowest right-wheel velocity in mm/s.
+        @param maxRTranslation Highest right-wheel velocity in mm/s.
         """
 
     def _op_getMinMaxLRVelocity(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
@@ -89,11 +95,13 @@ class DifferentialMotion(_m_Miro__POA_Motion_idl.Motion):
 
     @_abc.abstractmethod
     def getTargetLRVelocity(self) -> tuple[int, int]:
-        """Return the wheel velocities the base is currently commanded to drive at. Reflects the
-        last setLRVelocity, or the last Motion::setVelocity converted to wheel velocities.
+        """Return the wheel velocities the base is currently commanded to drive at.
 
-        @param left Commanded left-wheel velocity in mm/s. @param right Commanded right-wheel
-        velocity in mm/s.
+        Reflects the last setLRVelocity, or the last Motion::setVelocity
+        converted to wheel velocities.
+
+        @param left Commanded left-wheel velocity in mm/s.
+        @param right Commanded right-wheel velocity in mm/s.
         """
 
     def _op_getTargetLRVelocity(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:

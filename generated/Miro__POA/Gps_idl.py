@@ -17,8 +17,11 @@ __all__ = [
 
 
 class Gps(_rpc.Servant):
-    """Access to a GPS receiver. Servers bind it as "Gps" in their naming context and publish
-    every new reading on the event channel with type name "Gps" (payload GpsDataIDL).
+    """Access to a GPS receiver.
+
+    Servers bind it as "Gps" in their naming context and publish every
+    new reading on the event channel with type name "Gps" (payload
+    GpsDataIDL).
     """
 
     _repo_id = "IDL:Miro/Gps:1.0"
@@ -26,6 +29,7 @@ class Gps(_rpc.Servant):
     @_abc.abstractmethod
     def getData(self) -> _m_Miro_Gps_idl.GpsDataIDL:
         """Return the latest reading.
+
         Fields not received yet are NaN or 0 (see GpsDataIDL).
         """
 
@@ -40,8 +44,10 @@ class Gps(_rpc.Servant):
 
     @_abc.abstractmethod
     def getWaitData(self) -> _m_Miro_Gps_idl.GpsDataIDL:
-        """Wait for the next reading and return it. @throw ETimeOut No new reading arrived within
-        the server's timeout (a few seconds; receivers report at about 1 Hz).
+        """Wait for the next reading and return it.
+
+        @throw ETimeOut No new reading arrived within the server's timeout
+        (a few seconds; receivers report at about 1 Hz).
         """
 
     def _op_getWaitData(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:

@@ -17,9 +17,11 @@ __all__ = [
 
 
 class InertialSensor(_rpc.Servant):
-    """Access to an inertial sensor. Servers publish every new reading on the event channel
-    (payload InertialDataIDL), under the event type name of the derived interface (e.g.
-    "Imu").
+    """Access to an inertial sensor.
+
+    Servers publish every new reading on the event channel (payload
+    InertialDataIDL), under the event type name of the derived interface
+    (e.g. "Imu").
     """
 
     _repo_id = "IDL:Miro/InertialSensor:1.0"
@@ -39,8 +41,10 @@ class InertialSensor(_rpc.Servant):
 
     @_abc.abstractmethod
     def getWaitData(self) -> _m_Miro_InertialSensor_idl.InertialDataIDL:
-        """Wait for the next reading and return it. @throw ETimeOut No new reading arrived within
-        the server's timeout (about one second).
+        """Wait for the next reading and return it.
+
+        @throw ETimeOut No new reading arrived within the server's timeout
+        (about one second).
         """
 
     def _op_getWaitData(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:

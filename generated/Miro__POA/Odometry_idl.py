@@ -19,14 +19,16 @@ __all__ = [
 
 
 class Odometry(_rpc.Servant):
-    """Dead-reckoning pose and velocity of a mobile base. Servers bind it as "Odometry" in their
-    naming context. Besides answering calls, they publish every report on the event channel: -
-    type name "Odometry", payload MotionStatusIDL; - optionally type name "RawPosition",
-    payload RawPositionIDL.
+    """Dead-reckoning pose and velocity of a mobile base.
 
-    Reports arrive at the base's own pace (typically 10 Hz). The "getWait..." operations block
-    until the next report and raise ETimeOut when none arrives within about five report
-    periods.
+    Servers bind it as "Odometry" in their naming context. Besides
+    answering calls, they publish every report on the event channel:
+    - type name "Odometry", payload MotionStatusIDL;
+    - optionally type name "RawPosition", payload RawPositionIDL.
+
+    Reports arrive at the base's own pace (typically 10 Hz). The
+    "getWait..." operations block until the next report and raise
+    ETimeOut when none arrives within about five report periods.
 
     Units: millimetres, radians, mm/s, rad/s (Miro's convention).
     """
@@ -35,8 +37,10 @@ class Odometry(_rpc.Servant):
 
     @_abc.abstractmethod
     def setPosition(self, position: _m_Miro_Position_idl.PositionIDL) -> None:
-        """Declare the robot's current pose to be the given one. Later reports continue from this
-        pose. The raw position is not affected.
+        """Declare the robot's current pose to be the given one.
+
+        Later reports continue from this pose. The raw position is not
+        affected.
 
         @param position The robot's pose in world coordinates (mm, rad).
         """
@@ -55,9 +59,11 @@ class Odometry(_rpc.Servant):
 
     @_abc.abstractmethod
     def updatePosition(self, deltaPosition: _m_Miro_Position_idl.PositionIDL) -> None:
-        """Correct the current pose by a relative amount. Adds deltaPosition.point to the current
-        point and deltaPosition.heading to the current heading (then normalised to -PI <
-        heading <= PI). The raw position is not affected.
+        """Correct the current pose by a relative amount.
+
+        Adds deltaPosition.point to the current point and
+        deltaPosition.heading to the current heading (then normalised to
+        -PI < heading <= PI). The raw position is not affected.
 
         @param deltaPosition Correction in world coordinates (mm, rad).
         """
@@ -89,8 +95,9 @@ class Odometry(_rpc.Servant):
 
     @_abc.abstractmethod
     def getWaitPosition(self) -> _m_Miro_Position_idl.PositionIDL:
-        """Wait for the next report and return its pose (mm, rad). @throw ETimeOut No report
-        arrived in time.
+        """Wait for the next report and return its pose (mm, rad).
+
+        @throw ETimeOut No report arrived in time.
         """
 
     def _op_getWaitPosition(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
@@ -104,10 +111,12 @@ class Odometry(_rpc.Servant):
 
     @_abc.abstractmethod
     def getRawPosition(self) -> _m_Miro_Position_idl.PositionIDL:
-        """Return the latest uncorrected odometry pose (mm, rad). The raw position integrates the
-        wheel motion only: setPosition and updatePosition (e.g. from a localisation module)
-        never change it. It gives a frame that does not jump, for stamping locally perceived
-        data; it only drifts with the odometry error.
+        """Return the latest uncorrected odometry pose (mm, rad).
+
+        The raw position integrates the wheel motion only: setPosition and
+        updatePosition (e.g. from a localisation module) never change it.
+        It gives a frame that does not jump, for stamping locally
+        perceived data; it only drifts with the odometry error.
         """
 
     def _op_getRawPosition(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
@@ -121,8 +130,9 @@ class Odometry(_rpc.Servant):
 
     @_abc.abstractmethod
     def getWaitRawPosition(self) -> _m_Miro_Position_idl.PositionIDL:
-        """Wait for the next report and return its uncorrected pose (mm, rad). @throw ETimeOut No
-        report arrived in time.
+        """Wait for the next report and return its uncorrected pose (mm, rad).
+
+        @throw ETimeOut No report arrived in time.
         """
 
     def _op_getWaitRawPosition(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
@@ -149,8 +159,9 @@ class Odometry(_rpc.Servant):
 
     @_abc.abstractmethod
     def getWaitVelocity(self) -> _m_Miro_Velocity_idl.VelocityIDL:
-        """Wait for the next report and return its velocity (mm/s, rad/s). @throw ETimeOut No
-        report arrived in time.
+        """Wait for the next report and return its velocity (mm/s, rad/s).
+
+        @throw ETimeOut No report arrived in time.
         """
 
     def _op_getWaitVelocity(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
@@ -177,8 +188,9 @@ class Odometry(_rpc.Servant):
 
     @_abc.abstractmethod
     def getWaitStatus(self) -> _m_Miro_MotionStatus_idl.MotionStatusIDL:
-        """Wait for the next report and return it: time stamp, pose and velocity. @throw ETimeOut
-        No report arrived in time.
+        """Wait for the next report and return it: time stamp, pose and velocity.
+
+        @throw ETimeOut No report arrived in time.
         """
 
     def _op_getWaitStatus(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:

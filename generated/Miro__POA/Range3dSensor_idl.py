@@ -49,8 +49,9 @@ class Range3dSensor(_rpc.Servant):
 
     @_abc.abstractmethod
     def getWaitScan(self) -> _m_Miro_Range3dSensor_idl.Range3dScanEventIDL:
-        """Wait for the next scan and return it. @throw ETimeOut No new scan arrived within about
-        five scan periods.
+        """Wait for the next scan and return it.
+
+        @throw ETimeOut No new scan arrived within about five scan periods.
         """
 
     def _op_getWaitScan(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:

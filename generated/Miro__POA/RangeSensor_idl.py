@@ -22,11 +22,13 @@ _U0 = (_S0[0].unpack_from, _S0[1].unpack_from)
 
 
 class RangeSensor(_rpc.Servant):
-    """Uniform access to range sensors: sonar, laser, infrared, bumpers. A client first asks for
-    the sensor's layout (getScanDescription) and then polls readings or subscribes to the
-    events the sensor publishes under ScanDescriptionIDL::eventName: RangeScanEventIDL,
-    RangeGroupEventIDL or RangeBunchEventIDL, as its scanType says. Distances are in
-    millimetres (Miro's convention).
+    """Uniform access to range sensors: sonar, laser, infrared, bumpers.
+
+    A client first asks for the sensor's layout (getScanDescription) and
+    then polls readings or subscribes to the events the sensor publishes
+    under ScanDescriptionIDL::eventName: RangeScanEventIDL,
+    RangeGroupEventIDL or RangeBunchEventIDL, as its scanType says.
+    Distances are in millimetres (Miro's convention).
     """
 
     _repo_id = "IDL:Miro/RangeSensor:1.0"
@@ -59,8 +61,9 @@ class RangeSensor(_rpc.Servant):
 
     @_abc.abstractmethod
     def getWaitFullScan(self) -> _m_Miro_RangeEvent_idl.RangeScanEventIDL:
-        """Wait for the next complete scan and return it. @throw ETimeOut No new scan arrived
-        within about five report periods.
+        """Wait for the next complete scan and return it.
+
+        @throw ETimeOut No new scan arrived within about five report periods.
         """
 
     def _op_getWaitFullScan(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
@@ -74,8 +77,9 @@ class RangeSensor(_rpc.Servant):
 
     @_abc.abstractmethod
     def getGroup(self, id: int) -> _m_Miro_RangeEvent_idl.RangeGroupEventIDL:
-        """Return the latest readings of one group. @param id Number of the group, an index into
-        ScanDescriptionIDL::group.
+        """Return the latest readings of one group.
+
+        @param id Number of the group, an index into ScanDescriptionIDL::group.
 
         @throw EOutOfBounds There is no group with that number.
         """
@@ -100,11 +104,13 @@ class RangeSensor(_rpc.Servant):
 
     @_abc.abstractmethod
     def getWaitGroup(self, id: int) -> _m_Miro_RangeEvent_idl.RangeGroupEventIDL:
-        """Wait for the next readings of one group and return them. @param id Number of the
-        group, an index into ScanDescriptionIDL::group.
+        """Wait for the next readings of one group and return them.
 
-        @throw EOutOfBounds There is no group with that number. @throw ETimeOut No new
-        readings of the group arrived within about five report periods.
+        @param id Number of the group, an index into ScanDescriptionIDL::group.
+
+        @throw EOutOfBounds There is no group with that number.
+        @throw ETimeOut No new readings of the group arrived within about
+        five report periods.
         """
 
     def _op_getWaitGroup(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:

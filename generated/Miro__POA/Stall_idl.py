@@ -19,9 +19,11 @@ _U0 = (_S0[0].unpack_from, _S0[1].unpack_from)
 
 
 class Stall(_rpc.Servant):
-    """Stall detection of a mobile base's drive. A drive stalls when its motors are blocked (e.g.
-    the robot pushes against an obstacle) and the controller cuts their power; the base does
-    not move again until the stall is cleared with unstall.
+    """Stall detection of a mobile base's drive.
+
+    A drive stalls when its motors are blocked (e.g. the robot pushes
+    against an obstacle) and the controller cuts their power; the base
+    does not move again until the stall is cleared with unstall.
     """
 
     _repo_id = "IDL:Miro/Stall:1.0"
@@ -41,8 +43,9 @@ class Stall(_rpc.Servant):
 
     @_abc.abstractmethod
     def unstall(self) -> None:
-        """Clear a stall so that the base accepts motion commands again. @throw EDevIO The
-        command could not be sent to the device.
+        """Clear a stall so that the base accepts motion commands again.
+
+        @throw EDevIO The command could not be sent to the device.
         """
 
     def _op_unstall(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:

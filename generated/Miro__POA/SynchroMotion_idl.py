@@ -23,8 +23,10 @@ _U1 = (_S1[0].unpack_from, _S1[1].unpack_from)
 
 
 class SynchroMotion(_m_Miro__POA_Motion_idl.Motion):
-    """Motion control of a synchro-drive base (e.g. the B21). A synchro drive has separate motors
-    for translation and for rotation, so the two can be commanded and limped independently.
+    """Motion control of a synchro-drive base (e.g. the B21).
+
+    A synchro drive has separate motors for translation and for
+    rotation, so the two can be commanded and limped independently.
     Units: mm/s and rad/s (Miro's convention).
     """
 
@@ -32,8 +34,9 @@ class SynchroMotion(_m_Miro__POA_Motion_idl.Motion):
 
     @_abc.abstractmethod
     def rotateLimp(self) -> None:
-        """Switch the rotation motor off; the base can then be turned by hand. @throw EDevIO The
-        command could not be sent to the device.
+        """Switch the rotation motor off; the base can then be turned by hand.
+
+        @throw EDevIO The command could not be sent to the device.
         """
 
     def _op_rotateLimp(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
@@ -43,13 +46,14 @@ class SynchroMotion(_m_Miro__POA_Motion_idl.Motion):
 
     @_abc.abstractmethod
     def rotate(self, velocity: float) -> None:
-        """Set the rotational velocity only and start turning. The translational velocity is left
-        as it is.
+        """Set the rotational velocity only and start turning.
+
+        The translational velocity is left as it is.
 
         @param velocity Rotational velocity in rad/s, positive counter-clockwise.
 
-        @throw EOutOfBounds The velocity is outside the limits of getMinMaxVelocity. @throw
-        EDevIO The command could not be sent to the device.
+        @throw EOutOfBounds The velocity is outside the limits of getMinMaxVelocity.
+        @throw EDevIO The command could not be sent to the device.
         """
 
     def _op_rotate(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
@@ -68,8 +72,9 @@ class SynchroMotion(_m_Miro__POA_Motion_idl.Motion):
 
     @_abc.abstractmethod
     def translateLimp(self) -> None:
-        """Switch the translation motor off; the base can then be pushed by hand. @throw EDevIO
-        The command could not be sent to the device.
+        """Switch the translation motor off; the base can then be pushed by hand.
+
+        @throw EDevIO The command could not be sent to the device.
         """
 
     def _op_translateLimp(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
@@ -79,13 +84,14 @@ class SynchroMotion(_m_Miro__POA_Motion_idl.Motion):
 
     @_abc.abstractmethod
     def translate(self, velocity: int) -> None:
-        """Set the translational velocity only and start driving. The rotational velocity is left
-        as it is.
+        """Set the translational velocity only and start driving.
+
+        The rotational velocity is left as it is.
 
         @param velocity Translational velocity in mm/s, negative backwards.
 
-        @throw EOutOfBounds The velocity is outside the limits of getMinMaxVelocity. @throw
-        EDevIO The command could not be sent to the device.
+        @throw EOutOfBounds The velocity is outside the limits of getMinMaxVelocity.
+        @throw EDevIO The command could not be sent to the device.
         """
 
     def _op_translate(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:

@@ -24,6 +24,7 @@ class myExample(_rpc.Servant):
     @_abc.abstractmethod
     def getString(self) -> _m_Miro_myExample_idl.myExampleIDL:
         """Return the string the server currently holds.
+
         @return The characters and their count.
         """
 

@@ -91,9 +91,12 @@ class Person(_rpc.Stub):
     _repo_id = "IDL:Person:1.0"
 
     def setTraits(self, height: float, waist: float, hair: str, age: int) -> None:
-        """Set all traits of the person. @param height Height in metres. @param waist Waist
-        circumference in metres. @param hair Hair colour as a one-letter code. @param age Age
-        in whole years.
+        """Set all traits of the person.
+
+        @param height Height in metres.
+        @param waist Waist circumference in metres.
+        @param hair Hair colour as a one-letter code.
+        @param age Age in whole years.
         """
         _buf = bytearray(_cdr.HEADER_LE)
         try:

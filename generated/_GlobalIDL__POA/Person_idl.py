@@ -36,9 +36,12 @@ class Person(_rpc.Servant):
 
     @_abc.abstractmethod
     def setTraits(self, height: float, waist: float, hair: str, age: int) -> None:
-        """Set all traits of the person. @param height Height in metres. @param waist Waist
-        circumference in metres. @param hair Hair colour as a one-letter code. @param age Age
-        in whole years.
+        """Set all traits of the person.
+
+        @param height Height in metres.
+        @param waist Waist circumference in metres.
+        @param hair Hair colour as a one-letter code.
+        @param age Age in whole years.
         """
 
     def _op_setTraits(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:

@@ -40,13 +40,23 @@ def docstring(text: str | None, indent: int, fallback: str | None = None) -> str
     if body.endswith('"'):
         body += " "
     width = LINE - indent - 6
-    paragraphs = [textwrap.fill(p, width) if len(p) > width else p for p in body.split("\n\n")]
-    lines = "\n\n".join(paragraphs).split("\n")
+    lines = [line for p in body.split("\n") for line in _wrap_block(p, width)]
     if len(lines) == 1:
         return f'"""{lines[0]}"""'
     pad = " " * indent
     rest = "\n".join(pad + line if line else "" for line in lines[1:])
     return f'"""{lines[0]}\n{rest}\n{pad}"""'
+
+
+def _wrap_block(line: str, width: int) -> list[str]:
+    """One line of doc text, wrapped to `width` only if it is longer: the author's line breaks
+    (Doxygen `@param` lines, lists) are kept. Continuation lines keep a list item's indent."""
+    if len(line) <= width:
+        return [line]
+    lead = line[: len(line) - len(line.lstrip())]
+    return textwrap.wrap(
+        line, width, initial_indent="", subsequent_indent=lead, break_on_hyphens=False
+    ) or [line]
 
 
 @cache

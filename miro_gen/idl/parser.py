@@ -709,7 +709,7 @@ def attach_docs(named: list[tuple[int, Any]], comments: list[tuple[int, str]]) -
         return
     named.sort(key=lambda item: item[0])
     starts = [n[0] for n in named]
-    pending: dict[int, list[str]] = {}
+    pending: dict[int, list[tuple[str, bool]]] = {}
     for offset, comment in comments:
         parsed = _doc_text(comment)
         if parsed is None:
@@ -717,12 +717,25 @@ def attach_docs(named: list[tuple[int, Any]], comments: list[tuple[int, str]]) -
         text, after = parsed
         at = bisect_left(starts, offset)
         idx = at - 1 if after else at
-        if 0 <= idx < len(named):
-            pending.setdefault(idx, []).append(text)
+        if 0 <= idx < len(named) and text:
+            pending.setdefault(idx, []).append((text, comment.startswith("/*")))
     for idx, texts in pending.items():
         node = named[idx][1]
         if getattr(node, "doc", None) is None:
-            node.doc = "\n".join(t for t in texts if t) or None
+            node.doc = _join_docs(texts) or None
+
+
+def _join_docs(texts: list[tuple[str, bool]]) -> str:
+    """Consecutive `///` lines form one paragraph; a block comment is a paragraph of its own,
+    as Doxygen reads a `//!` brief followed by a `/** */` description."""
+    out = ""
+    prev_block = False
+    for i, (text, block) in enumerate(texts):
+        if i:
+            out += "\n\n" if block or prev_block else "\n"
+        out += text
+        prev_block = block
+    return out
 
 
 # ---- the parser -----------------------------------------------------------------------------
