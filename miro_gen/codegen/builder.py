@@ -180,10 +180,14 @@ class Builder:
         head, _, tail = cls_ref.rpartition(".")
         return f"{head}.{prefix}{tail}" if head else f"{prefix}{tail}"
 
-    def annotation(self, shape: Shape, use_alias: bool = True, in_op: bool = False) -> str:
+    def annotation(
+        self, shape: Shape, use_alias: bool = True, in_op: bool = False, sending: bool = False
+    ) -> str:
         """The type hint of a value. Object references inside an operation's arguments and
         results arrive as stubs, but as `ObjectRef` inside data types; so a typedef holding
-        references is spelled out there rather than named (its alias says `ObjectRef`)."""
+        references is spelled out there rather than named (its alias says `ObjectRef`). What is
+        being sent (a stub's arguments, a servant's results) may be any sequence, and for an
+        object reference a local servant."""
         if use_alias and shape.alias is not None and not (in_op and _holds_object(shape)):
             return self.ref(shape.alias)
         k = shape.kind
@@ -195,12 +199,19 @@ class Builder:
             return "bytes"
         if k in ("seq", "array"):
             inner = shape.elem if k == "seq" else _sub_array(shape)
-            return f"list[{self.annotation(inner, in_op=in_op)}]"  # type: ignore[arg-type]
+            inner_ann = self.annotation(inner, in_op=in_op, sending=sending)  # type: ignore[arg-type]
+            if sending:  # any sequence will do, and a list of stubs is one of stubs-or-servants
+                self.m.uses.add("typing")
+                return f"_t.Sequence[{inner_ann}]"
+            return f"list[{inner_ann}]"
         if k in ("enum", "struct", "union", "exception"):
             return self.ref(shape.decl)
         if k == "object":
             if in_op:
                 stub = self._stub_ref(shape)
+                if sending:
+                    self.m.uses.add("rpc")
+                    return f"{stub} | _rpc.Servant | None"
                 return f"{stub} | None"
             self.m.uses.add("cdr")
             return "_cdr.ObjectRef"
@@ -625,18 +636,20 @@ class Builder:
             shape = shape_of(returns, pos)
             outs.append((shape, "_r", f"{what} result"))
             results.append("_r")
-            result_annotations.append(self.annotation(shape, in_op=True))
+            result_annotations.append(self.annotation(shape, in_op=True, sending=not self._in_stub))
         for mode, pname, ptype, ppos in params:
             shape = shape_of(ptype, ppos)
             py = self._ambiguous(names.py_name(pname, names.PARAMETER_NAMES), "E741")
-            ann = self.annotation(shape, in_op=True)
+            ann = self.annotation(shape, in_op=True, sending=self._in_stub)
             py_params.append(Param(py, ann, mode))
             if mode in ("in", "inout"):
                 ins.append((shape, py, f"{what}({pname})"))
             if mode in ("out", "inout"):
                 outs.append((shape, f"_o_{py}", f"{what}({pname})"))
                 results.append(f"_o_{py}")
-                result_annotations.append(ann)
+                result_annotations.append(
+                    self.annotation(shape, in_op=True, sending=not self._in_stub)
+                )
         if not result_annotations:
             ret = "None"
         elif len(result_annotations) == 1:
