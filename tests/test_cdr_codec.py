@@ -203,11 +203,6 @@ def _generate(tmp_path: Path, idl: str) -> Path:
     return tmp_path / "out"
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="bug: two adjacent union cases of the same type give an encoder whose if/elif "
-    "branches have the same body, which ruff rejects (SIM114)",
-)
 def test_union_cases_of_one_type_pass_ruff(tmp_path: Path) -> None:
     out = _generate(
         tmp_path, "module S { union U switch (long) { case 1: long a; case 2: long b; }; };"
@@ -221,11 +216,6 @@ def test_union_cases_of_one_type_pass_ruff(tmp_path: Path) -> None:
     assert lint.returncode == 0, lint.stdout
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="bug: union branches called serialize or deserialize are not escaped: the class's "
-    "methods replace their properties (and mypy --strict rejects the module)",
-)
 def test_union_branches_named_like_methods(tmp_path: Path) -> None:
     idl = "module KW { union U switch (long) { case 1: long serialize; case 2: long deserialize; };"
     idl += " };"
@@ -661,13 +651,7 @@ NAMED: list[tuple[str, Callable[[], Any], str]] = [
         "CodecTest::KeywordUnion.list|CodecTest::KeywordUnion._list",
     ),
 ]
-FIELD_NOT_NAMED = pytest.mark.xfail(
-    strict=True,
-    reason="bug: BAD_PARAM names only the type, not the field, for fields packed together "
-    "(integers, floats, chars, enums, fixed arrays), bulk sequences of primitives and octets, "
-    "nested structs and union branches",
-)
-UNNAMED: list[tuple[str, Callable[[], Any], str]] = [
+PACKED: list[tuple[str, Callable[[], Any], str]] = [
     ("short out of range", lambda: T.Primitives(s=1 << 15), "CodecTest::Primitives.s"),
     ("unsigned negative", lambda: T.Primitives(ull=-1), "CodecTest::Primitives.ull"),
     ("octet out of range", lambda: T.Primitives(o=256), "CodecTest::Primitives.o"),
@@ -693,7 +677,7 @@ UNNAMED: list[tuple[str, Callable[[], Any], str]] = [
     ("branch of the wrong type", lambda: U.ByShort(-1, "s"), "CodecUnions::ByShort.neg"),
     ("discriminator out of range", lambda: U.ByOctet(300, 1), "CodecUnions::ByOctet discriminator"),
 ]
-ENCODING_ERRORS = NAMED + UNNAMED
+ENCODING_ERRORS = NAMED + PACKED
 
 
 @pytest.mark.parametrize(
@@ -709,8 +693,7 @@ def test_encoding_error_is_bad_param(make: Callable[[], Any], field: str) -> Non
 
 @pytest.mark.parametrize(
     ("make", "field"),
-    [(m, f) for _, m, f in NAMED]
-    + [pytest.param(m, f, marks=FIELD_NOT_NAMED) for _, m, f in UNNAMED],
+    [(m, f) for _, m, f in ENCODING_ERRORS],
     ids=[n for n, _, _ in ENCODING_ERRORS],
 )
 def test_encoding_error_names_the_field(make: Callable[[], Any], field: str) -> None:
@@ -719,11 +702,6 @@ def test_encoding_error_names_the_field(make: Callable[[], Any], field: str) -> 
     assert any(f in str(info.value) for f in field.split("|")), str(info.value)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="bug: a sequence<char> element that is not one character ('ab', '') is written "
-    "as it is while the length counts one element per item: corrupt bytes, no BAD_PARAM",
-)
 @pytest.mark.parametrize("element", ["ab", ""])
 def test_char_sequence_element_must_be_one_character(element: str) -> None:
     with pytest.raises(BAD_PARAM):

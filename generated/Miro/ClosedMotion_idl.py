@@ -43,7 +43,13 @@ class ClosedMotion(_rpc.Stub):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-            _buf += _P0(angle)
+            try:
+                _buf += _P0(angle)
+            except _cdr.EncodeErrors as _x:
+                raise _cdr.pack_error(
+                    _x,
+                    ("Miro::ClosedMotion::rotateToPosition(angle)", "d", lambda: (angle,)),
+                ) from None
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::ClosedMotion::rotateToPosition", _x) from None
         self._call(
@@ -64,7 +70,13 @@ class ClosedMotion(_rpc.Stub):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-            _buf += _P0(angle)
+            try:
+                _buf += _P0(angle)
+            except _cdr.EncodeErrors as _x:
+                raise _cdr.pack_error(
+                    _x,
+                    ("Miro::ClosedMotion::rotateRelative(angle)", "d", lambda: (angle,)),
+                ) from None
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::ClosedMotion::rotateRelative", _x) from None
         self._call(
@@ -85,7 +97,13 @@ class ClosedMotion(_rpc.Stub):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-            _buf += _P1(distance)
+            try:
+                _buf += _P1(distance)
+            except _cdr.EncodeErrors as _x:
+                raise _cdr.pack_error(
+                    _x,
+                    ("Miro::ClosedMotion::translateRelative(distance)", "i", lambda: (distance,)),
+                ) from None
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::ClosedMotion::translateRelative", _x) from None
         self._call(

@@ -47,7 +47,14 @@ class DifferentialMotion(_m_Miro_Motion_idl.Motion):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-            _buf += _P0(left, right)
+            try:
+                _buf += _P0(left, right)
+            except _cdr.EncodeErrors as _x:
+                raise _cdr.pack_error(
+                    _x,
+                    ("Miro::DifferentialMotion::setLRVelocity(left)", "i", lambda: (left,)),
+                    ("Miro::DifferentialMotion::setLRVelocity(right)", "i", lambda: (right,)),
+                ) from None
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::DifferentialMotion::setLRVelocity", _x) from None
         self._call(

@@ -72,7 +72,14 @@ class ExampleStructIDL(_cdr.IdlType):
 
 def _enc_ExampleStructIDL(_buf: bytearray, _v: ExampleStructIDL) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-    _buf += _P0(_v.a, _v.b)
+    try:
+        _buf += _P0(_v.a, _v.b)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("Miro::ExampleStructIDL.a", "d", lambda: (_v.a,)),
+            ("Miro::ExampleStructIDL.b", "d", lambda: (_v.b,)),
+        ) from None
 
 
 def _dec_ExampleStructIDL(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[ExampleStructIDL, int]:
@@ -135,7 +142,13 @@ class ExampleGroupIDL(_cdr.IdlType):
 
 def _enc_ExampleGroupIDL(_buf: bytearray, _v: ExampleGroupIDL) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P1(_v.c)
+    try:
+        _buf += _P1(_v.c)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("Miro::ExampleGroupIDL.c", "i", lambda: (_v.c,)),
+        ) from None
     _cdr.put_flat(
         _buf,
         _v.PointList,
@@ -214,8 +227,17 @@ class ExampleEventIDL(_cdr.IdlType):
 
 def _enc_ExampleEventIDL(_buf: bytearray, _v: ExampleEventIDL) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P2(_v.counter)
-    _enc_ExampleStructIDL(_buf, _v.data)
+    try:
+        _buf += _P2(_v.counter)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("Miro::ExampleEventIDL.counter", "I", lambda: (_v.counter,)),
+        ) from None
+    try:
+        _enc_ExampleStructIDL(_buf, _v.data)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("Miro::ExampleEventIDL.data", _x) from None
 
 
 def _dec_ExampleEventIDL(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[ExampleEventIDL, int]:
@@ -237,7 +259,14 @@ class Example(_rpc.Stub):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-            _buf += _P0(a, b)
+            try:
+                _buf += _P0(a, b)
+            except _cdr.EncodeErrors as _x:
+                raise _cdr.pack_error(
+                    _x,
+                    ("Miro::Example::setData(a)", "d", lambda: (a,)),
+                    ("Miro::Example::setData(b)", "d", lambda: (b,)),
+                ) from None
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::Example::setData", _x) from None
         self._call("setData", bytes(_buf), ())

@@ -265,19 +265,48 @@ class GpsDataIDL(_cdr.IdlType):
 
 
 def _enc_GpsDataIDL(_buf: bytearray, _v: GpsDataIDL) -> None:
-    _m_Miro_Time_idl._enc_TimeIDL(_buf, _v.time)
-    _m_Miro_Time_idl._enc_TimeIDL(_buf, _v.utcTime)
-    _buf += _P0(_v.valid)
+    try:
+        _m_Miro_Time_idl._enc_TimeIDL(_buf, _v.time)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("Miro::GpsDataIDL.time", _x) from None
+    try:
+        _m_Miro_Time_idl._enc_TimeIDL(_buf, _v.utcTime)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("Miro::GpsDataIDL.utcTime", _x) from None
+    try:
+        _buf += _P0(_v.valid)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("Miro::GpsDataIDL.valid", "?", lambda: (_v.valid,)),
+        ) from None
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P1(_GpsFixQualityIDL_W[_v.quality], _GpsFixModeIDL_W[_v.mode])
+    try:
+        _buf += _P1(_GpsFixQualityIDL_W[_v.quality], _GpsFixModeIDL_W[_v.mode])
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("Miro::GpsDataIDL.quality", "I", lambda: (_GpsFixQualityIDL_W[_v.quality],)),
+            ("Miro::GpsDataIDL.mode", "I", lambda: (_GpsFixModeIDL_W[_v.mode],)),
+        ) from None
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-    _buf += _P2(
-        _v.latitude,
-        _v.longitude,
-        _v.altitude,
-        _v.geoidSeparation,
-        _v.satellitesUsed,
-    )
+    try:
+        _buf += _P2(
+            _v.latitude,
+            _v.longitude,
+            _v.altitude,
+            _v.geoidSeparation,
+            _v.satellitesUsed,
+        )
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("Miro::GpsDataIDL.latitude", "d", lambda: (_v.latitude,)),
+            ("Miro::GpsDataIDL.longitude", "d", lambda: (_v.longitude,)),
+            ("Miro::GpsDataIDL.altitude", "d", lambda: (_v.altitude,)),
+            ("Miro::GpsDataIDL.geoidSeparation", "f", lambda: (_v.geoidSeparation,)),
+            ("Miro::GpsDataIDL.satellitesUsed", "H", lambda: (_v.satellitesUsed,)),
+        ) from None
     _cdr.put_primitives(
         _buf,
         _v.satellites,
@@ -287,16 +316,29 @@ def _enc_GpsDataIDL(_buf: bytearray, _v: GpsDataIDL) -> None:
         "Miro::GpsDataIDL.satellites",
     )
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P3(
-        _v.hdop,
-        _v.pdop,
-        _v.vdop,
-        _v.speed,
-        _v.course,
-        _v.magneticVariation,
-        _v.dgpsAge,
-        _v.dgpsStation,
-    )
+    try:
+        _buf += _P3(
+            _v.hdop,
+            _v.pdop,
+            _v.vdop,
+            _v.speed,
+            _v.course,
+            _v.magneticVariation,
+            _v.dgpsAge,
+            _v.dgpsStation,
+        )
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("Miro::GpsDataIDL.hdop", "f", lambda: (_v.hdop,)),
+            ("Miro::GpsDataIDL.pdop", "f", lambda: (_v.pdop,)),
+            ("Miro::GpsDataIDL.vdop", "f", lambda: (_v.vdop,)),
+            ("Miro::GpsDataIDL.speed", "f", lambda: (_v.speed,)),
+            ("Miro::GpsDataIDL.course", "f", lambda: (_v.course,)),
+            ("Miro::GpsDataIDL.magneticVariation", "f", lambda: (_v.magneticVariation,)),
+            ("Miro::GpsDataIDL.dgpsAge", "f", lambda: (_v.dgpsAge,)),
+            ("Miro::GpsDataIDL.dgpsStation", "H", lambda: (_v.dgpsStation,)),
+        ) from None
 
 
 def _dec_GpsDataIDL(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[GpsDataIDL, int]:
@@ -399,7 +441,10 @@ class GpsSentenceEventIDL(_cdr.IdlType):
 
 
 def _enc_GpsSentenceEventIDL(_buf: bytearray, _v: GpsSentenceEventIDL) -> None:
-    _m_Miro_Time_idl._enc_TimeIDL(_buf, _v.time)
+    try:
+        _m_Miro_Time_idl._enc_TimeIDL(_buf, _v.time)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("Miro::GpsSentenceEventIDL.time", _x) from None
     _cdr.put_string(
         _buf,
         _v.sentence,

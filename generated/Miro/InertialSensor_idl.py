@@ -72,7 +72,15 @@ class Vector3IDL(_cdr.IdlType):
 
 def _enc_Vector3IDL(_buf: bytearray, _v: Vector3IDL) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-    _buf += _P0(_v.x, _v.y, _v.z)
+    try:
+        _buf += _P0(_v.x, _v.y, _v.z)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("Miro::Vector3IDL.x", "d", lambda: (_v.x,)),
+            ("Miro::Vector3IDL.y", "d", lambda: (_v.y,)),
+            ("Miro::Vector3IDL.z", "d", lambda: (_v.z,)),
+        ) from None
 
 
 def _dec_Vector3IDL(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Vector3IDL, int]:
@@ -135,7 +143,16 @@ class QuaternionIDL(_cdr.IdlType):
 
 def _enc_QuaternionIDL(_buf: bytearray, _v: QuaternionIDL) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-    _buf += _P1(_v.w, _v.x, _v.y, _v.z)
+    try:
+        _buf += _P1(_v.w, _v.x, _v.y, _v.z)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("Miro::QuaternionIDL.w", "d", lambda: (_v.w,)),
+            ("Miro::QuaternionIDL.x", "d", lambda: (_v.x,)),
+            ("Miro::QuaternionIDL.y", "d", lambda: (_v.y,)),
+            ("Miro::QuaternionIDL.z", "d", lambda: (_v.z,)),
+        ) from None
 
 
 def _dec_QuaternionIDL(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[QuaternionIDL, int]:
@@ -196,7 +213,15 @@ class EulerAnglesIDL(_cdr.IdlType):
 
 def _enc_EulerAnglesIDL(_buf: bytearray, _v: EulerAnglesIDL) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-    _buf += _P0(_v.roll, _v.pitch, _v.yaw)
+    try:
+        _buf += _P0(_v.roll, _v.pitch, _v.yaw)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("Miro::EulerAnglesIDL.roll", "d", lambda: (_v.roll,)),
+            ("Miro::EulerAnglesIDL.pitch", "d", lambda: (_v.pitch,)),
+            ("Miro::EulerAnglesIDL.yaw", "d", lambda: (_v.yaw,)),
+        ) from None
 
 
 def _dec_EulerAnglesIDL(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[EulerAnglesIDL, int]:
@@ -311,12 +336,30 @@ class InertialDataIDL(_cdr.IdlType):
 
 
 def _enc_InertialDataIDL(_buf: bytearray, _v: InertialDataIDL) -> None:
-    _m_Miro_Time_idl._enc_TimeIDL(_buf, _v.time)
-    _enc_Vector3IDL(_buf, _v.acceleration)
-    _enc_Vector3IDL(_buf, _v.angularRate)
-    _enc_QuaternionIDL(_buf, _v.orientation)
-    _enc_EulerAnglesIDL(_buf, _v.eulerAngles)
-    _enc_Vector3IDL(_buf, _v.magneticField)
+    try:
+        _m_Miro_Time_idl._enc_TimeIDL(_buf, _v.time)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("Miro::InertialDataIDL.time", _x) from None
+    try:
+        _enc_Vector3IDL(_buf, _v.acceleration)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("Miro::InertialDataIDL.acceleration", _x) from None
+    try:
+        _enc_Vector3IDL(_buf, _v.angularRate)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("Miro::InertialDataIDL.angularRate", _x) from None
+    try:
+        _enc_QuaternionIDL(_buf, _v.orientation)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("Miro::InertialDataIDL.orientation", _x) from None
+    try:
+        _enc_EulerAnglesIDL(_buf, _v.eulerAngles)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("Miro::InertialDataIDL.eulerAngles", _x) from None
+    try:
+        _enc_Vector3IDL(_buf, _v.magneticField)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("Miro::InertialDataIDL.magneticField", _x) from None
 
 
 def _dec_InertialDataIDL(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[InertialDataIDL, int]:

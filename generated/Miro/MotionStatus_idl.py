@@ -93,9 +93,18 @@ class MotionStatusIDL(_cdr.IdlType):
 
 
 def _enc_MotionStatusIDL(_buf: bytearray, _v: MotionStatusIDL) -> None:
-    _m_Miro_Time_idl._enc_TimeIDL(_buf, _v.time)
-    _m_Miro_Position_idl._enc_PositionIDL(_buf, _v.position)
-    _m_Miro_Velocity_idl._enc_VelocityIDL(_buf, _v.velocity)
+    try:
+        _m_Miro_Time_idl._enc_TimeIDL(_buf, _v.time)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("Miro::MotionStatusIDL.time", _x) from None
+    try:
+        _m_Miro_Position_idl._enc_PositionIDL(_buf, _v.position)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("Miro::MotionStatusIDL.position", _x) from None
+    try:
+        _m_Miro_Velocity_idl._enc_VelocityIDL(_buf, _v.velocity)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("Miro::MotionStatusIDL.velocity", _x) from None
 
 
 def _dec_MotionStatusIDL(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[MotionStatusIDL, int]:
@@ -170,8 +179,14 @@ class RawPositionIDL(_cdr.IdlType):
 
 
 def _enc_RawPositionIDL(_buf: bytearray, _v: RawPositionIDL) -> None:
-    _m_Miro_Time_idl._enc_TimeIDL(_buf, _v.time)
-    _m_Miro_Position_idl._enc_PositionIDL(_buf, _v.position)
+    try:
+        _m_Miro_Time_idl._enc_TimeIDL(_buf, _v.time)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("Miro::RawPositionIDL.time", _x) from None
+    try:
+        _m_Miro_Position_idl._enc_PositionIDL(_buf, _v.position)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("Miro::RawPositionIDL.position", _x) from None
 
 
 def _dec_RawPositionIDL(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[RawPositionIDL, int]:

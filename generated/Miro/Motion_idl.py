@@ -58,7 +58,10 @@ class Motion(_rpc.Stub):
         """
         _buf = bytearray(_cdr.HEADER_LE)
         try:
-            _m_Miro_Velocity_idl._enc_VelocityIDL(_buf, velocity)
+            try:
+                _m_Miro_Velocity_idl._enc_VelocityIDL(_buf, velocity)
+            except _cdr.NestedErrors as _x:
+                raise _cdr.nested_error("Miro::Motion::setVelocity(velocity)", _x) from None
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::Motion::setVelocity", _x) from None
         self._call(

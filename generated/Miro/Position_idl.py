@@ -75,9 +75,18 @@ class PositionIDL(_cdr.IdlType):
 
 
 def _enc_PositionIDL(_buf: bytearray, _v: PositionIDL) -> None:
-    _m_Miro_WorldPoint_idl._enc_WorldPointIDL(_buf, _v.point)
+    try:
+        _m_Miro_WorldPoint_idl._enc_WorldPointIDL(_buf, _v.point)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("Miro::PositionIDL.point", _x) from None
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-    _buf += _P0(_v.heading)
+    try:
+        _buf += _P0(_v.heading)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("Miro::PositionIDL.heading", "d", lambda: (_v.heading,)),
+        ) from None
 
 
 def _dec_PositionIDL(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[PositionIDL, int]:

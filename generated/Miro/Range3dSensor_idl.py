@@ -89,7 +89,15 @@ class Range3dPointIDL(_cdr.IdlType):
 
 def _enc_Range3dPointIDL(_buf: bytearray, _v: Range3dPointIDL) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P0(_v.x, _v.y, _v.z)
+    try:
+        _buf += _P0(_v.x, _v.y, _v.z)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("Miro::Range3dPointIDL.x", "f", lambda: (_v.x,)),
+            ("Miro::Range3dPointIDL.y", "f", lambda: (_v.y,)),
+            ("Miro::Range3dPointIDL.z", "f", lambda: (_v.z,)),
+        ) from None
 
 
 def _dec_Range3dPointIDL(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Range3dPointIDL, int]:
@@ -167,7 +175,18 @@ class Range3dMountingIDL(_cdr.IdlType):
 
 def _enc_Range3dMountingIDL(_buf: bytearray, _v: Range3dMountingIDL) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-    _buf += _P1(_v.x, _v.y, _v.z, _v.roll, _v.pitch, _v.yaw)
+    try:
+        _buf += _P1(_v.x, _v.y, _v.z, _v.roll, _v.pitch, _v.yaw)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("Miro::Range3dMountingIDL.x", "d", lambda: (_v.x,)),
+            ("Miro::Range3dMountingIDL.y", "d", lambda: (_v.y,)),
+            ("Miro::Range3dMountingIDL.z", "d", lambda: (_v.z,)),
+            ("Miro::Range3dMountingIDL.roll", "d", lambda: (_v.roll,)),
+            ("Miro::Range3dMountingIDL.pitch", "d", lambda: (_v.pitch,)),
+            ("Miro::Range3dMountingIDL.yaw", "d", lambda: (_v.yaw,)),
+        ) from None
 
 
 def _dec_Range3dMountingIDL(
@@ -257,15 +276,34 @@ def _enc_Range3dDescriptionIDL(_buf: bytearray, _v: Range3dDescriptionIDL) -> No
         "Miro::Range3dDescriptionIDL.eventName",
     )
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P2(_v.minRange, _v.maxRange)
+    try:
+        _buf += _P2(_v.minRange, _v.maxRange)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("Miro::Range3dDescriptionIDL.minRange", "i", lambda: (_v.minRange,)),
+            ("Miro::Range3dDescriptionIDL.maxRange", "i", lambda: (_v.maxRange,)),
+        ) from None
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-    _buf += _P3(
-        _v.minAzimuth,
-        _v.maxAzimuth,
-        _v.minElevation,
-        _v.maxElevation,
-    )
-    _enc_Range3dMountingIDL(_buf, _v.mounting)
+    try:
+        _buf += _P3(
+            _v.minAzimuth,
+            _v.maxAzimuth,
+            _v.minElevation,
+            _v.maxElevation,
+        )
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("Miro::Range3dDescriptionIDL.minAzimuth", "d", lambda: (_v.minAzimuth,)),
+            ("Miro::Range3dDescriptionIDL.maxAzimuth", "d", lambda: (_v.maxAzimuth,)),
+            ("Miro::Range3dDescriptionIDL.minElevation", "d", lambda: (_v.minElevation,)),
+            ("Miro::Range3dDescriptionIDL.maxElevation", "d", lambda: (_v.maxElevation,)),
+        ) from None
+    try:
+        _enc_Range3dMountingIDL(_buf, _v.mounting)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("Miro::Range3dDescriptionIDL.mounting", _x) from None
 
 
 def _dec_Range3dDescriptionIDL(
@@ -361,7 +399,10 @@ class Range3dScanEventIDL(_cdr.IdlType):
 
 
 def _enc_Range3dScanEventIDL(_buf: bytearray, _v: Range3dScanEventIDL) -> None:
-    _m_Miro_Time_idl._enc_TimeIDL(_buf, _v.time)
+    try:
+        _m_Miro_Time_idl._enc_TimeIDL(_buf, _v.time)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("Miro::Range3dScanEventIDL.time", _x) from None
     _cdr.put_flat(
         _buf,
         _v.point,

@@ -98,13 +98,11 @@ class RangeScanEventIDL(_cdr.IdlType):
 
 
 def _enc_RangeScanEventIDL(_buf: bytearray, _v: RangeScanEventIDL) -> None:
-    _m_Miro_Time_idl._enc_TimeIDL(_buf, _v.time)
-    _cdr.put_length(
-        _buf,
-        len(_v.range),
-        None,
-        "Miro::RangeScanEventIDL.range",
-    )
+    try:
+        _m_Miro_Time_idl._enc_TimeIDL(_buf, _v.time)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("Miro::RangeScanEventIDL.time", _x) from None
+    _cdr.put_count(_buf, _v.range, None, "Miro::RangeScanEventIDL.range")
     for _x0 in _v.range:
         _cdr.put_primitives(
             _buf,
@@ -196,9 +194,18 @@ class RangeGroupEventIDL(_cdr.IdlType):
 
 
 def _enc_RangeGroupEventIDL(_buf: bytearray, _v: RangeGroupEventIDL) -> None:
-    _m_Miro_Time_idl._enc_TimeIDL(_buf, _v.time)
+    try:
+        _m_Miro_Time_idl._enc_TimeIDL(_buf, _v.time)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("Miro::RangeGroupEventIDL.time", _x) from None
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 1]
-    _buf += _P0(_v.group)
+    try:
+        _buf += _P0(_v.group)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("Miro::RangeGroupEventIDL.group", "H", lambda: (_v.group,)),
+        ) from None
     _cdr.put_primitives(
         _buf,
         _v.range,
@@ -273,9 +280,22 @@ class RangeSensorIDL(_cdr.IdlType):
 
 def _enc_RangeSensorIDL(_buf: bytearray, _v: RangeSensorIDL) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 1]
-    _buf += _P1(_v.group, _v.index)
+    try:
+        _buf += _P1(_v.group, _v.index)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("Miro::RangeSensorIDL.group", "H", lambda: (_v.group,)),
+            ("Miro::RangeSensorIDL.index", "H", lambda: (_v.index,)),
+        ) from None
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P2(_v.range)
+    try:
+        _buf += _P2(_v.range)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("Miro::RangeSensorIDL.range", "i", lambda: (_v.range,)),
+        ) from None
 
 
 def _dec_RangeSensorIDL(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[RangeSensorIDL, int]:
@@ -351,15 +371,16 @@ class RangeBunchEventIDL(_cdr.IdlType):
 
 
 def _enc_RangeBunchEventIDL(_buf: bytearray, _v: RangeBunchEventIDL) -> None:
-    _m_Miro_Time_idl._enc_TimeIDL(_buf, _v.time)
-    _cdr.put_length(
-        _buf,
-        len(_v.sensor),
-        None,
-        "Miro::RangeBunchEventIDL.sensor",
-    )
+    try:
+        _m_Miro_Time_idl._enc_TimeIDL(_buf, _v.time)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("Miro::RangeBunchEventIDL.time", _x) from None
+    _cdr.put_count(_buf, _v.sensor, None, "Miro::RangeBunchEventIDL.sensor")
     for _x0 in _v.sensor:
-        _enc_RangeSensorIDL(_buf, _x0)
+        try:
+            _enc_RangeSensorIDL(_buf, _x0)
+        except _cdr.NestedErrors as _x:
+            raise _cdr.nested_error("Miro::RangeBunchEventIDL.sensor", _x) from None
 
 
 def _dec_RangeBunchEventIDL(

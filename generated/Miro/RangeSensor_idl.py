@@ -122,7 +122,13 @@ class RangeSensor(_rpc.Stub):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-            _buf += _P0(id)
+            try:
+                _buf += _P0(id)
+            except _cdr.EncodeErrors as _x:
+                raise _cdr.pack_error(
+                    _x,
+                    ("Miro::RangeSensor::getGroup(id)", "i", lambda: (id,)),
+                ) from None
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::RangeSensor::getGroup", _x) from None
         _data = self._call("getGroup", bytes(_buf), (_m_Miro_Exception_idl.EOutOfBounds,))
@@ -147,7 +153,13 @@ class RangeSensor(_rpc.Stub):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-            _buf += _P0(id)
+            try:
+                _buf += _P0(id)
+            except _cdr.EncodeErrors as _x:
+                raise _cdr.pack_error(
+                    _x,
+                    ("Miro::RangeSensor::getWaitGroup(id)", "i", lambda: (id,)),
+                ) from None
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::RangeSensor::getWaitGroup", _x) from None
         _data = self._call(

@@ -85,9 +85,22 @@ class SensorDescriptionIDL(_cdr.IdlType):
 
 def _enc_SensorDescriptionIDL(_buf: bytearray, _v: SensorDescriptionIDL) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P0(_v.minRange, _v.maxRange)
+    try:
+        _buf += _P0(_v.minRange, _v.maxRange)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("Miro::SensorDescriptionIDL.minRange", "i", lambda: (_v.minRange,)),
+            ("Miro::SensorDescriptionIDL.maxRange", "i", lambda: (_v.maxRange,)),
+        ) from None
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-    _buf += _P1(_v.focus)
+    try:
+        _buf += _P1(_v.focus)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("Miro::SensorDescriptionIDL.focus", "d", lambda: (_v.focus,)),
+        ) from None
 
 
 def _dec_SensorDescriptionIDL(
@@ -169,9 +182,25 @@ class SensorPositionIDL(_cdr.IdlType):
 
 def _enc_SensorPositionIDL(_buf: bytearray, _v: SensorPositionIDL) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P0(_v.height, _v.distance)
+    try:
+        _buf += _P0(_v.height, _v.distance)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("Miro::SensorPositionIDL.height", "i", lambda: (_v.height,)),
+            ("Miro::SensorPositionIDL.distance", "i", lambda: (_v.distance,)),
+        ) from None
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-    _buf += _P2(_v.alpha, _v.beta, _v.gamma, _v.masked)
+    try:
+        _buf += _P2(_v.alpha, _v.beta, _v.gamma, _v.masked)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("Miro::SensorPositionIDL.alpha", "d", lambda: (_v.alpha,)),
+            ("Miro::SensorPositionIDL.beta", "d", lambda: (_v.beta,)),
+            ("Miro::SensorPositionIDL.gamma", "d", lambda: (_v.gamma,)),
+            ("Miro::SensorPositionIDL.masked", "?", lambda: (_v.masked,)),
+        ) from None
 
 
 def _dec_SensorPositionIDL(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[SensorPositionIDL, int]:
@@ -253,15 +282,16 @@ class SensorGroupIDL(_cdr.IdlType):
 
 
 def _enc_SensorGroupIDL(_buf: bytearray, _v: SensorGroupIDL) -> None:
-    _enc_SensorDescriptionIDL(_buf, _v.description)
-    _cdr.put_length(
-        _buf,
-        len(_v.sensor),
-        None,
-        "Miro::SensorGroupIDL.sensor",
-    )
+    try:
+        _enc_SensorDescriptionIDL(_buf, _v.description)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("Miro::SensorGroupIDL.description", _x) from None
+    _cdr.put_count(_buf, _v.sensor, None, "Miro::SensorGroupIDL.sensor")
     for _x0 in _v.sensor:
-        _enc_SensorPositionIDL(_buf, _x0)
+        try:
+            _enc_SensorPositionIDL(_buf, _x0)
+        except _cdr.NestedErrors as _x:
+            raise _cdr.nested_error("Miro::SensorGroupIDL.sensor", _x) from None
 
 
 def _dec_SensorGroupIDL(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[SensorGroupIDL, int]:
@@ -368,21 +398,25 @@ class ScanDescriptionIDL(_cdr.IdlType):
 
 def _enc_ScanDescriptionIDL(_buf: bytearray, _v: ScanDescriptionIDL) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P3(_v.scanType)
+    try:
+        _buf += _P3(_v.scanType)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("Miro::ScanDescriptionIDL.scanType", "i", lambda: (_v.scanType,)),
+        ) from None
     _cdr.put_string(
         _buf,
         _v.eventName,
         None,
         "Miro::ScanDescriptionIDL.eventName",
     )
-    _cdr.put_length(
-        _buf,
-        len(_v.group),
-        None,
-        "Miro::ScanDescriptionIDL.group",
-    )
+    _cdr.put_count(_buf, _v.group, None, "Miro::ScanDescriptionIDL.group")
     for _x0 in _v.group:
-        _enc_SensorGroupIDL(_buf, _x0)
+        try:
+            _enc_SensorGroupIDL(_buf, _x0)
+        except _cdr.NestedErrors as _x:
+            raise _cdr.nested_error("Miro::ScanDescriptionIDL.group", _x) from None
 
 
 def _dec_ScanDescriptionIDL(

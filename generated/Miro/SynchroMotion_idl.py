@@ -52,7 +52,13 @@ class SynchroMotion(_m_Miro_Motion_idl.Motion):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-            _buf += _P0(velocity)
+            try:
+                _buf += _P0(velocity)
+            except _cdr.EncodeErrors as _x:
+                raise _cdr.pack_error(
+                    _x,
+                    ("Miro::SynchroMotion::rotate(velocity)", "d", lambda: (velocity,)),
+                ) from None
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::SynchroMotion::rotate", _x) from None
         self._call(
@@ -82,7 +88,13 @@ class SynchroMotion(_m_Miro_Motion_idl.Motion):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-            _buf += _P1(velocity)
+            try:
+                _buf += _P1(velocity)
+            except _cdr.EncodeErrors as _x:
+                raise _cdr.pack_error(
+                    _x,
+                    ("Miro::SynchroMotion::translate(velocity)", "i", lambda: (velocity,)),
+                ) from None
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::SynchroMotion::translate", _x) from None
         self._call(

@@ -68,7 +68,14 @@ class TimeIDL(_cdr.IdlType):
 
 def _enc_TimeIDL(_buf: bytearray, _v: TimeIDL) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P0(_v.sec, _v.usec)
+    try:
+        _buf += _P0(_v.sec, _v.usec)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("Miro::TimeIDL.sec", "i", lambda: (_v.sec,)),
+            ("Miro::TimeIDL.usec", "i", lambda: (_v.usec,)),
+        ) from None
 
 
 def _dec_TimeIDL(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[TimeIDL, int]:

@@ -70,9 +70,21 @@ class VelocityIDL(_cdr.IdlType):
 
 def _enc_VelocityIDL(_buf: bytearray, _v: VelocityIDL) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P0(_v.translation)
+    try:
+        _buf += _P0(_v.translation)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("Miro::VelocityIDL.translation", "i", lambda: (_v.translation,)),
+        ) from None
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-    _buf += _P1(_v.rotation)
+    try:
+        _buf += _P1(_v.rotation)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("Miro::VelocityIDL.rotation", "d", lambda: (_v.rotation,)),
+        ) from None
 
 
 def _dec_VelocityIDL(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[VelocityIDL, int]:

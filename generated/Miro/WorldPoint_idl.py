@@ -63,7 +63,14 @@ class WorldPointIDL(_cdr.IdlType):
 
 def _enc_WorldPointIDL(_buf: bytearray, _v: WorldPointIDL) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-    _buf += _P0(_v.x, _v.y)
+    try:
+        _buf += _P0(_v.x, _v.y)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("Miro::WorldPointIDL.x", "d", lambda: (_v.x,)),
+            ("Miro::WorldPointIDL.y", "d", lambda: (_v.y,)),
+        ) from None
 
 
 def _dec_WorldPointIDL(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[WorldPointIDL, int]:

@@ -62,7 +62,14 @@ class WorldVectorIDL(_cdr.IdlType):
 
 def _enc_WorldVectorIDL(_buf: bytearray, _v: WorldVectorIDL) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-    _buf += _P0(_v.dx, _v.dy)
+    try:
+        _buf += _P0(_v.dx, _v.dy)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("Miro::WorldVectorIDL.dx", "d", lambda: (_v.dx,)),
+            ("Miro::WorldVectorIDL.dy", "d", lambda: (_v.dy,)),
+        ) from None
 
 
 def _dec_WorldVectorIDL(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[WorldVectorIDL, int]:

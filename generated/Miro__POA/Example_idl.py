@@ -52,7 +52,10 @@ class Example(_rpc.Servant):
         _r = self.getData()
         _buf = bytearray(_cdr.HEADER_LE)
         try:
-            _m_Miro_Example_idl._enc_ExampleStructIDL(_buf, _r)
+            try:
+                _m_Miro_Example_idl._enc_ExampleStructIDL(_buf, _r)
+            except _cdr.NestedErrors as _x:
+                raise _cdr.nested_error("Miro::Example::getData result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Example::getData", _x) from None
         return bytes(_buf)

@@ -37,7 +37,10 @@ class Gps(_rpc.Servant):
         _r = self.getData()
         _buf = bytearray(_cdr.HEADER_LE)
         try:
-            _m_Miro_Gps_idl._enc_GpsDataIDL(_buf, _r)
+            try:
+                _m_Miro_Gps_idl._enc_GpsDataIDL(_buf, _r)
+            except _cdr.NestedErrors as _x:
+                raise _cdr.nested_error("Miro::Gps::getData result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Gps::getData", _x) from None
         return bytes(_buf)
@@ -54,7 +57,10 @@ class Gps(_rpc.Servant):
         _r = self.getWaitData()
         _buf = bytearray(_cdr.HEADER_LE)
         try:
-            _m_Miro_Gps_idl._enc_GpsDataIDL(_buf, _r)
+            try:
+                _m_Miro_Gps_idl._enc_GpsDataIDL(_buf, _r)
+            except _cdr.NestedErrors as _x:
+                raise _cdr.nested_error("Miro::Gps::getWaitData result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Gps::getWaitData", _x) from None
         return bytes(_buf)

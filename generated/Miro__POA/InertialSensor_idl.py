@@ -34,7 +34,10 @@ class InertialSensor(_rpc.Servant):
         _r = self.getData()
         _buf = bytearray(_cdr.HEADER_LE)
         try:
-            _m_Miro_InertialSensor_idl._enc_InertialDataIDL(_buf, _r)
+            try:
+                _m_Miro_InertialSensor_idl._enc_InertialDataIDL(_buf, _r)
+            except _cdr.NestedErrors as _x:
+                raise _cdr.nested_error("Miro::InertialSensor::getData result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::InertialSensor::getData", _x) from None
         return bytes(_buf)
@@ -51,7 +54,10 @@ class InertialSensor(_rpc.Servant):
         _r = self.getWaitData()
         _buf = bytearray(_cdr.HEADER_LE)
         try:
-            _m_Miro_InertialSensor_idl._enc_InertialDataIDL(_buf, _r)
+            try:
+                _m_Miro_InertialSensor_idl._enc_InertialDataIDL(_buf, _r)
+            except _cdr.NestedErrors as _x:
+                raise _cdr.nested_error("Miro::InertialSensor::getWaitData result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::InertialSensor::getWaitData", _x) from None
         return bytes(_buf)

@@ -88,7 +88,10 @@ class Odometry(_rpc.Servant):
         _r = self.getPosition()
         _buf = bytearray(_cdr.HEADER_LE)
         try:
-            _m_Miro_Position_idl._enc_PositionIDL(_buf, _r)
+            try:
+                _m_Miro_Position_idl._enc_PositionIDL(_buf, _r)
+            except _cdr.NestedErrors as _x:
+                raise _cdr.nested_error("Miro::Odometry::getPosition result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Odometry::getPosition", _x) from None
         return bytes(_buf)
@@ -104,7 +107,10 @@ class Odometry(_rpc.Servant):
         _r = self.getWaitPosition()
         _buf = bytearray(_cdr.HEADER_LE)
         try:
-            _m_Miro_Position_idl._enc_PositionIDL(_buf, _r)
+            try:
+                _m_Miro_Position_idl._enc_PositionIDL(_buf, _r)
+            except _cdr.NestedErrors as _x:
+                raise _cdr.nested_error("Miro::Odometry::getWaitPosition result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Odometry::getWaitPosition", _x) from None
         return bytes(_buf)
@@ -123,7 +129,10 @@ class Odometry(_rpc.Servant):
         _r = self.getRawPosition()
         _buf = bytearray(_cdr.HEADER_LE)
         try:
-            _m_Miro_Position_idl._enc_PositionIDL(_buf, _r)
+            try:
+                _m_Miro_Position_idl._enc_PositionIDL(_buf, _r)
+            except _cdr.NestedErrors as _x:
+                raise _cdr.nested_error("Miro::Odometry::getRawPosition result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Odometry::getRawPosition", _x) from None
         return bytes(_buf)
@@ -139,7 +148,10 @@ class Odometry(_rpc.Servant):
         _r = self.getWaitRawPosition()
         _buf = bytearray(_cdr.HEADER_LE)
         try:
-            _m_Miro_Position_idl._enc_PositionIDL(_buf, _r)
+            try:
+                _m_Miro_Position_idl._enc_PositionIDL(_buf, _r)
+            except _cdr.NestedErrors as _x:
+                raise _cdr.nested_error("Miro::Odometry::getWaitRawPosition result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Odometry::getWaitRawPosition", _x) from None
         return bytes(_buf)
@@ -152,7 +164,10 @@ class Odometry(_rpc.Servant):
         _r = self.getVelocity()
         _buf = bytearray(_cdr.HEADER_LE)
         try:
-            _m_Miro_Velocity_idl._enc_VelocityIDL(_buf, _r)
+            try:
+                _m_Miro_Velocity_idl._enc_VelocityIDL(_buf, _r)
+            except _cdr.NestedErrors as _x:
+                raise _cdr.nested_error("Miro::Odometry::getVelocity result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Odometry::getVelocity", _x) from None
         return bytes(_buf)
@@ -168,7 +183,10 @@ class Odometry(_rpc.Servant):
         _r = self.getWaitVelocity()
         _buf = bytearray(_cdr.HEADER_LE)
         try:
-            _m_Miro_Velocity_idl._enc_VelocityIDL(_buf, _r)
+            try:
+                _m_Miro_Velocity_idl._enc_VelocityIDL(_buf, _r)
+            except _cdr.NestedErrors as _x:
+                raise _cdr.nested_error("Miro::Odometry::getWaitVelocity result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Odometry::getWaitVelocity", _x) from None
         return bytes(_buf)
@@ -181,7 +199,10 @@ class Odometry(_rpc.Servant):
         _r = self.getStatus()
         _buf = bytearray(_cdr.HEADER_LE)
         try:
-            _m_Miro_MotionStatus_idl._enc_MotionStatusIDL(_buf, _r)
+            try:
+                _m_Miro_MotionStatus_idl._enc_MotionStatusIDL(_buf, _r)
+            except _cdr.NestedErrors as _x:
+                raise _cdr.nested_error("Miro::Odometry::getStatus result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Odometry::getStatus", _x) from None
         return bytes(_buf)
@@ -197,7 +218,10 @@ class Odometry(_rpc.Servant):
         _r = self.getWaitStatus()
         _buf = bytearray(_cdr.HEADER_LE)
         try:
-            _m_Miro_MotionStatus_idl._enc_MotionStatusIDL(_buf, _r)
+            try:
+                _m_Miro_MotionStatus_idl._enc_MotionStatusIDL(_buf, _r)
+            except _cdr.NestedErrors as _x:
+                raise _cdr.nested_error("Miro::Odometry::getWaitStatus result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Odometry::getWaitStatus", _x) from None
         return bytes(_buf)

@@ -29,7 +29,10 @@ class Range3dSensor(_rpc.Servant):
         _r = self.getDescription()
         _buf = bytearray(_cdr.HEADER_LE)
         try:
-            _m_Miro_Range3dSensor_idl._enc_Range3dDescriptionIDL(_buf, _r)
+            try:
+                _m_Miro_Range3dSensor_idl._enc_Range3dDescriptionIDL(_buf, _r)
+            except _cdr.NestedErrors as _x:
+                raise _cdr.nested_error("Miro::Range3dSensor::getDescription result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Range3dSensor::getDescription", _x) from None
         return bytes(_buf)
@@ -42,7 +45,10 @@ class Range3dSensor(_rpc.Servant):
         _r = self.getScan()
         _buf = bytearray(_cdr.HEADER_LE)
         try:
-            _m_Miro_Range3dSensor_idl._enc_Range3dScanEventIDL(_buf, _r)
+            try:
+                _m_Miro_Range3dSensor_idl._enc_Range3dScanEventIDL(_buf, _r)
+            except _cdr.NestedErrors as _x:
+                raise _cdr.nested_error("Miro::Range3dSensor::getScan result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Range3dSensor::getScan", _x) from None
         return bytes(_buf)
@@ -58,7 +64,10 @@ class Range3dSensor(_rpc.Servant):
         _r = self.getWaitScan()
         _buf = bytearray(_cdr.HEADER_LE)
         try:
-            _m_Miro_Range3dSensor_idl._enc_Range3dScanEventIDL(_buf, _r)
+            try:
+                _m_Miro_Range3dSensor_idl._enc_Range3dScanEventIDL(_buf, _r)
+            except _cdr.NestedErrors as _x:
+                raise _cdr.nested_error("Miro::Range3dSensor::getWaitScan result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Range3dSensor::getWaitScan", _x) from None
         return bytes(_buf)

@@ -36,7 +36,13 @@ class Stall(_rpc.Servant):
         _r = self.isStalled()
         _buf = bytearray(_cdr.HEADER_LE)
         try:
-            _buf += _P0(_r)
+            try:
+                _buf += _P0(_r)
+            except _cdr.EncodeErrors as _x:
+                raise _cdr.pack_error(
+                    _x,
+                    ("Miro::Stall::isStalled result", "?", lambda: (_r,)),
+                ) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Stall::isStalled", _x) from None
         return bytes(_buf)

@@ -32,7 +32,10 @@ class myExample(_rpc.Servant):
         _r = self.getString()
         _buf = bytearray(_cdr.HEADER_LE)
         try:
-            _m_Miro_myExample_idl._enc_myExampleIDL(_buf, _r)
+            try:
+                _m_Miro_myExample_idl._enc_myExampleIDL(_buf, _r)
+            except _cdr.NestedErrors as _x:
+                raise _cdr.nested_error("Miro::myExample::getString result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::myExample::getString", _x) from None
         return bytes(_buf)

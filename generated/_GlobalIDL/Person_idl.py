@@ -74,7 +74,16 @@ class PersonTraitsIDL(_cdr.IdlType):
 
 def _enc_PersonTraitsIDL(_buf: bytearray, _v: PersonTraitsIDL) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P0(_v.height, _v.waist, ord(_v.hair), _v.age)
+    try:
+        _buf += _P0(_v.height, _v.waist, ord(_v.hair), _v.age)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("PersonTraitsIDL.height", "f", lambda: (_v.height,)),
+            ("PersonTraitsIDL.waist", "f", lambda: (_v.waist,)),
+            ("PersonTraitsIDL.hair", "B", lambda: (ord(_v.hair),)),
+            ("PersonTraitsIDL.age", "i", lambda: (_v.age,)),
+        ) from None
 
 
 def _dec_PersonTraitsIDL(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[PersonTraitsIDL, int]:
@@ -101,7 +110,16 @@ class Person(_rpc.Stub):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-            _buf += _P0(height, waist, ord(hair), age)
+            try:
+                _buf += _P0(height, waist, ord(hair), age)
+            except _cdr.EncodeErrors as _x:
+                raise _cdr.pack_error(
+                    _x,
+                    ("Person::setTraits(height)", "f", lambda: (height,)),
+                    ("Person::setTraits(waist)", "f", lambda: (waist,)),
+                    ("Person::setTraits(hair)", "B", lambda: (ord(hair),)),
+                    ("Person::setTraits(age)", "i", lambda: (age,)),
+                ) from None
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Person::setTraits", _x) from None
         self._call("setTraits", bytes(_buf), ())

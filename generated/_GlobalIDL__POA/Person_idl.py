@@ -70,7 +70,13 @@ class Person(_rpc.Servant):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-            _buf += _P1(_r)
+            try:
+                _buf += _P1(_r)
+            except _cdr.EncodeErrors as _x:
+                raise _cdr.pack_error(
+                    _x,
+                    ("Person::getHeight result", "f", lambda: (_r,)),
+                ) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Person::getHeight", _x) from None
         return bytes(_buf)
@@ -84,7 +90,13 @@ class Person(_rpc.Servant):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-            _buf += _P1(_r)
+            try:
+                _buf += _P1(_r)
+            except _cdr.EncodeErrors as _x:
+                raise _cdr.pack_error(
+                    _x,
+                    ("Person::getWaist result", "f", lambda: (_r,)),
+                ) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Person::getWaist", _x) from None
         return bytes(_buf)
@@ -97,7 +109,13 @@ class Person(_rpc.Servant):
         _r = self.getHair()
         _buf = bytearray(_cdr.HEADER_LE)
         try:
-            _buf += _P2(ord(_r))
+            try:
+                _buf += _P2(ord(_r))
+            except _cdr.EncodeErrors as _x:
+                raise _cdr.pack_error(
+                    _x,
+                    ("Person::getHair result", "B", lambda: (ord(_r),)),
+                ) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Person::getHair", _x) from None
         return bytes(_buf)
@@ -111,7 +129,13 @@ class Person(_rpc.Servant):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-            _buf += _P3(_r)
+            try:
+                _buf += _P3(_r)
+            except _cdr.EncodeErrors as _x:
+                raise _cdr.pack_error(
+                    _x,
+                    ("Person::getAge result", "i", lambda: (_r,)),
+                ) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Person::getAge", _x) from None
         return bytes(_buf)
@@ -124,7 +148,10 @@ class Person(_rpc.Servant):
         _r = self.getTraits()
         _buf = bytearray(_cdr.HEADER_LE)
         try:
-            _m__GlobalIDL_Person_idl._enc_PersonTraitsIDL(_buf, _r)
+            try:
+                _m__GlobalIDL_Person_idl._enc_PersonTraitsIDL(_buf, _r)
+            except _cdr.NestedErrors as _x:
+                raise _cdr.nested_error("Person::getTraits result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Person::getTraits", _x) from None
         return bytes(_buf)

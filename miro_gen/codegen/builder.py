@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import re
 from collections.abc import Callable, Iterator
 from typing import Any
 
@@ -391,7 +392,7 @@ class Builder:
         default_branch = None
         used: set[Any] = set()
         for case in d.cases:
-            name = self._ambiguous(names.py_name(case.name, names.CLASS_BODY), "E743")
+            name = self._ambiguous(names.py_name(case.name, names.STRUCT_ATTRIBUTES), "E743")
             shape = shape_of(case.type, case.pos, case.dims)
             values = [v for v in case.labels if v is not None]
             used.update(v.ordinal if isinstance(v, ast.EnumValue) else v for v in values)
@@ -409,6 +410,7 @@ class Builder:
                     "zero": self._zero(shape),
                     "shape": shape,
                     "doc": case.doc,
+                    "idl_name": case.name,
                 }
             )
         # The discriminator the default branch gets, chosen as Cyclone DDS chooses it.
@@ -438,7 +440,7 @@ class Builder:
         default_enc: list[Step] = []
         default_dec: list[Step] = []
         for b in branches:
-            bwhat = f"{what}.{b['name']}"
+            bwhat = f"{what}.{b['idl_name']}"
             e_steps = self.encode_value(b["shape"], "_v._v", bwhat, 1)
             d_steps = self.decode_value(b["shape"], "_x", bwhat, 1)
             if b["default"]:
@@ -753,6 +755,10 @@ class Builder:
             shapes = [entries[i][0] for i in group]
             fmt, size, _ = self._layout(shapes)
             items = [self._pack_expr(*entries[i]) for i in group]
+            checks = [
+                (entries[i][2], _item_format(entries[i][0]), _thunk(item))
+                for i, item in zip(group, items, strict=True)
+            ]
             steps.append(
                 Step(
                     "pack",
@@ -761,6 +767,7 @@ class Builder:
                     items=items,
                     size=size,
                     what=entries[group[0]][2],
+                    checks=checks,
                 )
             )
         return steps
@@ -882,7 +889,8 @@ class Builder:
                 self.m.uses.add("rpc")
             return [Step("put_object", expr=value, what=what)]
         if k in ("struct", "union", "exception"):
-            return [Step("call_enc", expr=expr, codec=self.codec_ref(shape.decl, "_enc_"))]
+            codec = self.codec_ref(shape.decl, "_enc_")
+            return [Step("call_enc", expr=expr, codec=codec, what=what)]
         if k == "seq":
             elem = shape.elem
             assert elem is not None
@@ -1040,6 +1048,19 @@ class Builder:
                 )
             ]
         raise AssertionError(k)  # pragma: no cover
+
+
+def _thunk(expr: str) -> str:
+    """A lambda giving the wire values of a packed expression. It is called at once, so the
+    late binding of loop variables that ruff's B023 warns about cannot bite."""
+    noqa = "  # noqa: B023" if re.search(r"\b_x\d+\b", expr) else ""
+    return f"lambda: ({expr},)),{noqa}"
+
+
+def _item_format(shape: Shape) -> str:
+    """The struct format of one packed value ("h", "3i")."""
+    n = shape.count if shape.kind == "array" else 1
+    return f"{n}{shape.unit.code}" if n > 1 else shape.unit.code
 
 
 def _holds_object(shape: Shape) -> bool:

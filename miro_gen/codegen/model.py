@@ -216,6 +216,8 @@ class Step:
     body: list[Step] = field(default_factory=list)
     labels: list[tuple[str, list[Step]]] = field(default_factory=list)  # union branches
     annotation: str = ""  # declared type of an assigned variable
+    # packed values, for naming the one that does not fit: (what, struct format, expression)
+    checks: list[tuple[str, str, str]] = field(default_factory=list)
 
     @property
     def bound_expr(self) -> str:

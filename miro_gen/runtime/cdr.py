@@ -29,8 +29,25 @@ BE: Final = 1
 NATIVE: Final = LE if sys.byteorder == "little" else BE
 ZEROS: Final = tuple(b"\0" * n for n in range(8))
 
-DecodeErrors: Final = (StructError, IndexError, ValueError, OverflowError, UnicodeDecodeError)
-EncodeErrors: Final = (StructError, TypeError, ValueError, OverflowError, AttributeError, KeyError)
+# What generated codecs turn into MARSHAL (decoding) or BAD_PARAM (encoding). RecursionError:
+# recursive types are decoded recursively, so data nested thousands deep runs out of stack.
+DecodeErrors: Final = (
+    StructError,
+    IndexError,
+    ValueError,
+    OverflowError,
+    UnicodeDecodeError,
+    RecursionError,
+)
+EncodeErrors: Final = (
+    StructError,
+    TypeError,
+    ValueError,
+    OverflowError,
+    AttributeError,
+    KeyError,
+    RecursionError,
+)
 
 _U32: Final = (Struct("<I"), Struct(">I"))
 _U32_LE: Final = _U32[LE]
@@ -95,9 +112,12 @@ def get_string(
     if bound is not None and n - 1 > bound:
         raise MARSHAL(f"{what}: string of {n - 1} bytes exceeds its bound {bound}")
     try:
-        return str(data[off : end - 1], "utf-8"), end
+        text = str(data[off : end - 1], "utf-8")
     except UnicodeDecodeError:
         raise MARSHAL(f"{what}: string is not valid UTF-8") from None
+    if "\0" in text:
+        raise MARSHAL(f"{what}: string holds a NUL before its end")
+    return text, end
 
 
 # ---- sequences ---------------------------------------------------------------------------------
@@ -131,7 +151,22 @@ def get_length(
     return n, off
 
 
+def count(values: Sequence[Any], what: str) -> int:
+    """len(values), or BAD_PARAM naming the field when the value is no sequence at all."""
+    try:
+        return len(values)
+    except TypeError:
+        raise BAD_PARAM(f"{what}: expected a sequence, got {type(values).__name__}") from None
+
+
+def put_count(buf: bytearray, values: Sequence[Any], bound: int | None, what: str) -> None:
+    """The length of a sequence whose elements are encoded one by one after it."""
+    put_length(buf, count(values, what), bound, what)
+
+
 def put_octets(buf: bytearray, value: bytes | bytearray, bound: int | None, what: str) -> None:
+    if not isinstance(value, bytes | bytearray | memoryview):
+        raise BAD_PARAM(f"{what}: expected bytes, got {type(value).__name__}")
     put_length(buf, len(value), bound, what)
     buf += value
 
@@ -147,18 +182,29 @@ def put_primitives(
     buf: bytearray, values: Sequence[Any], code: str, size: int, bound: int | None, what: str
 ) -> None:
     """A sequence of one primitive type (`code`: a struct format letter), in bulk."""
-    n = len(values)
-    put_length(buf, n, bound, what)
+    try:
+        n = len(values)
+        packed = struct_pack(f"<{n}{code}", *values)
+    except EncodeErrors as exc:
+        raise encode_error(what, exc) from None
+    if bound is not None and n > bound:
+        raise BAD_PARAM(f"{what}: {n} elements is more than the bound {bound}")
+    buf += ZEROS[-len(buf) & 3]
+    buf += _U32_LE.pack(n)
     if n:
         buf += ZEROS[(4 - len(buf)) & (size - 1)]
-        buf += struct_pack(f"<{n}{code}", *values)
+        buf += packed
 
 
 def put_enums(
     buf: bytearray, values: Sequence[Any], wire: dict[int, int], bound: int | None, what: str
 ) -> None:
     """A sequence of enumerators; `wire` maps each valid ordinal to itself (KeyError if not)."""
-    put_primitives(buf, [wire[v] for v in values], "I", 4, bound, what)
+    try:
+        ordinals = [wire[v] for v in values]
+    except (KeyError, TypeError) as exc:
+        raise encode_error(what, exc) from None
+    put_primitives(buf, ordinals, "I", 4, bound, what)
 
 
 def get_primitives(
@@ -196,7 +242,7 @@ def _values(
 
 
 def put_booleans(buf: bytearray, values: Sequence[bool], bound: int | None, what: str) -> None:
-    put_length(buf, len(values), bound, what)
+    put_length(buf, count(values, what), bound, what)
     buf += bytes(map(bool, values))
 
 
@@ -208,10 +254,12 @@ def get_booleans(
 
 
 def put_chars(buf: bytearray, values: Sequence[str], bound: int | None, what: str) -> None:
-    put_length(buf, len(values), bound, what)
+    put_length(buf, count(values, what), bound, what)
     try:
-        buf += "".join(values).encode("latin-1")
-    except UnicodeEncodeError:
+        buf += bytes(map(ord, values))  # ord: exactly one character; bytes: Latin-1 only
+    except TypeError:
+        raise BAD_PARAM(f"{what}: each element must be one character") from None
+    except ValueError:
         raise BAD_PARAM(f"{what}: characters must be ISO Latin-1") from None
 
 
@@ -224,7 +272,7 @@ def get_chars(
 
 def check_length(values: Sequence[Any], n: int, what: str) -> None:
     """Arrays have a fixed length."""
-    if len(values) != n:
+    if count(values, what) != n:
         raise BAD_PARAM(f"{what}: array needs exactly {n} elements, got {len(values)}")
 
 
@@ -384,6 +432,8 @@ def marshal_error(what: str, exc: BaseException) -> MARSHAL:
         return exc
     if isinstance(exc, StructError | IndexError):
         return MARSHAL(f"{what}: data is truncated")
+    if isinstance(exc, RecursionError):
+        return MARSHAL(f"{what}: data is nested too deeply to decode")
     return MARSHAL(f"{what}: {exc}")
 
 
@@ -391,12 +441,44 @@ def encode_error(what: str, exc: BaseException) -> BAD_PARAM:
     """The BAD_PARAM error for a value that does not fit its IDL type (from generated encoders)."""
     if isinstance(exc, BAD_PARAM):
         return exc
+    if isinstance(exc, RecursionError):
+        return BAD_PARAM(f"{what}: value is nested too deeply to encode")
     if isinstance(exc, KeyError):  # only the enum ordinal checks (`_E_W[v]`) raise it
         return BAD_PARAM(f"{what}: {exc.args[0]!r} is not one of its enumerators")
     return BAD_PARAM(f"{what}: {exc}")
 
 
 ResultErrors: Final = (*EncodeErrors, BAD_PARAM)
+NestedErrors: Final = ResultErrors
+_LONGEST_PATH: Final = 400  # characters of field path an error message keeps
+
+
+def pack_error(
+    exc: BaseException, *items: tuple[str, str, Callable[[], tuple[Any, ...]]]
+) -> BAD_PARAM:
+    """BAD_PARAM naming the value that did not fit, of several packed together (from generated
+    encoders, once packing has failed): each item is (what, struct format, its wire values)."""
+    for what, fmt, values in items:
+        try:
+            wire = values()
+            n = int(fmt[:-1] or 1)
+            if len(wire) != n:
+                return BAD_PARAM(f"{what}: array needs exactly {n} elements, got {len(wire)}")
+            struct_pack("<" + fmt, *wire)
+        except BAD_PARAM as named:
+            return named
+        except EncodeErrors as problem:
+            return encode_error(what, problem)
+    return encode_error(items[0][0] if items else "value", exc)
+
+
+def nested_error(what: str, exc: BaseException) -> BAD_PARAM:
+    """BAD_PARAM for a struct, union or exception value inside another: the message leads with
+    the field that holds it, so it reads as a path (`Line.a: Point.x: ...`)."""
+    inner = encode_error(what, exc)
+    if not isinstance(exc, BAD_PARAM) or len(inner.message) > _LONGEST_PATH:
+        return inner
+    return BAD_PARAM(f"{what}: {inner.message}", inner.minor, inner.completed)
 
 
 def result_error(what: str, exc: BaseException) -> MARSHAL:
@@ -417,19 +499,23 @@ def put_flat(
     buf: bytearray,
     values: Sequence[Any],
     getter: Callable[[Any], Any],
-    count: int,
+    members: int,
     code: str,
     size: int,
     bound: int | None,
     what: str,
 ) -> None:
-    """A sequence of structs whose `count` members all have one primitive type, in bulk."""
-    n = len(values)
+    """A sequence of structs whose `members` members all have one primitive type, in bulk."""
+    n = count(values, what)
     put_length(buf, n, bound, what)
     if n:
+        try:
+            flat = map(getter, values) if members == 1 else chain.from_iterable(map(getter, values))
+            packed = struct_pack(f"<{n * members}{code}", *flat)
+        except EncodeErrors as exc:
+            raise encode_error(what, exc) from None
         buf += ZEROS[(4 - len(buf)) & (size - 1)]
-        flat = map(getter, values) if count == 1 else chain.from_iterable(map(getter, values))
-        buf += struct_pack(f"<{n * count}{code}", *flat)
+        buf += packed
 
 
 def get_flat(

@@ -82,7 +82,14 @@ class Point(_cdr.IdlType):
 
 def _enc_Point(_buf: bytearray, _v: Point) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-    _buf += _P0(_v.x, _v.y)
+    try:
+        _buf += _P0(_v.x, _v.y)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Point.x", "d", lambda: (_v.x,)),
+            ("CodecTest::Point.y", "d", lambda: (_v.y,)),
+        ) from None
 
 
 def _dec_Point(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Point, int]:

@@ -276,27 +276,61 @@ class Primitives(_cdr.IdlType):
 
 def _enc_Primitives(_buf: bytearray, _v: Primitives) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 1]
-    _buf += _P0(_v.s, _v.us)
+    try:
+        _buf += _P0(_v.s, _v.us)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Primitives.s", "h", lambda: (_v.s,)),
+            ("CodecTest::Primitives.us", "H", lambda: (_v.us,)),
+        ) from None
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P1(_v.lo, _v.ul)
+    try:
+        _buf += _P1(_v.lo, _v.ul)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Primitives.lo", "i", lambda: (_v.lo,)),
+            ("CodecTest::Primitives.ul", "I", lambda: (_v.ul,)),
+        ) from None
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-    _buf += _P2(
-        _v.ll,
-        _v.ull,
-        _v.i8,
-        _v.u8,
-        _v.o,
-        ord(_v.c),
-        _v.b,
-        _v.f,
-        _v.d,
-        _v.i16,
-        _v.u16,
-        _v.i32,
-        _v.u32,
-        _v.i64,
-        _v.u64,
-    )
+    try:
+        _buf += _P2(
+            _v.ll,
+            _v.ull,
+            _v.i8,
+            _v.u8,
+            _v.o,
+            ord(_v.c),
+            _v.b,
+            _v.f,
+            _v.d,
+            _v.i16,
+            _v.u16,
+            _v.i32,
+            _v.u32,
+            _v.i64,
+            _v.u64,
+        )
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Primitives.ll", "q", lambda: (_v.ll,)),
+            ("CodecTest::Primitives.ull", "Q", lambda: (_v.ull,)),
+            ("CodecTest::Primitives.i8", "b", lambda: (_v.i8,)),
+            ("CodecTest::Primitives.u8", "B", lambda: (_v.u8,)),
+            ("CodecTest::Primitives.o", "B", lambda: (_v.o,)),
+            ("CodecTest::Primitives.c", "B", lambda: (ord(_v.c),)),
+            ("CodecTest::Primitives.b", "?", lambda: (_v.b,)),
+            ("CodecTest::Primitives.f", "f", lambda: (_v.f,)),
+            ("CodecTest::Primitives.d", "d", lambda: (_v.d,)),
+            ("CodecTest::Primitives.i16", "h", lambda: (_v.i16,)),
+            ("CodecTest::Primitives.u16", "H", lambda: (_v.u16,)),
+            ("CodecTest::Primitives.i32", "i", lambda: (_v.i32,)),
+            ("CodecTest::Primitives.u32", "I", lambda: (_v.u32,)),
+            ("CodecTest::Primitives.i64", "q", lambda: (_v.i64,)),
+            ("CodecTest::Primitives.u64", "Q", lambda: (_v.u64,)),
+        ) from None
 
 
 def _dec_Primitives(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Primitives, int]:
@@ -398,11 +432,19 @@ class Enums(_cdr.IdlType):
 
 def _enc_Enums(_buf: bytearray, _v: Enums) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P3(
-        _m_CodecTest_base_idl._Color_W[_v.hue],
-        _Single_W[_v.only_one],
-        _Words_W[_v.word],
-    )
+    try:
+        _buf += _P3(
+            _m_CodecTest_base_idl._Color_W[_v.hue],
+            _Single_W[_v.only_one],
+            _Words_W[_v.word],
+        )
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Enums.hue", "I", lambda: (_m_CodecTest_base_idl._Color_W[_v.hue],)),
+            ("CodecTest::Enums.only_one", "I", lambda: (_Single_W[_v.only_one],)),
+            ("CodecTest::Enums.word", "I", lambda: (_Words_W[_v.word],)),
+        ) from None
 
 
 def _dec_Enums(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Enums, int]:
@@ -555,9 +597,21 @@ class Mixed(_cdr.IdlType):
 
 
 def _enc_Mixed(_buf: bytearray, _v: Mixed) -> None:
-    _buf += _P4(_v.tag)
+    try:
+        _buf += _P4(_v.tag)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Mixed.tag", "B", lambda: (_v.tag,)),
+        ) from None
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-    _buf += _P5(_v.value)
+    try:
+        _buf += _P5(_v.value)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Mixed.value", "d", lambda: (_v.value,)),
+        ) from None
 
 
 def _dec_Mixed(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Mixed, int]:
@@ -611,7 +665,15 @@ class Point3(_cdr.IdlType):
 
 def _enc_Point3(_buf: bytearray, _v: Point3) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P6(_v.x, _v.y, _v.z)
+    try:
+        _buf += _P6(_v.x, _v.y, _v.z)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Point3.x", "f", lambda: (_v.x,)),
+            ("CodecTest::Point3.y", "f", lambda: (_v.y,)),
+            ("CodecTest::Point3.z", "f", lambda: (_v.z,)),
+        ) from None
 
 
 def _dec_Point3(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Point3, int]:
@@ -750,12 +812,7 @@ def _enc_Sequences(_buf: bytearray, _v: Sequences) -> None:
         5,
         "CodecTest::Sequences.bounded",
     )
-    _cdr.put_length(
-        _buf,
-        len(_v.nested),
-        None,
-        "CodecTest::Sequences.nested",
-    )
+    _cdr.put_count(_buf, _v.nested, None, "CodecTest::Sequences.nested")
     for _x0 in _v.nested:
         _cdr.put_primitives(
             _buf,
@@ -765,9 +822,9 @@ def _enc_Sequences(_buf: bytearray, _v: Sequences) -> None:
             None,
             "CodecTest::Sequences.nested",
         )
-    _cdr.put_length(
+    _cdr.put_count(
         _buf,
-        len(_v.nested_bounded),
+        _v.nested_bounded,
         3,
         "CodecTest::Sequences.nested_bounded",
     )
@@ -780,17 +837,12 @@ def _enc_Sequences(_buf: bytearray, _v: Sequences) -> None:
             2,
             "CodecTest::Sequences.nested_bounded",
         )
-    _cdr.put_length(
-        _buf,
-        len(_v.strings),
-        None,
-        "CodecTest::Sequences.strings",
-    )
+    _cdr.put_count(_buf, _v.strings, None, "CodecTest::Sequences.strings")
     for _x2 in _v.strings:
         _cdr.put_string(_buf, _x2, None, "CodecTest::Sequences.strings")
-    _cdr.put_length(
+    _cdr.put_count(
         _buf,
-        len(_v.bounded_strings),
+        _v.bounded_strings,
         4,
         "CodecTest::Sequences.bounded_strings",
     )
@@ -816,9 +868,12 @@ def _enc_Sequences(_buf: bytearray, _v: Sequences) -> None:
         2,
         "CodecTest::Sequences.points3",
     )
-    _cdr.put_length(_buf, len(_v.mixes), None, "CodecTest::Sequences.mixes")
+    _cdr.put_count(_buf, _v.mixes, None, "CodecTest::Sequences.mixes")
     for _x4 in _v.mixes:
-        _enc_Mixed(_buf, _x4)
+        try:
+            _enc_Mixed(_buf, _x4)
+        except _cdr.NestedErrors as _x:
+            raise _cdr.nested_error("CodecTest::Sequences.mixes", _x) from None
     _cdr.put_enums(
         _buf,
         _v.colors,
@@ -909,12 +964,12 @@ def _enc_Sequences(_buf: bytearray, _v: Sequences) -> None:
         None,
         "CodecTest::Sequences.ullongs",
     )
-    _cdr.put_length(_buf, len(_v.blobs), None, "CodecTest::Sequences.blobs")
+    _cdr.put_count(_buf, _v.blobs, None, "CodecTest::Sequences.blobs")
     for _x5 in _v.blobs:
         _cdr.put_octets(_buf, _x5, None, "CodecTest::Sequences.blobs")
-    _cdr.put_length(
+    _cdr.put_count(
         _buf,
-        len(_v.point_rows),
+        _v.point_rows,
         None,
         "CodecTest::Sequences.point_rows",
     )
@@ -1367,18 +1422,35 @@ class Arrays(_cdr.IdlType):
 
 def _enc_Arrays(_buf: bytearray, _v: Arrays) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P7(
-        *_v.a1,
-        *_cdr.flatten(_v.m23, (2, 3), 'CodecTest::Arrays.m23'),
-    )
+    try:
+        _buf += _P7(
+            *_v.a1,
+            *_cdr.flatten(_v.m23, (2, 3), 'CodecTest::Arrays.m23'),
+        )
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Arrays.a1", "3i", lambda: (*_v.a1,)),
+            ("CodecTest::Arrays.m23", "6h", lambda: (*_cdr.flatten(_v.m23, (2, 3), 'CodecTest::Arrays.m23'),)),
+        ) from None
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-    _buf += _P8(
-        *_cdr.flatten(_v.cube, (2, 2, 2), 'CodecTest::Arrays.cube'),
-        *_cdr.flatten(_v.c4, (4,), 'CodecTest::Arrays.c4', ord),
-        *_cdr.flatten(_v.cm, (2, 2), 'CodecTest::Arrays.cm', ord),
-        *_cdr.flatten(_v.e3, (3,), 'CodecTest::Arrays.e3', _m_CodecTest_base_idl._Color_W.__getitem__),
-        *_cdr.flatten(_v.em, (2, 2), 'CodecTest::Arrays.em', _m_CodecTest_base_idl._Color_W.__getitem__),
-    )
+    try:
+        _buf += _P8(
+            *_cdr.flatten(_v.cube, (2, 2, 2), 'CodecTest::Arrays.cube'),
+            *_cdr.flatten(_v.c4, (4,), 'CodecTest::Arrays.c4', ord),
+            *_cdr.flatten(_v.cm, (2, 2), 'CodecTest::Arrays.cm', ord),
+            *_cdr.flatten(_v.e3, (3,), 'CodecTest::Arrays.e3', _m_CodecTest_base_idl._Color_W.__getitem__),
+            *_cdr.flatten(_v.em, (2, 2), 'CodecTest::Arrays.em', _m_CodecTest_base_idl._Color_W.__getitem__),
+        )
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Arrays.cube", "8d", lambda: (*_cdr.flatten(_v.cube, (2, 2, 2), 'CodecTest::Arrays.cube'),)),
+            ("CodecTest::Arrays.c4", "4B", lambda: (*_cdr.flatten(_v.c4, (4,), 'CodecTest::Arrays.c4', ord),)),
+            ("CodecTest::Arrays.cm", "4B", lambda: (*_cdr.flatten(_v.cm, (2, 2), 'CodecTest::Arrays.cm', ord),)),
+            ("CodecTest::Arrays.e3", "3I", lambda: (*_cdr.flatten(_v.e3, (3,), 'CodecTest::Arrays.e3', _m_CodecTest_base_idl._Color_W.__getitem__),)),
+            ("CodecTest::Arrays.em", "4I", lambda: (*_cdr.flatten(_v.em, (2, 2), 'CodecTest::Arrays.em', _m_CodecTest_base_idl._Color_W.__getitem__),)),
+        ) from None
     _cdr.check_length(_v.s2, 2, "CodecTest::Arrays.s2")
     for _x0 in _v.s2:
         _cdr.put_string(_buf, _x0, None, "CodecTest::Arrays.s2")
@@ -1389,23 +1461,51 @@ def _enc_Arrays(_buf: bytearray, _v: Arrays) -> None:
             _cdr.put_string(_buf, _x2, 3, "CodecTest::Arrays.sb22")
     _cdr.check_length(_v.p2, 2, "CodecTest::Arrays.p2")
     for _x3 in _v.p2:
-        _m_CodecTest_base_idl._enc_Point(_buf, _x3)
+        try:
+            _m_CodecTest_base_idl._enc_Point(_buf, _x3)
+        except _cdr.NestedErrors as _x:
+            raise _cdr.nested_error("CodecTest::Arrays.p2", _x) from None
     _cdr.check_length(_v.mm, 2, "CodecTest::Arrays.mm")
     for _x4 in _v.mm:
         _cdr.check_length(_x4, 1, "CodecTest::Arrays.mm")
         for _x5 in _x4:
-            _enc_Mixed(_buf, _x5)
-    _buf += _P9(
-        *_v.b3,
-        *_v.o5,
-        *_cdr.flatten(_v.om, (2, 3), 'CodecTest::Arrays.om'),
-        *_v.u2,
-        *_v.i2,
-    )
+            try:
+                _enc_Mixed(_buf, _x5)
+            except _cdr.NestedErrors as _x:
+                raise _cdr.nested_error("CodecTest::Arrays.mm", _x) from None
+    try:
+        _buf += _P9(
+            *_v.b3,
+            *_v.o5,
+            *_cdr.flatten(_v.om, (2, 3), 'CodecTest::Arrays.om'),
+            *_v.u2,
+            *_v.i2,
+        )
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Arrays.b3", "3?", lambda: (*_v.b3,)),
+            ("CodecTest::Arrays.o5", "5B", lambda: (*_v.o5,)),
+            ("CodecTest::Arrays.om", "6B", lambda: (*_cdr.flatten(_v.om, (2, 3), 'CodecTest::Arrays.om'),)),
+            ("CodecTest::Arrays.u2", "2B", lambda: (*_v.u2,)),
+            ("CodecTest::Arrays.i2", "2b", lambda: (*_v.i2,)),
+        ) from None
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P10(*_v.f3)
+    try:
+        _buf += _P10(*_v.f3)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Arrays.f3", "3f", lambda: (*_v.f3,)),
+        ) from None
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-    _buf += _P11(*_v.u64)
+    try:
+        _buf += _P11(*_v.u64)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Arrays.u64", "2Q", lambda: (*_v.u64,)),
+        ) from None
     _cdr.check_length(_v.sa, 2, "CodecTest::Arrays.sa")
     for _x6 in _v.sa:
         _cdr.put_primitives(_buf, _x6, "i", 4, None, "CodecTest::Arrays.sa")
@@ -1556,7 +1656,15 @@ class Point3D(_m_CodecTest_base_idl.Point):
 
 def _enc_Point3D(_buf: bytearray, _v: Point3D) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-    _buf += _P12(_v.x, _v.y, _v.z)
+    try:
+        _buf += _P12(_v.x, _v.y, _v.z)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Point3D.x", "d", lambda: (_v.x,)),
+            ("CodecTest::Point3D.y", "d", lambda: (_v.y,)),
+            ("CodecTest::Point3D.z", "d", lambda: (_v.z,)),
+        ) from None
 
 
 def _dec_Point3D(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Point3D, int]:
@@ -1605,7 +1713,14 @@ class Bytes2(_cdr.IdlType):
 
 
 def _enc_Bytes2(_buf: bytearray, _v: Bytes2) -> None:
-    _buf += _P13(_v.a, _v.b)
+    try:
+        _buf += _P13(_v.a, _v.b)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Bytes2.a", "b", lambda: (_v.a,)),
+            ("CodecTest::Bytes2.b", "b", lambda: (_v.b,)),
+        ) from None
 
 
 def _dec_Bytes2(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Bytes2, int]:
@@ -1656,7 +1771,15 @@ class Shorts3(_cdr.IdlType):
 
 def _enc_Shorts3(_buf: bytearray, _v: Shorts3) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 1]
-    _buf += _P14(_v.a, _v.b, _v.c)
+    try:
+        _buf += _P14(_v.a, _v.b, _v.c)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Shorts3.a", "h", lambda: (_v.a,)),
+            ("CodecTest::Shorts3.b", "h", lambda: (_v.b,)),
+            ("CodecTest::Shorts3.c", "h", lambda: (_v.c,)),
+        ) from None
 
 
 def _dec_Shorts3(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Shorts3, int]:
@@ -1739,7 +1862,13 @@ class FlatSeqs(_cdr.IdlType):
 
 
 def _enc_FlatSeqs(_buf: bytearray, _v: FlatSeqs) -> None:
-    _buf += _P4(_v.lead)
+    try:
+        _buf += _P4(_v.lead)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::FlatSeqs.lead", "B", lambda: (_v.lead,)),
+        ) from None
     _cdr.put_flat(
         _buf,
         _v.p3d,
@@ -1770,7 +1899,10 @@ def _enc_FlatSeqs(_buf: bytearray, _v: FlatSeqs) -> None:
         2,
         "CodecTest::FlatSeqs.s3",
     )
-    _enc_Point3D(_buf, _v.one)
+    try:
+        _enc_Point3D(_buf, _v.one)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("CodecTest::FlatSeqs.one", _x) from None
     _cdr.put_flat(
         _buf,
         _v.more,
@@ -1781,7 +1913,13 @@ def _enc_FlatSeqs(_buf: bytearray, _v: FlatSeqs) -> None:
         None,
         "CodecTest::FlatSeqs.more",
     )
-    _buf += _P4(ord(_v.tail))
+    try:
+        _buf += _P4(ord(_v.tail))
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::FlatSeqs.tail", "B", lambda: (ord(_v.tail),)),
+        ) from None
 
 
 def _dec_FlatSeqs(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[FlatSeqs, int]:
@@ -1884,8 +2022,14 @@ class Line(_cdr.IdlType):
 
 
 def _enc_Line(_buf: bytearray, _v: Line) -> None:
-    _m_CodecTest_base_idl._enc_Point(_buf, _v.a)
-    _m_CodecTest_base_idl._enc_Point(_buf, _v.b)
+    try:
+        _m_CodecTest_base_idl._enc_Point(_buf, _v.a)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("CodecTest::Line.a", _x) from None
+    try:
+        _m_CodecTest_base_idl._enc_Point(_buf, _v.b)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("CodecTest::Line.b", _x) from None
     _cdr.put_string(_buf, _v.label, None, "CodecTest::Line.label")
 
 
@@ -1986,13 +2130,28 @@ class Deep(_cdr.IdlType):
 
 
 def _enc_Deep(_buf: bytearray, _v: Deep) -> None:
-    _enc_Line(_buf, _v.ln)
-    _cdr.put_length(_buf, len(_v.lines), None, "CodecTest::Deep.lines")
+    try:
+        _enc_Line(_buf, _v.ln)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("CodecTest::Deep.ln", _x) from None
+    _cdr.put_count(_buf, _v.lines, None, "CodecTest::Deep.lines")
     for _x0 in _v.lines:
-        _enc_Line(_buf, _x0)
-    _enc_Mixed(_buf, _v.m)
-    _m_CodecTest_Util_base_idl._enc_Tag(_buf, _v.tag)
-    _m_CodecOther_Util_base_idl._enc_Tag(_buf, _v.other_tag)
+        try:
+            _enc_Line(_buf, _x0)
+        except _cdr.NestedErrors as _x:
+            raise _cdr.nested_error("CodecTest::Deep.lines", _x) from None
+    try:
+        _enc_Mixed(_buf, _v.m)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("CodecTest::Deep.m", _x) from None
+    try:
+        _m_CodecTest_Util_base_idl._enc_Tag(_buf, _v.tag)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("CodecTest::Deep.tag", _x) from None
+    try:
+        _m_CodecOther_Util_base_idl._enc_Tag(_buf, _v.other_tag)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("CodecTest::Deep.other_tag", _x) from None
 
 
 def _dec_Deep(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Deep, int]:
@@ -2053,7 +2212,13 @@ class Base3(_cdr.IdlType):
 
 def _enc_Base3(_buf: bytearray, _v: Base3) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P15(_v.id)
+    try:
+        _buf += _P15(_v.id)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Base3.id", "i", lambda: (_v.id,)),
+        ) from None
 
 
 def _dec_Base3(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Base3, int]:
@@ -2106,7 +2271,13 @@ class Derived(Base3):
 
 def _enc_Derived(_buf: bytearray, _v: Derived) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P15(_v.id)
+    try:
+        _buf += _P15(_v.id)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Derived.id", "i", lambda: (_v.id,)),
+        ) from None
     _cdr.put_string(_buf, _v.name, None, "CodecTest::Derived.name")
 
 
@@ -2174,10 +2345,22 @@ class Derived2(Derived):
 
 def _enc_Derived2(_buf: bytearray, _v: Derived2) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P15(_v.id)
+    try:
+        _buf += _P15(_v.id)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Derived2.id", "i", lambda: (_v.id,)),
+        ) from None
     _cdr.put_string(_buf, _v.name, None, "CodecTest::Derived2.name")
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-    _buf += _P5(_v.value)
+    try:
+        _buf += _P5(_v.value)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Derived2.value", "d", lambda: (_v.value,)),
+        ) from None
     _cdr.put_flat(
         _buf,
         _v.bases,
@@ -2306,14 +2489,29 @@ class HasEmpty(_cdr.IdlType):
 
 
 def _enc_HasEmpty(_buf: bytearray, _v: HasEmpty) -> None:
-    _enc_Empty(_buf, _v.e)
-    _buf += _P4(ord(_v.c))
+    try:
+        _enc_Empty(_buf, _v.e)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("CodecTest::HasEmpty.e", _x) from None
+    try:
+        _buf += _P4(ord(_v.c))
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::HasEmpty.c", "B", lambda: (ord(_v.c),)),
+        ) from None
     _cdr.check_length(_v.es, 2, "CodecTest::HasEmpty.es")
     for _x0 in _v.es:
-        _enc_Empty(_buf, _x0)
-    _cdr.put_length(_buf, len(_v.seq), None, "CodecTest::HasEmpty.seq")
+        try:
+            _enc_Empty(_buf, _x0)
+        except _cdr.NestedErrors as _x:
+            raise _cdr.nested_error("CodecTest::HasEmpty.es", _x) from None
+    _cdr.put_count(_buf, _v.seq, None, "CodecTest::HasEmpty.seq")
     for _x1 in _v.seq:
-        _enc_Empty(_buf, _x1)
+        try:
+            _enc_Empty(_buf, _x1)
+        except _cdr.NestedErrors as _x:
+            raise _cdr.nested_error("CodecTest::HasEmpty.seq", _x) from None
 
 
 def _dec_HasEmpty(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[HasEmpty, int]:
@@ -2380,11 +2578,14 @@ class EmptyRows(_cdr.IdlType):
 
 
 def _enc_EmptyRows(_buf: bytearray, _v: EmptyRows) -> None:
-    _cdr.put_length(_buf, len(_v.rows), None, "CodecTest::EmptyRows.rows")
+    _cdr.put_count(_buf, _v.rows, None, "CodecTest::EmptyRows.rows")
     for _x0 in _v.rows:
-        _cdr.put_length(_buf, len(_x0), None, "CodecTest::EmptyRows.rows")
+        _cdr.put_count(_buf, _x0, None, "CodecTest::EmptyRows.rows")
         for _x1 in _x0:
-            _enc_Empty(_buf, _x1)
+            try:
+                _enc_Empty(_buf, _x1)
+            except _cdr.NestedErrors as _x:
+                raise _cdr.nested_error("CodecTest::EmptyRows.rows", _x) from None
 
 
 def _dec_EmptyRows(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[EmptyRows, int]:
@@ -2465,7 +2666,13 @@ class Failure(_exc.UserException, _cdr.IdlType):
 
 def _enc_Failure(_buf: bytearray, _v: Failure) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P15(_v.code)
+    try:
+        _buf += _P15(_v.code)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Failure.code", "i", lambda: (_v.code,)),
+        ) from None
     _cdr.put_string(_buf, _v.reason, None, "CodecTest::Failure.reason")
     _cdr.put_flat(
         _buf,
@@ -2675,16 +2882,31 @@ class Typedefs(_cdr.IdlType):
 def _enc_Typedefs(_buf: bytearray, _v: Typedefs) -> None:
     _cdr.put_primitives(_buf, _v.s, "i", 4, None, "CodecTest::Typedefs.s")
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P16(*_cdr.flatten(_v.m, (2, 2), 'CodecTest::Typedefs.m'))
+    try:
+        _buf += _P16(*_cdr.flatten(_v.m, (2, 2), 'CodecTest::Typedefs.m'))
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Typedefs.m", "4i", lambda: (*_cdr.flatten(_v.m, (2, 2), 'CodecTest::Typedefs.m'),)),
+        ) from None
     _cdr.check_length(_v.mp, 2, "CodecTest::Typedefs.mp")
     for _x0 in _v.mp:
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-        _buf += _P16(*_cdr.flatten(_x0, (2, 2), 'CodecTest::Typedefs.mp'))
+        try:
+            _buf += _P16(*_cdr.flatten(_x0, (2, 2), 'CodecTest::Typedefs.mp'))
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecTest::Typedefs.mp", "4i", lambda: (*_cdr.flatten(_x0, (2, 2), 'CodecTest::Typedefs.mp'),)),  # noqa: B023
+            ) from None
     _cdr.put_string(_buf, _v.n, 8, "CodecTest::Typedefs.n")
-    _cdr.put_length(_buf, len(_v.ss), None, "CodecTest::Typedefs.ss")
+    _cdr.put_count(_buf, _v.ss, None, "CodecTest::Typedefs.ss")
     for _x1 in _v.ss:
         _cdr.put_primitives(_buf, _x1, "i", 4, None, "CodecTest::Typedefs.ss")
-    _m_CodecTest_base_idl._enc_Point(_buf, _v.p)
+    try:
+        _m_CodecTest_base_idl._enc_Point(_buf, _v.p)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("CodecTest::Typedefs.p", _x) from None
     _cdr.put_flat(
         _buf,
         _v.ps,
@@ -2696,7 +2918,13 @@ def _enc_Typedefs(_buf: bytearray, _v: Typedefs) -> None:
         "CodecTest::Typedefs.ps",
     )
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P17(_m_CodecTest_base_idl._Color_W[_v.c])
+    try:
+        _buf += _P17(_m_CodecTest_base_idl._Color_W[_v.c])
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Typedefs.c", "I", lambda: (_m_CodecTest_base_idl._Color_W[_v.c],)),
+        ) from None
     _cdr.check_length(_v.arr_of_seq, 2, "CodecTest::Typedefs.arr_of_seq")
     for _x2 in _v.arr_of_seq:
         _cdr.put_primitives(
@@ -2842,15 +3070,19 @@ class Node(_cdr.IdlType):
 
 def _enc_Node(_buf: bytearray, _v: Node) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P15(_v.value)
-    _cdr.put_length(
-        _buf,
-        len(_v.children),
-        None,
-        "CodecTest::Node.children",
-    )
+    try:
+        _buf += _P15(_v.value)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Node.value", "i", lambda: (_v.value,)),
+        ) from None
+    _cdr.put_count(_buf, _v.children, None, "CodecTest::Node.children")
     for _x0 in _v.children:
-        _enc_Node(_buf, _x0)
+        try:
+            _enc_Node(_buf, _x0)
+        except _cdr.NestedErrors as _x:
+            raise _cdr.nested_error("CodecTest::Node.children", _x) from None
 
 
 def _dec_Node(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Node, int]:
@@ -2953,15 +3185,30 @@ class Expr(_cdr.IdlUnion):
 
 def _enc_Expr(_buf: bytearray, _v: Expr) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P15(_v._d)
+    try:
+        _buf += _P15(_v._d)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Expr discriminator", "i", lambda: (_v._d,)),
+        ) from None
     _d = _v._d
     if _d in (0,):
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-        _buf += _P15(_v._v)
+        try:
+            _buf += _P15(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecTest::Expr.leaf", "i", lambda: (_v._v,)),
+            ) from None
     elif _d in (1,):
-        _cdr.put_length(_buf, len(_v._v), None, "CodecTest::Expr.items")
+        _cdr.put_count(_buf, _v._v, None, "CodecTest::Expr.items")
         for _x2 in _v._v:
-            _enc_Expr(_buf, _x2)
+            try:
+                _enc_Expr(_buf, _x2)
+            except _cdr.NestedErrors as _x:
+                raise _cdr.nested_error("CodecTest::Expr.items", _x) from None
 
 
 def _dec_Expr(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Expr, int]:
@@ -3033,7 +3280,13 @@ class Holder_Inner(_cdr.IdlType):
 
 def _enc_Holder_Inner(_buf: bytearray, _v: Holder_Inner) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P15(_v.a)
+    try:
+        _buf += _P15(_v.a)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Holder::Inner.a", "i", lambda: (_v.a,)),
+        ) from None
 
 
 def _dec_Holder_Inner(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Holder_Inner, int]:
@@ -3146,13 +3399,28 @@ class Holder_Choice(_cdr.IdlUnion):
 
 def _enc_Holder_Choice(_buf: bytearray, _v: Holder_Choice) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P17(_Holder_Mode_W[_v._d])
+    try:
+        _buf += _P17(_Holder_Mode_W[_v._d])
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Holder::Choice discriminator", "I", lambda: (_Holder_Mode_W[_v._d],)),
+        ) from None
     _d = _v._d
     if _d in (Holder_Mode.OFF,):
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-        _buf += _P15(_v._v)
+        try:
+            _buf += _P15(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecTest::Holder::Choice.when_off", "i", lambda: (_v._v,)),
+            ) from None
     elif _d in (Holder_Mode.ON,):
-        _enc_Holder_Inner(_buf, _v._v)
+        try:
+            _enc_Holder_Inner(_buf, _v._v)
+        except _cdr.NestedErrors as _x:
+            raise _cdr.nested_error("CodecTest::Holder::Choice.when_on", _x) from None
 
 
 def _dec_Holder_Choice(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Holder_Choice, int]:
@@ -3247,7 +3515,13 @@ class Holder(_rpc.Stub):
         _buf = bytearray(_cdr.HEADER_LE)
         try:
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-            _buf += _P17(_Holder_Mode_W[m])
+            try:
+                _buf += _P17(_Holder_Mode_W[m])
+            except _cdr.EncodeErrors as _x:
+                raise _cdr.pack_error(
+                    _x,
+                    ("CodecTest::Holder::get(m)", "I", lambda: (_Holder_Mode_W[m],)),
+                ) from None
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Holder::get", _x) from None
         _data = self._call("get", bytes(_buf), (Holder_Oops,))
@@ -3301,7 +3575,13 @@ class Outer_Nested(_cdr.IdlType):
 
 def _enc_Outer_Nested(_buf: bytearray, _v: Outer_Nested) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 1]
-    _buf += _P18(_v.n)
+    try:
+        _buf += _P18(_v.n)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Outer::Nested.n", "h", lambda: (_v.n,)),
+        ) from None
 
 
 def _dec_Outer_Nested(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Outer_Nested, int]:
@@ -3416,10 +3696,22 @@ class Outer(_cdr.IdlType):
 
 
 def _enc_Outer(_buf: bytearray, _v: Outer) -> None:
-    _enc_Outer_Nested(_buf, _v.inside)
+    try:
+        _enc_Outer_Nested(_buf, _v.inside)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("CodecTest::Outer.inside", _x) from None
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P17(_Outer_Kind_W[_v.sort])
-    _enc_Holder_Inner(_buf, _v.inner)
+    try:
+        _buf += _P17(_Outer_Kind_W[_v.sort])
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Outer.sort", "I", lambda: (_Outer_Kind_W[_v.sort],)),
+        ) from None
+    try:
+        _enc_Holder_Inner(_buf, _v.inner)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("CodecTest::Outer.inner", _x) from None
     _cdr.put_flat(
         _buf,
         _v.inners,
@@ -3430,7 +3722,10 @@ def _enc_Outer(_buf: bytearray, _v: Outer) -> None:
         None,
         "CodecTest::Outer.inners",
     )
-    _enc_Holder_Choice(_buf, _v.choice)
+    try:
+        _enc_Holder_Choice(_buf, _v.choice)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("CodecTest::Outer.choice", _x) from None
 
 
 def _dec_Outer(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Outer, int]:
@@ -3535,9 +3830,21 @@ class Keywords(_cdr.IdlType):
 
 def _enc_Keywords(_buf: bytearray, _v: Keywords) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P15(_v._from)
+    try:
+        _buf += _P15(_v._from)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Keywords.from", "i", lambda: (_v._from,)),
+        ) from None
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-    _buf += _P5(_v._lambda)
+    try:
+        _buf += _P5(_v._lambda)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Keywords.lambda", "d", lambda: (_v._lambda,)),
+        ) from None
     _cdr.put_primitives(
         _buf,
         _v._list,
@@ -3548,22 +3855,41 @@ def _enc_Keywords(_buf: bytearray, _v: Keywords) -> None:
     )
     _cdr.put_string(_buf, _v._str, None, "CodecTest::Keywords.str")
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P19(
-        _v.l,
-        _v.I,
-        _v.O,
-        _v._None,
-        _v._class,
-        _v._def,
-        _v._int,
-        _v.type,
-        _v.self,
-        _v._print,
-        _v.data,
-        _v.cls,
-        _v._serialize,
-        _v._deserialize,
-    )
+    try:
+        _buf += _P19(
+            _v.l,
+            _v.I,
+            _v.O,
+            _v._None,
+            _v._class,
+            _v._def,
+            _v._int,
+            _v.type,
+            _v.self,
+            _v._print,
+            _v.data,
+            _v.cls,
+            _v._serialize,
+            _v._deserialize,
+        )
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Keywords.l", "i", lambda: (_v.l,)),
+            ("CodecTest::Keywords.I", "h", lambda: (_v.I,)),
+            ("CodecTest::Keywords.O", "B", lambda: (_v.O,)),
+            ("CodecTest::Keywords.None", "?", lambda: (_v._None,)),
+            ("CodecTest::Keywords.class", "i", lambda: (_v._class,)),
+            ("CodecTest::Keywords.def", "i", lambda: (_v._def,)),
+            ("CodecTest::Keywords.int", "i", lambda: (_v._int,)),
+            ("CodecTest::Keywords.type", "i", lambda: (_v.type,)),
+            ("CodecTest::Keywords.self", "i", lambda: (_v.self,)),
+            ("CodecTest::Keywords.print", "i", lambda: (_v._print,)),
+            ("CodecTest::Keywords.data", "i", lambda: (_v.data,)),
+            ("CodecTest::Keywords.cls", "i", lambda: (_v.cls,)),
+            ("CodecTest::Keywords.serialize", "i", lambda: (_v._serialize,)),
+            ("CodecTest::Keywords.deserialize", "i", lambda: (_v._deserialize,)),
+        ) from None
 
 
 def _dec_Keywords(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Keywords, int]:
@@ -3739,18 +4065,39 @@ class KeywordUnion(_cdr.IdlUnion):
 
 def _enc_KeywordUnion(_buf: bytearray, _v: KeywordUnion) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P15(_v._d)
+    try:
+        _buf += _P15(_v._d)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::KeywordUnion discriminator", "i", lambda: (_v._d,)),
+        ) from None
     _d = _v._d
     if _d in (1,):
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-        _buf += _P15(_v._v)
+        try:
+            _buf += _P15(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecTest::KeywordUnion.from", "i", lambda: (_v._v,)),
+            ) from None
     elif _d in (2,):
-        _cdr.put_string(_buf, _v._v, None, "CodecTest::KeywordUnion._list")
+        _cdr.put_string(_buf, _v._v, None, "CodecTest::KeywordUnion.list")
     elif _d in (3,):
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-        _buf += _P5(_v._v)
+        try:
+            _buf += _P5(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecTest::KeywordUnion.l", "d", lambda: (_v._v,)),
+            ) from None
     elif _d in (4,):
-        _enc_Keywords(_buf, _v._v)
+        try:
+            _enc_Keywords(_buf, _v._v)
+        except _cdr.NestedErrors as _x:
+            raise _cdr.nested_error("CodecTest::KeywordUnion.str", _x) from None
 
 
 def _dec_KeywordUnion(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[KeywordUnion, int]:
@@ -3770,7 +4117,7 @@ def _dec_KeywordUnion(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[KeywordUn
             _off,
             _e,
             None,
-            "CodecTest::KeywordUnion._list",
+            "CodecTest::KeywordUnion.list",
         )
     elif _d in (3,):
         _off += (4 - _off) & 7
@@ -3823,9 +4170,21 @@ class BoolDouble(_cdr.IdlType):
 
 
 def _enc_BoolDouble(_buf: bytearray, _v: BoolDouble) -> None:
-    _buf += _P20(_v.b)
+    try:
+        _buf += _P20(_v.b)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::BoolDouble.b", "?", lambda: (_v.b,)),
+        ) from None
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-    _buf += _P5(_v.d)
+    try:
+        _buf += _P5(_v.d)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::BoolDouble.d", "d", lambda: (_v.d,)),
+        ) from None
 
 
 def _dec_BoolDouble(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[BoolDouble, int]:
@@ -3876,9 +4235,21 @@ class OctetLongLong(_cdr.IdlType):
 
 
 def _enc_OctetLongLong(_buf: bytearray, _v: OctetLongLong) -> None:
-    _buf += _P4(_v.o)
+    try:
+        _buf += _P4(_v.o)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::OctetLongLong.o", "B", lambda: (_v.o,)),
+        ) from None
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-    _buf += _P21(_v.ll)
+    try:
+        _buf += _P21(_v.ll)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::OctetLongLong.ll", "q", lambda: (_v.ll,)),
+        ) from None
 
 
 def _dec_OctetLongLong(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[OctetLongLong, int]:
@@ -3930,7 +4301,14 @@ class EndsInChar(_cdr.IdlType):
 
 def _enc_EndsInChar(_buf: bytearray, _v: EndsInChar) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-    _buf += _P22(_v.d, ord(_v.c))
+    try:
+        _buf += _P22(_v.d, ord(_v.c))
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::EndsInChar.d", "d", lambda: (_v.d,)),
+            ("CodecTest::EndsInChar.c", "B", lambda: (ord(_v.c),)),
+        ) from None
 
 
 def _dec_EndsInChar(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[EndsInChar, int]:
@@ -3985,16 +4363,20 @@ class SeqEndsInChar(_cdr.IdlType):
 
 
 def _enc_SeqEndsInChar(_buf: bytearray, _v: SeqEndsInChar) -> None:
-    _cdr.put_length(
-        _buf,
-        len(_v.items),
-        None,
-        "CodecTest::SeqEndsInChar.items",
-    )
+    _cdr.put_count(_buf, _v.items, None, "CodecTest::SeqEndsInChar.items")
     for _x0 in _v.items:
-        _enc_EndsInChar(_buf, _x0)
+        try:
+            _enc_EndsInChar(_buf, _x0)
+        except _cdr.NestedErrors as _x:
+            raise _cdr.nested_error("CodecTest::SeqEndsInChar.items", _x) from None
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-    _buf += _P5(_v.after)
+    try:
+        _buf += _P5(_v.after)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::SeqEndsInChar.after", "d", lambda: (_v.after,)),
+        ) from None
 
 
 def _dec_SeqEndsInChar(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[SeqEndsInChar, int]:
@@ -4083,7 +4465,13 @@ class EmptySeqs(_cdr.IdlType):
 def _enc_EmptySeqs(_buf: bytearray, _v: EmptySeqs) -> None:
     _cdr.put_primitives(_buf, _v.a, "i", 4, None, "CodecTest::EmptySeqs.a")
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-    _buf += _P5(_v.d)
+    try:
+        _buf += _P5(_v.d)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::EmptySeqs.d", "d", lambda: (_v.d,)),
+        ) from None
     _cdr.put_primitives(_buf, _v.b, "d", 8, None, "CodecTest::EmptySeqs.b")
     _cdr.put_flat(
         _buf,
@@ -4096,17 +4484,38 @@ def _enc_EmptySeqs(_buf: bytearray, _v: EmptySeqs) -> None:
         "CodecTest::EmptySeqs.c",
     )
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-    _buf += _P5(_v.e)
-    _cdr.put_length(_buf, len(_v.f), None, "CodecTest::EmptySeqs.f")
+    try:
+        _buf += _P5(_v.e)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::EmptySeqs.e", "d", lambda: (_v.e,)),
+        ) from None
+    _cdr.put_count(_buf, _v.f, None, "CodecTest::EmptySeqs.f")
     for _x0 in _v.f:
         _cdr.put_string(_buf, _x0, None, "CodecTest::EmptySeqs.f")
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-    _buf += _P21(_v.g)
-    _cdr.put_length(_buf, len(_v.h), None, "CodecTest::EmptySeqs.h")
+    try:
+        _buf += _P21(_v.g)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::EmptySeqs.g", "q", lambda: (_v.g,)),
+        ) from None
+    _cdr.put_count(_buf, _v.h, None, "CodecTest::EmptySeqs.h")
     for _x1 in _v.h:
-        _enc_Mixed(_buf, _x1)
+        try:
+            _enc_Mixed(_buf, _x1)
+        except _cdr.NestedErrors as _x:
+            raise _cdr.nested_error("CodecTest::EmptySeqs.h", _x) from None
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-    _buf += _P5(_v.i)
+    try:
+        _buf += _P5(_v.i)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::EmptySeqs.i", "d", lambda: (_v.i,)),
+        ) from None
 
 
 def _dec_EmptySeqs(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[EmptySeqs, int]:
@@ -4263,21 +4672,73 @@ class Traps(_cdr.IdlType):
 
 
 def _enc_Traps(_buf: bytearray, _v: Traps) -> None:
-    _buf += _P4(ord(_v.c))
+    try:
+        _buf += _P4(ord(_v.c))
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Traps.c", "B", lambda: (ord(_v.c),)),
+        ) from None
     _cdr.put_primitives(_buf, _v.ds, "d", 8, None, "CodecTest::Traps.ds")
-    _buf += _P4(_v.o)
+    try:
+        _buf += _P4(_v.o)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Traps.o", "B", lambda: (_v.o,)),
+        ) from None
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-    _buf += _P23(*_v.arr, _v.b)
-    _m_CodecTest_base_idl._enc_Point(_buf, _v.p)
+    try:
+        _buf += _P23(*_v.arr, _v.b)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Traps.arr", "2d", lambda: (*_v.arr,)),
+            ("CodecTest::Traps.b", "?", lambda: (_v.b,)),
+        ) from None
+    try:
+        _m_CodecTest_base_idl._enc_Point(_buf, _v.p)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("CodecTest::Traps.p", _x) from None
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 1]
-    _buf += _P18(_v.s)
+    try:
+        _buf += _P18(_v.s)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Traps.s", "h", lambda: (_v.s,)),
+        ) from None
     _cdr.put_string(_buf, _v.t, None, "CodecTest::Traps.t")
-    _buf += _P4(ord(_v.c2))
+    try:
+        _buf += _P4(ord(_v.c2))
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Traps.c2", "B", lambda: (ord(_v.c2),)),
+        ) from None
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-    _buf += _P21(_v.ll)
-    _enc_BoolDouble(_buf, _v.bd)
-    _buf += _P4(_v.o2)
-    _enc_OctetLongLong(_buf, _v.oll)
+    try:
+        _buf += _P21(_v.ll)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Traps.ll", "q", lambda: (_v.ll,)),
+        ) from None
+    try:
+        _enc_BoolDouble(_buf, _v.bd)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("CodecTest::Traps.bd", _x) from None
+    try:
+        _buf += _P4(_v.o2)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Traps.o2", "B", lambda: (_v.o2,)),
+        ) from None
+    try:
+        _enc_OctetLongLong(_buf, _v.oll)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("CodecTest::Traps.oll", _x) from None
 
 
 def _dec_Traps(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Traps, int]:

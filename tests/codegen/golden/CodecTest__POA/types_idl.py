@@ -43,7 +43,10 @@ class Holder(_rpc.Servant):
         _r = self.get(m)
         _buf = bytearray(_cdr.HEADER_LE)
         try:
-            _m_CodecTest_types_idl._enc_Holder_Inner(_buf, _r)
+            try:
+                _m_CodecTest_types_idl._enc_Holder_Inner(_buf, _r)
+            except _cdr.NestedErrors as _x:
+                raise _cdr.nested_error("CodecTest::Holder::get result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("CodecTest::Holder::get", _x) from None
         return bytes(_buf)

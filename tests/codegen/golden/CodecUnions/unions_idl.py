@@ -171,11 +171,23 @@ class ByEnum(_cdr.IdlUnion):
 
 def _enc_ByEnum(_buf: bytearray, _v: ByEnum) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P0(_m_CodecTest_base_idl._Color_W[_v._d])
+    try:
+        _buf += _P0(_m_CodecTest_base_idl._Color_W[_v._d])
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecUnions::ByEnum discriminator", "I", lambda: (_m_CodecTest_base_idl._Color_W[_v._d],)),
+        ) from None
     _d = _v._d
     if _d in (_m_CodecTest_base_idl.Color.RED,):
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-        _buf += _P1(_v._v)
+        try:
+            _buf += _P1(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::ByEnum.r", "i", lambda: (_v._v,)),
+            ) from None
     elif _d in (_m_CodecTest_base_idl.Color.GREEN, _m_CodecTest_base_idl.Color.BLUE,):
         _cdr.put_string(_buf, _v._v, None, "CodecUnions::ByEnum.gb")
 
@@ -282,14 +294,32 @@ class ByEnumDefault(_cdr.IdlUnion):
 
 def _enc_ByEnumDefault(_buf: bytearray, _v: ByEnumDefault) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P0(_m_CodecTest_base_idl._Color_W[_v._d])
+    try:
+        _buf += _P0(_m_CodecTest_base_idl._Color_W[_v._d])
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecUnions::ByEnumDefault discriminator", "I", lambda: (_m_CodecTest_base_idl._Color_W[_v._d],)),
+        ) from None
     _d = _v._d
     if _d in (_m_CodecTest_base_idl.Color.GREEN,):
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-        _buf += _P1(_v._v)
+        try:
+            _buf += _P1(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::ByEnumDefault.g", "i", lambda: (_v._v,)),
+            ) from None
     else:
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-        _buf += _P2(_v._v)
+        try:
+            _buf += _P2(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::ByEnumDefault.other", "d", lambda: (_v._v,)),
+            ) from None
 
 
 def _dec_ByEnumDefault(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[ByEnumDefault, int]:
@@ -390,11 +420,23 @@ class ByEnumPartial(_cdr.IdlUnion):
 
 def _enc_ByEnumPartial(_buf: bytearray, _v: ByEnumPartial) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P0(_m_CodecTest_base_idl._Color_W[_v._d])
+    try:
+        _buf += _P0(_m_CodecTest_base_idl._Color_W[_v._d])
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecUnions::ByEnumPartial discriminator", "I", lambda: (_m_CodecTest_base_idl._Color_W[_v._d],)),
+        ) from None
     _d = _v._d
     if _d in (_m_CodecTest_base_idl.Color.RED,):
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-        _buf += _P1(_v._v)
+        try:
+            _buf += _P1(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::ByEnumPartial.r", "i", lambda: (_v._v,)),
+            ) from None
     elif _d in (_m_CodecTest_base_idl.Color.BLUE,):
         _cdr.put_string(_buf, _v._v, None, "CodecUnions::ByEnumPartial.b")
 
@@ -509,14 +551,32 @@ class ByChar(_cdr.IdlUnion):
 
 
 def _enc_ByChar(_buf: bytearray, _v: ByChar) -> None:
-    _buf += _P3(ord(_v._d))
+    try:
+        _buf += _P3(ord(_v._d))
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecUnions::ByChar discriminator", "B", lambda: (ord(_v._d),)),
+        ) from None
     _d = _v._d
     if _d in ('a',):
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-        _buf += _P1(_v._v)
+        try:
+            _buf += _P1(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::ByChar.a", "i", lambda: (_v._v,)),
+            ) from None
     elif _d in ('b', 'c',):
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-        _buf += _P2(_v._v)
+        try:
+            _buf += _P2(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::ByChar.bc", "d", lambda: (_v._v,)),
+            ) from None
     else:
         _cdr.put_string(_buf, _v._v, None, "CodecUnions::ByChar.other")
 
@@ -631,16 +691,40 @@ class ByCharNul(_cdr.IdlUnion):
 
 
 def _enc_ByCharNul(_buf: bytearray, _v: ByCharNul) -> None:
-    _buf += _P3(ord(_v._d))
+    try:
+        _buf += _P3(ord(_v._d))
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecUnions::ByCharNul discriminator", "B", lambda: (ord(_v._d),)),
+        ) from None
     _d = _v._d
     if _d in ('\x00',):
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-        _buf += _P1(_v._v)
+        try:
+            _buf += _P1(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::ByCharNul.nul", "i", lambda: (_v._v,)),
+            ) from None
     elif _d in ('A',):
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 1]
-        _buf += _P4(_v._v)
+        try:
+            _buf += _P4(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::ByCharNul.big_a", "h", lambda: (_v._v,)),
+            ) from None
     else:
-        _buf += _P3(_v._v)
+        try:
+            _buf += _P3(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::ByCharNul.other", "B", lambda: (_v._v,)),
+            ) from None
 
 
 def _dec_ByCharNul(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[ByCharNul, int]:
@@ -736,11 +820,23 @@ class ByBool(_cdr.IdlUnion):
 
 
 def _enc_ByBool(_buf: bytearray, _v: ByBool) -> None:
-    _buf += _P5(_v._d)
+    try:
+        _buf += _P5(_v._d)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecUnions::ByBool discriminator", "?", lambda: (_v._d,)),
+        ) from None
     _d = _v._d
     if _d in (True,):
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-        _buf += _P1(_v._v)
+        try:
+            _buf += _P1(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::ByBool.yes", "i", lambda: (_v._v,)),
+            ) from None
     elif _d in (False,):
         _cdr.put_string(_buf, _v._v, None, "CodecUnions::ByBool.no")
 
@@ -838,14 +934,32 @@ class ByBoolDefault(_cdr.IdlUnion):
 
 
 def _enc_ByBoolDefault(_buf: bytearray, _v: ByBoolDefault) -> None:
-    _buf += _P5(_v._d)
+    try:
+        _buf += _P5(_v._d)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecUnions::ByBoolDefault discriminator", "?", lambda: (_v._d,)),
+        ) from None
     _d = _v._d
     if _d in (True,):
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-        _buf += _P1(_v._v)
+        try:
+            _buf += _P1(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::ByBoolDefault.yes", "i", lambda: (_v._v,)),
+            ) from None
     else:
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-        _buf += _P2(_v._v)
+        try:
+            _buf += _P2(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::ByBoolDefault.other", "d", lambda: (_v._v,)),
+            ) from None
 
 
 def _dec_ByBoolDefault(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[ByBoolDefault, int]:
@@ -923,11 +1037,23 @@ class ByBoolTrue(_cdr.IdlUnion):
 
 
 def _enc_ByBoolTrue(_buf: bytearray, _v: ByBoolTrue) -> None:
-    _buf += _P5(_v._d)
+    try:
+        _buf += _P5(_v._d)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecUnions::ByBoolTrue discriminator", "?", lambda: (_v._d,)),
+        ) from None
     _d = _v._d
     if _d in (True,):
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-        _buf += _P1(_v._v)
+        try:
+            _buf += _P1(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::ByBoolTrue.yes", "i", lambda: (_v._v,)),
+            ) from None
 
 
 def _dec_ByBoolTrue(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[ByBoolTrue, int]:
@@ -1034,14 +1160,32 @@ class ByShort(_cdr.IdlUnion):
 
 def _enc_ByShort(_buf: bytearray, _v: ByShort) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 1]
-    _buf += _P4(_v._d)
+    try:
+        _buf += _P4(_v._d)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecUnions::ByShort discriminator", "h", lambda: (_v._d,)),
+        ) from None
     _d = _v._d
     if _d in (-1,):
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-        _buf += _P1(_v._v)
+        try:
+            _buf += _P1(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::ByShort.neg", "i", lambda: (_v._v,)),
+            ) from None
     elif _d in (0, 1, 2,):
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-        _buf += _P2(_v._v)
+        try:
+            _buf += _P2(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::ByShort.small", "d", lambda: (_v._v,)),
+            ) from None
     else:
         _cdr.put_string(_buf, _v._v, None, "CodecUnions::ByShort.other")
 
@@ -1158,15 +1302,39 @@ class ByUShort(_cdr.IdlUnion):
 
 def _enc_ByUShort(_buf: bytearray, _v: ByUShort) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 1]
-    _buf += _P6(_v._d)
+    try:
+        _buf += _P6(_v._d)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecUnions::ByUShort discriminator", "H", lambda: (_v._d,)),
+        ) from None
     _d = _v._d
     if _d in (0,):
-        _buf += _P3(_v._v)
+        try:
+            _buf += _P3(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::ByUShort.zero", "B", lambda: (_v._v,)),
+            ) from None
     elif _d in (65535,):
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-        _buf += _P1(_v._v)
+        try:
+            _buf += _P1(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::ByUShort.max", "i", lambda: (_v._v,)),
+            ) from None
     else:
-        _buf += _P5(_v._v)
+        try:
+            _buf += _P5(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::ByUShort.other", "?", lambda: (_v._v,)),
+            ) from None
 
 
 def _dec_ByUShort(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[ByUShort, int]:
@@ -1276,11 +1444,23 @@ class ByLong(_cdr.IdlUnion):
 
 def _enc_ByLong(_buf: bytearray, _v: ByLong) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P1(_v._d)
+    try:
+        _buf += _P1(_v._d)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecUnions::ByLong discriminator", "i", lambda: (_v._d,)),
+        ) from None
     _d = _v._d
     if _d in (-2147483648,):
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-        _buf += _P1(_v._v)
+        try:
+            _buf += _P1(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::ByLong.min", "i", lambda: (_v._v,)),
+            ) from None
     elif _d in (7,):
         _cdr.put_primitives(
             _buf,
@@ -1291,7 +1471,13 @@ def _enc_ByLong(_buf: bytearray, _v: ByLong) -> None:
             "CodecUnions::ByLong.seven",
         )
     else:
-        _buf += _P3(ord(_v._v))
+        try:
+            _buf += _P3(ord(_v._v))
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::ByLong.other", "B", lambda: (ord(_v._v),)),
+            ) from None
 
 
 def _dec_ByLong(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[ByLong, int]:
@@ -1394,11 +1580,23 @@ class ByULong(_cdr.IdlUnion):
 
 def _enc_ByULong(_buf: bytearray, _v: ByULong) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P0(_v._d)
+    try:
+        _buf += _P0(_v._d)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecUnions::ByULong discriminator", "I", lambda: (_v._d,)),
+        ) from None
     _d = _v._d
     if _d in (1,):
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-        _buf += _P7(_v._v)
+        try:
+            _buf += _P7(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::ByULong.one", "q", lambda: (_v._v,)),
+            ) from None
     elif _d in (4294967295,):
         _cdr.put_string(_buf, _v._v, None, "CodecUnions::ByULong.max")
 
@@ -1512,17 +1710,41 @@ class ByLongLong(_cdr.IdlUnion):
 
 def _enc_ByLongLong(_buf: bytearray, _v: ByLongLong) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-    _buf += _P7(_v._d)
+    try:
+        _buf += _P7(_v._d)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecUnions::ByLongLong discriminator", "q", lambda: (_v._d,)),
+        ) from None
     _d = _v._d
     if _d in (-1,):
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-        _buf += _P2(_v._v)
+        try:
+            _buf += _P2(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::ByLongLong.minus_one", "d", lambda: (_v._v,)),
+            ) from None
     elif _d in (9223372036854775807,):
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-        _buf += _P1(_v._v)
+        try:
+            _buf += _P1(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::ByLongLong.max", "i", lambda: (_v._v,)),
+            ) from None
     else:
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 1]
-        _buf += _P4(_v._v)
+        try:
+            _buf += _P4(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::ByLongLong.other", "h", lambda: (_v._v,)),
+            ) from None
 
 
 def _dec_ByLongLong(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[ByLongLong, int]:
@@ -1634,17 +1856,41 @@ class ByULongLong(_cdr.IdlUnion):
 
 def _enc_ByULongLong(_buf: bytearray, _v: ByULongLong) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-    _buf += _P8(_v._d)
+    try:
+        _buf += _P8(_v._d)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecUnions::ByULongLong discriminator", "Q", lambda: (_v._d,)),
+        ) from None
     _d = _v._d
     if _d in (0,):
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-        _buf += _P1(_v._v)
+        try:
+            _buf += _P1(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::ByULongLong.zero", "i", lambda: (_v._v,)),
+            ) from None
     elif _d in (18446744073709551615,):
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-        _buf += _P2(_v._v)
+        try:
+            _buf += _P2(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::ByULongLong.max", "d", lambda: (_v._v,)),
+            ) from None
     else:
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-        _buf += _P8(_v._v)
+        try:
+            _buf += _P8(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::ByULongLong.other", "Q", lambda: (_v._v,)),
+            ) from None
 
 
 def _dec_ByULongLong(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[ByULongLong, int]:
@@ -1758,16 +2004,34 @@ class ByOctet(_cdr.IdlUnion):
 
 
 def _enc_ByOctet(_buf: bytearray, _v: ByOctet) -> None:
-    _buf += _P3(_v._d)
+    try:
+        _buf += _P3(_v._d)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecUnions::ByOctet discriminator", "B", lambda: (_v._d,)),
+        ) from None
     _d = _v._d
     if _d in (0,):
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-        _buf += _P1(_v._v)
+        try:
+            _buf += _P1(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::ByOctet.zero", "i", lambda: (_v._v,)),
+            ) from None
     elif _d in (1, 2,):
         _cdr.put_string(_buf, _v._v, None, "CodecUnions::ByOctet.small")
     elif _d in (255,):
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-        _buf += _P2(_v._v)
+        try:
+            _buf += _P2(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::ByOctet.max", "d", lambda: (_v._v,)),
+            ) from None
 
 
 def _dec_ByOctet(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[ByOctet, int]:
@@ -1884,14 +2148,32 @@ class ByInt8(_cdr.IdlUnion):
 
 
 def _enc_ByInt8(_buf: bytearray, _v: ByInt8) -> None:
-    _buf += _P9(_v._d)
+    try:
+        _buf += _P9(_v._d)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecUnions::ByInt8 discriminator", "b", lambda: (_v._d,)),
+        ) from None
     _d = _v._d
     if _d in (-128,):
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-        _buf += _P1(_v._v)
+        try:
+            _buf += _P1(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::ByInt8.min", "i", lambda: (_v._v,)),
+            ) from None
     elif _d in (-1, 1,):
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-        _buf += _P2(_v._v)
+        try:
+            _buf += _P2(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::ByInt8.one", "d", lambda: (_v._v,)),
+            ) from None
     else:
         _cdr.put_string(_buf, _v._v, None, "CodecUnions::ByInt8.other")
 
@@ -2006,16 +2288,40 @@ class ByUInt8(_cdr.IdlUnion):
 
 
 def _enc_ByUInt8(_buf: bytearray, _v: ByUInt8) -> None:
-    _buf += _P3(_v._d)
+    try:
+        _buf += _P3(_v._d)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecUnions::ByUInt8 discriminator", "B", lambda: (_v._d,)),
+        ) from None
     _d = _v._d
     if _d in (0,):
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-        _buf += _P1(_v._v)
+        try:
+            _buf += _P1(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::ByUInt8.zero", "i", lambda: (_v._v,)),
+            ) from None
     elif _d in (200,):
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-        _buf += _P2(_v._v)
+        try:
+            _buf += _P2(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::ByUInt8.big", "d", lambda: (_v._v,)),
+            ) from None
     else:
-        _buf += _P3(ord(_v._v))
+        try:
+            _buf += _P3(ord(_v._v))
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::ByUInt8.other", "B", lambda: (ord(_v._v),)),
+            ) from None
 
 
 def _dec_ByUInt8(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[ByUInt8, int]:
@@ -2137,13 +2443,28 @@ class ByTypedef(_cdr.IdlUnion):
 
 def _enc_ByTypedef(_buf: bytearray, _v: ByTypedef) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P1(_v._d)
+    try:
+        _buf += _P1(_v._d)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecUnions::ByTypedef discriminator", "i", lambda: (_v._d,)),
+        ) from None
     _d = _v._d
     if _d in (1,):
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-        _buf += _P1(_v._v)
+        try:
+            _buf += _P1(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::ByTypedef.one", "i", lambda: (_v._v,)),
+            ) from None
     elif _d in (2,):
-        _m_CodecTest_base_idl._enc_Point(_buf, _v._v)
+        try:
+            _m_CodecTest_base_idl._enc_Point(_buf, _v._v)
+        except _cdr.NestedErrors as _x:
+            raise _cdr.nested_error("CodecUnions::ByTypedef.two", _x) from None
     else:
         _cdr.put_flat(
             _buf,
@@ -2266,11 +2587,23 @@ class ByTypedefEnum(_cdr.IdlUnion):
 
 def _enc_ByTypedefEnum(_buf: bytearray, _v: ByTypedefEnum) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P0(_m_CodecTest_base_idl._Color_W[_v._d])
+    try:
+        _buf += _P0(_m_CodecTest_base_idl._Color_W[_v._d])
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecUnions::ByTypedefEnum discriminator", "I", lambda: (_m_CodecTest_base_idl._Color_W[_v._d],)),
+        ) from None
     _d = _v._d
     if _d in (_m_CodecTest_base_idl.Color.RED,):
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-        _buf += _P1(_v._v)
+        try:
+            _buf += _P1(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::ByTypedefEnum.r", "i", lambda: (_v._v,)),
+            ) from None
     else:
         _cdr.put_string(_buf, _v._v, None, "CodecUnions::ByTypedefEnum.other")
 
@@ -2652,10 +2985,19 @@ class Branches(_cdr.IdlUnion):
 
 def _enc_Branches(_buf: bytearray, _v: Branches) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P1(_v._d)
+    try:
+        _buf += _P1(_v._d)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecUnions::Branches discriminator", "i", lambda: (_v._d,)),
+        ) from None
     _d = _v._d
     if _d in (1,):
-        _m_CodecTest_base_idl._enc_Point(_buf, _v._v)
+        try:
+            _m_CodecTest_base_idl._enc_Point(_buf, _v._v)
+        except _cdr.NestedErrors as _x:
+            raise _cdr.nested_error("CodecUnions::Branches.p", _x) from None
     elif _d in (2,):
         _cdr.put_flat(
             _buf,
@@ -2669,23 +3011,59 @@ def _enc_Branches(_buf: bytearray, _v: Branches) -> None:
         )
     elif _d in (3,):
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-        _buf += _P10(*_v._v)
+        try:
+            _buf += _P10(*_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::Branches.arr", "3i", lambda: (*_v._v,)),
+            ) from None
     elif _d in (4,):
-        _enc_ByEnum(_buf, _v._v)
+        try:
+            _enc_ByEnum(_buf, _v._v)
+        except _cdr.NestedErrors as _x:
+            raise _cdr.nested_error("CodecUnions::Branches.inner", _x) from None
     elif _d in (5,):
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-        _buf += _P0(_m_CodecTest_base_idl._Color_W[_v._v])
+        try:
+            _buf += _P0(_m_CodecTest_base_idl._Color_W[_v._v])
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::Branches.c", "I", lambda: (_m_CodecTest_base_idl._Color_W[_v._v],)),
+            ) from None
     elif _d in (6,):
-        _buf += _P3(ord(_v._v))
+        try:
+            _buf += _P3(ord(_v._v))
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::Branches.ch", "B", lambda: (ord(_v._v),)),
+            ) from None
     elif _d in (7,):
-        _buf += _P5(_v._v)
+        try:
+            _buf += _P5(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::Branches.bo", "?", lambda: (_v._v,)),
+            ) from None
     elif _d in (8,):
         _cdr.put_octets(_buf, _v._v, None, "CodecUnions::Branches.raw")
     elif _d in (9,):
-        _m_CodecTest_types_idl._enc_Mixed(_buf, _v._v)
+        try:
+            _m_CodecTest_types_idl._enc_Mixed(_buf, _v._v)
+        except _cdr.NestedErrors as _x:
+            raise _cdr.nested_error("CodecUnions::Branches.m", _x) from None
     elif _d in (10,):
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-        _buf += _P2(_v._v)
+        try:
+            _buf += _P2(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::Branches.d", "d", lambda: (_v._v,)),
+            ) from None
     elif _d in (11,):
         _cdr.check_length(_v._v, 2, "CodecUnions::Branches.s2")
         for _x6 in _v._v:
@@ -2700,17 +3078,41 @@ def _enc_Branches(_buf: bytearray, _v: Branches) -> None:
             "CodecUnions::Branches.ls",
         )
     elif _d in (13,):
-        _buf += _P3(_v._v)
+        try:
+            _buf += _P3(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::Branches.o", "B", lambda: (_v._v,)),
+            ) from None
     elif _d in (14,):
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-        _buf += _P11(*_cdr.flatten(_v._v, (2, 2), 'CodecUnions::Branches.mat'))
+        try:
+            _buf += _P11(*_cdr.flatten(_v._v, (2, 2), 'CodecUnions::Branches.mat'))
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::Branches.mat", "4i", lambda: (*_cdr.flatten(_v._v, (2, 2), 'CodecUnions::Branches.mat'),)),
+            ) from None
     elif _d in (15,):
-        _m_CodecTest_types_idl._enc_Empty(_buf, _v._v)
+        try:
+            _m_CodecTest_types_idl._enc_Empty(_buf, _v._v)
+        except _cdr.NestedErrors as _x:
+            raise _cdr.nested_error("CodecUnions::Branches.nothing", _x) from None
     elif _d in (16,):
-        _m_CodecTest_types_idl._enc_FlatSeqs(_buf, _v._v)
+        try:
+            _m_CodecTest_types_idl._enc_FlatSeqs(_buf, _v._v)
+        except _cdr.NestedErrors as _x:
+            raise _cdr.nested_error("CodecUnions::Branches.flat", _x) from None
     elif _d in (17,):
         _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-        _buf += _P2(_v._v)
+        try:
+            _buf += _P2(_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::Branches.d2", "d", lambda: (_v._v,)),
+            ) from None
 
 
 def _dec_Branches(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Branches, int]:
@@ -2999,18 +3401,48 @@ class Holder(_cdr.IdlType):
 
 
 def _enc_Holder(_buf: bytearray, _v: Holder) -> None:
-    _buf += _P3(_v.before)
-    _enc_Branches(_buf, _v.b)
-    _buf += _P3(ord(_v.after_char))
-    _enc_ByBoolTrue(_buf, _v.t)
+    try:
+        _buf += _P3(_v.before)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecUnions::Holder.before", "B", lambda: (_v.before,)),
+        ) from None
+    try:
+        _enc_Branches(_buf, _v.b)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("CodecUnions::Holder.b", _x) from None
+    try:
+        _buf += _P3(ord(_v.after_char))
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecUnions::Holder.after_char", "B", lambda: (ord(_v.after_char),)),
+        ) from None
+    try:
+        _enc_ByBoolTrue(_buf, _v.t)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("CodecUnions::Holder.t", _x) from None
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
-    _buf += _P2(_v.after)
-    _cdr.put_length(_buf, len(_v.many), None, "CodecUnions::Holder.many")
+    try:
+        _buf += _P2(_v.after)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecUnions::Holder.after", "d", lambda: (_v.after,)),
+        ) from None
+    _cdr.put_count(_buf, _v.many, None, "CodecUnions::Holder.many")
     for _x0 in _v.many:
-        _enc_ByChar(_buf, _x0)
+        try:
+            _enc_ByChar(_buf, _x0)
+        except _cdr.NestedErrors as _x:
+            raise _cdr.nested_error("CodecUnions::Holder.many", _x) from None
     _cdr.check_length(_v.arr, 2, "CodecUnions::Holder.arr")
     for _x1 in _v.arr:
-        _enc_ByLongLong(_buf, _x1)
+        try:
+            _enc_ByLongLong(_buf, _x1)
+        except _cdr.NestedErrors as _x:
+            raise _cdr.nested_error("CodecUnions::Holder.arr", _x) from None
 
 
 def _dec_Holder(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Holder, int]:

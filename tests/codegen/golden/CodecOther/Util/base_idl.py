@@ -70,8 +70,17 @@ class Tag(_cdr.IdlType):
 
 
 def _enc_Tag(_buf: bytearray, _v: Tag) -> None:
-    _m_CodecTest_Util_base_idl._enc_Tag(_buf, _v.inner)
-    _buf += _P0(_v.level)
+    try:
+        _m_CodecTest_Util_base_idl._enc_Tag(_buf, _v.inner)
+    except _cdr.NestedErrors as _x:
+        raise _cdr.nested_error("CodecOther::Util::Tag.inner", _x) from None
+    try:
+        _buf += _P0(_v.level)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecOther::Util::Tag.level", "B", lambda: (_v.level,)),
+        ) from None
 
 
 def _dec_Tag(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Tag, int]:

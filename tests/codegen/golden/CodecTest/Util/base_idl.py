@@ -60,7 +60,13 @@ class Tag(_cdr.IdlType):
 def _enc_Tag(_buf: bytearray, _v: Tag) -> None:
     _cdr.put_string(_buf, _v.key, 4, "CodecTest::Util::Tag.key")
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
-    _buf += _P0(_v.value)
+    try:
+        _buf += _P0(_v.value)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Util::Tag.value", "i", lambda: (_v.value,)),
+        ) from None
 
 
 def _dec_Tag(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Tag, int]:
