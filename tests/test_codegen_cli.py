@@ -49,6 +49,37 @@ def test_empty_folder_gets_an_importable_package(tmp_path: Path) -> None:
     assert "wrote" not in again.stdout
 
 
+def test_package_names_import_on_first_use(tmp_path: Path) -> None:
+    """A package `__init__` imports a module when one of its names is first used; the package
+    still behaves as if it had imported them all: attributes, from-imports, star, dir()."""
+    idl = sorted(str(f) for f in (REPO / "idl").glob("*.idl"))
+    assert run_miro_idl("-I", str(REPO / "idl"), *idl, cwd=tmp_path).returncode == 0
+    code = (
+        "import sys, Miro\n"
+        "assert 'Miro.Odometry_idl' not in sys.modules\n"
+        "from Miro import PositionIDL\n"
+        "assert Miro.PositionIDL is PositionIDL\n"
+        "assert 'Miro.Odometry_idl' not in sys.modules\n"
+        "assert Miro.Odometry.__name__ == 'Odometry'\n"
+        "assert 'TimeIDL' in dir(Miro) and 'Odometry' in Miro.__all__\n"
+        "try:\n"
+        "    Miro.NoSuchThing\n"
+        "except AttributeError as e:\n"
+        "    assert 'NoSuchThing' in str(e)\n"
+        "else:\n"
+        "    raise AssertionError('no AttributeError')\n"
+        "ns = {}\n"
+        "exec('from Miro import *', ns)\n"
+        "assert {'TimeIDL', 'PositionIDL', 'Odometry'} <= set(ns)\n"
+        "print('ok')\n"
+    )
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(tmp_path / "generated"), str(REPO)]))
+    run = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=60
+    )
+    assert run.stdout.strip() == "ok", run.stderr
+
+
 def test_check_reports_stale_files_and_writes_nothing(tmp_path: Path) -> None:
     out = run_miro_idl("-o", "out", "--check", str(EXAMPLE), cwd=tmp_path)
     assert out.returncode == 1

@@ -9,6 +9,7 @@ module, say) are neither touched nor checked.
 
 from __future__ import annotations
 
+import ast as pyast
 import os
 from collections.abc import Iterable
 from pathlib import Path
@@ -69,6 +70,11 @@ def generated_files(modules: list[PyModule], outdir: Path) -> dict[str, str]:
             and p.endswith("_idl.py")
         }
         siblings |= _generated_on_disk(outdir / folder)
+        exports: dict[str, str] = {}
+        for stem in sorted(siblings, key=str.lower):  # later modules win, as star imports did
+            rel = f"{folder}/{stem}.py"
+            names_of = _exports(files[rel]) if rel in files else _exports_on_disk(outdir / rel)
+            exports.update(dict.fromkeys(names_of, f"{package}.{stem}"))
         children = {
             p.rsplit(".", 1)[1]
             for p in packages
@@ -89,6 +95,8 @@ def generated_files(modules: list[PyModule], outdir: Path) -> dict[str, str]:
             doc,
             [f"{package}.{s}" for s in sorted(siblings, key=str.lower)],
             [(package, c) for c in sorted(children, key=str.lower)],
+            sorted(exports.items()),
+            sorted(siblings | children),
         )
     return files
 
@@ -104,6 +112,31 @@ def _generated_on_disk(folder: Path) -> set[str]:
             except OSError:
                 continue
     return out
+
+
+def _exports(source: str) -> list[str]:
+    """The `__all__` of a generated module (a literal list of strings)."""
+    try:
+        tree = pyast.parse(source)
+    except SyntaxError:
+        return []
+    for node in tree.body:
+        if isinstance(node, pyast.Assign) and any(
+            isinstance(t, pyast.Name) and t.id == "__all__" for t in node.targets
+        ):
+            try:
+                value = pyast.literal_eval(node.value)
+            except ValueError:
+                return []
+            return [v for v in value if isinstance(v, str)]
+    return []
+
+
+def _exports_on_disk(path: Path) -> list[str]:
+    try:
+        return _exports(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError):
+        return []
 
 
 def _packages_on_disk(folder: Path) -> set[str]:

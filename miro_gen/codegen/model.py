@@ -308,7 +308,7 @@ class PyModule:
     @property
     def sorted_exports(self) -> list[str]:
         """`__all__` in the order ruff's RUF022 wants: constants, classes, then the rest."""
-        return sorted(self.exports, key=_isort_key)
+        return sorted(self.exports, key=isort_key)
 
     @property
     def import_blocks(self) -> list[list[str]]:
@@ -353,7 +353,7 @@ def _natural(text: str) -> list[Any]:
     return [int(p) if p.isdigit() else p for p in re.split(r"(\d+)", text)]
 
 
-def _isort_key(name: str) -> tuple[int, list[Any]]:
+def isort_key(name: str) -> tuple[int, list[Any]]:
     if len(name) > 1 and name.isupper():
         kind = 0
     elif name[:1].isupper() or (name[:1] == "_" and name[1:2].isupper()):

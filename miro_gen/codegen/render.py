@@ -10,7 +10,7 @@ from typing import Any
 import jinja2
 
 from miro_gen import __version__
-from miro_gen.codegen.model import PyModule
+from miro_gen.codegen.model import PyModule, isort_key
 
 LINE = 100
 
@@ -85,9 +85,26 @@ def render_module(module: PyModule) -> str:
     return text
 
 
-def render_package_init(doc: str, modules: list[str], subpackages: list[tuple[str, str]]) -> str:
+def render_package_init(
+    doc: str,
+    modules: list[str],
+    subpackages: list[tuple[str, str]],
+    exports: list[tuple[str, str]],
+    submodules: list[str],
+) -> str:
+    """A package `__init__` that imports its modules' names lazily (see the template)."""
+    public = sorted(
+        {name for name, _ in exports} | {name for _, name in subpackages}, key=isort_key
+    )
     return (
         environment()
         .get_template("idl/package_init.py.j2")
-        .render(doc=doc, modules=modules, subpackages=subpackages)
+        .render(
+            doc=doc,
+            modules=modules,
+            subpackages=subpackages,
+            exports=exports,
+            submodules=submodules,
+            public=public,
+        )
     )
