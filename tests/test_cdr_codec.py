@@ -703,22 +703,7 @@ def test_identity_schema_and_hash(decl: Any) -> None:
         assert word not in schema
 
 
-SCHEMA_BUG = {
-    "CodecTest::Outer": "bug: the schema of a struct with declarations nested in it writes "
-    "their scope as `module Outer`, which clashes with `struct Outer` in the same text",
-}
-
-
-@pytest.mark.parametrize(
-    "decl",
-    [
-        pytest.param(d, marks=pytest.mark.xfail(strict=True, reason=SCHEMA_BUG[d.scoped_name]))
-        if d.scoped_name in SCHEMA_BUG
-        else d
-        for d in TYPES
-    ],
-    ids=IDS,
-)
+@pytest.mark.parametrize("decl", TYPES, ids=IDS)
 def test_schema_parses_to_the_same_schema(decl: Any, tmp_path: Path) -> None:
     """The schema is IDL that compiles on its own, and describes the same type: its own schema
     (from the front end and the same schema writer) is the same text."""
@@ -738,18 +723,16 @@ def test_schema_parses_to_the_same_schema(decl: Any, tmp_path: Path) -> None:
 
 
 def test_schemas_pass_miro_idl(tmp_path: Path) -> None:
-    """All schemas (but the known bad one) at once through the command line."""
+    """All schemas at once through the command line."""
     files = []
     for d, cls in H.idl_types():
-        if d.scoped_name in SCHEMA_BUG:
-            continue
         path = tmp_path / (d.scoped_name.replace("::", "_") + ".idl")
         path.write_text(cls._data_schema)
         files.append(str(path))
     out = H.run_miro_idl("--ast-json", *files)
     assert out.returncode == 0, out.stderr
     names = {x["name"] for x in json.loads(out.stdout)["declarations"]}
-    assert {d.scoped_name for d in TYPES} - set(SCHEMA_BUG) <= names
+    assert {d.scoped_name for d in TYPES} <= names
 
 
 def test_hashes_of_different_types_differ() -> None:

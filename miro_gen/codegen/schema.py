@@ -5,11 +5,16 @@ bounds as literals, no includes or directives, no interfaces, and no leading `::
 that Foxglove's OMG IDL parser accepts, so that MCAP logs open in Foxglove. Declarations come in
 dependency order, each wrapped in its modules; a type used recursively (through a sequence) is
 forward-declared first. Exceptions are written as structs with the same members (only their data
-matters here). The runtime hashes this text to check types on the wire.
+matters here). A type declared inside a struct or union (`struct Outer { struct Inner {...} i; }`)
+is written inside `module Outer`, unless the schema also holds `struct Outer`: then it is written
+beside it as `Outer_Inner` (its Python class name), since the module would clash with the struct
+and Foxglove's parser takes no declarations inside structs. The runtime hashes this text to check
+types on the wire.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 from miro_gen.idl import ast
@@ -86,14 +91,33 @@ def _type_deps(t: Any) -> list[Any]:
     return []
 
 
-def _type(t: Any) -> str:
+# Whether a scope path names a struct, union or exception of the schema (whose nested types are
+# hoisted).
+DataScope = Callable[[tuple[str, ...]], bool]
+
+
+def _place(decl: Any, data_scope: DataScope) -> tuple[tuple[str, ...], str]:
+    """The modules a declaration is written in, and its name there."""
+    path = tuple(decl.scope_path)
+    for i in range(1, len(path)):
+        if data_scope(path[:i]):
+            return path[: i - 1], "_".join(path[i - 1 :])
+    return path[:-1], path[-1]
+
+
+def _scoped(decl: Any, data_scope: DataScope) -> str:
+    modules, name = _place(decl, data_scope)
+    return "::".join((*modules, name))
+
+
+def _type(t: Any, data_scope: DataScope) -> str:
     if isinstance(t, ast.BaseType):
         return "::".join(OBJECT_REF) if t.name == "Object" else t.name
     if isinstance(t, ast.StringType):
         base = "wstring" if t.wide else "string"
         return f"{base}<{t.bound}>" if t.bound is not None else base
     if isinstance(t, ast.SequenceType):
-        elem = _type(t.element)
+        elem = _type(t.element, data_scope)
         return f"sequence<{elem}, {t.bound}>" if t.bound is not None else f"sequence<{elem}>"
     if isinstance(t, ast.NamedType):
         decl = _completed(t.decl)
@@ -101,11 +125,11 @@ def _type(t: Any) -> str:
             isinstance(decl, ast.Forward) and decl.of == "interface"
         ):
             return "::".join(OBJECT_REF)
-        return str(decl.scoped_name)
+        return _scoped(decl, data_scope)
     if isinstance(t, ast.FixedType):
         return f"fixed<{t.digits}, {t.scale}>"
     if isinstance(t, ast.MapType):
-        inner = f"{_type(t.key)}, {_type(t.value)}"
+        inner = f"{_type(t.key, data_scope)}, {_type(t.value, data_scope)}"
         return f"map<{inner}, {t.bound}>" if t.bound is not None else f"map<{inner}>"
     raise TypeError(f"not a data type: {t!r}")  # pragma: no cover
 
@@ -114,9 +138,9 @@ def _dims(dims: list[int]) -> str:
     return "".join(f"[{d}]" for d in dims)
 
 
-def _label(v: Any) -> str:
-    if isinstance(v, ast.EnumValue):
-        return v.scoped_name
+def _label(v: Any, data_scope: DataScope) -> str:
+    if isinstance(v, ast.EnumValue):  # enumerators live in the scope that holds their enum
+        return "::".join((*_place(v.enum, data_scope)[0], v.name))
     if isinstance(v, bool):
         return "TRUE" if v else "FALSE"
     if isinstance(v, str):
@@ -128,25 +152,25 @@ def _label(v: Any) -> str:
     return str(v)
 
 
-def _body(decl: Any) -> str:
-    name = decl.name
+def _body(decl: Any, data_scope: DataScope) -> str:
+    name = _place(decl, data_scope)[1]
     if isinstance(decl, ast.Typedef):
-        return f"typedef {_type(decl.type)} {name}{_dims(decl.dims)};"
+        return f"typedef {_type(decl.type, data_scope)} {name}{_dims(decl.dims)};"
     if isinstance(decl, ast.Enum):
         return f"enum {name} {{\n" + ",\n".join(f"  {e.name}" for e in decl.enumerators) + "\n};"
     if isinstance(decl, (ast.Struct, ast.Exception_)):
         members = decl.members
         base = ""
         if isinstance(decl, ast.Struct) and decl.base is not None:
-            base = f" : {decl.base.scoped_name}"
-        lines = [f"  {_type(m.type)} {m.name}{_dims(m.dims)};" for m in members]
+            base = f" : {_scoped(_completed(decl.base), data_scope)}"
+        lines = [f"  {_type(m.type, data_scope)} {m.name}{_dims(m.dims)};" for m in members]
         return f"struct {name}{base} {{\n" + "\n".join(lines) + ("\n" if lines else "") + "};"
     if isinstance(decl, ast.Union_):
-        lines = [f"union {name} switch ({_type(decl.switch_type)}) {{"]
+        lines = [f"union {name} switch ({_type(decl.switch_type, data_scope)}) {{"]
         for c in decl.cases:
             for v in c.labels:
-                lines.append("  default:" if v is None else f"  case {_label(v)}:")
-            lines.append(f"    {_type(c.type)} {c.name}{_dims(c.dims)};")
+                lines.append("  default:" if v is None else f"  case {_label(v, data_scope)}:")
+            lines.append(f"    {_type(c.type, data_scope)} {c.name}{_dims(c.dims)};")
         lines.append("};")
         return "\n".join(lines)
     raise TypeError(f"not a data type: {decl!r}")  # pragma: no cover
@@ -165,13 +189,20 @@ def data_schema(decl: Any) -> str:
     """The flattened IDL text of `decl` (a struct, union or exception) and its dependencies."""
     c = _Collector()
     c.visit(decl)
+    data_types = {
+        tuple(d.scope_path)
+        for kind, d in c.order
+        if kind == "decl" and isinstance(d, ast.Struct | ast.Union_ | ast.Exception_)
+    }
+    data_scope: DataScope = data_types.__contains__
     parts: list[str] = []
     for kind, d in c.order:
         if kind == "objectref":
             parts.append(_wrap(OBJECT_REF[:-1], _OBJECT_REF_TEXT))
         elif kind == "forward":
             word = "union" if isinstance(d, ast.Union_) else "struct"
-            parts.append(_wrap(d.scope_path[:-1], f"{word} {d.name};"))
+            modules, name = _place(d, data_scope)
+            parts.append(_wrap(modules, f"{word} {name};"))
         else:
-            parts.append(_wrap(d.scope_path[:-1], _body(d)))
+            parts.append(_wrap(_place(d, data_scope)[0], _body(d, data_scope)))
     return "\n".join(parts) + "\n"
