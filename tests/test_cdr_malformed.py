@@ -269,13 +269,6 @@ def test_zero_size_elements_are_capped() -> None:
     assert len(decode_quickly(T.HasEmpty, data[:-4] + u32(1000)).seq) == 1000
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="bug: each sequence of zero-size elements (empty structs) may claim some 65,536 "
-    "elements whatever the data holds, and nesting multiplies the claims: 72 bytes of "
-    "sequence<sequence<Empty>> decode to a million objects (tens of MB, about a second), "
-    "4 KB to 65 million",
-)
 def test_nested_zero_size_elements_do_not_amplify() -> None:
     data = LE + u32(16) + u32(65536) * 16
     decode_quickly(T.EmptyRows, data)

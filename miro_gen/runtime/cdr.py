@@ -13,6 +13,7 @@ at offset `o` is `(4 - o) & (a - 1)`.
 from __future__ import annotations
 
 import sys
+import threading
 from array import array
 from collections.abc import Callable, Sequence
 from itertools import chain
@@ -52,9 +53,12 @@ EncodeErrors: Final = (
 _U32: Final = (Struct("<I"), Struct(">I"))
 _U32_LE: Final = _U32[LE]
 _U32_UNPACK: Final = (_U32[LE].unpack_from, _U32[BE].unpack_from)
-# Elements that may take no bytes at all (empty structs): a claimed count beyond the bytes left
-# plus this many is refused anyway, so a lying length cannot allocate millions of objects.
+# Elements that may take no bytes at all (empty structs) cannot be checked against the bytes
+# left: one decode may create this many of them in all (sequences of them nested in sequences
+# would otherwise multiply a lying length). Each thread's budget is refilled by
+# header_endianness(), which every decode of a whole value starts with.
 _EMPTY_ELEMENTS: Final = 1 << 16
+_zero_size = threading.local()
 _XCDR2_KINDS: Final = {6, 7, 8, 9, 10, 11}
 # struct format letters whose array type code differs ("i" is a C int in both on every platform
 # this runs on; "?" has no array type: booleans travel as bytes).
@@ -68,6 +72,7 @@ def pair(fmt: str) -> tuple[Struct, Struct]:
 
 def header_endianness(data: bytes | bytearray | memoryview) -> int:
     """Check the encapsulation header; the endianness index of the data that follows."""
+    _zero_size.left = _EMPTY_ELEMENTS
     if len(data) < 4:
         raise MARSHAL(f"{len(data)} bytes is too short for a CDR encapsulation header")
     kind = data[1]
@@ -146,8 +151,15 @@ def get_length(
     off += 4
     if bound is not None and n > bound:
         raise MARSHAL(f"{what}: {n} elements exceeds the bound {bound}")
-    if n and (n * min_size if min_size else n - _EMPTY_ELEMENTS) > len(data) - off:
+    if n and min_size and n * min_size > len(data) - off:
         raise MARSHAL(f"{what}: {n} elements cannot fit in the {len(data) - off} bytes left")
+    if n and not min_size:
+        left = getattr(_zero_size, "left", _EMPTY_ELEMENTS)
+        if n > left:
+            raise MARSHAL(
+                f"{what}: {n} empty elements is more than the {_EMPTY_ELEMENTS} one value may hold"
+            )
+        _zero_size.left = left - n
     return n, off
 
 
