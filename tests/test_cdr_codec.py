@@ -504,6 +504,9 @@ def test_union_properties() -> None:
             with pytest.raises(AttributeError):
                 getattr(back, name)
     assert U.ByEnumPartial(T.GREEN, None).serialize() == b"\x00\x01\x00\x00\x01\x00\x00\x00"
+    # A value given with a discriminator that selects no branch would be lost: refused.
+    with pytest.raises(BAD_PARAM, match="selects no branch"):
+        U.ByEnumPartial(T.GREEN, 5).serialize()
 
 
 def test_union_repr_and_equality() -> None:

@@ -451,7 +451,14 @@ class Builder:
                 dec_branches.append((cond, d_steps))
         item.encode = [
             *enc,
-            Step("union_branches", expr="_v._d", labels=enc_branches, body=default_enc, var="enc"),
+            Step(
+                "union_branches",
+                expr="_v._d",
+                labels=enc_branches,
+                body=default_enc,
+                var="enc",
+                what=what,
+            ),
         ]
         item.decode = [
             *dec_steps,

@@ -282,6 +282,15 @@ def get_chars(
     return list(str(data[off : off + n], "latin-1")), off + n
 
 
+def check_no_branch(value: Any, discriminator: Any, what: str) -> None:
+    """A union whose discriminator selects no branch holds no value (only the discriminator is
+    sent); one given anyway would be lost, so it is refused."""
+    if value is not None:
+        raise BAD_PARAM(
+            f"{what}: discriminator {discriminator!r} selects no branch, but a value is set"
+        )
+
+
 def check_length(values: Sequence[Any], n: int, what: str) -> None:
     """Arrays have a fixed length."""
     if count(values, what) != n:

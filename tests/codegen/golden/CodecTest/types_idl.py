@@ -3209,6 +3209,8 @@ def _enc_Expr(_buf: bytearray, _v: Expr) -> None:
                 _enc_Expr(_buf, _x2)
             except _cdr.NestedErrors as _x:
                 raise _cdr.nested_error("CodecTest::Expr.items", _x) from None
+    else:
+        _cdr.check_no_branch(_v._v, _d, "CodecTest::Expr")
 
 
 def _dec_Expr(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Expr, int]:
@@ -3421,6 +3423,8 @@ def _enc_Holder_Choice(_buf: bytearray, _v: Holder_Choice) -> None:
             _enc_Holder_Inner(_buf, _v._v)
         except _cdr.NestedErrors as _x:
             raise _cdr.nested_error("CodecTest::Holder::Choice.when_on", _x) from None
+    else:
+        _cdr.check_no_branch(_v._v, _d, "CodecTest::Holder::Choice")
 
 
 def _dec_Holder_Choice(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Holder_Choice, int]:
@@ -4094,6 +4098,8 @@ def _enc_KeywordUnion(_buf: bytearray, _v: KeywordUnion) -> None:
             _enc_Keywords(_buf, _v._v)
         except _cdr.NestedErrors as _x:
             raise _cdr.nested_error("CodecTest::KeywordUnion.str", _x) from None
+    else:
+        _cdr.check_no_branch(_v._v, _d, "CodecTest::KeywordUnion")
 
 
 def _dec_KeywordUnion(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[KeywordUnion, int]:

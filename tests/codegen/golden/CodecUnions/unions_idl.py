@@ -190,6 +190,8 @@ def _enc_ByEnum(_buf: bytearray, _v: ByEnum) -> None:
             ) from None
     elif _d in (_m_CodecTest_base_idl.Color.GREEN, _m_CodecTest_base_idl.Color.BLUE,):
         _cdr.put_string(_buf, _v._v, None, "CodecUnions::ByEnum.gb")
+    else:
+        _cdr.check_no_branch(_v._v, _d, "CodecUnions::ByEnum")
 
 
 def _dec_ByEnum(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[ByEnum, int]:
@@ -439,6 +441,8 @@ def _enc_ByEnumPartial(_buf: bytearray, _v: ByEnumPartial) -> None:
             ) from None
     elif _d in (_m_CodecTest_base_idl.Color.BLUE,):
         _cdr.put_string(_buf, _v._v, None, "CodecUnions::ByEnumPartial.b")
+    else:
+        _cdr.check_no_branch(_v._v, _d, "CodecUnions::ByEnumPartial")
 
 
 def _dec_ByEnumPartial(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[ByEnumPartial, int]:
@@ -839,6 +843,8 @@ def _enc_ByBool(_buf: bytearray, _v: ByBool) -> None:
             ) from None
     elif _d in (False,):
         _cdr.put_string(_buf, _v._v, None, "CodecUnions::ByBool.no")
+    else:
+        _cdr.check_no_branch(_v._v, _d, "CodecUnions::ByBool")
 
 
 def _dec_ByBool(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[ByBool, int]:
@@ -1054,6 +1060,8 @@ def _enc_ByBoolTrue(_buf: bytearray, _v: ByBoolTrue) -> None:
                 _x,
                 ("CodecUnions::ByBoolTrue.yes", "i", lambda: (_v._v,)),
             ) from None
+    else:
+        _cdr.check_no_branch(_v._v, _d, "CodecUnions::ByBoolTrue")
 
 
 def _dec_ByBoolTrue(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[ByBoolTrue, int]:
@@ -1599,6 +1607,8 @@ def _enc_ByULong(_buf: bytearray, _v: ByULong) -> None:
             ) from None
     elif _d in (4294967295,):
         _cdr.put_string(_buf, _v._v, None, "CodecUnions::ByULong.max")
+    else:
+        _cdr.check_no_branch(_v._v, _d, "CodecUnions::ByULong")
 
 
 def _dec_ByULong(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[ByULong, int]:
@@ -2032,6 +2042,8 @@ def _enc_ByOctet(_buf: bytearray, _v: ByOctet) -> None:
                 _x,
                 ("CodecUnions::ByOctet.max", "d", lambda: (_v._v,)),
             ) from None
+    else:
+        _cdr.check_no_branch(_v._v, _d, "CodecUnions::ByOctet")
 
 
 def _dec_ByOctet(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[ByOctet, int]:
@@ -3113,6 +3125,8 @@ def _enc_Branches(_buf: bytearray, _v: Branches) -> None:
                 _x,
                 ("CodecUnions::Branches.d2", "d", lambda: (_v._v,)),
             ) from None
+    else:
+        _cdr.check_no_branch(_v._v, _d, "CodecUnions::Branches")
 
 
 def _dec_Branches(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Branches, int]:
