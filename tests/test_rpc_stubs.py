@@ -632,6 +632,22 @@ def test_not_implemented_error_is_no_implement(modes: tuple[Any, Any]) -> None:
     assert "later" in info.value.message and "no_raises" in info.value.message
 
 
+def test_servant_deferring_to_the_skeleton_is_no_implement(
+    gen: SimpleNamespace, inv: CountingInvoker
+) -> None:
+    """A servant whose method calls the skeleton's (abstract) one: NO_IMPLEMENT, not a None
+    result that fails to encode."""
+
+    class Deferring(gen.impl.Modes):
+        def get_value(self) -> int:
+            return super(gen.impl.Modes, self).get_value()
+
+    stub = inv.stub(gen.Rpc.Modes, Deferring())
+    with pytest.raises(NO_IMPLEMENT) as info:
+        stub.get_value()
+    assert "get_value" in info.value.message
+
+
 def test_unknown_operation_is_bad_operation(gen: SimpleNamespace, inv: CountingInvoker) -> None:
     servant = gen.impl.Right()
     stub = inv.stub(gen.Rpc.Right, servant)

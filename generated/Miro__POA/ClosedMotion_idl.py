@@ -41,6 +41,7 @@ class ClosedMotion(_rpc.Servant):
         @throw EOutOfBounds angle is outside -PI < angle <= PI.
         @throw EDevIO The command could not be sent to the device.
         """
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_rotateToPosition(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         try:
@@ -66,6 +67,7 @@ class ClosedMotion(_rpc.Servant):
         @throw EOutOfBounds angle is outside -2 PI < angle <= 2 PI.
         @throw EDevIO The command could not be sent to the device.
         """
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_rotateRelative(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         try:
@@ -91,6 +93,7 @@ class ClosedMotion(_rpc.Servant):
         drive in one closed motion (a few metres on most bases).
         @throw EDevIO The command could not be sent to the device.
         """
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_translateRelative(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         try:

@@ -47,6 +47,7 @@ class DifferentialMotion(_m_Miro__POA_Motion_idl.Motion):
         @throw EOutOfBounds A velocity is outside the limits of getMinMaxLRVelocity.
         @throw EDevIO The command could not be sent to the device.
         """
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_setLRVelocity(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         try:
@@ -72,6 +73,7 @@ class DifferentialMotion(_m_Miro__POA_Motion_idl.Motion):
         @param minRTranslation Lowest right-wheel velocity in mm/s.
         @param maxRTranslation Highest right-wheel velocity in mm/s.
         """
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_getMinMaxLRVelocity(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _results = self.getMinMaxLRVelocity()
@@ -113,6 +115,7 @@ class DifferentialMotion(_m_Miro__POA_Motion_idl.Motion):
         @param left Commanded left-wheel velocity in mm/s.
         @param right Commanded right-wheel velocity in mm/s.
         """
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_getTargetLRVelocity(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _results = self.getTargetLRVelocity()

@@ -28,6 +28,7 @@ class Example(_rpc.Servant):
     @_abc.abstractmethod
     def setData(self, a: float, b: float) -> None:
         """Set the two values the server keeps."""
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_setData(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         try:
@@ -47,6 +48,7 @@ class Example(_rpc.Servant):
     @_abc.abstractmethod
     def getData(self) -> _m_Miro_Example_idl.ExampleStructIDL:
         """Return the values the server keeps."""
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_getData(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getData()

@@ -32,6 +32,7 @@ class Gps(_rpc.Servant):
 
         Fields not received yet are NaN or 0 (see GpsDataIDL).
         """
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_getData(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getData()
@@ -52,6 +53,7 @@ class Gps(_rpc.Servant):
         @throw ETimeOut No new reading arrived within the server's timeout
         (a few seconds; receivers report at about 1 Hz).
         """
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_getWaitData(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getWaitData()

@@ -29,6 +29,7 @@ class InertialSensor(_rpc.Servant):
     @_abc.abstractmethod
     def getData(self) -> _m_Miro_InertialSensor_idl.InertialDataIDL:
         """Return the latest reading."""
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_getData(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getData()
@@ -49,6 +50,7 @@ class InertialSensor(_rpc.Servant):
         @throw ETimeOut No new reading arrived within the server's timeout
         (about one second).
         """
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_getWaitData(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getWaitData()

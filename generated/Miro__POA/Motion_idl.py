@@ -47,6 +47,7 @@ class Motion(_rpc.Servant):
 
         @throw EDevIO The command could not be sent to the device.
         """
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_limp(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         self.limp()
@@ -63,6 +64,7 @@ class Motion(_rpc.Servant):
         by getMinMaxVelocity.
         @throw EDevIO The command could not be sent to the device.
         """
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_setVelocity(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         try:
@@ -91,6 +93,7 @@ class Motion(_rpc.Servant):
         @param minRotation Lowest rotational velocity in rad/s (negative: clockwise).
         @param maxRotation Highest rotational velocity in rad/s.
         """
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_getMinMaxVelocity(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _results = self.getMinMaxVelocity()
@@ -128,6 +131,7 @@ class Motion(_rpc.Servant):
         getMinMaxVelocity (mm/s, rad/s). It is the target, not a
         measurement: see Odometry::getVelocity for that.
         """
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_getTargetVelocity(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getTargetVelocity()

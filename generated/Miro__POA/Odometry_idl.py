@@ -44,6 +44,7 @@ class Odometry(_rpc.Servant):
 
         @param position The robot's pose in world coordinates (mm, rad).
         """
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_setPosition(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         try:
@@ -67,6 +68,7 @@ class Odometry(_rpc.Servant):
 
         @param deltaPosition Correction in world coordinates (mm, rad).
         """
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_updatePosition(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         try:
@@ -83,6 +85,7 @@ class Odometry(_rpc.Servant):
     @_abc.abstractmethod
     def getPosition(self) -> _m_Miro_Position_idl.PositionIDL:
         """Return the latest pose of the robot (mm, rad)."""
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_getPosition(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getPosition()
@@ -102,6 +105,7 @@ class Odometry(_rpc.Servant):
 
         @throw ETimeOut No report arrived in time.
         """
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_getWaitPosition(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getWaitPosition()
@@ -124,6 +128,7 @@ class Odometry(_rpc.Servant):
         It gives a frame that does not jump, for stamping locally
         perceived data; it only drifts with the odometry error.
         """
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_getRawPosition(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getRawPosition()
@@ -143,6 +148,7 @@ class Odometry(_rpc.Servant):
 
         @throw ETimeOut No report arrived in time.
         """
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_getWaitRawPosition(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getWaitRawPosition()
@@ -159,6 +165,7 @@ class Odometry(_rpc.Servant):
     @_abc.abstractmethod
     def getVelocity(self) -> _m_Miro_Velocity_idl.VelocityIDL:
         """Return the latest measured velocity (mm/s, rad/s)."""
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_getVelocity(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getVelocity()
@@ -178,6 +185,7 @@ class Odometry(_rpc.Servant):
 
         @throw ETimeOut No report arrived in time.
         """
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_getWaitVelocity(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getWaitVelocity()
@@ -194,6 +202,7 @@ class Odometry(_rpc.Servant):
     @_abc.abstractmethod
     def getStatus(self) -> _m_Miro_MotionStatus_idl.MotionStatusIDL:
         """Return the latest complete report: time stamp, pose and velocity."""
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_getStatus(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getStatus()
@@ -213,6 +222,7 @@ class Odometry(_rpc.Servant):
 
         @throw ETimeOut No report arrived in time.
         """
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_getWaitStatus(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getWaitStatus()

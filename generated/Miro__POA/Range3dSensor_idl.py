@@ -24,6 +24,7 @@ class Range3dSensor(_rpc.Servant):
     @_abc.abstractmethod
     def getDescription(self) -> _m_Miro_Range3dSensor_idl.Range3dDescriptionIDL:
         """Return the properties and mounting of the sensor."""
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_getDescription(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getDescription()
@@ -40,6 +41,7 @@ class Range3dSensor(_rpc.Servant):
     @_abc.abstractmethod
     def getScan(self) -> _m_Miro_Range3dSensor_idl.Range3dScanEventIDL:
         """Return the latest scan."""
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_getScan(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getScan()
@@ -59,6 +61,7 @@ class Range3dSensor(_rpc.Servant):
 
         @throw ETimeOut No new scan arrived within about five scan periods.
         """
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_getWaitScan(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getWaitScan()

@@ -37,6 +37,7 @@ class RangeSensor(_rpc.Servant):
     @_abc.abstractmethod
     def getScanDescription(self) -> _m_Miro_ScanDescription_idl.ScanDescriptionIDL:
         """Return the layout of the sensor: its groups, positions and ranges."""
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_getScanDescription(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getScanDescription()
@@ -53,6 +54,7 @@ class RangeSensor(_rpc.Servant):
     @_abc.abstractmethod
     def getFullScan(self) -> _m_Miro_RangeEvent_idl.RangeScanEventIDL:
         """Return the latest readings of all groups."""
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_getFullScan(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getFullScan()
@@ -72,6 +74,7 @@ class RangeSensor(_rpc.Servant):
 
         @throw ETimeOut No new scan arrived within about five report periods.
         """
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_getWaitFullScan(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getWaitFullScan()
@@ -93,6 +96,7 @@ class RangeSensor(_rpc.Servant):
 
         @throw EOutOfBounds There is no group with that number.
         """
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_getGroup(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         try:
@@ -125,6 +129,7 @@ class RangeSensor(_rpc.Servant):
         @throw ETimeOut No new readings of the group arrived within about
         five report periods.
         """
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_getWaitGroup(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         try:

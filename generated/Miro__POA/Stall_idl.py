@@ -31,6 +31,7 @@ class Stall(_rpc.Servant):
     @_abc.abstractmethod
     def isStalled(self) -> bool:
         """Return TRUE when the drive is stalled."""
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_isStalled(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.isStalled()
@@ -53,6 +54,7 @@ class Stall(_rpc.Servant):
 
         @throw EDevIO The command could not be sent to the device.
         """
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_unstall(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         self.unstall()

@@ -38,6 +38,7 @@ class SynchroMotion(_m_Miro__POA_Motion_idl.Motion):
 
         @throw EDevIO The command could not be sent to the device.
         """
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_rotateLimp(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         self.rotateLimp()
@@ -55,6 +56,7 @@ class SynchroMotion(_m_Miro__POA_Motion_idl.Motion):
         @throw EOutOfBounds The velocity is outside the limits of getMinMaxVelocity.
         @throw EDevIO The command could not be sent to the device.
         """
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_rotate(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         try:
@@ -76,6 +78,7 @@ class SynchroMotion(_m_Miro__POA_Motion_idl.Motion):
 
         @throw EDevIO The command could not be sent to the device.
         """
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_translateLimp(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         self.translateLimp()
@@ -93,6 +96,7 @@ class SynchroMotion(_m_Miro__POA_Motion_idl.Motion):
         @throw EOutOfBounds The velocity is outside the limits of getMinMaxVelocity.
         @throw EDevIO The command could not be sent to the device.
         """
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_translate(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         try:

@@ -27,6 +27,7 @@ class myExample(_rpc.Servant):
 
         @return The characters and their count.
         """
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_getString(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getString()

@@ -43,6 +43,7 @@ class Person(_rpc.Servant):
         @param hair Hair colour as a one-letter code.
         @param age Age in whole years.
         """
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_setTraits(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         try:
@@ -64,6 +65,7 @@ class Person(_rpc.Servant):
     @_abc.abstractmethod
     def getHeight(self) -> float:
         """Return the height in metres."""
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_getHeight(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getHeight()
@@ -84,6 +86,7 @@ class Person(_rpc.Servant):
     @_abc.abstractmethod
     def getWaist(self) -> float:
         """Return the waist circumference in metres."""
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_getWaist(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getWaist()
@@ -104,6 +107,7 @@ class Person(_rpc.Servant):
     @_abc.abstractmethod
     def getHair(self) -> str:
         """Return the hair colour code."""
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_getHair(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getHair()
@@ -123,6 +127,7 @@ class Person(_rpc.Servant):
     @_abc.abstractmethod
     def getAge(self) -> int:
         """Return the age in whole years."""
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_getAge(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getAge()
@@ -143,6 +148,7 @@ class Person(_rpc.Servant):
     @_abc.abstractmethod
     def getTraits(self) -> _m__GlobalIDL_Person_idl.PersonTraitsIDL:
         """Return all traits at once."""
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_getTraits(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getTraits()

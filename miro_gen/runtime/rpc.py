@@ -15,7 +15,7 @@ import queue
 import threading
 from abc import ABC
 from collections.abc import Callable
-from typing import Any, ClassVar, NamedTuple, Protocol
+from typing import Any, ClassVar, NamedTuple, Protocol, TypeVar
 
 from miro_gen.exceptions import (
     BAD_OPERATION,
@@ -36,6 +36,8 @@ from miro_gen.runtime.cdr import (
     pair,
     put_string,
 )
+
+StubT = TypeVar("StubT", bound="Stub")
 
 DEFAULT_TIMEOUT = 10.0  # seconds a call waits for its reply unless the stub says otherwise
 
@@ -150,7 +152,9 @@ class Stub:
         """Invoke a oneway operation: no reply is awaited."""
         self._invoker.invoke(self._ref, operation, body, oneway=True, timeout=self._timeout)
 
-    def _narrow(self, cls: type[Stub]) -> Any:
+    def _narrow(self, cls: type[StubT]) -> StubT:
+        """This reference as a stub of `cls` (e.g. an `Object` received, as the interface it
+        is known to be). Not checked here: a wrong guess fails with BAD_OPERATION on use."""
         return cls(self._ref, self._invoker, self._timeout)
 
     def __repr__(self) -> str:
@@ -271,7 +275,7 @@ class LocalInvoker:
                     return ObjectRef(servant._repo_id, self.endpoint, key)
         return self.register(servant)
 
-    def stub(self, cls: type[Any], servant: Servant) -> Any:
+    def stub(self, cls: type[StubT], servant: Servant) -> StubT:
         """A stub of `cls` talking to `servant` through this invoker."""
         return cls(self.reference_for(servant), self)
 

@@ -29,6 +29,7 @@ class Holder(_rpc.Servant):
     @_abc.abstractmethod
     def get(self, m: _m_CodecTest_types_idl.Holder_Mode) -> _m_CodecTest_types_idl.Holder_Inner:
         """CodecTest::Holder::get"""
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_get(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         try:
