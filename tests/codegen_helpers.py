@@ -16,8 +16,6 @@ from __future__ import annotations
 import dataclasses
 import enum
 import importlib
-import os
-import subprocess
 import sys
 import types
 from collections.abc import Iterator
@@ -25,12 +23,14 @@ from functools import cache
 from pathlib import Path
 from typing import Any
 
+from hypothesis import HealthCheck, settings
 from hypothesis import strategies as st
+from miro_cli import REPO as REPO  # re-exported: the tests use H.REPO, H.run_miro_idl
+from miro_cli import run_miro_idl as run_miro_idl
 
 from miro_gen.idl import ast, compile_idl
 from miro_gen.runtime.cdr import IdlUnion
 
-REPO = Path(__file__).resolve().parents[1]
 CODEGEN = REPO / "tests" / "codegen"
 GOLDEN = CODEGEN / "golden"
 REFUSED = CODEGEN / "refused"
@@ -543,29 +543,18 @@ def cyclone() -> Cyclone:
 
 
 # =============================================================================================
-# running miro-idl
+# running miro-idl, hypothesis settings
 # =============================================================================================
 
-
-def run_miro_idl(
-    *args: str, cwd: Path | None = None, hash_seed: str | None = None
-) -> subprocess.CompletedProcess[str]:
-    """`python -m miro_gen.cli.idl ARGS` from this checkout, in `cwd` (default: the repository),
-    with PYTHONHASHSEED set when `hash_seed` is given."""
-    env = dict(os.environ)
-    env["PYTHONPATH"] = str(REPO) + os.pathsep + env.get("PYTHONPATH", "")
-    env.pop("MIRO_DEBUG", None)
-    if hash_seed is not None:
-        env["PYTHONHASHSEED"] = hash_seed
-    return subprocess.run(
-        [sys.executable, "-m", "miro_gen.cli.idl", *args],
-        cwd=cwd or REPO,
-        env=env,
-        capture_output=True,
-        text=True,
-        errors="replace",
-        timeout=120,
-    )
+# What the codec property tests share: reproducible, no example database, no deadline (values
+# can be large); each test sets max_examples.
+SETTINGS = settings(
+    max_examples=30,
+    derandomize=True,
+    deadline=None,
+    database=None,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
+)
 
 
 def tree(folder: Path) -> dict[str, bytes]:

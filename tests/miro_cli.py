@@ -11,12 +11,15 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def run_miro_idl(
-    *args: str, cwd: Path | None = None, timeout: float = 120
+    *args: str, cwd: Path | None = None, timeout: float = 120, hash_seed: str | None = None
 ) -> subprocess.CompletedProcess[str]:
-    """`miro-idl ARGS` in `cwd` (default: the repository), from this checkout, no debug output."""
+    """`miro-idl ARGS` in `cwd` (default: the repository), from this checkout, no debug output;
+    with PYTHONHASHSEED set when `hash_seed` is given."""
     env = dict(os.environ)
     env["PYTHONPATH"] = str(REPO) + os.pathsep + env.get("PYTHONPATH", "")
     env.pop("MIRO_DEBUG", None)
+    if hash_seed is not None:
+        env["PYTHONHASHSEED"] = hash_seed
     return subprocess.run(
         [sys.executable, "-m", "miro_gen.cli.idl", *args],
         cwd=cwd or REPO,

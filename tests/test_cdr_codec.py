@@ -27,7 +27,7 @@ from typing import Any
 
 import codegen_helpers as H
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from miro_gen.exceptions import BAD_PARAM
@@ -38,13 +38,7 @@ U = H.CodecUnions
 TYPES = H.data_types()
 IDS = [d.scoped_name for d in TYPES]
 
-SETTINGS = settings(
-    max_examples=30,
-    derandomize=True,
-    deadline=None,
-    database=None,
-    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
-)
+SETTINGS = settings(H.SETTINGS, max_examples=30)
 
 # =============================================================================================
 # golden output

@@ -24,7 +24,7 @@ from typing import Any
 
 import codegen_helpers as H
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from miro_gen.exceptions import BAD_PARAM, MARSHAL
@@ -39,13 +39,7 @@ BE = b"\x00\x00\x00\x00"
 MAX_SECONDS = 0.5
 MAX_PEAK = 10 * 1024 * 1024
 
-SETTINGS = settings(
-    max_examples=8,
-    derandomize=True,
-    deadline=None,
-    database=None,
-    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
-)
+SETTINGS = settings(H.SETTINGS, max_examples=8)
 
 
 def decode(cls: Any, data: bytes) -> Any:

@@ -19,7 +19,7 @@ from typing import Any
 
 import codegen_helpers as H
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 T = H.CodecTest
@@ -29,13 +29,7 @@ CYCLONE_CANNOT = {"CodecUnions::ByBool"}
 TYPES = [d for d in H.data_types() if d.scoped_name not in CYCLONE_CANNOT]
 IDS = [d.scoped_name for d in TYPES]
 
-SETTINGS = settings(
-    max_examples=30,
-    derandomize=True,
-    deadline=None,
-    database=None,
-    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
-)
+SETTINGS = settings(H.SETTINGS, max_examples=30)
 
 
 def test_cyclone_represents_every_type_but_one() -> None:
