@@ -1,0 +1,1 @@
+"""The ZeroMQ transport: options, naming, servers, clients, event channels, the reactor."""

@@ -1,0 +1,157 @@
+"""The options every Miro service accepts, removed from `argv` before the service sees the rest.
+
+As in Miro, a service's `main(argc, argv)` hands its arguments to the middleware first, which
+takes what it knows and leaves the service's own ones. The contract (DESIGN.md, "Command line"):
+
+* `--naming tcp://HOST:PORT` (env `MIRO_NAMING`), or the manual's
+  `-ORBInitRef NameService=iioploc://HOST:PORT/NameService` and `...=corbaloc:iiop:HOST:PORT/...`
+  (env `NameServiceIOR`): where the naming service is; default `tcp://127.0.0.1:2809`;
+* other `-ORB*` options (TAO's) are accepted and ignored, with a one-line notice each;
+* `-MNC NAME` / `-MiroNamingContext NAME`: the naming context, default the host name;
+* `-MLL N` / `-MiroLogLevel N`: Miro's log level, 0 emergency ... 4 warning (default) ... 9 prattle;
+* `-MLF CAT [CAT ...]` / `-MiroLogFilter CAT [CAT ...]`: the log categories to show (default all);
+* `-MCF FILE` / `-MiroConfigFile FILE`: the run-time parameter document;
+* `--host HOST` (env `MIRO_HOST`): the address other machines reach this process at.
+
+Options may also be written `--naming=URL`. A missing or malformed value raises `UsageError`
+with a message naming the option.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import socket
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+DEFAULT_NAMING = "tcp://127.0.0.1:2809"
+DEFAULT_LOG_LEVEL = 4
+
+# iioploc://HOST:PORT/NameService, corbaloc:iiop:HOST:PORT/NameService (also corbaloc::HOST:PORT,
+# iiop versions like 1.2@HOST), optionally after "NameService=".
+_CORBALOC = re.compile(
+    r"^(?:NameService=)?(?:iioploc://|corbaloc:(?:iiop)?:)(?:\d+\.\d+@)?"
+    r"(?P<host>\[[^\]]+\]|[^:/\[\]]+)(?::(?P<port>\d+))?(?:/.*)?$"
+)
+_TCP = re.compile(r"^tcp://(?P<host>\[[^\]]+\]|[^:/\[\]]+):(?P<port>\d+)$")
+_IIOP_DEFAULT_PORT = 2809  # the port corbaloc implies when none is given
+
+
+class UsageError(ValueError):
+    """A common option is missing its value or has one that makes no sense."""
+
+
+@dataclass
+class CommonOptions:
+    """What the common options say (the defaults when absent)."""
+
+    naming: str = DEFAULT_NAMING
+    naming_context: str = field(default_factory=socket.gethostname)
+    log_level: int = DEFAULT_LOG_LEVEL
+    log_filter: list[str] = field(default_factory=list)  # empty: every category
+    config_file: str | None = None
+    host: str | None = None
+    ignored: list[str] = field(default_factory=list)  # -ORB options given, for the notice
+
+
+def naming_endpoint(text: str) -> str:
+    """`tcp://HOST:PORT` for a naming-service address in any of the accepted spellings."""
+    text = text.strip()
+    m = _TCP.match(text)
+    if m:
+        return text
+    m = _CORBALOC.match(text)
+    if m:
+        port = m.group("port") or str(_IIOP_DEFAULT_PORT)
+        return f"tcp://{m.group('host')}:{port}"
+    raise UsageError(
+        f"cannot read the naming service address {text!r}: expected tcp://HOST:PORT or "
+        "iioploc://HOST:PORT/NameService"
+    )
+
+
+def parse_common_options(
+    argv: Sequence[str], environ: Mapping[str, str] | None = None
+) -> tuple[CommonOptions, list[str]]:
+    """The common options in `argv` (program name excluded), and the arguments left over."""
+    env = os.environ if environ is None else environ
+    opts = CommonOptions()
+    if env.get("NameServiceIOR"):
+        opts.naming = naming_endpoint(env["NameServiceIOR"])
+    if env.get("MIRO_NAMING"):
+        opts.naming = naming_endpoint(env["MIRO_NAMING"])
+    if env.get("MIRO_HOST"):
+        opts.host = env["MIRO_HOST"]
+    rest: list[str] = []
+    args = list(argv)
+    i = 0
+
+    def value(name: str) -> str:
+        nonlocal i
+        if i + 1 >= len(args):
+            raise UsageError(f"{name} needs a value")
+        i += 1
+        return args[i]
+
+    while i < len(args):
+        arg = args[i]
+        name, eq, inline = arg.partition("=") if arg.startswith("--") else (arg, "", "")
+        if name == "--":  # everything after belongs to the service
+            rest += args[i:]
+            break
+        if name in ("--naming", "--host") or arg in ("-MNC", "-MiroNamingContext", "-MCF"):
+            text = inline if eq else value(name)
+            if name == "--naming":
+                opts.naming = naming_endpoint(text)
+            elif name == "--host":
+                opts.host = text
+            elif name == "-MCF":
+                opts.config_file = text
+            else:
+                opts.naming_context = _context(text)
+        elif arg == "-MiroConfigFile":
+            opts.config_file = value(arg)
+        elif arg in ("-MLL", "-MiroLogLevel"):
+            opts.log_level = _level(value(arg), arg)
+        elif arg in ("-MLF", "-MiroLogFilter"):
+            cats = []
+            while i + 1 < len(args) and not args[i + 1].startswith("-"):
+                i += 1
+                cats.append(args[i])
+            if not cats:
+                raise UsageError(f"{arg} needs at least one category (such as MIRO)")
+            opts.log_filter += cats
+        elif arg == "-ORBInitRef":
+            ref = value(arg)
+            if ref.startswith("NameService="):
+                opts.naming = naming_endpoint(ref)
+            else:
+                opts.ignored.append(f"{arg} {ref}")
+        elif arg.startswith("-ORB"):
+            # TAO's options take one value, except the few written -ORBOption=value.
+            if "=" not in arg and i + 1 < len(args) and not args[i + 1].startswith("-"):
+                opts.ignored.append(f"{arg} {value(arg)}")
+            else:
+                opts.ignored.append(arg)
+        else:
+            rest.append(arg)
+        i += 1
+    return opts, rest
+
+
+def _level(text: str, option: str) -> int:
+    try:
+        level = int(text)
+    except ValueError:
+        raise UsageError(f"{option} takes a level from 0 to 9, not {text!r}") from None
+    if not 0 <= level <= 9:
+        raise UsageError(f"{option} takes a level from 0 to 9, not {level}")
+    return level
+
+
+def _context(text: str) -> str:
+    parts = [p for p in text.split("/") if p]
+    if not parts:
+        raise UsageError(f"the naming context {text!r} is empty")
+    return "/".join(parts)
