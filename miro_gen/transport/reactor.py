@@ -1,0 +1,237 @@
+"""The reactor: one thread that dispatches ZeroMQ sockets, file descriptors and timers.
+
+Like ACE's reactor in Miro, a process has one, and everything that reacts to input runs on it:
+a socket or descriptor becomes readable and its handler runs; a timer expires and its handler
+runs. Handlers must not block (a blocking servant runs on the server's worker pool instead).
+Other threads hand work to the reactor with `call_soon`, which wakes it through a socket pair;
+a ZeroMQ socket must only be used by the thread that owns it, so this is how they reach it.
+
+A handler that raises is logged (category MIRO) and the reactor goes on: one bad handler must
+not stop a service.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import heapq
+import itertools
+import math
+import socket
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from typing import Any
+
+import zmq
+
+from miro_gen.log import logger
+
+_log = logger("MIRO")
+
+# What can be registered: a ZeroMQ socket, a file descriptor, or an object with fileno().
+Source = Any
+TimerHandler = Callable[[Any], object]
+
+
+class _Timer:
+    __slots__ = ("arg", "cancelled", "due", "handler", "id", "interval")
+
+    def __init__(self, timer_id: int, due: float, interval: float, handler: Any, arg: Any) -> None:
+        self.id = timer_id
+        self.due = due
+        self.interval = interval
+        self.handler = handler
+        self.arg = arg
+        self.cancelled = False
+
+    def __lt__(self, other: _Timer) -> bool:
+        return (self.due, self.id) < (other.due, other.id)
+
+
+class Reactor:
+    """Dispatches sockets, descriptors and timers on the thread that calls `run()`."""
+
+    def __init__(self, context: zmq.Context[Any] | None = None) -> None:
+        self.context = context if context is not None else zmq.Context.instance()
+        self._poller = zmq.Poller()
+        self._handlers: dict[Any, Callable[[], object]] = {}
+        self._timers: list[_Timer] = []
+        self._timer_by_id: dict[int, _Timer] = {}
+        self._ids = itertools.count(1)
+        self._calls: deque[tuple[Callable[..., object], tuple[Any, ...]]] = deque()
+        self._lock = threading.Lock()
+        self._wake_r, self._wake_w = socket.socketpair()
+        self._wake_r.setblocking(False)
+        self._wake_w.setblocking(False)
+        self._woken = False
+        self._poller.register(self._wake_r.fileno(), zmq.POLLIN)
+        self._running = False
+        self._stopping = False
+        self._thread: threading.Thread | None = None
+        self._closed = False
+
+    # ---- sockets and descriptors ---------------------------------------------------------------
+
+    def register(self, source: Source, handler: Callable[[], object]) -> None:
+        """Call `handler()` whenever `source` (a ZeroMQ socket, a file descriptor or an object
+        with `fileno()`) has input. Call from the reactor thread, or before `run()`."""
+        key = _key(source)
+        self._handlers[key] = handler
+        self._poller.register(key, zmq.POLLIN)
+
+    def unregister(self, source: Source) -> None:
+        key = _key(source)
+        if self._handlers.pop(key, None) is not None:
+            self._poller.unregister(key)
+
+    # ---- timers ---------------------------------------------------------------------------------
+
+    def schedule_timer(self, delay: float, interval: float, handler: Any, arg: Any = None) -> int:
+        """Call `handler(arg)` (or `handler.handle_timeout(arg)`, as ACE does) after `delay`
+        seconds, then every `interval` seconds if `interval` > 0. Returns the timer's id for
+        `cancel_timer`. Safe from any thread. A periodic timer keeps its rate: a late run does
+        not push the next ones back, and runs missed entirely are skipped, not bunched."""
+        if delay < 0 or interval < 0 or math.isnan(delay) or math.isnan(interval):
+            raise ValueError("timer delay and interval must be zero or more seconds")
+        fn = getattr(handler, "handle_timeout", handler)
+        if not callable(fn):
+            raise TypeError("a timer handler is a callable or has handle_timeout(arg)")
+        timer = _Timer(next(self._ids), time.monotonic() + delay, interval, fn, arg)
+        with self._lock:
+            self._timer_by_id[timer.id] = timer
+            heapq.heappush(self._timers, timer)
+        self._wake()
+        return timer.id
+
+    def cancel_timer(self, timer_id: int) -> bool:
+        """Stop a timer; whether it was still scheduled. Safe from any thread."""
+        with self._lock:
+            timer = self._timer_by_id.pop(timer_id, None)
+        if timer is None:
+            return False
+        timer.cancelled = True
+        return True
+
+    # ---- calls from other threads ---------------------------------------------------------------
+
+    def call_soon(self, fn: Callable[..., object], *args: Any) -> None:
+        """Run `fn(*args)` on the reactor thread, soon, in the order of the calls."""
+        self._calls.append((fn, args))
+        self._wake()
+
+    def in_reactor_thread(self) -> bool:
+        return self._thread is threading.current_thread()
+
+    # ---- running --------------------------------------------------------------------------------
+
+    def run(self) -> None:
+        """Dispatch until `stop()`."""
+        if self._running:
+            raise RuntimeError("the reactor is already running")
+        self._running = True
+        self._stopping = False
+        self._thread = threading.current_thread()
+        try:
+            while not self._stopping:
+                self._turn()
+        finally:
+            self._running = False
+            self._thread = None
+
+    def run_in_thread(self, name: str = "miro-reactor") -> threading.Thread:
+        """Start `run()` on a daemon thread of its own; the thread."""
+        ready = threading.Event()
+
+        def main() -> None:
+            self.call_soon(ready.set)
+            self.run()
+
+        t = threading.Thread(target=main, name=name, daemon=True)
+        t.start()
+        ready.wait(5)
+        return t
+
+    def stop(self) -> None:
+        """Make `run()` return after the current turn. Safe from any thread."""
+        self._stopping = True
+        self._wake()
+
+    def close(self) -> None:
+        """Release the wake-up sockets (after `run()` has returned)."""
+        if not self._closed:
+            self._closed = True
+            self._wake_r.close()
+            self._wake_w.close()
+
+    def _turn(self) -> None:
+        timeout = self._run_due_timers()
+        if self._calls or self._stopping:
+            timeout = 0
+        events = self._poller.poll(timeout)
+        for key, _ in events:
+            if key == self._wake_r.fileno():
+                self._drain_wakeups()
+                continue
+            handler = self._handlers.get(key)
+            if handler is not None:
+                self._safely(handler)
+        while self._calls:
+            fn, args = self._calls.popleft()
+            self._safely(fn, *args)
+
+    def _run_due_timers(self) -> int | None:
+        """Run the timers that are due; milliseconds until the next one (None: no timer)."""
+        now = time.monotonic()
+        due: list[_Timer] = []
+        with self._lock:
+            while self._timers and (self._timers[0].cancelled or self._timers[0].due <= now):
+                timer = heapq.heappop(self._timers)
+                if timer.cancelled:
+                    continue
+                due.append(timer)
+                if timer.interval > 0:
+                    missed = math.floor((now - timer.due) / timer.interval)
+                    timer.due += (missed + 1) * timer.interval
+                    heapq.heappush(self._timers, timer)
+                else:
+                    self._timer_by_id.pop(timer.id, None)
+            next_due = self._timers[0].due if self._timers else None
+        for timer in due:
+            if not timer.cancelled:
+                self._safely(timer.handler, timer.arg)
+        if next_due is None:
+            return None
+        return max(0, math.ceil((next_due - time.monotonic()) * 1000))
+
+    def _wake(self) -> None:
+        if not self._woken:
+            self._woken = True
+            with contextlib.suppress(BlockingIOError, OSError):  # full (so awake) or closed
+                self._wake_w.send(b"\0")
+
+    def _drain_wakeups(self) -> None:
+        # Cleared after draining: a wake-up skipped meanwhile (flag still set) needs no byte,
+        # since this turn still runs the queued calls and the next one rereads the timers.
+        with contextlib.suppress(BlockingIOError, OSError):
+            while self._wake_r.recv(4096):
+                pass
+        self._woken = False
+
+    @staticmethod
+    def _safely(fn: Callable[..., object], *args: Any) -> None:
+        try:
+            fn(*args)
+        except Exception:
+            _log.exception("a reactor handler failed: %r", fn)
+
+
+def _key(source: Source) -> Any:
+    if isinstance(source, zmq.Socket):
+        return source
+    if isinstance(source, int):
+        return source
+    fileno = getattr(source, "fileno", None)
+    if fileno is None:
+        raise TypeError(f"cannot poll {source!r}: not a ZeroMQ socket, fd or file")
+    return fileno()
