@@ -1,0 +1,54 @@
+"""A process serving Miro::Example over the ZeroMQ transport, for the integration tests.
+
+    python tests/procs/example_server.py [KEY]
+
+Prints `READY <endpoint>` once it serves, then serves until killed. Its servant behaves as
+ExampleA does, plus a test hook: setData(a, b) with a < 0 sleeps for -a seconds first, so that
+tests can catch it in the middle of a call.
+"""
+
+from __future__ import annotations
+
+import signal
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path[:0] = [str(ROOT / "generated"), str(ROOT)]
+
+import Miro  # noqa: E402
+import Miro__POA  # noqa: E402
+
+from miro_gen.transport.adapter import ObjectAdapter  # noqa: E402
+from miro_gen.transport.invoker import ZmqInvoker  # noqa: E402
+from miro_gen.transport.reactor import Reactor  # noqa: E402
+
+
+class Example(Miro__POA.Example):
+    def __init__(self) -> None:
+        self.data = Miro.ExampleStructIDL()
+
+    def setData(self, a: float, b: float) -> None:
+        if a < 0:
+            time.sleep(-a)
+        self.data = Miro.ExampleStructIDL(a, b)
+
+    def getData(self) -> Miro.ExampleStructIDL:
+        return Miro.ExampleStructIDL(self.data.a + 1, self.data.b + 1)
+
+
+def main() -> None:
+    key = (sys.argv[1] if len(sys.argv) > 1 else "ExampleA").encode()
+    reactor = Reactor()
+    invoker = ZmqInvoker(reactor.context)
+    adapter = ObjectAdapter(reactor, invoker)
+    invoker.adapter = adapter
+    adapter.activate(Example(), key)
+    signal.signal(signal.SIGTERM, lambda *_: reactor.stop())
+    reactor.call_soon(lambda: print("READY", adapter.endpoint, flush=True))
+    reactor.run()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,160 @@
+"""Remote calls between real processes over ZeroMQ on loopback (no naming service yet)."""
+
+from __future__ import annotations
+
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import Miro
+import pytest
+import zmq
+
+from miro_gen.exceptions import COMM_FAILURE, OBJECT_NOT_EXIST, TIMEOUT, TRANSIENT, CompletionStatus
+from miro_gen.runtime.cdr import ObjectRef
+from miro_gen.transport.invoker import ZmqInvoker
+
+HERE = Path(__file__).resolve().parent
+SERVER = HERE / "procs" / "example_server.py"
+REPO_ID = "IDL:Miro/Example:1.0"
+
+
+class Server:
+    def __init__(self, key: str = "ExampleA") -> None:
+        self.proc = subprocess.Popen(
+            [sys.executable, str(SERVER), key], stdout=subprocess.PIPE, text=True
+        )
+        assert self.proc.stdout is not None
+        line = self.proc.stdout.readline().split()
+        assert line and line[0] == "READY", f"server did not start: {line}"
+        self.endpoint = line[1]
+        self.ref = ObjectRef(REPO_ID, self.endpoint, key.encode())
+
+    def kill(self) -> None:
+        self.proc.kill()
+        self.proc.wait(10)
+
+
+@pytest.fixture
+def server() -> Iterator[Server]:
+    s = Server()
+    yield s
+    s.kill()
+
+
+@pytest.fixture
+def invoker() -> Iterator[ZmqInvoker]:
+    inv = ZmqInvoker(zmq.Context())
+    yield inv
+    inv.close()
+    inv.context.term()
+
+
+def test_set_and_get_data_across_processes(server: Server, invoker: ZmqInvoker) -> None:
+    stub = Miro.Example(server.ref, invoker)
+    stub.setData(0.0, 10.0)
+    assert stub.getData() == Miro.ExampleStructIDL(1.0, 11.0)
+    for i in range(100):
+        stub.setData(float(i), 2.0 * i)
+        assert stub.getData() == Miro.ExampleStructIDL(i + 1.0, 2.0 * i + 1)
+
+
+def test_calls_from_many_threads(server: Server, invoker: ZmqInvoker) -> None:
+    stub = Miro.Example(server.ref, invoker)
+    errors: list[BaseException] = []
+
+    def work() -> None:
+        try:
+            for _ in range(50):
+                assert isinstance(stub.getData(), Miro.ExampleStructIDL)
+        except BaseException as e:
+            errors.append(e)
+
+    threads = [threading.Thread(target=work) for _ in range(8)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(30)
+    assert not errors
+
+
+def test_unknown_object_is_object_not_exist(server: Server, invoker: ZmqInvoker) -> None:
+    stub = Miro.Example(ObjectRef(REPO_ID, server.endpoint, b"nobody"), invoker)
+    with pytest.raises(OBJECT_NOT_EXIST):
+        stub.getData()
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def test_nobody_listening_is_transient_promptly(invoker: ZmqInvoker) -> None:
+    stub = Miro.Example(ObjectRef(REPO_ID, f"tcp://127.0.0.1:{free_port()}", b"x"), invoker)
+    start = time.monotonic()
+    with pytest.raises(TRANSIENT) as info:
+        stub.getData()
+    assert info.value.completed is CompletionStatus.NO
+    assert time.monotonic() - start < 5
+
+
+def test_timeout_then_the_next_call_works(server: Server, invoker: ZmqInvoker) -> None:
+    slow = Miro.Example(server.ref, invoker, timeout=0.3)
+    with pytest.raises(TIMEOUT) as info:
+        slow.setData(-1.0, 0.0)  # the servant sleeps 1 s
+    assert info.value.completed is CompletionStatus.MAYBE
+    fresh = Miro.Example(server.ref, invoker)
+    time.sleep(1)
+    assert fresh.getData() == Miro.ExampleStructIDL(0.0, 1.0)  # the slow call did finish
+
+
+def test_server_killed_mid_call_is_comm_failure_then_restart_works(
+    invoker: ZmqInvoker,
+) -> None:
+    first = Server()
+    stub = Miro.Example(first.ref, invoker, timeout=30)
+    threading.Timer(0.5, first.kill).start()
+    start = time.monotonic()
+    with pytest.raises(COMM_FAILURE) as info:
+        stub.setData(-20.0, 0.0)  # would sleep 20 s
+    assert info.value.completed is CompletionStatus.MAYBE
+    assert time.monotonic() - start < 10
+    with pytest.raises(TRANSIENT):
+        stub.getData()  # nobody there now
+    second = Server()
+    try:
+        again = Miro.Example(second.ref, invoker)
+        assert again.getData() == Miro.ExampleStructIDL(1.0, 1.0)
+    finally:
+        second.kill()
+
+
+def test_malformed_frames_are_dropped_and_the_server_goes_on(
+    server: Server, invoker: ZmqInvoker
+) -> None:
+    ctx = zmq.Context.instance()
+    rogue = ctx.socket(zmq.DEALER)
+    rogue.setsockopt(zmq.LINGER, 0)
+    rogue.connect(server.endpoint)
+    for parts in ([b"garbage"], [b"\x09" * 30, b"x"], [b"\x01\x01" + bytes(30), b""], [b""] * 5):
+        rogue.send_multipart(parts)
+    good_header_bad_body = [
+        bytes.fromhex("01010000")
+        + bytes(4)
+        + (1).to_bytes(8, "little")
+        + b"\x08\x00ExampleA"
+        + b"\x07\x00setData",
+        b"\x00\x01\x00\x00\x01",
+    ]
+    rogue.send_multipart(good_header_bad_body)
+    assert rogue.poll(5000)
+    header, _ = rogue.recv_multipart()
+    assert header[2] == 2  # system exception
+    assert b"MARSHAL" in header
+    rogue.close()
+    assert Miro.Example(server.ref, invoker).getData() == Miro.ExampleStructIDL(1.0, 1.0)
