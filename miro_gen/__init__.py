@@ -1,7 +1,58 @@
 """miro-gen: Miro (Middleware for Robots) in Python.
 
 The IDL compiler lives in `miro_gen.idl` (`miro-idl`); generated code uses `miro_gen.runtime`;
-remote-call exceptions are in `miro_gen.exceptions`.
+remote-call exceptions are in `miro_gen.exceptions`. The runtime's public names are importable
+from here (`from miro_gen import Server, Client`); they load the transport (and ZeroMQ) on first
+use, so the compilers start without it.
 """
 
+from typing import TYPE_CHECKING, Any
+
+from miro_gen.exceptions import (
+    BAD_OPERATION,
+    BAD_PARAM,
+    COMM_FAILURE,
+    MARSHAL,
+    NO_IMPLEMENT,
+    OBJECT_NOT_EXIST,
+    TIMEOUT,
+    TRANSIENT,
+    UNKNOWN,
+    CompletionStatus,
+    SystemException,
+    UserException,
+)
+
+if TYPE_CHECKING:
+    from miro_gen.transport.server import Client, Server
+
 __version__ = "0.1.0"
+
+_LAZY = {"Server": "miro_gen.transport.server", "Client": "miro_gen.transport.server"}
+
+__all__ = [
+    "BAD_OPERATION",
+    "BAD_PARAM",
+    "COMM_FAILURE",
+    "MARSHAL",
+    "NO_IMPLEMENT",
+    "OBJECT_NOT_EXIST",
+    "TIMEOUT",
+    "TRANSIENT",
+    "UNKNOWN",
+    "Client",
+    "CompletionStatus",
+    "Server",
+    "SystemException",
+    "UserException",
+]
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        import importlib
+
+        value = getattr(importlib.import_module(_LAZY[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'miro_gen' has no attribute {name!r}")

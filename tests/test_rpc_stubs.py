@@ -1621,7 +1621,9 @@ def _mypy(gen: SimpleNamespace, name: str, text: str) -> subprocess.CompletedPro
     (folder / "mypy.ini").write_text("[mypy]\n")
     path = folder / name
     path.write_text(text)
-    env = {**os.environ, "MYPYPATH": f"{gen.out}{os.pathsep}{ROOT}"}
+    # miro_gen's own generated packages (MiroNaming) come from generated/, as in a wheel.
+    paths = [str(gen.out), str(ROOT), str(ROOT / "generated")]
+    env = {**os.environ, "MYPYPATH": os.pathsep.join(paths)}
     return subprocess.run(
         [
             sys.executable,

@@ -18,6 +18,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--version", action=VersionAction)
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
     sub.add_parser("idl", help="compile IDL files (same as miro-idl)", add_help=False)
+    sub.add_parser("naming", help="run the naming service", add_help=False)
+    sub.add_parser("nslist", help="print the names bound in the naming service", add_help=False)
     return p
 
 
@@ -27,6 +29,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         from miro_gen.cli import idl
 
         return idl.main(args[1:])
+    if args and args[0] in ("naming", "nslist"):
+        from miro_gen.cli import naming
+
+        run = naming.naming_main if args[0] == "naming" else naming.nslist_main
+        return run(args[1:])
     parser = build_parser()
     ns = parser.parse_args(args)
     if ns.command is None:

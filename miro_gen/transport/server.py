@@ -1,0 +1,173 @@
+"""`Server` and `Client`: Miro's entry points, in Python.
+
+    server = Server(sys.argv)                 # takes the common options out of sys.argv
+    server.add_to_name_service(ExampleImpl(), "ExampleA")
+    server.run()                              # until SIGINT / SIGTERM, then unbinds its names
+
+    client = Client(sys.argv)
+    example = client.resolve_name("ExampleA", Miro.Example)
+    example.setData(0.0, 10.0)
+
+A Server owns the process's reactor and one ROUTER socket for all its objects; its names live
+under its naming context (`-MNC`, default the host name) with leases that a background thread
+renews, re-binding them when the naming service has restarted. A Client only calls out.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import signal
+import sys
+import threading
+import uuid
+from collections.abc import MutableSequence, Sequence
+from types import FrameType
+from typing import Any, TypeVar
+
+import MiroNaming
+import zmq
+
+from miro_gen import log
+from miro_gen.exceptions import SystemException
+from miro_gen.runtime.cdr import ObjectRef
+from miro_gen.runtime.rpc import Servant, Stub
+from miro_gen.transport.adapter import ObjectAdapter
+from miro_gen.transport.invoker import ZmqInvoker
+from miro_gen.transport.naming import DEFAULT_LEASE, NamingClient
+from miro_gen.transport.options import CommonOptions, parse_common_options
+from miro_gen.transport.reactor import Reactor
+
+StubT = TypeVar("StubT", bound=Stub)
+_log = log.logger("MIRO")
+
+
+def _take_options(argv: Sequence[str] | None) -> tuple[CommonOptions, list[str]]:
+    """Parse the common options of `argv` (sys.argv by default; [0] is the program) and, when
+    it is a mutable list, remove them from it as Miro does."""
+    args = sys.argv if argv is None else argv
+    opts, rest = parse_common_options(list(args[1:]))
+    if isinstance(args, MutableSequence):
+        args[1:] = rest
+    for ignored in opts.ignored:
+        print(f"note: {ignored} is a TAO option; miro-gen ignores it", file=sys.stderr)
+    log.configure(opts.log_level, opts.log_filter)
+    return opts, [args[0] if args else "", *rest]
+
+
+class Client:
+    """Calls remote objects found through the naming service."""
+
+    def __init__(self, argv: Sequence[str] | None = None, *, context: Any = None) -> None:
+        self.options, self.argv = _take_options(argv)
+        self.context = context if context is not None else zmq.Context.instance()
+        self.invoker = ZmqInvoker(self.context)
+        self.naming = NamingClient(self.invoker, self.options.naming, self.options.naming_context)
+
+    def resolve_name(self, name: str, stub: type[StubT]) -> StubT:
+        """A stub of the object bound to `name` (in this process's naming context first, then
+        at the root; a path such as `robot1/ExampleA` as it is)."""
+        entry = self.naming.resolve(name)
+        if entry.repo_id != stub._repo_id:
+            _log.debug("%s is a %s, used as a %s", entry.name, entry.repo_id, stub._repo_id)
+        return stub(ObjectRef(entry.repo_id, entry.endpoint, entry.key), self.invoker)
+
+    def close(self) -> None:
+        self.invoker.close()
+
+
+class Server(Client):
+    """Serves objects: a reactor, a ROUTER socket, and names kept alive in the naming service."""
+
+    def __init__(
+        self,
+        argv: Sequence[str] | None = None,
+        *,
+        context: Any = None,
+        bind_host: str = "127.0.0.1",
+        lease: float = DEFAULT_LEASE,
+    ) -> None:
+        super().__init__(argv, context=context)
+        self._reactor = Reactor(self.context)
+        host = self.options.host
+        bind = f"tcp://{'*' if host and bind_host == '127.0.0.1' else bind_host}:*"
+        self.adapter = ObjectAdapter(self._reactor, self.invoker, bind=bind, host=host)
+        self.invoker.adapter = self.adapter
+        self.owner = uuid.uuid4().hex
+        self.lease = lease
+        self._names: dict[str, MiroNaming.Entry] = {}
+        self._names_lock = threading.Lock()
+        self._stop = threading.Event()
+        self._renewer: threading.Thread | None = None
+
+    def reactor(self) -> Reactor:
+        return self._reactor
+
+    def add_to_name_service(self, servant: Servant, name: str) -> ObjectRef:
+        """Serve `servant` and bind it as `name` under this server's naming context (or at the
+        path given); its reference. Replaces an older binding of the name, as Miro does."""
+        full = self.naming.full_name(name)
+        ref = self.adapter.reference_for(servant)
+        entry = MiroNaming.Entry(full, ref.repo_id, ref.endpoint, ref.key, "")
+        self.naming.registry.rebind(entry, self.owner, int(self.lease * 1000))
+        with self._names_lock:
+            self._names[full] = entry
+        self._start_renewing()
+        _log.notice("bound %s in the naming service", full)
+        return ref
+
+    def run(self) -> None:
+        """Serve until SIGINT, SIGTERM or `shutdown()`; then unbind this server's names."""
+        handlers = {}
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                handlers[sig] = signal.signal(sig, self._on_signal)
+        try:
+            self._reactor.run()
+        finally:
+            for sig, old in handlers.items():
+                signal.signal(sig, old)
+            self._cleanup()
+
+    def shutdown(self) -> None:
+        """Make `run()` return (from any thread)."""
+        self._reactor.stop()
+
+    def _on_signal(self, signum: int, frame: FrameType | None) -> None:
+        self.shutdown()
+
+    def _cleanup(self) -> None:
+        self._stop.set()
+        with self._names_lock:
+            names, self._names = list(self._names), {}
+        for name in names:
+            with contextlib.suppress(SystemException, MiroNaming.NotFound):
+                self.naming.registry.unbind(name)
+        self.adapter.close()
+        self._reactor.close()
+        self.close()
+
+    # ---- leases --------------------------------------------------------------------------------
+
+    def _start_renewing(self) -> None:
+        if self._renewer is None:
+            self._renewer = threading.Thread(
+                target=self._renew_loop, name="miro-lease", daemon=True
+            )
+            self._renewer.start()
+
+    def _renew_loop(self) -> None:
+        while not self._stop.wait(self.lease / 3):
+            try:
+                known = self.naming.registry.renew(self.owner, int(self.lease * 1000))
+                if not known:  # the naming service restarted (or we were cut off too long)
+                    self._rebind_all()
+            except SystemException as e:
+                _log.warning("cannot renew names: %s", e)
+
+    def _rebind_all(self) -> None:
+        with self._names_lock:
+            entries = list(self._names.values())
+        for entry in entries:
+            self.naming.registry.rebind(entry, self.owner, int(self.lease * 1000))
+        if entries:
+            _log.notice("bound %d names again in a restarted naming service", len(entries))
