@@ -21,6 +21,7 @@ from miro_gen import TRANSIENT, Client
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 EXAMPLE = HERE / "procs" / "named_example.py"
+RELAY = HERE / "procs" / "relay.py"
 LEASE = "1.5"  # seconds: short, so that expiry is seen quickly
 
 
@@ -54,9 +55,9 @@ class Naming:
 
 
 class Service:
-    def __init__(self, naming: Naming, *args: str) -> None:
+    def __init__(self, naming: Naming, *args: str, script: Path = EXAMPLE) -> None:
         self.proc = subprocess.Popen(
-            [sys.executable, str(EXAMPLE), "--naming", naming.endpoint, *args],
+            [sys.executable, str(script), "--naming", naming.endpoint, *args],
             stdout=subprocess.PIPE,
             text=True,
             env=env(),
@@ -189,3 +190,19 @@ def test_malformed_frames_to_the_naming_service(naming: Naming) -> None:
     with pytest.raises(MiroNaming.InvalidName):
         c.naming.registry.resolve("bad//name")
     c.close()
+
+
+def test_a_servant_calling_back_into_its_caller_does_not_deadlock(naming: Naming) -> None:
+    """A.getData calls B.getData, which calls A.setData while A still serves the first call:
+    servants run on a worker pool, so A serves the call back."""
+    a = Service(naming, "-MNC", "r", "A", "@B", script=RELAY)
+    b = Service(naming, "-MNC", "r", "B", "A", script=RELAY)
+    try:
+        c = client(naming, "-MNC", "r")
+        stub = c.resolve_name("A", Miro.Example)
+        stub._timeout = 10.0
+        assert stub.getData() == Miro.ExampleStructIDL(7.0, 8.0)  # B's call back reached A
+        c.close()
+    finally:
+        a.stop()
+        b.stop()

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 import os
+import signal
 import threading
 import time
 from collections.abc import Iterator
@@ -216,3 +217,24 @@ def test_stop_from_another_thread_returns_promptly() -> None:
     assert time.monotonic() - start < 1
     r.close()
     r.context.term()
+
+
+def test_a_signal_delivered_to_another_thread_still_stops_the_main_threads_reactor() -> None:
+    """Python runs signal handlers on the main thread only when it runs Python code; a signal
+    the OS hands to another thread must still end the reactor's poll (SIGTERM to a server)."""
+    r = Reactor(zmq.Context())
+    old = signal.signal(signal.SIGUSR1, lambda *_: r.stop())
+    try:
+
+        def kill_from_elsewhere() -> None:
+            time.sleep(0.2)
+            signal.pthread_kill(threading.get_ident(), signal.SIGUSR1)  # to this thread
+
+        threading.Thread(target=kill_from_elsewhere, daemon=True).start()
+        start = time.monotonic()
+        r.run()  # on the main thread, no timers: only the signal can end it
+        assert time.monotonic() - start < 3
+    finally:
+        signal.signal(signal.SIGUSR1, old)
+        r.close()
+        r.context.term()

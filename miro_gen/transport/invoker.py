@@ -123,7 +123,7 @@ class ZmqInvoker:
             frames.Request(request_id, ref.key, operation, int(wait * 1000), oneway)
         )
         try:
-            conn.socket.send_multipart([header, body], zmq.NOBLOCK, copy=False)
+            conn.socket.send_multipart([header, body], zmq.NOBLOCK)
         except zmq.Again:
             self._drop(conn)
             raise TRANSIENT(f"cannot send {operation} to {ref.endpoint}") from None

@@ -16,6 +16,7 @@ import contextlib
 import heapq
 import itertools
 import math
+import signal
 import socket
 import threading
 import time
@@ -132,10 +133,17 @@ class Reactor:
         self._running = True
         self._stopping = False
         self._thread = threading.current_thread()
+        # A signal may be delivered to any thread, and Python runs its handler only when the
+        # main thread runs Python code: the wake-up socket makes a signal end the poll.
+        old_fd = None
+        if self._thread is threading.main_thread():
+            old_fd = signal.set_wakeup_fd(self._wake_w.fileno(), warn_on_full_buffer=False)
         try:
             while not self._stopping:
                 self._turn()
         finally:
+            if old_fd is not None:
+                signal.set_wakeup_fd(old_fd)
             self._running = False
             self._thread = None
 

@@ -38,6 +38,7 @@ from miro_gen.transport.options import CommonOptions, parse_common_options
 from miro_gen.transport.reactor import Reactor
 
 StubT = TypeVar("StubT", bound=Stub)
+RENEW_TIMEOUT = 2.0  # seconds a lease renewal may take
 _log = log.logger("MIRO")
 
 
@@ -137,6 +138,8 @@ class Server(Client):
 
     def _cleanup(self) -> None:
         self._stop.set()
+        if self._renewer is not None:  # its socket must be closed by no one else while in use
+            self._renewer.join(RENEW_TIMEOUT + 1)
         with self._names_lock:
             names, self._names = list(self._names), {}
         for name in names:
@@ -150,6 +153,9 @@ class Server(Client):
 
     def _start_renewing(self) -> None:
         if self._renewer is None:
+            self._registry_for_renewal = MiroNaming.Registry(
+                self.naming.registry._ref, self.invoker, timeout=RENEW_TIMEOUT
+            )
             self._renewer = threading.Thread(
                 target=self._renew_loop, name="miro-lease", daemon=True
             )
@@ -158,7 +164,7 @@ class Server(Client):
     def _renew_loop(self) -> None:
         while not self._stop.wait(self.lease / 3):
             try:
-                known = self.naming.registry.renew(self.owner, int(self.lease * 1000))
+                known = self._registry_for_renewal.renew(self.owner, int(self.lease * 1000))
                 if not known:  # the naming service restarted (or we were cut off too long)
                     self._rebind_all()
             except SystemException as e:
@@ -168,6 +174,6 @@ class Server(Client):
         with self._names_lock:
             entries = list(self._names.values())
         for entry in entries:
-            self.naming.registry.rebind(entry, self.owner, int(self.lease * 1000))
+            self._registry_for_renewal.rebind(entry, self.owner, int(self.lease * 1000))
         if entries:
             _log.notice("bound %d names again in a restarted naming service", len(entries))
