@@ -1,0 +1,55 @@
+"""ExampleA, the manual's server (§5.1): implements Miro::Example and binds it as "ExampleA".
+
+    python services/exampleA.py [common options such as -MNC robot1 -MLL 9 -MLF MIRO]
+
+setData(a, b) stores the two values; each getData() returns them one higher than before, as
+the manual's run shows. Serves until Ctrl-C (or SIGTERM), then unbinds its name.
+"""
+
+from __future__ import annotations
+
+import sys
+import threading
+from pathlib import Path
+
+if __package__ in (None, ""):  # run as a script from a checkout: the generated code beside it
+    sys.path[:0] = [str(Path(__file__).resolve().parents[1] / "generated")]
+
+import Miro
+import Miro__POA
+
+from miro_gen import Server, log
+
+_log = log.logger("MIRO")
+
+
+class ExampleImpl(Miro__POA.Example):
+    """The Example interface's implementation: two numbers, stepped on every poll."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()  # calls arrive on several worker threads
+        self._data = Miro.ExampleStructIDL()
+
+    def setData(self, a: float, b: float) -> None:
+        with self._lock:
+            self._data = Miro.ExampleStructIDL(a, b)
+        _log.debug("setData(%g, %g)", a, b)
+
+    def getData(self) -> Miro.ExampleStructIDL:
+        with self._lock:
+            self._data = Miro.ExampleStructIDL(self._data.a + 1, self._data.b + 1)
+            data = self._data
+        _log.debug("getData() -> %g, %g", data.a, data.b)
+        return data
+
+
+def main(argv: list[str] | None = None) -> int:
+    server = Server(sys.argv if argv is None else argv)
+    server.add_to_name_service(ExampleImpl(), "ExampleA")
+    print("ExampleA is ready", flush=True)
+    server.run()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

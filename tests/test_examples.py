@@ -1,0 +1,136 @@
+"""The manual's examples as separate processes, with the manual's flags and output (§5.1)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+SERVICES = REPO / "services"
+
+# §5.1, as printed in the manual.
+MANUAL_OUTPUT = """\
+The object 'ExampleA' has been found in the naming service
+Variables a and b have been set to: 0 and 10
+Retrieved variables a and b are: 1 and 11
+Variables a and b have been set to: 2 and 12
+Retrieved variables a and b are: 3 and 13
+Variables a and b have been set to: 4 and 14
+Retrieved variables a and b are: 5 and 15
+Variables a and b have been set to: 6 and 16
+"""
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def env() -> dict[str, str]:
+    return dict(os.environ, PYTHONPATH=os.pathsep.join([str(REPO / "generated"), str(REPO)]))
+
+
+def test_example_a_and_b_print_what_the_manual_shows() -> None:
+    port = free_port()
+    nsc = ["-ORBInitRef", f"NameService=iioploc://127.0.0.1:{port}/NameService"]
+    naming = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "miro_gen.cli.main",
+            "naming",
+            "--endpoint",
+            f"tcp://127.0.0.1:{port}",
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+        env=env(),
+    )
+    a = None
+    try:
+        assert naming.stdout is not None and naming.stdout.readline().startswith("naming service")
+        a = subprocess.Popen(
+            [sys.executable, str(SERVICES / "exampleA.py"), *nsc, "-MLL", "9", "-MLF", "MIRO"],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            env=env(),
+        )
+        assert a.stdout is not None and a.stdout.readline().strip() == "ExampleA is ready"
+        b = subprocess.run(
+            [
+                sys.executable,
+                str(SERVICES / "exampleB.py"),
+                *nsc,
+                "-MLL",
+                "9",
+                "-MLF",
+                "MIRO",
+                "--count",
+                "4",
+                "--period",
+                "0",
+            ],
+            capture_output=True,
+            text=True,
+            env=env(),
+            timeout=60,
+        )
+        assert b.returncode == 0, b.stderr
+        assert b.stdout.startswith(MANUAL_OUTPUT)
+        a.send_signal(signal.SIGINT)
+        assert a.wait(10) == 0
+        log = a.stderr.read() if a.stderr else ""
+        assert "[DEBUG MIRO] setData(0, 10)" in log  # -MLL 9 -MLF MIRO shows the debug lines
+        assert "[NOTICE MIRO] bound" in log
+    finally:
+        if a is not None and a.poll() is None:
+            a.kill()
+        naming.kill()
+        naming.wait(10)
+
+
+def test_example_b_without_example_a_says_so() -> None:
+    port = free_port()
+    naming = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "miro_gen.cli.main",
+            "naming",
+            "--endpoint",
+            f"tcp://127.0.0.1:{port}",
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+        env=env(),
+    )
+    try:
+        assert naming.stdout is not None and naming.stdout.readline()
+        b = subprocess.run(
+            [
+                sys.executable,
+                str(SERVICES / "exampleB.py"),
+                "--naming",
+                f"tcp://127.0.0.1:{port}",
+                "-MNC",
+                "robot1",
+                "--count",
+                "1",
+            ],
+            capture_output=True,
+            text=True,
+            env=env(),
+            timeout=60,
+        )
+        assert b.returncode == 1
+        assert "robot1/ExampleA is not bound in the naming service" in b.stderr
+        assert "Traceback" not in b.stderr
+    finally:
+        naming.kill()
+        naming.wait(10)
