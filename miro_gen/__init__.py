@@ -24,11 +24,25 @@ from miro_gen.exceptions import (
 )
 
 if TYPE_CHECKING:
+    from miro_gen.transport.events import (
+        EventChannelFactory,
+        StructuredEvent,
+        StructuredPushConsumer,
+        StructuredPushSupplier,
+    )
     from miro_gen.transport.server import Client, Server
 
 __version__ = "0.1.0"
 
-_LAZY = {"Server": "miro_gen.transport.server", "Client": "miro_gen.transport.server"}
+_EVENTS = "miro_gen.transport.events"
+_LAZY = {
+    "Server": "miro_gen.transport.server",
+    "Client": "miro_gen.transport.server",
+    "EventChannelFactory": _EVENTS,
+    "StructuredPushSupplier": _EVENTS,
+    "StructuredPushConsumer": _EVENTS,
+    "StructuredEvent": _EVENTS,
+}
 
 __all__ = [
     "BAD_OPERATION",
@@ -42,7 +56,11 @@ __all__ = [
     "UNKNOWN",
     "Client",
     "CompletionStatus",
+    "EventChannelFactory",
     "Server",
+    "StructuredEvent",
+    "StructuredPushConsumer",
+    "StructuredPushSupplier",
     "SystemException",
     "UserException",
 ]

@@ -134,3 +134,79 @@ def test_example_b_without_example_a_says_so() -> None:
     finally:
         naming.kill()
         naming.wait(10)
+
+
+def read_lines(proc: subprocess.Popen[str], prefix: str, n: int, seconds: float = 20) -> list[str]:
+    """The next n lines of proc's output that start with prefix."""
+    import selectors
+
+    assert proc.stdout is not None
+    out: list[str] = []
+    sel = selectors.DefaultSelector()
+    sel.register(proc.stdout, selectors.EVENT_READ)
+    import time
+
+    end = time.monotonic() + seconds
+    while len(out) < n and time.monotonic() < end:
+        if sel.select(timeout=0.5):
+            line = proc.stdout.readline()
+            if not line:
+                break
+            if line.startswith(prefix):
+                out.append(line.rstrip("\n"))
+    return out
+
+
+def test_example_c_publishes_and_example_d_receives() -> None:
+    """§5.2: exampleC creates ExampleEventChannel and publishes; exampleD subscribes."""
+    port = free_port()
+    nsc = ["-ORBInitRef", f"NameService=iioploc://127.0.0.1:{port}/NameService", "-MNC", "robot1"]
+    naming = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "miro_gen.cli.main",
+            "naming",
+            "--endpoint",
+            f"tcp://127.0.0.1:{port}",
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+        env=env(),
+    )
+    procs: list[subprocess.Popen[str]] = []
+    try:
+        assert naming.stdout is not None and naming.stdout.readline()
+        c = subprocess.Popen(
+            [sys.executable, str(SERVICES / "exampleC.py"), *nsc, "0.05"],
+            stdout=subprocess.PIPE,
+            text=True,
+            env=env(),
+        )
+        procs.append(c)
+        assert read_lines(c, "ExampleC publishes", 1) == [
+            "ExampleC publishes ExampleEvent on robot1/ExampleEventChannel every 0.05 s"
+        ]
+        assert read_lines(c, "ExampleEvent #", 1)[0].endswith("skipped: no subscribers")
+        d = subprocess.Popen(
+            [sys.executable, str(SERVICES / "exampleD.py"), *nsc],
+            stdout=subprocess.PIPE,
+            text=True,
+            env=env(),
+        )
+        procs.append(d)
+        got = read_lines(d, "Received ExampleEvent #", 5)
+        assert len(got) == 5, got
+        counters = [int(line.split("#")[1].split()[0]) for line in got]
+        assert counters == list(range(counters[0], counters[0] + 5))  # in order, none lost
+        k = counters[0]
+        assert got[0] == f"Received ExampleEvent #{k} from robot1: a = {k}, b = {10 + k}"
+        for p in procs:
+            p.send_signal(signal.SIGINT)
+            assert p.wait(10) == 0
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.kill()
+        naming.kill()
+        naming.wait(10)

@@ -113,6 +113,41 @@ _EXPORTS: dict[str, str] = {
     "myExample": "Miro.myExample_idl",
     "myExampleIDL": "Miro.myExample_idl",
 }
+# type hash -> the data type that has it: how event consumers find the class of a payload
+_TYPE_HASHES: dict[str, str] = {
+    "01ccfae769f03d9d5eb655f5d957742ce5e9d2557f3473b05aa7c65ea6364b57": "PositionIDL",
+    "0673d7d3225a4b63c55a67bd32dfb6e1d7891a676a242f866ca8eb71e74dfed2": "Range3dDescriptionIDL",
+    "0735db274096c9c968db0cf54508bee38c199efba3889aee68865b81ed5363ec": "ExampleEventIDL",
+    "0c802c92445ee53d4a217180fc7319a45fe8ed54b095015949a2d21dac10a37e": "ExampleGroupIDL",
+    "0e6dc856d3cc3b0f8d351c094c742aff7cae08e6ad6e19d44f7c1111436791fc": "myExampleIDL",
+    "27dfb5fc525049058945e22d6c5c5d0ac412243209c1a7eae8d54c0dae56fc6d": "RangeGroupEventIDL",
+    "36b1d4479f223929ff17f33980e12fcd1992ff25bd290bb93621b46a8618db0d": "RangeBunchEventIDL",
+    "3da8d9c25ff30cef597f1923f1c533c822035ed9684a5bbe879dd8c417616a7c": "SensorGroupIDL",
+    "3e0e4eaa94e245c89e4df8fe554d1276fb90cf73996a681fd1da7eef045299c0": "RawPositionIDL",
+    "4273752d252d361f2638db70dc411e76ddea3c2c7a93a617b66ca67873d4f133": "RangeScanEventIDL",
+    "53fb54e8edea73e5dd8c54a9776caa5e3404a0c8eaa3f23c4d2de4684589f4e2": "ETimeOut",
+    "5f93eea400997fc96cccea62fc6153d881fd1310e1ba339b93cc38c5f14a2e42": "GpsDataIDL",
+    "683fc69c0fae353c7bb9f1bf8a3f313bfbb7e0f8e2c1e95125c21c4bbf5ca0c9": "MotionStatusIDL",
+    "6c755292fec84c2f4455be3478f4b05c177c1cb667fe8e155b48a1d21e651ad8": "TimeIDL",
+    "70439e16beb76e92a3dd5a3358b1bbaa1d798ee81b53ca548bbe3240b4cd2586": "ExampleStructIDL",
+    "70858648e6f1da30a68929b0f628287bd453d2616f682030eb6ff4a145250d1b": "SensorPositionIDL",
+    "74548679ca05477c4d5232a7238ec869fa8b207a0711296e1ae381374d155c0f": "WorldPointIDL",
+    "764a88eda3ab800116ca7817af3cea56075e75bece1bdc2b6c197e53adc402b2": "Range3dPointIDL",
+    "82cafd8b25f36a02ec3c001d3e94b6e17f064c46b45fcf6c10faddc36488223b": "InertialDataIDL",
+    "96548c5768561506677ffe25fae5903d6c4ce6c0f111ca021605edc81dd1fe14": "VelocityIDL",
+    "97c971bd2af9f579cf3c4971cfc1aac38e83e6c80ed42ed7664bb3f572ddf1df": "EulerAnglesIDL",
+    "a14c025aa8dd33ac537657f0cfca82157c5da36941f2518794baac69ca96eb55": "QuaternionIDL",
+    "aebae6f3e3baf7858097f84caef7519ea5420497ac5e30a6cdc9115064a5843e": "WorldVectorIDL",
+    "beafb3a20f1a4e868eb156a75d260ee4e5e7a2c238559cdbcd073dd17b495038": "SensorDescriptionIDL",
+    "c0069dbedbf58fa8fdacdb8f124541ed311fe7ba9cb46c197e42c80a7e0d180e": "Range3dMountingIDL",
+    "c997b37005a56e67ab484b6626d7fe3868d28bd31ff4407b0cdfc093c9ffb3ca": "ScanDescriptionIDL",
+    "cfbce9c999aa0519aeab581bd52ec430c8286a3df7e8684cc2a821fb7c19aad2": "RangeSensorIDL",
+    "d8e00d689aa7416d9e16a52adea9fd5aaea2baec8f01c412b0e342715e186542": "Vector3IDL",
+    "ed4ebe588b6b760fdadbe7ee54f32b930dc474f926d00ec9e657cd3c1b61688a": "EDevIO",
+    "f0b5b00bf42166f78c18816d6b64554353baa33562a566c18266d815555bbe7a": "EOutOfBounds",
+    "f82207d3c302254f70f5540b56766d9bfd99651f39c1a6311b1146e718c1c4a4": "Range3dScanEventIDL",
+    "fa9ef5ba30627208b80b247e2899f972b4dc6f8ba96836e699f52d31bc5fe7b8": "GpsSentenceEventIDL",
+}
 # the package's *_idl modules and subpackages
 _SUBMODULES: frozenset[str] = frozenset(
     [

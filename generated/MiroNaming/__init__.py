@@ -22,6 +22,13 @@ _EXPORTS: dict[str, str] = {
     "NotFound": "MiroNaming.MiroNaming_idl",
     "Registry": "MiroNaming.MiroNaming_idl",
 }
+# type hash -> the data type that has it: how event consumers find the class of a payload
+_TYPE_HASHES: dict[str, str] = {
+    "129cde27241907313a910df5bf0da772791cc0046b4b8c5a598754612a216d13": "NotFound",
+    "63992faffcfa28e8f8fc2be3f96ce79595b841d6b3dfbbf609b458e83d930ab6": "Entry",
+    "6e94d6e0ad60fd8ae5f45c56a471e617481a26adc9b4b30afa8ef2f33bcab952": "InvalidName",
+    "fddbb10404166b7254e6216ad1c982a6958a7d06153d797307ec6569b5847dd4": "AlreadyBound",
+}
 # the package's *_idl modules and subpackages
 _SUBMODULES: frozenset[str] = frozenset(
     [

@@ -41,6 +41,9 @@ _EXPORTS: dict[str, str] = {
     "SynchroMotion": "Miro__POA.SynchroMotion_idl",
     "myExample": "Miro__POA.myExample_idl",
 }
+# type hash -> the data type that has it: how event consumers find the class of a payload
+_TYPE_HASHES: dict[str, str] = {
+}
 # the package's *_idl modules and subpackages
 _SUBMODULES: frozenset[str] = frozenset(
     [

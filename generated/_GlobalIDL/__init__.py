@@ -18,6 +18,10 @@ _EXPORTS: dict[str, str] = {
     "Person": "_GlobalIDL.Person_idl",
     "PersonTraitsIDL": "_GlobalIDL.Person_idl",
 }
+# type hash -> the data type that has it: how event consumers find the class of a payload
+_TYPE_HASHES: dict[str, str] = {
+    "f692e73fb9ac8371ab1c5b1cd1400c81faff5227b002e11f9c2ba7e1e18a6f01": "PersonTraitsIDL",
+}
 # the package's *_idl modules and subpackages
 _SUBMODULES: frozenset[str] = frozenset(
     [

@@ -71,10 +71,12 @@ def generated_files(modules: list[PyModule], outdir: Path) -> dict[str, str]:
         }
         siblings |= _generated_on_disk(outdir / folder)
         exports: dict[str, str] = {}
+        hashes: dict[str, str] = {}
         for stem in sorted(siblings, key=str.lower):  # later modules win, as star imports did
             rel = f"{folder}/{stem}.py"
-            names_of = _exports(files[rel]) if rel in files else _exports_on_disk(outdir / rel)
-            exports.update(dict.fromkeys(names_of, f"{package}.{stem}"))
+            source = files[rel] if rel in files else _read(outdir / rel)
+            exports.update(dict.fromkeys(_exports(source), f"{package}.{stem}"))
+            hashes.update(_type_hashes(source))
         children = {
             p.rsplit(".", 1)[1]
             for p in packages
@@ -97,6 +99,7 @@ def generated_files(modules: list[PyModule], outdir: Path) -> dict[str, str]:
             [(package, c) for c in sorted(children, key=str.lower)],
             sorted(exports.items()),
             sorted(siblings | children),
+            sorted((h, name) for h, name in hashes.items() if name in exports),
         )
     return files
 
@@ -132,11 +135,32 @@ def _exports(source: str) -> list[str]:
     return []
 
 
-def _exports_on_disk(path: Path) -> list[str]:
+def _read(path: Path) -> str:
     try:
-        return _exports(path.read_text(encoding="utf-8"))
+        return path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError):
-        return []
+        return ""
+
+
+def _type_hashes(source: str) -> dict[str, str]:
+    """type hash -> class name, for the module-level classes of a generated module."""
+    try:
+        tree = pyast.parse(source)
+    except SyntaxError:
+        return {}
+    out: dict[str, str] = {}
+    for node in tree.body:
+        if not isinstance(node, pyast.ClassDef):
+            continue
+        for stmt in node.body:
+            if (
+                isinstance(stmt, pyast.Assign)
+                and any(isinstance(t, pyast.Name) and t.id == "_type_hash" for t in stmt.targets)
+                and isinstance(stmt.value, pyast.Constant)
+                and isinstance(stmt.value.value, str)
+            ):
+                out[stmt.value.value] = node.name
+    return out
 
 
 def _packages_on_disk(folder: Path) -> set[str]:

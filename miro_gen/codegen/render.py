@@ -91,6 +91,7 @@ def render_package_init(
     subpackages: list[tuple[str, str]],
     exports: list[tuple[str, str]],
     submodules: list[str],
+    hashes: list[tuple[str, str]],
 ) -> str:
     """A package `__init__` that imports its modules' names lazily (see the template)."""
     public = sorted(
@@ -106,5 +107,6 @@ def render_package_init(
             exports=exports,
             submodules=submodules,
             public=public,
+            hashes=hashes,
         )
     )

@@ -318,8 +318,33 @@ class IdlType:
     _type_hash: ClassVar[str] = ""
     _data_schema: ClassVar[str] = ""
 
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        type_hash = cls.__dict__.get("_type_hash")
+        if type_hash:
+            _TYPES_BY_HASH[type_hash] = cls
+
     def serialize(self) -> bytes:
         raise NotImplementedError  # pragma: no cover - generated classes implement it
+
+
+# Every generated type imported so far, by type hash: what event consumers decode payloads with.
+_TYPES_BY_HASH: dict[str, type[IdlType]] = {}
+
+
+def type_for_hash(type_hash: str) -> type[IdlType] | None:
+    """The generated class whose data schema has this hash: one imported already, or one that
+    an imported generated package lists (its module is imported then)."""
+    cls = _TYPES_BY_HASH.get(type_hash)
+    if cls is not None:
+        return cls
+    for module in list(sys.modules.values()):
+        table = getattr(module, "_TYPE_HASHES", None)
+        if isinstance(table, dict) and type_hash in table:
+            found = getattr(module, table[type_hash], None)
+            if isinstance(found, type) and issubclass(found, IdlType):
+                return found
+    return None
 
 
 # ---- unions ------------------------------------------------------------------------------------

@@ -20,7 +20,7 @@ import signal
 import sys
 import threading
 import uuid
-from collections.abc import MutableSequence, Sequence
+from collections.abc import Callable, MutableSequence, Sequence
 from types import FrameType
 from typing import Any, TypeVar
 
@@ -99,6 +99,7 @@ class Server(Client):
         self._names_lock = threading.Lock()
         self._stop = threading.Event()
         self._renewer: threading.Thread | None = None
+        self._on_shutdown: list[Callable[[], object]] = []
 
     def reactor(self) -> Reactor:
         return self._reactor
@@ -108,13 +109,26 @@ class Server(Client):
         path given); its reference. Replaces an older binding of the name, as Miro does."""
         full = self.naming.full_name(name)
         ref = self.adapter.reference_for(servant)
-        entry = MiroNaming.Entry(full, ref.repo_id, ref.endpoint, ref.key, "")
+        self.bind_entry(MiroNaming.Entry(full, ref.repo_id, ref.endpoint, ref.key, ""))
+        return ref
+
+    def bind_entry(self, entry: MiroNaming.Entry) -> None:
+        """Bind a naming entry under this server's lease (objects, event channels)."""
         self.naming.registry.rebind(entry, self.owner, int(self.lease * 1000))
         with self._names_lock:
-            self._names[full] = entry
+            self._names[entry.name] = entry
         self._start_renewing()
-        _log.notice("bound %s in the naming service", full)
-        return ref
+        _log.notice("bound %s in the naming service", entry.name)
+
+    def resolve_channel(self, name: str = "EventChannel") -> Any:
+        """The event channel bound as `name` (see EventChannelFactory.create_channel)."""
+        from miro_gen.transport.events import resolve_channel
+
+        return resolve_channel(self, name)
+
+    def on_shutdown(self, fn: Callable[[], object]) -> None:
+        """Call `fn()` when `run()` ends, before the sockets close (newest first)."""
+        self._on_shutdown.append(fn)
 
     def run(self) -> None:
         """Serve until SIGINT, SIGTERM or `shutdown()`; then unbind this server's names."""
@@ -145,6 +159,11 @@ class Server(Client):
         for name in names:
             with contextlib.suppress(SystemException, MiroNaming.NotFound):
                 self.naming.registry.unbind(name)
+        for fn in reversed(self._on_shutdown):
+            try:
+                fn()
+            except Exception:
+                _log.exception("a shutdown handler failed")
         self.adapter.close()
         self._reactor.close()
         self.close()

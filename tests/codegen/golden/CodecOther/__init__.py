@@ -15,6 +15,9 @@ if _t.TYPE_CHECKING:
 # name -> the module that defines it
 _EXPORTS: dict[str, str] = {
 }
+# type hash -> the data type that has it: how event consumers find the class of a payload
+_TYPE_HASHES: dict[str, str] = {
+}
 # the package's *_idl modules and subpackages
 _SUBMODULES: frozenset[str] = frozenset(
     [

@@ -17,6 +17,9 @@ if _t.TYPE_CHECKING:
 _EXPORTS: dict[str, str] = {
     "Holder": "CodecTest__POA.types_idl",
 }
+# type hash -> the data type that has it: how event consumers find the class of a payload
+_TYPE_HASHES: dict[str, str] = {
+}
 # the package's *_idl modules and subpackages
 _SUBMODULES: frozenset[str] = frozenset(
     [

@@ -17,6 +17,10 @@ if _t.TYPE_CHECKING:
 _EXPORTS: dict[str, str] = {
     "Tag": "CodecOther.Util.base_idl",
 }
+# type hash -> the data type that has it: how event consumers find the class of a payload
+_TYPE_HASHES: dict[str, str] = {
+    "9b4de718019d13e6a0af102891a8945767dd28650a3d7f44caf39c0720f1104a": "Tag",
+}
 # the package's *_idl modules and subpackages
 _SUBMODULES: frozenset[str] = frozenset(
     [

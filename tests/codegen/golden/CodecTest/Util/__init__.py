@@ -17,6 +17,10 @@ if _t.TYPE_CHECKING:
 _EXPORTS: dict[str, str] = {
     "Tag": "CodecTest.Util.base_idl",
 }
+# type hash -> the data type that has it: how event consumers find the class of a payload
+_TYPE_HASHES: dict[str, str] = {
+    "c2d82f84575ffebaa8a3b92cf4dcf1d2606a73ffd4e116351eb4ff9f60f41793": "Tag",
+}
 # the package's *_idl modules and subpackages
 _SUBMODULES: frozenset[str] = frozenset(
     [
