@@ -134,7 +134,8 @@ class EventChannelFactory:
 
     def __init__(self, server: Any) -> None:
         self.server = server
-        self._channels: dict[str, EventChannel] = {}
+        # The channels this process hosts, whichever factory created them.
+        self._channels: dict[str, EventChannel] = server.hosted_channels
 
     def create_channel(self, name: str = DEFAULT_CHANNEL) -> EventChannel:
         """Host a channel and bind it as `name`; the one already hosted here if there is one."""

@@ -166,9 +166,15 @@ class Reactor:
         self._wake()
 
     def close(self) -> None:
-        """Release the wake-up sockets (after `run()` has returned)."""
+        """After `run()` has returned: close the ZeroMQ sockets still registered (their owners,
+        suppliers and consumers, live on this thread) and the wake-up sockets. A context with
+        open sockets would otherwise hang whoever terminates it."""
         if not self._closed:
             self._closed = True
+            for key in list(self._handlers):
+                if isinstance(key, zmq.Socket) and not key.closed:
+                    key.close(0)
+            self._handlers.clear()
             self._wake_r.close()
             self._wake_w.close()
 

@@ -100,6 +100,7 @@ class Server(Client):
         self._stop = threading.Event()
         self._renewer: threading.Thread | None = None
         self._on_shutdown: list[Callable[[], object]] = []
+        self.hosted_channels: dict[str, Any] = {}  # event channels hosted here, by full name
 
     def reactor(self) -> Reactor:
         return self._reactor

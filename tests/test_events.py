@@ -1,0 +1,244 @@
+"""Event channels over real sockets on loopback: subscriptions, offers, batches, slow consumers."""
+
+from __future__ import annotations
+
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import Miro
+import pytest
+import zmq
+
+from miro_gen import (
+    EventChannelFactory,
+    Server,
+    StructuredEvent,
+    StructuredPushConsumer,
+    StructuredPushSupplier,
+)
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.fixture(scope="module")
+def naming() -> Iterator[str]:
+    endpoint = f"tcp://127.0.0.1:{free_port()}"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "miro_gen.cli.main", "naming", "--endpoint", endpoint],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    assert proc.stdout is not None and proc.stdout.readline()
+    yield endpoint
+    proc.kill()
+    proc.wait(10)
+
+
+class Running:
+    """A Server whose reactor runs in a thread of the test."""
+
+    def __init__(self, naming: str, context: str) -> None:
+        self.server = Server(["t", "--naming", naming, "-MNC", context], context=zmq.Context())
+        self.thread = threading.Thread(target=self.server.run, daemon=True)
+        self.thread.start()
+
+    def stop(self) -> None:
+        self.server.shutdown()
+        self.thread.join(10)
+
+
+@pytest.fixture
+def servers(naming: str) -> Iterator[Callable[[str], Server]]:
+    started: list[Running] = []
+
+    def make(context: str) -> Server:
+        r = Running(naming, context)
+        started.append(r)
+        return r.server
+
+    yield make
+    for r in reversed(started):
+        r.stop()
+
+
+class Recorder(StructuredPushConsumer):
+    def __init__(self, *args: object, delay: float = 0.0) -> None:
+        super().__init__(*args)  # type: ignore[arg-type]
+        self.events: list[StructuredEvent] = []
+        self.delay = delay
+
+    def push_structured_event(self, event: StructuredEvent) -> None:
+        if self.delay:
+            time.sleep(self.delay)
+        self.events.append(event)
+
+
+def eventually(check: Callable[[], bool], seconds: float = 10) -> None:
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        if check():
+            return
+        time.sleep(0.01)
+    raise AssertionError("condition not reached in time")
+
+
+def event(n: int) -> Miro.ExampleEventIDL:
+    return Miro.ExampleEventIDL(n, Miro.ExampleStructIDL(float(n), -float(n)))
+
+
+def test_subscriptions_select_by_domain_and_type(servers: Callable[[str], Server]) -> None:
+    host = servers("robot1")
+    channel = EventChannelFactory(host).create_channel("Events")
+    assert EventChannelFactory(host).create_channel("Events").name == "robot1/Events"
+    robot1 = StructuredPushSupplier(channel)
+    robot2 = StructuredPushSupplier(channel, domain_name="robot2")
+    listener = servers("gui")
+    remote = listener.resolve_channel("robot1/Events")
+    everything, exact, by_type, by_domain = (Recorder(remote) for _ in range(4))
+    everything.set_subscriptions([("*", "*")])
+    exact.set_subscriptions([("robot2", "ExampleEvent")])
+    by_type.set_subscriptions([("*", "ExampleEvent")])
+    by_domain.set_subscriptions([("robot1", "*")])
+    eventually(lambda: robot1.has_subscribers("Other") and robot2.has_subscribers("ExampleEvent"))
+    eventually(lambda: robot2.has_subscribers("Other"))  # (*, *) matches every topic
+    n = 0
+    while len(everything.events) < 4 * 3 and n < 50:  # first events may beat the connections
+        for s, t in ((robot1, "ExampleEvent"), (robot2, "ExampleEvent"), (robot1, "Other")):
+            s.push(t, event(n))
+        n += 1
+        time.sleep(0.02)
+    time.sleep(0.2)
+
+    def seen(r: Recorder) -> set[tuple[str, str]]:
+        return {(e.domain_name, e.type_name) for e in r.events}
+
+    assert seen(everything) == {
+        ("robot1", "ExampleEvent"),
+        ("robot2", "ExampleEvent"),
+        ("robot1", "Other"),
+    }
+    assert seen(exact) == {("robot2", "ExampleEvent")}
+    assert seen(by_type) == {("robot1", "ExampleEvent"), ("robot2", "ExampleEvent")}
+    assert seen(by_domain) == {("robot1", "ExampleEvent"), ("robot1", "Other")}
+    e = exact.events[-1]
+    assert isinstance(e.payload, Miro.ExampleEventIDL)
+    assert e.payload == event(e.payload.counter)
+    assert e.stamp <= e.publish_time <= time.time()
+    assert e.type_hash == Miro.ExampleEventIDL._type_hash
+
+
+def test_nobody_subscribed_means_nothing_encoded(servers: Callable[[str], Server]) -> None:
+    host = servers("r")
+    supplier = StructuredPushSupplier(EventChannelFactory(host).create_channel())
+    time.sleep(0.2)
+    assert not supplier.has_subscribers("ExampleEvent")
+
+    class Exploding:
+        _type_hash = Miro.ExampleEventIDL._type_hash
+
+        def serialize(self) -> bytes:
+            raise AssertionError("encoded although nobody listens")
+
+    assert supplier.push("ExampleEvent", Exploding()) is False
+    consumer = Recorder(servers("c").resolve_channel("r/EventChannel"))
+    consumer.set_subscriptions([("r", "ExampleEvent")])
+    eventually(lambda: supplier.has_subscribers("ExampleEvent"))
+    consumer.set_subscriptions([])
+    eventually(lambda: not supplier.has_subscribers("ExampleEvent"))
+
+
+def test_sequence_numbers_count_what_a_late_consumer_missed(
+    servers: Callable[[str], Server],
+) -> None:
+    host = servers("r")
+    channel = EventChannelFactory(host).create_channel("Seq")
+    supplier = StructuredPushSupplier(channel)
+    consumer = Recorder(servers("c").resolve_channel("r/Seq"))
+    consumer.set_subscriptions([("*", "*")])
+    eventually(lambda: supplier.has_subscribers("ExampleEvent"))
+    for n in range(200):
+        supplier.push("ExampleEvent", event(n))
+    eventually(lambda: len(consumer.events) == 200)
+    seqs = [e.seq for e in consumer.events]
+    assert seqs == list(range(seqs[0], seqs[0] + 200))
+    assert consumer.missed == 0
+
+
+def test_a_slow_consumer_does_not_slow_the_supplier(servers: Callable[[str], Server]) -> None:
+    host = servers("r")
+    channel = EventChannelFactory(host).create_channel("Slow")
+    supplier = StructuredPushSupplier(channel)
+    fast = Recorder(servers("fast").resolve_channel("r/Slow"))
+    slow = Recorder(servers("slow").resolve_channel("r/Slow"), delay=0.01)
+    for c in (fast, slow):
+        c.set_subscriptions([("*", "*")])
+    eventually(lambda: len(supplier._subscriptions) >= 1)
+    time.sleep(0.3)
+    total = 30_000
+    start = time.monotonic()
+    for n in range(total):
+        supplier.push("ExampleEvent", event(n))
+    pushing = time.monotonic() - start
+    eventually(lambda: len(fast.events) >= total * 0.99, 30)
+    assert pushing < 10  # a slow consumer 10 ms per event would need 300 s
+    time.sleep(1)
+    # The slow one got some and knows how many it missed (within what is still queued).
+    received = len(slow.events)
+    assert received < total
+    last = slow.events[-1].seq - slow.events[0].seq + 1
+    assert slow.missed == last - received
+
+
+def test_undecodable_events_are_reported_not_delivered(
+    servers: Callable[[str], Server], capfd: pytest.CaptureFixture[str]
+) -> None:
+    host = servers("r")
+    channel = EventChannelFactory(host).create_channel("Hash")
+    supplier = StructuredPushSupplier(channel)
+    consumer = Recorder(servers("c").resolve_channel("r/Hash"))
+    consumer.set_subscriptions([("*", "*")])
+    eventually(lambda: supplier.has_subscribers("ExampleEvent"))
+
+    class Impostor:  # same name, another layout: its hash is unknown to everybody
+        _type_hash = "ab" * 32
+
+        def serialize(self) -> bytes:
+            return b"\x00\x01\x00\x00" + bytes(8)
+
+    for _ in range(3):
+        supplier.push("ExampleEvent", Impostor())
+    supplier.push("ExampleEvent", event(1))
+    eventually(lambda: len(consumer.events) == 1)
+    assert consumer.undecodable == 3
+    assert consumer.events[0].payload == event(1)
+
+
+def test_malformed_event_frames_are_dropped(servers: Callable[[str], Server]) -> None:
+    host = servers("r")
+    channel = EventChannelFactory(host).create_channel("Bad")
+    consumer = Recorder(servers("c").resolve_channel("r/Bad"))
+    consumer.set_subscriptions([("*", "*")])
+    rogue = zmq.Context.instance().socket(zmq.PUB)
+    rogue.setsockopt(zmq.LINGER, 0)
+    rogue.connect(channel.supplier_endpoint)
+    time.sleep(0.3)
+    bad = [[b"x"], [b"r\0T\0", b"short"], [b"r\0T\0", b"\x09" + bytes(50)], [b"no-nul", b""]]
+    for parts in bad:
+        rogue.send_multipart(parts)
+    supplier = StructuredPushSupplier(channel)
+    eventually(lambda: supplier.has_subscribers("ExampleEvent"))
+    supplier.push("ExampleEvent", event(5))
+    eventually(lambda: len(consumer.events) == 1)
+    assert consumer.events[0].payload == event(5)
+    rogue.close()
