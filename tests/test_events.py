@@ -2,9 +2,6 @@
 
 from __future__ import annotations
 
-import socket
-import subprocess
-import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -13,6 +10,7 @@ from pathlib import Path
 import Miro
 import pytest
 import zmq
+from loopback import NamingProcess, eventually
 
 from miro_gen import (
     EventChannelFactory,
@@ -25,24 +23,11 @@ from miro_gen import (
 REPO = Path(__file__).resolve().parents[1]
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 @pytest.fixture(scope="module")
 def naming() -> Iterator[str]:
-    endpoint = f"tcp://127.0.0.1:{free_port()}"
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "miro_gen.cli.main", "naming", "--endpoint", endpoint],
-        stdout=subprocess.PIPE,
-        text=True,
-    )
-    assert proc.stdout is not None and proc.stdout.readline()
-    yield endpoint
-    proc.kill()
-    proc.wait(10)
+    process = NamingProcess()
+    yield process.endpoint
+    process.stop()
 
 
 class Running:
@@ -82,15 +67,6 @@ class Recorder(StructuredPushConsumer):
         if self.delay:
             time.sleep(self.delay)
         self.events.append(event)
-
-
-def eventually(check: Callable[[], bool], seconds: float = 10) -> None:
-    end = time.monotonic() + seconds
-    while time.monotonic() < end:
-        if check():
-            return
-        time.sleep(0.01)
-    raise AssertionError("condition not reached in time")
 
 
 def event(n: int) -> Miro.ExampleEventIDL:

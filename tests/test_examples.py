@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import os
 import signal
-import socket
 import subprocess
 import sys
 from pathlib import Path
+
+from loopback import NamingProcess, service_env
 
 REPO = Path(__file__).resolve().parents[1]
 SERVICES = REPO / "services"
@@ -25,41 +25,18 @@ Variables a and b have been set to: 6 and 16
 """
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-def env() -> dict[str, str]:
-    return dict(os.environ, PYTHONPATH=os.pathsep.join([str(REPO / "generated"), str(REPO)]))
-
-
 def test_example_a_and_b_print_what_the_manual_shows() -> None:
-    port = free_port()
+    naming = NamingProcess()
+    port = naming.port
     nsc = ["-ORBInitRef", f"NameService=iioploc://127.0.0.1:{port}/NameService"]
-    naming = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "miro_gen.cli.main",
-            "naming",
-            "--endpoint",
-            f"tcp://127.0.0.1:{port}",
-        ],
-        stdout=subprocess.PIPE,
-        text=True,
-        env=env(),
-    )
     a = None
     try:
-        assert naming.stdout is not None and naming.stdout.readline().startswith("naming service")
         a = subprocess.Popen(
             [sys.executable, str(SERVICES / "exampleA.py"), *nsc, "-MLL", "9", "-MLF", "MIRO"],
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
             text=True,
-            env=env(),
+            env=service_env(),
         )
         assert a.stdout is not None and a.stdout.readline().strip() == "ExampleA is ready"
         b = subprocess.run(
@@ -78,7 +55,7 @@ def test_example_a_and_b_print_what_the_manual_shows() -> None:
             ],
             capture_output=True,
             text=True,
-            env=env(),
+            env=service_env(),
             timeout=60,
         )
         assert b.returncode == 0, b.stderr
@@ -91,27 +68,13 @@ def test_example_a_and_b_print_what_the_manual_shows() -> None:
     finally:
         if a is not None and a.poll() is None:
             a.kill()
-        naming.kill()
-        naming.wait(10)
+        naming.stop()
 
 
 def test_example_b_without_example_a_says_so() -> None:
-    port = free_port()
-    naming = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "miro_gen.cli.main",
-            "naming",
-            "--endpoint",
-            f"tcp://127.0.0.1:{port}",
-        ],
-        stdout=subprocess.PIPE,
-        text=True,
-        env=env(),
-    )
+    naming = NamingProcess()
+    port = naming.port
     try:
-        assert naming.stdout is not None and naming.stdout.readline()
         b = subprocess.run(
             [
                 sys.executable,
@@ -125,15 +88,14 @@ def test_example_b_without_example_a_says_so() -> None:
             ],
             capture_output=True,
             text=True,
-            env=env(),
+            env=service_env(),
             timeout=60,
         )
         assert b.returncode == 1
         assert "robot1/ExampleA is not bound in the naming service" in b.stderr
         assert "Traceback" not in b.stderr
     finally:
-        naming.kill()
-        naming.wait(10)
+        naming.stop()
 
 
 def read_lines(proc: subprocess.Popen[str], prefix: str, n: int, seconds: float = 20) -> list[str]:
@@ -159,29 +121,16 @@ def read_lines(proc: subprocess.Popen[str], prefix: str, n: int, seconds: float 
 
 def test_example_c_publishes_and_example_d_receives() -> None:
     """§5.2: exampleC creates ExampleEventChannel and publishes; exampleD subscribes."""
-    port = free_port()
+    naming = NamingProcess()
+    port = naming.port
     nsc = ["-ORBInitRef", f"NameService=iioploc://127.0.0.1:{port}/NameService", "-MNC", "robot1"]
-    naming = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "miro_gen.cli.main",
-            "naming",
-            "--endpoint",
-            f"tcp://127.0.0.1:{port}",
-        ],
-        stdout=subprocess.PIPE,
-        text=True,
-        env=env(),
-    )
     procs: list[subprocess.Popen[str]] = []
     try:
-        assert naming.stdout is not None and naming.stdout.readline()
         c = subprocess.Popen(
             [sys.executable, str(SERVICES / "exampleC.py"), *nsc, "0.05"],
             stdout=subprocess.PIPE,
             text=True,
-            env=env(),
+            env=service_env(),
         )
         procs.append(c)
         assert read_lines(c, "ExampleC publishes", 1) == [
@@ -192,7 +141,7 @@ def test_example_c_publishes_and_example_d_receives() -> None:
             [sys.executable, str(SERVICES / "exampleD.py"), *nsc],
             stdout=subprocess.PIPE,
             text=True,
-            env=env(),
+            env=service_env(),
         )
         procs.append(d)
         got = read_lines(d, "Received ExampleEvent #", 5)
@@ -208,5 +157,4 @@ def test_example_c_publishes_and_example_d_receives() -> None:
         for p in procs:
             if p.poll() is None:
                 p.kill()
-        naming.kill()
-        naming.wait(10)
+        naming.stop()

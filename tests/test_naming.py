@@ -2,19 +2,18 @@
 
 from __future__ import annotations
 
-import os
 import signal
-import socket
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 
 import Miro
 import MiroNaming
 import pytest
 import zmq
+from loopback import NamingProcess, eventually, free_port, service_env
 
 from miro_gen import TRANSIENT, Client
 
@@ -25,33 +24,11 @@ RELAY = HERE / "procs" / "relay.py"
 LEASE = "1.5"  # seconds: short, so that expiry is seen quickly
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 def env() -> dict[str, str]:
-    e = dict(os.environ, MIRO_TEST_LEASE=LEASE)
-    e["PYTHONPATH"] = os.pathsep.join([str(REPO / "generated"), str(REPO)])
-    return e
+    return service_env(MIRO_TEST_LEASE=LEASE)
 
 
-class Naming:
-    def __init__(self, port: int) -> None:
-        self.endpoint = f"tcp://127.0.0.1:{port}"
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "miro_gen.cli.main", "naming", "--endpoint", self.endpoint],
-            stdout=subprocess.PIPE,
-            text=True,
-            env=env(),
-        )
-        assert self.proc.stdout is not None
-        assert self.proc.stdout.readline().startswith("naming service at")
-
-    def stop(self, sig: int = signal.SIGKILL) -> None:
-        self.proc.send_signal(sig)
-        self.proc.wait(10)
+Naming = NamingProcess
 
 
 class Service:
@@ -72,22 +49,13 @@ class Service:
 
 @pytest.fixture
 def naming() -> Iterator[Naming]:
-    n = Naming(free_port())
+    n = Naming()
     yield n
     n.stop()
 
 
 def client(naming: Naming, *args: str) -> Client:
     return Client(["test", "--naming", naming.endpoint, *args], context=zmq.Context())
-
-
-def eventually(check: Callable[[], bool], seconds: float = 10) -> None:
-    end = time.monotonic() + seconds
-    while time.monotonic() < end:
-        if check():
-            return
-        time.sleep(0.05)
-    raise AssertionError("condition not reached in time")
 
 
 def resolves(c: Client, name: str) -> bool:

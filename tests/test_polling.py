@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import socket
 import subprocess
 import sys
 import threading
@@ -13,6 +12,7 @@ from pathlib import Path
 import Miro
 import pytest
 import zmq
+from loopback import free_port
 
 from miro_gen.exceptions import COMM_FAILURE, OBJECT_NOT_EXIST, TIMEOUT, TRANSIENT, CompletionStatus
 from miro_gen.runtime.cdr import ObjectRef
@@ -86,12 +86,6 @@ def test_unknown_object_is_object_not_exist(server: Server, invoker: ZmqInvoker)
     stub = Miro.Example(ObjectRef(REPO_ID, server.endpoint, b"nobody"), invoker)
     with pytest.raises(OBJECT_NOT_EXIST):
         stub.getData()
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def test_nobody_listening_is_transient_promptly(invoker: ZmqInvoker) -> None:

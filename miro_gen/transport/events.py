@@ -75,6 +75,16 @@ def subscription_prefix(domain: str, type_name: str) -> bytes:
     return topic(domain, type_name)
 
 
+def _close_on(reactor: Reactor, socket: zmq.Socket[Any]) -> None:
+    """Close a socket of the reactor's thread, on that thread."""
+
+    def close() -> None:
+        reactor.unregister(socket)
+        socket.close(0)
+
+    reactor.call_soon(close)
+
+
 # ---- channels -------------------------------------------------------------------------------
 
 
@@ -262,11 +272,7 @@ class StructuredPushSupplier:
                 self._subscriptions.pop(prefix, None)
 
     def close(self) -> None:
-        def close() -> None:
-            self.reactor.unregister(self.socket)
-            self.socket.close(0)
-
-        self.reactor.call_soon(close)
+        _close_on(self.reactor, self.socket)
 
 
 # ---- consumers ------------------------------------------------------------------------------
@@ -393,8 +399,4 @@ class StructuredPushConsumer:
         return out
 
     def close(self) -> None:
-        def close() -> None:
-            self.reactor.unregister(self.socket)
-            self.socket.close(0)
-
-        self.reactor.call_soon(close)
+        _close_on(self.reactor, self.socket)

@@ -1,0 +1,58 @@
+"""What the transport's integration tests share: free ports, the environment of the processes
+they start, a `miro naming` process, and waiting for a condition."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+
+from miro_cli import REPO
+
+
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that nothing listens on (now)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def service_env(**extra: str) -> dict[str, str]:
+    """The environment of a service process run from this checkout (generated code included)."""
+    env = dict(os.environ, **extra)
+    env["PYTHONPATH"] = os.pathsep.join([str(REPO / "generated"), str(REPO)])
+    return env
+
+
+class NamingProcess:
+    """`miro naming` in a process of its own, serving on 127.0.0.1 (on `port`, or a free one)."""
+
+    def __init__(self, port: int | None = None) -> None:
+        self.port = free_port() if port is None else port
+        self.endpoint = f"tcp://127.0.0.1:{self.port}"
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "miro_gen.cli.main", "naming", "--endpoint", self.endpoint],
+            stdout=subprocess.PIPE,
+            text=True,
+            env=service_env(),
+        )
+        assert self.proc.stdout is not None
+        assert self.proc.stdout.readline().startswith("naming service at")
+
+    def stop(self, sig: int = signal.SIGKILL) -> None:
+        self.proc.send_signal(sig)
+        self.proc.wait(10)
+
+
+def eventually(check: Callable[[], bool], seconds: float = 10) -> None:
+    """Wait until check() is true; fail after `seconds`."""
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        if check():
+            return
+        time.sleep(0.01)
+    raise AssertionError("condition not reached in time")
