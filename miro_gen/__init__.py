@@ -30,6 +30,7 @@ if TYPE_CHECKING:
         StructuredPushConsumer,
         StructuredPushSupplier,
     )
+    from miro_gen.transport.implementation import Implementation
     from miro_gen.transport.server import Client, Server
 
 __version__ = "0.1.0"
@@ -42,6 +43,7 @@ _LAZY = {
     "StructuredPushSupplier": _EVENTS,
     "StructuredPushConsumer": _EVENTS,
     "StructuredEvent": _EVENTS,
+    "Implementation": "miro_gen.transport.implementation",
 }
 
 __all__ = [
@@ -57,6 +59,7 @@ __all__ = [
     "Client",
     "CompletionStatus",
     "EventChannelFactory",
+    "Implementation",
     "Server",
     "StructuredEvent",
     "StructuredPushConsumer",
