@@ -29,13 +29,22 @@ def service_env(**extra: str) -> dict[str, str]:
 
 
 class NamingProcess:
-    """`miro naming` in a process of its own, serving on 127.0.0.1 (on `port`, or a free one)."""
+    """`miro naming` in a process of its own, serving on 127.0.0.1 (on `port`, or a free one);
+    `options` are more of its command line (`--channel NAME`)."""
 
-    def __init__(self, port: int | None = None) -> None:
+    def __init__(self, port: int | None = None, options: tuple[str, ...] = ()) -> None:
         self.port = free_port() if port is None else port
         self.endpoint = f"tcp://127.0.0.1:{self.port}"
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "miro_gen.cli.main", "naming", "--endpoint", self.endpoint],
+            [
+                sys.executable,
+                "-m",
+                "miro_gen.cli.main",
+                "naming",
+                "--endpoint",
+                self.endpoint,
+                *options,
+            ],
             stdout=subprocess.PIPE,
             text=True,
             env=service_env(),

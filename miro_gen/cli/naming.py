@@ -1,4 +1,5 @@
-"""`miro naming` (the naming service) and `miro nslist` (what it holds, as a tree)."""
+"""`miro naming` (the naming service, optionally hosting event channels) and `miro nslist`
+(what it holds, as a tree)."""
 
 from __future__ import annotations
 
@@ -7,12 +8,14 @@ import signal
 import sys
 from collections.abc import Sequence
 
+import MiroNaming
 import zmq
 
 from miro_gen import log
 from miro_gen.exceptions import SystemException
+from miro_gen.transport.events import CHANNEL_REPO_ID, ChannelHost
 from miro_gen.transport.invoker import ZmqInvoker
-from miro_gen.transport.naming import NamingService
+from miro_gen.transport.naming import NamingService, check_name
 from miro_gen.transport.options import DEFAULT_NAMING, UsageError, naming_endpoint
 from miro_gen.transport.reactor import Reactor
 
@@ -28,8 +31,26 @@ def naming_main(argv: Sequence[str]) -> int:
         default=DEFAULT_NAMING,
         help=f"where to serve (default {DEFAULT_NAMING}; use tcp://0.0.0.0:2809 for other hosts)",
     )
+    p.add_argument(
+        "--channel",
+        action="append",
+        default=[],
+        metavar="NAME",
+        help="also host the event channel NAME (bound as NAME, found from any naming context), "
+        "so that it outlives its suppliers; may be repeated",
+    )
+    p.add_argument(
+        "--host",
+        help="the address to advertise for hosted channels when --endpoint listens on all "
+        "interfaces",
+    )
     p.add_argument("-MLL", "--log-level", type=int, default=5, help="Miro log level (default 5)")
     ns = p.parse_args(argv)
+    for name in ns.channel:
+        try:
+            check_name(name)
+        except MiroNaming.InvalidName:
+            p.error(f"--channel {name!r} is not a valid name")
     try:
         endpoint = naming_endpoint(ns.endpoint)
     except UsageError as e:
@@ -38,17 +59,36 @@ def naming_main(argv: Sequence[str]) -> int:
     reactor = Reactor(zmq.Context.instance())
     invoker = ZmqInvoker(reactor.context)
     try:
-        service = NamingService(reactor, invoker, endpoint)
+        service = NamingService(reactor, invoker, endpoint, ns.host)
     except zmq.ZMQError as e:
         print(f"miro naming: cannot serve on {endpoint}: {e}", file=sys.stderr)
         return 1
+    channels = [_host_channel(service, name) for name in ns.channel]
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: reactor.stop())
     print(f"naming service at {service.endpoint}", flush=True)
+    for name in ns.channel:
+        print(f"event channel {name}", flush=True)
     reactor.run()
+    for channel in channels:
+        channel.close()
     service.close()
     reactor.close()
     return 0
+
+
+def _host_channel(service: NamingService, name: str) -> ChannelHost:
+    """Host the event channel `name` in this process and bind it, lease-free, in `service`."""
+    bound = service.adapter.socket.getsockopt_string(zmq.LAST_ENDPOINT)
+    bind_host = bound.split("://", 1)[1].rsplit(":", 1)[0]
+    advertise = service.endpoint.split("://", 1)[1].rsplit(":", 1)[0]
+    host = ChannelHost(service.adapter.reactor.context, bind_host, advertise)
+    service.registry.keep(
+        MiroNaming.Entry(
+            name, CHANNEL_REPO_ID, host.supplier_endpoint, host.consumer_endpoint.encode(), ""
+        )
+    )
+    return host
 
 
 def nslist_main(argv: Sequence[str]) -> int:

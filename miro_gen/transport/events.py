@@ -98,11 +98,12 @@ class EventChannel:
     consumer_endpoint: str
     reactor: Reactor
     domain_name: str = ""  # the default domain of suppliers (the process's naming context)
-    _host: _ChannelHost | None = field(default=None, repr=False)
+    _host: ChannelHost | None = field(default=None, repr=False)
 
 
-class _ChannelHost:
-    """Runs the XSUB/XPUB proxy in a thread (libzmq's, without the GIL) until closed."""
+class ChannelHost:
+    """Runs a channel's XSUB/XPUB proxy in a thread (libzmq's, without the GIL) until closed:
+    in the process that creates the channel, or in `miro naming --channel`."""
 
     def __init__(self, context: zmq.Context[Any], bind_host: str, advertise: str) -> None:
         self.xsub = context.socket(zmq.XSUB)
@@ -154,7 +155,7 @@ class EventChannelFactory:
             return self._channels[full]
         host = self.server.options.host
         advertise = self.server.adapter.endpoint.split("://", 1)[1].rsplit(":", 1)[0]
-        ch_host = _ChannelHost(self.server.context, "*" if host else "127.0.0.1", advertise)
+        ch_host = ChannelHost(self.server.context, "*" if host else "127.0.0.1", advertise)
         channel = EventChannel(
             full,
             ch_host.supplier_endpoint,

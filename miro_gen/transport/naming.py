@@ -8,6 +8,7 @@ naming service learns the names of the live servers at their next renewal.
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from dataclasses import dataclass
@@ -26,6 +27,7 @@ from miro_gen.transport.reactor import Reactor
 _log = logger("MIRO")
 
 NAMING_KEY = b"NameService"
+NAMING_OWNER = "miro-naming"  # the owner of the entries the naming service binds itself
 DEFAULT_LEASE = 3.0  # seconds an entry lives without renewal
 PURGE_INTERVAL = 0.25  # seconds between sweeps for expired entries
 Entry = MiroNaming.Entry
@@ -68,6 +70,13 @@ class Registry(MiroNaming__POA.Registry):
             self._table[name] = _Binding(binding, owner, _expiry(lease_ms))
         _log.info("bound %s (%s at %s)", name, binding.repo_id, binding.endpoint)
 
+    def keep(self, binding: MiroNaming.Entry) -> None:
+        """Bind an entry of the naming service's own (a channel it hosts), without a lease."""
+        name = check_name(binding.name)
+        with self._lock:
+            self._table[name] = _Binding(binding, NAMING_OWNER, math.inf)
+        _log.info("bound %s (%s at %s)", name, binding.repo_id, binding.endpoint)
+
     def resolve(self, name: str) -> MiroNaming.Entry:
         check_name(name)
         with self._lock:
@@ -90,6 +99,8 @@ class Registry(MiroNaming__POA.Registry):
             return [b.entry for n, b in sorted(self._table.items()) if n.startswith(prefix)]
 
     def renew(self, owner: str, lease_ms: int) -> bool:
+        if owner == NAMING_OWNER:  # its own entries have no lease to renew
+            return False
         expires = _expiry(lease_ms)
         found = False
         with self._lock:
@@ -119,11 +130,14 @@ def _expiry(lease_ms: int) -> float:
 
 
 class NamingService:
-    """A naming service hosted on `reactor` at `endpoint` (a fixed port)."""
+    """A naming service hosted on `reactor` at `endpoint` (a fixed port); `host` is the address
+    it advertises for what it hosts when it listens on all interfaces."""
 
-    def __init__(self, reactor: Reactor, invoker: ZmqInvoker, endpoint: str) -> None:
+    def __init__(
+        self, reactor: Reactor, invoker: ZmqInvoker, endpoint: str, host: str | None = None
+    ) -> None:
         self.registry = Registry()
-        self.adapter = ObjectAdapter(reactor, invoker, bind=endpoint)
+        self.adapter = ObjectAdapter(reactor, invoker, bind=endpoint, host=host)
         self.endpoint = self.adapter.endpoint
         self.adapter.activate(self.registry, NAMING_KEY)
         self._timer = reactor.schedule_timer(PURGE_INTERVAL, PURGE_INTERVAL, self._purge)

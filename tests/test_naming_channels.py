@@ -1,0 +1,81 @@
+"""`miro naming --channel NAME`: a channel hosted by the naming service outlives its suppliers."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import threading
+import time
+
+import Miro
+import zmq
+from loopback import NamingProcess, eventually, service_env
+
+from miro_gen import Server, StructuredEvent, StructuredPushConsumer, StructuredPushSupplier
+
+
+class Recorder(StructuredPushConsumer):
+    def __init__(self, *args: object) -> None:
+        super().__init__(*args)  # type: ignore[arg-type]
+        self.events: list[StructuredEvent] = []
+
+    def push_structured_event(self, event: StructuredEvent) -> None:
+        self.events.append(event)
+
+
+class Running:
+    def __init__(self, naming: str, context: str) -> None:
+        self.server = Server(["t", "--naming", naming, "-MNC", context], context=zmq.Context())
+        self.thread = threading.Thread(target=self.server.run, daemon=True)
+        self.thread.start()
+
+    def stop(self) -> None:
+        self.server.shutdown()
+        self.thread.join(10)
+
+
+def test_a_channel_hosted_by_naming_outlives_its_suppliers() -> None:
+    naming = NamingProcess(options=("--channel", "Shared", "--channel", "robots/Status"))
+    listener = Running(naming.endpoint, "gui")
+    try:
+        listing = subprocess.run(
+            [sys.executable, "-m", "miro_gen.cli.main", "nslist", "--naming", naming.endpoint],
+            capture_output=True,
+            text=True,
+            env=service_env(),
+            timeout=30,
+        ).stdout
+        assert "Shared  (IDL:miro-gen/EventChannel:1.0 at tcp://127.0.0.1:" in listing
+        assert "robots/\n  Status  (IDL:miro-gen/EventChannel:1.0" in listing
+
+        consumer = Recorder(listener.server.resolve_channel("Shared"))  # found from any context
+        consumer.set_subscriptions([("*", "ExampleEvent")])
+        for n in range(2):  # one supplier after another: the consumer does not notice
+            supplier_proc = Running(naming.endpoint, f"robot{n}")
+            supplier = StructuredPushSupplier(supplier_proc.server.resolve_channel("Shared"))
+            eventually(lambda s=supplier: s.has_subscribers("ExampleEvent"))
+            payload = Miro.ExampleEventIDL(n, Miro.ExampleStructIDL(1.0, 2.0))
+            supplier.push("ExampleEvent", payload)
+            eventually(lambda n=n: len(consumer.events) == n + 1)
+            supplier_proc.stop()
+        assert [(e.domain_name, e.payload.counter) for e in consumer.events] == [
+            ("robot0", 0),
+            ("robot1", 1),
+        ]
+        time.sleep(4)  # longer than a lease: the naming service's own entries do not expire
+        assert listener.server.resolve_channel("robots/Status").name == "robots/Status"
+    finally:
+        listener.stop()
+        naming.stop()
+
+
+def test_an_invalid_channel_name_is_a_usage_error() -> None:
+    result = subprocess.run(
+        [sys.executable, "-m", "miro_gen.cli.main", "naming", "--channel", "a//b"],
+        capture_output=True,
+        text=True,
+        env=service_env(),
+        timeout=30,
+    )
+    assert result.returncode == 2
+    assert "--channel 'a//b' is not a valid name" in result.stderr
