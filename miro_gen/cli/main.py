@@ -20,6 +20,9 @@ def build_parser() -> argparse.ArgumentParser:
     sub.add_parser("idl", help="compile IDL files (same as miro-idl)", add_help=False)
     sub.add_parser("naming", help="run the naming service", add_help=False)
     sub.add_parser("nslist", help="print the names bound in the naming service", add_help=False)
+    sub.add_parser(
+        "demo", help="run the manual's examples A to D with a naming service", add_help=False
+    )
     return p
 
 
@@ -34,6 +37,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         run = naming.naming_main if args[0] == "naming" else naming.nslist_main
         return run(args[1:])
+    if args and args[0] == "demo":
+        from miro_gen.cli import demo
+
+        return demo.demo_main(args[1:])
     parser = build_parser()
     ns = parser.parse_args(args)
     if ns.command is None:
