@@ -52,15 +52,20 @@ def test_the_demo_runs_all_four_examples_for_its_duration() -> None:
 
 def test_ctrl_c_stops_the_examples_and_the_naming_service() -> None:
     demo = subprocess.Popen(DEMO, stdout=subprocess.PIPE, text=True, env=service_env())
-    assert demo.stdout is not None
-    endpoint = demo.stdout.readline().rsplit(" ", 1)[1].strip()
-    deadline = time.monotonic() + 30
-    for line in demo.stdout:
-        if line.startswith("exampleD | Received") or time.monotonic() > deadline:
-            break
-    assert len(running_examples(endpoint)) == 4
-    demo.send_signal(signal.SIGINT)
-    rest = demo.stdout.read()
-    assert demo.wait(20) == 0
-    assert rest.rstrip().endswith("naming   | stopped")
-    assert not running_examples(endpoint)
+    try:
+        assert demo.stdout is not None
+        endpoint = demo.stdout.readline().rsplit(" ", 1)[1].strip()
+        deadline = time.monotonic() + 30
+        for line in demo.stdout:
+            if line.startswith("exampleD | Received") or time.monotonic() > deadline:
+                break
+        assert len(running_examples(endpoint)) == 4
+        demo.send_signal(signal.SIGINT)
+        rest = demo.stdout.read()
+        assert demo.wait(20) == 0
+        assert rest.rstrip().endswith("naming   | stopped")
+        assert not running_examples(endpoint)
+    finally:
+        if demo.poll() is None:  # a failed assertion must not leave the demo running
+            demo.send_signal(signal.SIGINT)
+            demo.wait(20)
