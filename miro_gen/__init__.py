@@ -22,6 +22,7 @@ from miro_gen.exceptions import (
     SystemException,
     UserException,
 )
+from miro_gen.runtime.rpc import nonblocking
 
 if TYPE_CHECKING:
     from miro_gen.transport.events import (
@@ -66,6 +67,7 @@ __all__ = [
     "StructuredPushSupplier",
     "SystemException",
     "UserException",
+    "nonblocking",
 ]
 
 

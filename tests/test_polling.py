@@ -152,3 +152,45 @@ def test_malformed_frames_are_dropped_and_the_server_goes_on(
     assert b"MARSHAL" in header
     rogue.close()
     assert Miro.Example(server.ref, invoker).getData() == Miro.ExampleStructIDL(1.0, 1.0)
+
+
+def test_nonblocking_methods_run_on_the_reactor_thread_others_on_workers() -> None:
+    import Miro__POA
+
+    from miro_gen import nonblocking
+    from miro_gen.transport.adapter import ObjectAdapter
+    from miro_gen.transport.reactor import Reactor
+
+    threads: dict[str, str] = {}
+
+    class Recording(Miro__POA.Example):
+        def setData(self, a: float, b: float) -> None:
+            threads["setData"] = threading.current_thread().name
+
+        @nonblocking
+        def getData(self) -> Miro.ExampleStructIDL:
+            threads["getData"] = threading.current_thread().name
+            return Miro.ExampleStructIDL(1.0, 2.0)
+
+    reactor = Reactor(zmq.Context())
+    inv = ZmqInvoker(reactor.context)
+    adapter = ObjectAdapter(reactor, inv)
+    thread = reactor.run_in_thread("the-reactor")
+    try:
+        stub = Miro.Example(adapter.activate(Recording()), inv)
+        stub.setData(1.0, 2.0)
+        assert stub.getData() == Miro.ExampleStructIDL(1.0, 2.0)
+    finally:
+        reactor.stop()
+        thread.join(5)
+        adapter.close()
+        reactor.close()
+        inv.close()
+    assert threads["getData"] == "the-reactor"
+    assert threads["setData"].startswith("miro-worker")
+
+
+def test_a_nonblocking_method_of_the_server_process(server: Server, invoker: ZmqInvoker) -> None:
+    stub = Miro.Example(ObjectRef(REPO_ID, server.endpoint, b"Quick"), invoker)
+    stub.setData(4.0, 5.0)
+    assert stub.getData() == Miro.ExampleStructIDL(5.0, 6.0)

@@ -185,6 +185,24 @@ def to_ref(value: Any, invoker: Invoker) -> Any:
 Dispatcher = Callable[[Any, bytes, "Invoker"], bytes]
 
 
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def nonblocking(method: F) -> F:
+    """Mark a servant method that returns at once: it never waits for data, never sleeps and
+    never calls another object. A server runs such methods on the thread that receives the
+    request instead of its worker pool, which saves two thread hand-offs per call. A marked
+    method that blocks stops its whole process from serving meanwhile: mark only what is quick."""
+    method._miro_nonblocking = True  # type: ignore[attr-defined]
+    return method
+
+
+def is_nonblocking(servant: Servant, operation: str) -> bool:
+    """Whether `servant` implements `operation` with a method marked @nonblocking."""
+    method = getattr(type(servant), operation, None)
+    return bool(getattr(method, "_miro_nonblocking", False))
+
+
 class Servant(ABC):  # noqa: B024 - generated subclasses declare the abstract methods
     """Base of generated skeletons. `_dispatch` maps operation names to functions that
     unmarshal the request, call the implementation and marshal the results."""

@@ -1,9 +1,10 @@
 """The server side of remote calls: one ROUTER socket serving all of a process's objects.
 
-Requests arrive on the reactor thread, which never runs a servant: each request goes to a bounded
-pool of worker threads, so a servant may block (wait for the next value) or call another service
-that calls back into this one (A -> B -> A) without stopping the process from serving. The reply
-is handed back to the reactor thread, which alone touches the socket. A frame that does not parse
+Requests arrive on the reactor thread, which runs no servant code unless told it is quick (a
+method marked `@nonblocking`): each request goes to a bounded pool of worker threads, so a servant
+may block (wait for the next value) or call another service that calls back into this one
+(A -> B -> A) without stopping the process from serving. The reply is handed back to the reactor
+thread, which alone touches the socket. A frame that does not parse
 is logged and dropped; a request for an unknown object gets OBJECT_NOT_EXIST; a request whose
 caller has stopped waiting by the time a worker is free is not run.
 """
@@ -21,7 +22,13 @@ import zmq
 from miro_gen.exceptions import OBJECT_NOT_EXIST, TRANSIENT, CompletionStatus
 from miro_gen.log import logger
 from miro_gen.runtime.cdr import ObjectRef
-from miro_gen.runtime.rpc import Invoker, Reply, Servant, system_exception_reply
+from miro_gen.runtime.rpc import (
+    Invoker,
+    Reply,
+    Servant,
+    is_nonblocking,
+    system_exception_reply,
+)
 from miro_gen.transport import frames
 from miro_gen.transport.reactor import Reactor
 
@@ -60,6 +67,7 @@ class ObjectAdapter:
         self._pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="miro-worker")
         self._pending = 0
         self._closed = False
+        self._inline: dict[tuple[type, str], bool] = {}  # (servant class, operation): @nonblocking
         reactor.call_soon(reactor.register, self.socket, self._readable)
 
     # ---- objects --------------------------------------------------------------------------------
@@ -124,6 +132,13 @@ class ObjectAdapter:
                 ),
             )
             return
+        kind = (type(servant), req.operation)
+        inline = self._inline.get(kind)
+        if inline is None:
+            inline = self._inline[kind] = is_nonblocking(servant, req.operation)
+        if inline:
+            self._reply(peer, req, servant._invoke(req.operation, body, self.invoker))
+            return
         self._pending += 1
         received = time.monotonic()
         self._pool.submit(self._work, servant, peer, req, body, received)
@@ -133,19 +148,20 @@ class ObjectAdapter:
     def _work(
         self, servant: Servant, peer: bytes, req: frames.Request, body: bytes, received: float
     ) -> None:
+        reply = None
         try:
             late = req.timeout_ms and time.monotonic() - received > req.timeout_ms / 1000
             if late:  # the caller has given up: running it now would surprise everyone
                 _log.notice("skipped %s: its caller stopped waiting", req.operation)
                 return
             reply = servant._invoke(req.operation, body, self.invoker)
-            if not req.oneway:
-                self.reactor.call_soon(self._reply, peer, req, reply)
-        finally:
-            self.reactor.call_soon(self._done)
+        finally:  # one hand-off back to the reactor thread per request
+            self.reactor.call_soon(self._done, peer, req, reply)
 
-    def _done(self) -> None:
+    def _done(self, peer: bytes, req: frames.Request, reply: Reply | None) -> None:
         self._pending -= 1
+        if reply is not None:
+            self._reply(peer, req, reply)
 
     def _reply(self, peer: bytes, req: frames.Request, reply: Reply) -> None:
         if req.oneway or self._closed:

@@ -4,7 +4,8 @@
 
 Prints `READY <endpoint>` once it serves, then serves until killed. Its servant behaves as
 ExampleA does, plus a test hook: setData(a, b) with a < 0 sleeps for -a seconds first, so that
-tests can catch it in the middle of a call.
+tests can catch it in the middle of a call. The key `Quick` serves the same with getData marked
+@nonblocking (run on the reactor thread).
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ sys.path[:0] = [str(ROOT / "generated"), str(ROOT)]
 import Miro  # noqa: E402
 import Miro__POA  # noqa: E402
 
+from miro_gen import nonblocking  # noqa: E402
 from miro_gen.transport.adapter import ObjectAdapter  # noqa: E402
 from miro_gen.transport.invoker import ZmqInvoker  # noqa: E402
 from miro_gen.transport.reactor import Reactor  # noqa: E402
@@ -38,6 +40,14 @@ class Example(Miro__POA.Example):
         return Miro.ExampleStructIDL(self.data.a + 1, self.data.b + 1)
 
 
+class QuickExample(Example):
+    """The same, with getData run on the reactor thread (served under the key `Quick`)."""
+
+    @nonblocking
+    def getData(self) -> Miro.ExampleStructIDL:
+        return Miro.ExampleStructIDL(self.data.a + 1, self.data.b + 1)
+
+
 def main() -> None:
     key = (sys.argv[1] if len(sys.argv) > 1 else "ExampleA").encode()
     reactor = Reactor()
@@ -45,6 +55,7 @@ def main() -> None:
     adapter = ObjectAdapter(reactor, invoker)
     invoker.adapter = adapter
     adapter.activate(Example(), key)
+    adapter.activate(QuickExample(), b"Quick")
     signal.signal(signal.SIGTERM, lambda *_: reactor.stop())
     reactor.call_soon(lambda: print("READY", adapter.endpoint, flush=True))
     reactor.run()
