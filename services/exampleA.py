@@ -18,23 +18,27 @@ if __package__ in (None, ""):  # run as a script from a checkout: the generated 
 import Miro
 import Miro__POA
 
-from miro_gen import Server, log
+from miro_gen import Server, log, nonblocking
 
 _log = log.logger("MIRO")
 
 
 class ExampleImpl(Miro__POA.Example):
-    """The Example interface's implementation: two numbers, stepped on every poll."""
+    """The Example interface's implementation: two numbers, stepped on every poll. Both
+    operations return at once, so they are marked @nonblocking: the server runs them where the
+    request arrives, without a hand-off to its worker pool."""
 
     def __init__(self) -> None:
         self._lock = threading.Lock()  # calls arrive on several worker threads
         self._data = Miro.ExampleStructIDL()
 
+    @nonblocking
     def setData(self, a: float, b: float) -> None:
         with self._lock:
             self._data = Miro.ExampleStructIDL(a, b)
         _log.debug("setData(%g, %g)", a, b)
 
+    @nonblocking
     def getData(self) -> Miro.ExampleStructIDL:
         with self._lock:
             self._data = Miro.ExampleStructIDL(self._data.a + 1, self._data.b + 1)
