@@ -34,9 +34,9 @@ COLOURS = {"naming": 37, "exampleA": 36, "exampleB": 32, "exampleC": 35, "exampl
 
 
 def services_dir() -> Path | None:
-    """The folder of the manual's examples: `services/` beside the miro_gen package (a checkout
-    or an editable install)."""
-    folder = Path(__file__).resolve().parents[2] / "services"
+    """The folder of the manual's examples: `miro_gen/services`, shipped in the package (in a
+    checkout, a link to the top-level `services/`)."""
+    folder = (Path(__file__).parents[1] / "services").resolve()
     return folder if (folder / "exampleA.py").is_file() else None
 
 
@@ -138,8 +138,8 @@ def demo_main(argv: Sequence[str]) -> int:
     folder = services_dir()
     if folder is None:
         print(
-            "miro demo: the examples (services/exampleA.py ...) are not beside this "
-            "installation of miro_gen; run it from a checkout of miro-gen",
+            "miro demo: the examples (miro_gen/services/exampleA.py ...) are missing from "
+            "this installation of miro-gen; reinstall it, or run it from a checkout",
             file=sys.stderr,
         )
         return 1
@@ -154,11 +154,12 @@ def demo_main(argv: Sequence[str]) -> int:
     reactor_thread = reactor.run_in_thread()
     out.line("naming", f"naming service at {naming.endpoint}")
 
-    root = folder.parent
     env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(
-        [str(root / "generated"), str(root), *filter(None, [env.get("PYTHONPATH")])]
-    )
+    root = folder.parent
+    if (root / "generated").is_dir():  # a checkout: its generated code and miro_gen first
+        env["PYTHONPATH"] = os.pathsep.join(
+            [str(root / "generated"), str(root), *filter(None, [env.get("PYTHONPATH")])]
+        )
     common = ["--naming", naming.endpoint, "-MLL", str(ns.log_level)]
     plan = [  # label, arguments, the line that says it is ready
         ("exampleA", [*common], "ExampleA is ready"),
