@@ -26,7 +26,8 @@ def naming_main(argv: Sequence[str]) -> int:
     p.add_argument(
         "--endpoint",
         default=DEFAULT_NAMING,
-        help=f"where to serve (default {DEFAULT_NAMING}; use tcp://0.0.0.0:2809 for other hosts)",
+        help=f"where to serve (default {DEFAULT_NAMING}, this machine only; for other hosts "
+        "use this machine's address, or tcp://0.0.0.0:2809 for every interface)",
     )
     p.add_argument("-MLL", "--log-level", type=int, default=5, help="Miro log level (default 5)")
     ns = p.parse_args(argv)
@@ -44,7 +45,10 @@ def naming_main(argv: Sequence[str]) -> int:
         return 1
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: reactor.stop())
-    print(f"naming service at {service.endpoint}", flush=True)
+    bound = service.adapter.socket.getsockopt_string(zmq.LAST_ENDPOINT)
+    every = "://0.0.0.0:" in bound
+    note = " (every interface: other hosts use this machine's address)" if every else ""
+    print(f"naming service at {bound}{note}", flush=True)
     reactor.run()
     service.close()
     reactor.close()
