@@ -19,6 +19,7 @@ import Miro
 import Miro__POA
 
 from miro_gen import Server, log, nonblocking
+from miro_gen.transport.options import UsageError
 
 _log = log.logger("MIRO")
 
@@ -48,7 +49,11 @@ class ExampleImpl(Miro__POA.Example):
 
 
 def main(argv: list[str] | None = None) -> int:
-    server = Server(sys.argv if argv is None else argv)
+    try:
+        server = Server(sys.argv if argv is None else argv)
+    except UsageError as e:  # a bad common option, or a --host that is not this machine's
+        print(f"exampleA: {e}", file=sys.stderr)
+        return 2
     server.add_to_name_service(ExampleImpl(), "ExampleA")
     print("ExampleA is ready", flush=True)
     server.run()

@@ -25,6 +25,7 @@ import Miro
 import MiroNaming
 
 from miro_gen import Client, SystemException
+from miro_gen.transport.options import UsageError
 
 
 def number(x: float) -> str:
@@ -33,7 +34,11 @@ def number(x: float) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    client = Client(sys.argv if argv is None else argv)
+    try:
+        client = Client(sys.argv if argv is None else argv)
+    except UsageError as e:  # a bad common option, or a --host that is not this machine's
+        print(f"exampleB: {e}", file=sys.stderr)
+        return 2
     p = argparse.ArgumentParser(prog="exampleB", description=__doc__.split("\n\n")[0])
     p.add_argument("--count", type=int, default=0, help="rounds to run (default: until Ctrl-C)")
     p.add_argument("--period", type=float, default=1.0, help="seconds between rounds")

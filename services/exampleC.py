@@ -17,6 +17,7 @@ if __package__ in (None, ""):  # run as a script from a checkout: the generated 
 import Miro
 
 from miro_gen import EventChannelFactory, Server, StructuredPushSupplier
+from miro_gen.transport.options import UsageError
 
 CHANNEL = "ExampleEventChannel"
 EVENT = "ExampleEvent"
@@ -39,7 +40,11 @@ class Publisher:
 
 
 def main(argv: list[str] | None = None) -> int:
-    server = Server(sys.argv if argv is None else argv)
+    try:
+        server = Server(sys.argv if argv is None else argv)
+    except UsageError as e:  # a bad common option, or a --host that is not this machine's
+        print(f"exampleC: {e}", file=sys.stderr)
+        return 2
     p = argparse.ArgumentParser(prog="exampleC", description=__doc__.split("\n\n")[0])
     p.add_argument("period", nargs="?", type=float, default=1.0, help="seconds between events")
     args = p.parse_args(server.argv[1:])

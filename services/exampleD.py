@@ -19,6 +19,7 @@ import Miro  # noqa: F401 - the package that has the event type, for decoding
 import MiroNaming
 
 from miro_gen import Server, StructuredEvent, StructuredPushConsumer, SystemException
+from miro_gen.transport.options import UsageError
 
 CHANNEL = "ExampleEventChannel"
 EVENT = "ExampleEvent"
@@ -35,7 +36,11 @@ class ExampleConsumer(StructuredPushConsumer):
 
 
 def main(argv: list[str] | None = None) -> int:
-    server = Server(sys.argv if argv is None else argv)
+    try:
+        server = Server(sys.argv if argv is None else argv)
+    except UsageError as e:  # a bad common option, or a --host that is not this machine's
+        print(f"exampleD: {e}", file=sys.stderr)
+        return 2
     p = argparse.ArgumentParser(prog="exampleD", description=__doc__.split("\n\n")[0])
     p.add_argument("--domain", default="*", help="the supplier's naming context (default: any)")
     args = p.parse_args(server.argv[1:])

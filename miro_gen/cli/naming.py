@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import re
 import signal
 import sys
 from collections.abc import Sequence
@@ -13,6 +14,7 @@ import zmq
 
 from miro_gen import log
 from miro_gen.exceptions import SystemException
+from miro_gen.transport.addresses import server_addresses
 from miro_gen.transport.events import CHANNEL_REPO_ID, ChannelHost
 from miro_gen.transport.invoker import ZmqInvoker
 from miro_gen.transport.naming import NamingService, check_name
@@ -29,7 +31,8 @@ def naming_main(argv: Sequence[str]) -> int:
     p.add_argument(
         "--endpoint",
         default=DEFAULT_NAMING,
-        help=f"where to serve (default {DEFAULT_NAMING}; use tcp://0.0.0.0:2809 for other hosts)",
+        help=f"where to serve (default {DEFAULT_NAMING}, this machine only; for other hosts "
+        "use this machine's address, or tcp://0.0.0.0:2809 for every interface)",
     )
     p.add_argument(
         "--channel",
@@ -53,8 +56,15 @@ def naming_main(argv: Sequence[str]) -> int:
             p.error(f"--channel {name!r} is not a valid name")
     try:
         endpoint = naming_endpoint(ns.endpoint)
+        if ns.host:
+            server_addresses(endpoint, ns.host)  # checks that it is an address of this machine
     except UsageError as e:
         p.error(str(e))
+    if ns.channel and not ns.host and re.search(r"://(0\.0\.0\.0|\*):", endpoint):
+        p.error(
+            "--channel with an --endpoint on every interface needs --host ADDRESS: the "
+            "address other hosts reach the channel at"
+        )
     log.configure(ns.log_level)
     reactor = Reactor(zmq.Context.instance())
     invoker = ZmqInvoker(reactor.context)
@@ -66,7 +76,10 @@ def naming_main(argv: Sequence[str]) -> int:
     channels = [_host_channel(service, name) for name in ns.channel]
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: reactor.stop())
-    print(f"naming service at {service.endpoint}", flush=True)
+    bound = service.adapter.socket.getsockopt_string(zmq.LAST_ENDPOINT)
+    every = "://0.0.0.0:" in bound
+    note = " (every interface: other hosts use this machine's address)" if every else ""
+    print(f"naming service at {bound}{note}", flush=True)
     for name in ns.channel:
         print(f"event channel {name}", flush=True)
     reactor.run()

@@ -153,9 +153,9 @@ class EventChannelFactory:
         full = self.server.naming.full_name(name)
         if full in self._channels:
             return self._channels[full]
-        host = self.server.options.host
+        # Bound and advertised like the server's objects (miro_gen.transport.addresses).
         advertise = self.server.adapter.endpoint.split("://", 1)[1].rsplit(":", 1)[0]
-        ch_host = ChannelHost(self.server.context, "*" if host else "127.0.0.1", advertise)
+        ch_host = ChannelHost(self.server.context, self.server.addresses.bind, advertise)
         channel = EventChannel(
             full,
             ch_host.supplier_endpoint,

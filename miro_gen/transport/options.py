@@ -11,7 +11,8 @@ takes what it knows and leaves the service's own ones. The contract (DESIGN.md, 
 * `-MLL N` / `-MiroLogLevel N`: Miro's log level, 0 emergency ... 4 warning (default) ... 9 prattle;
 * `-MLF CAT [CAT ...]` / `-MiroLogFilter CAT [CAT ...]`: the log categories to show (default all);
 * `-MCF FILE` / `-MiroConfigFile FILE`: the run-time parameter document;
-* `--host HOST` (env `MIRO_HOST`): the address other machines reach this process at.
+* `--host HOST` (env `MIRO_HOST`): the address other machines reach this process at; by default
+  the one towards the naming service (see `miro_gen.transport.addresses`, docs/PROTOCOL.md).
 
 Options may also be written `--naming=URL`. A missing or malformed value raises `UsageError`
 with a message naming the option.

@@ -8,7 +8,9 @@
     example = client.resolve_name("ExampleA", Miro.Example)
     example.setData(0.0, 10.0)
 
-A Server owns the process's reactor and one ROUTER socket for all its objects; its names live
+A Server owns the process's reactor and one ROUTER socket for all its objects, bound and
+advertised as `miro_gen.transport.addresses` decides (reachable from the naming service's host,
+or `--host`); its names live
 under its naming context (`-MNC`, default the host name) with leases that a background thread
 renews, re-binding them when the naming service has restarted. A Client only calls out.
 """
@@ -16,6 +18,7 @@ renews, re-binding them when the naming service has restarted. A Client only cal
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import signal
 import sys
 import threading
@@ -32,6 +35,7 @@ from miro_gen.exceptions import SystemException
 from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.runtime.rpc import Servant, Stub
 from miro_gen.transport.adapter import ObjectAdapter
+from miro_gen.transport.addresses import server_addresses
 from miro_gen.transport.invoker import ZmqInvoker
 from miro_gen.transport.naming import DEFAULT_LEASE, NamingClient
 from miro_gen.transport.options import CommonOptions, parse_common_options
@@ -84,14 +88,21 @@ class Server(Client):
         argv: Sequence[str] | None = None,
         *,
         context: Any = None,
-        bind_host: str = "127.0.0.1",
+        bind_host: str | None = None,
         lease: float = DEFAULT_LEASE,
     ) -> None:
         super().__init__(argv, context=context)
+        # Before any socket exists: a --host that is not ours is a UsageError, nothing to close.
+        self.addresses = server_addresses(self.options.naming, self.options.host)
+        if bind_host is not None:
+            self.addresses = dataclasses.replace(self.addresses, bind=bind_host)
         self._reactor = Reactor(self.context)
-        host = self.options.host
-        bind = f"tcp://{'*' if host and bind_host == '127.0.0.1' else bind_host}:*"
-        self.adapter = ObjectAdapter(self._reactor, self.invoker, bind=bind, host=host)
+        self.adapter = ObjectAdapter(
+            self._reactor,
+            self.invoker,
+            bind=f"tcp://{self.addresses.bind}:*",
+            host=self.addresses.advertise,
+        )
         self.invoker.adapter = self.adapter
         self.owner = uuid.uuid4().hex
         self.lease = lease

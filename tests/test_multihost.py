@@ -1,0 +1,254 @@
+"""The naming service, a server and a client on three "machines": Linux network namespaces
+joined by veth links to a bridge (in a fourth, hub namespace), with addresses in 10.77.0.0/24.
+
+Each namespace has its own interfaces, routes and loopback, so a server that advertised
+127.0.0.1, or bound only loopback, could not be reached from the others; that is what these
+tests would catch. Creating namespaces needs root and iproute2 (`ip netns`); without them, or
+where `ip netns add` is refused (a container without CAP_SYS_ADMIN), the tests are skipped and
+say why.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from loopback import service_env
+from test_examples import MANUAL_OUTPUT, read_lines
+
+REPO = Path(__file__).resolve().parents[1]
+SERVICES = REPO / "services"
+ADDRESSES = {"nsbox": "10.77.0.1", "robot": "10.77.0.2", "laptop": "10.77.0.3"}
+NAMING = f"tcp://{ADDRESSES['nsbox']}:2809"
+NSC = ["-ORBInitRef", f"NameService=iioploc://{ADDRESSES['nsbox']}:2809/NameService"]
+
+
+def ip(*args: str) -> None:
+    """Run `ip ARGS`; a failure shows the command and what `ip` said."""
+    done = subprocess.run(["ip", *args], capture_output=True, text=True, timeout=30)
+    assert done.returncode == 0, f"ip {' '.join(args)}: {done.stderr.strip()}"
+
+
+class Hosts:
+    """Namespaces named after this test run (`miro-<pid>-<host>`) and the processes in them."""
+
+    def __init__(self) -> None:
+        self.prefix = f"miro-{os.getpid()}-"
+        self.created: list[str] = []
+        self.procs: list[subprocess.Popen[str]] = []
+
+    def ns(self, host: str) -> str:
+        return self.prefix + host
+
+    def add(self, host: str) -> subprocess.CompletedProcess[str]:
+        done = subprocess.run(
+            ["ip", "netns", "add", self.ns(host)], capture_output=True, text=True, timeout=30
+        )
+        if done.returncode == 0:
+            self.created.append(self.ns(host))
+        return done
+
+    def link(self) -> None:
+        """The hub's bridge, and each host's eth0 plugged into it (with lo up)."""
+        hub = self.ns("hub")
+        ip("-n", hub, "link", "add", "br0", "type", "bridge")
+        ip("-n", hub, "link", "set", "br0", "up")
+        for host, address in ADDRESSES.items():
+            ns, port = self.ns(host), f"to-{host}"
+            ip("-n", hub, "link", "add", port, "type", "veth", "peer", "name", "eth0", "netns", ns)
+            ip("-n", hub, "link", "set", port, "master", "br0", "up")
+            ip("-n", ns, "addr", "add", f"{address}/24", "dev", "eth0")
+            ip("-n", ns, "link", "set", "eth0", "up")
+            ip("-n", ns, "link", "set", "lo", "up")
+
+    def popen(self, host: str, *argv: str, stderr: Path) -> subprocess.Popen[str]:
+        """`argv` (run by this Python) in `host`'s namespace, from this checkout."""
+        with stderr.open("w") as err:
+            proc = subprocess.Popen(
+                ["ip", "netns", "exec", self.ns(host), sys.executable, *argv],
+                stdout=subprocess.PIPE,
+                stderr=err,
+                text=True,
+                env=service_env(),
+            )
+        self.procs.append(proc)
+        return proc
+
+    def run(self, host: str, *argv: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run(
+            ["ip", "netns", "exec", self.ns(host), sys.executable, *argv],
+            capture_output=True,
+            text=True,
+            env=service_env(),
+            timeout=60,
+        )
+
+    def kill(self, procs: list[subprocess.Popen[str]]) -> None:
+        for proc in procs:
+            if proc.poll() is None:
+                proc.kill()
+            proc.wait(10)
+            if proc.stdout is not None:
+                proc.stdout.close()
+
+    def close(self) -> None:
+        """Kill what still runs, then delete the namespaces (their links go with them)."""
+        self.kill(self.procs)
+        for ns in reversed(self.created):
+            subprocess.run(["ip", "netns", "delete", ns], capture_output=True, timeout=30)
+
+
+@pytest.fixture(scope="module")
+def hosts() -> Iterator[Hosts]:
+    if not sys.platform.startswith("linux"):
+        pytest.skip("network namespaces are a Linux feature")
+    if os.geteuid() != 0:
+        pytest.skip("creating network namespaces (ip netns add) needs root")
+    if shutil.which("ip") is None:
+        pytest.skip("the ip command (iproute2) is not installed")
+    h = Hosts()
+    try:
+        for host in ("hub", *ADDRESSES):
+            done = h.add(host)
+            if done.returncode != 0:
+                pytest.skip(
+                    f"ip netns add {h.ns(host)} failed: {done.stderr.strip()} "
+                    "(a container without CAP_SYS_ADMIN?)"
+                )
+        h.link()
+        yield h
+    finally:
+        h.close()
+
+
+@pytest.fixture(scope="module")
+def naming(hosts: Hosts, tmp_path_factory: pytest.TempPathFactory) -> subprocess.Popen[str]:
+    """`miro naming` on nsbox's own address (not 0.0.0.0), as on a real naming host."""
+    log = tmp_path_factory.mktemp("nsbox") / "naming.err"
+    proc = hosts.popen(
+        "nsbox", "-m", "miro_gen.cli.main", "naming", "--endpoint", NAMING, stderr=log
+    )
+    assert proc.stdout is not None
+    line = proc.stdout.readline().strip()
+    assert line == f"naming service at {NAMING}", log.read_text()
+    return proc
+
+
+@pytest.fixture
+def net(hosts: Hosts, naming: subprocess.Popen[str]) -> Iterator[Hosts]:
+    """The hosts with the naming service running; what the test starts is killed after it, even
+    when it fails, so the next test sees none of its names."""
+    before = len(hosts.procs)
+    yield hosts
+    hosts.kill(hosts.procs[before:])
+
+
+def nslist(hosts: Hosts) -> str:
+    """What `miro nslist` shows from the laptop."""
+    done = hosts.run("laptop", "-m", "miro_gen.cli.main", "nslist", "--naming", NAMING)
+    assert done.returncode == 0, done.stderr
+    return done.stdout
+
+
+def stop(proc: subprocess.Popen[str], log: Path) -> None:
+    proc.send_signal(signal.SIGINT)
+    assert proc.wait(10) == 0, log.read_text()
+
+
+def test_example_b_on_a_laptop_polls_example_a_on_a_robot(net: Hosts, tmp_path: Path) -> None:
+    """§5.1 across machines: ExampleA on robot advertises robot's address; ExampleB on laptop
+    finds it through nsbox and prints what the manual shows."""
+    a_log = tmp_path / "exampleA.err"
+    a = net.popen(
+        "robot", str(SERVICES / "exampleA.py"), *NSC, "-MNC", "robot1", "-MLL", "9", stderr=a_log
+    )
+    assert a.stdout is not None and a.stdout.readline().strip() == "ExampleA is ready", (
+        a_log.read_text()
+    )
+    listing = nslist(net)
+    assert f"ExampleA  (IDL:Miro/Example:1.0 at tcp://{ADDRESSES['robot']}:" in listing, listing
+    assert "127.0.0.1" not in listing
+    b = net.run(
+        "laptop",
+        str(SERVICES / "exampleB.py"),
+        "--naming",
+        NAMING,
+        "-MNC",
+        "robot1",
+        "--count",
+        "4",
+        "--period",
+        "0",
+    )
+    assert b.returncode == 0, b.stderr
+    assert b.stdout.startswith(MANUAL_OUTPUT)
+    stop(a, a_log)
+    assert "[DEBUG MIRO] setData(0, 10)" in a_log.read_text()
+    assert "ExampleA" not in nslist(net)  # unbound on the way out, across the link too
+
+
+def test_example_d_on_a_laptop_receives_example_c_on_a_robot(net: Hosts, tmp_path: Path) -> None:
+    """§5.2 across machines: the channel is hosted on robot, and laptop's consumer connects to
+    the endpoints robot advertises."""
+    c_log, d_log = tmp_path / "exampleC.err", tmp_path / "exampleD.err"
+    c = net.popen(
+        "robot", str(SERVICES / "exampleC.py"), *NSC, "-MNC", "robot1", "0.05", stderr=c_log
+    )
+    assert read_lines(c, "ExampleC publishes", 1) == [
+        "ExampleC publishes ExampleEvent on robot1/ExampleEventChannel every 0.05 s"
+    ], c_log.read_text()
+    listing = nslist(net)
+    channel = "ExampleEventChannel  (IDL:miro-gen/EventChannel:1.0 at tcp://"
+    assert f"{channel}{ADDRESSES['robot']}:" in listing, listing
+    d = net.popen(
+        "laptop", str(SERVICES / "exampleD.py"), "--naming", NAMING, "-MNC", "robot1", stderr=d_log
+    )
+    got = read_lines(d, "Received ExampleEvent #", 5)
+    assert len(got) == 5, (got, d_log.read_text())
+    counters = [int(line.split("#")[1].split()[0]) for line in got]
+    assert counters == list(range(counters[0], counters[0] + 5))  # in order, none lost
+    k = counters[0]
+    assert got[0] == f"Received ExampleEvent #{k} from robot1: a = {k}, b = {10 + k}"
+    stop(d, d_log)
+    stop(c, c_log)
+
+
+def test_a_server_told_to_advertise_loopback_is_unreachable_from_another_host(
+    net: Hosts, tmp_path: Path
+) -> None:
+    """What the default used to do: the client resolves the name, then cannot reach 127.0.0.1
+    on its own machine, and says where it tried (no traceback)."""
+    a_log = tmp_path / "exampleA.err"
+    a = net.popen(
+        "robot",
+        str(SERVICES / "exampleA.py"),
+        *NSC,
+        "-MNC",
+        "robot2",
+        "--host",
+        "127.0.0.1",
+        stderr=a_log,
+    )
+    assert a.stdout is not None and a.stdout.readline().strip() == "ExampleA is ready", (
+        a_log.read_text()
+    )
+    b = net.run(
+        "laptop",
+        str(SERVICES / "exampleB.py"),
+        "--naming",
+        NAMING,
+        "-MNC",
+        "robot2",
+        "--count",
+        "1",
+    )
+    assert b.returncode == 1
+    assert b.stderr.startswith("exampleB: TRANSIENT: cannot reach tcp://127.0.0.1:"), b.stderr
+    assert "Traceback" not in b.stderr
+    stop(a, a_log)
