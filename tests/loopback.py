@@ -8,9 +8,11 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable
 
+import zmq
 from miro_cli import REPO
 
 
@@ -55,6 +57,32 @@ class NamingProcess:
     def stop(self, sig: int = signal.SIGKILL) -> None:
         self.proc.send_signal(sig)
         self.proc.wait(10)
+
+
+def run_miro(*args: str, timeout: float = 30) -> subprocess.CompletedProcess[str]:
+    """`miro ARGS` from this checkout, to the end; its exit status and output."""
+    return subprocess.run(
+        [sys.executable, "-m", "miro_gen.cli.main", *args],
+        capture_output=True,
+        text=True,
+        env=service_env(),
+        timeout=timeout,
+    )
+
+
+class RunningServer:
+    """A Server (naming context `context`) whose reactor runs in a thread of the test."""
+
+    def __init__(self, naming: str, context: str) -> None:
+        from miro_gen import Server
+
+        self.server = Server(["t", "--naming", naming, "-MNC", context], context=zmq.Context())
+        self.thread = threading.Thread(target=self.server.run, daemon=True)
+        self.thread.start()
+
+    def stop(self) -> None:
+        self.server.shutdown()
+        self.thread.join(10)
 
 
 def eventually(check: Callable[[], bool], seconds: float = 10) -> None:

@@ -9,7 +9,7 @@ import sys
 import time
 from pathlib import Path
 
-from loopback import service_env
+from loopback import run_miro, service_env
 
 DEMO = [sys.executable, "-m", "miro_gen.cli.main", "demo", "--colour", "never"]
 
@@ -28,13 +28,7 @@ def running_examples(endpoint: str) -> list[str]:
 
 
 def test_the_demo_runs_all_four_examples_for_its_duration() -> None:
-    result = subprocess.run(
-        [*DEMO, "--duration", "3", "--period", "0.5"],
-        capture_output=True,
-        text=True,
-        env=service_env(),
-        timeout=60,
-    )
+    result = run_miro(*DEMO[3:], "--duration", "3", "--period", "0.5", timeout=60)
     assert result.returncode == 0, result.stderr
     lines = result.stdout.splitlines()
     assert re.fullmatch(r"naming   \| naming service at tcp://127\.0\.0\.1:\d+", lines[0])

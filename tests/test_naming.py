@@ -13,7 +13,7 @@ import Miro
 import MiroNaming
 import pytest
 import zmq
-from loopback import NamingProcess, eventually, free_port, service_env
+from loopback import NamingProcess, eventually, free_port, run_miro, service_env
 
 from miro_gen import TRANSIENT, Client
 
@@ -89,13 +89,7 @@ def test_nslist_prints_the_tree(naming: Naming) -> None:
     a = Service(naming, "-MNC", "robot1")
     b = Service(naming, "-MNC", "robot1", "Second")
     try:
-        out = subprocess.run(
-            [sys.executable, "-m", "miro_gen.cli.main", "nslist", "--naming", naming.endpoint],
-            capture_output=True,
-            text=True,
-            env=env(),
-            timeout=30,
-        )
+        out = run_miro("nslist", "--naming", naming.endpoint)
         assert out.returncode == 0, out.stderr
         lines = out.stdout.splitlines()
         assert lines[0] == "robot1/"

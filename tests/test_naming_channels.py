@@ -2,16 +2,12 @@
 
 from __future__ import annotations
 
-import subprocess
-import sys
-import threading
 import time
 
 import Miro
-import zmq
-from loopback import NamingProcess, eventually, service_env
+from loopback import NamingProcess, RunningServer, eventually, run_miro
 
-from miro_gen import Server, StructuredEvent, StructuredPushConsumer, StructuredPushSupplier
+from miro_gen import StructuredEvent, StructuredPushConsumer, StructuredPushSupplier
 
 
 class Recorder(StructuredPushConsumer):
@@ -23,35 +19,18 @@ class Recorder(StructuredPushConsumer):
         self.events.append(event)
 
 
-class Running:
-    def __init__(self, naming: str, context: str) -> None:
-        self.server = Server(["t", "--naming", naming, "-MNC", context], context=zmq.Context())
-        self.thread = threading.Thread(target=self.server.run, daemon=True)
-        self.thread.start()
-
-    def stop(self) -> None:
-        self.server.shutdown()
-        self.thread.join(10)
-
-
 def test_a_channel_hosted_by_naming_outlives_its_suppliers() -> None:
     naming = NamingProcess(options=("--channel", "Shared", "--channel", "robots/Status"))
-    listener = Running(naming.endpoint, "gui")
+    listener = RunningServer(naming.endpoint, "gui")
     try:
-        listing = subprocess.run(
-            [sys.executable, "-m", "miro_gen.cli.main", "nslist", "--naming", naming.endpoint],
-            capture_output=True,
-            text=True,
-            env=service_env(),
-            timeout=30,
-        ).stdout
+        listing = run_miro("nslist", "--naming", naming.endpoint).stdout
         assert "Shared  (IDL:miro-gen/EventChannel:1.0 at tcp://127.0.0.1:" in listing
         assert "robots/\n  Status  (IDL:miro-gen/EventChannel:1.0" in listing
 
         consumer = Recorder(listener.server.resolve_channel("Shared"))  # found from any context
         consumer.set_subscriptions([("*", "ExampleEvent")])
         for n in range(2):  # one supplier after another: the consumer does not notice
-            supplier_proc = Running(naming.endpoint, f"robot{n}")
+            supplier_proc = RunningServer(naming.endpoint, f"robot{n}")
             supplier = StructuredPushSupplier(supplier_proc.server.resolve_channel("Shared"))
             eventually(lambda s=supplier: s.has_subscribers("ExampleEvent"))
             payload = Miro.ExampleEventIDL(n, Miro.ExampleStructIDL(1.0, 2.0))
@@ -70,12 +49,6 @@ def test_a_channel_hosted_by_naming_outlives_its_suppliers() -> None:
 
 
 def test_an_invalid_channel_name_is_a_usage_error() -> None:
-    result = subprocess.run(
-        [sys.executable, "-m", "miro_gen.cli.main", "naming", "--channel", "a//b"],
-        capture_output=True,
-        text=True,
-        env=service_env(),
-        timeout=30,
-    )
+    result = run_miro("naming", "--channel", "a//b")
     assert result.returncode == 2
     assert "--channel 'a//b' is not a valid name" in result.stderr
