@@ -179,6 +179,7 @@ def demo_main(argv: Sequence[str]) -> int:
                 pass
             if example.proc.poll() not in (None, 0):
                 out.line(label, f"exited with status {example.proc.returncode}")
+                stop.set()  # the others depend on it: stop them too
                 break
         end = time.monotonic() + ns.duration if ns.duration else float("inf")
         while not stop.wait(0.1) and time.monotonic() < end:
