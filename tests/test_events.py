@@ -218,3 +218,67 @@ def test_malformed_event_frames_are_dropped(servers: Callable[[str], Server]) ->
     eventually(lambda: len(consumer.events) == 1)
     assert consumer.events[0].payload == event(5)
     rogue.close()
+
+
+def test_events_of_other_types_are_not_counted_as_missed(
+    servers: Callable[[str], Server],
+) -> None:
+    """Sequence numbers count per type: a consumer of one type sees no gaps from the others."""
+    host = servers("r")
+    supplier = StructuredPushSupplier(EventChannelFactory(host).create_channel("Two"))
+    remote = servers("c").resolve_channel("r/Two")
+    only_a, only_b = Recorder(remote), Recorder(remote)
+    only_a.set_subscriptions([("r", "A")])
+    only_b.set_subscriptions([("r", "B")])
+    eventually(lambda: supplier.has_subscribers("A") and supplier.has_subscribers("B"))
+    for n in range(100):
+        supplier.push("A", event(n))
+        supplier.push("B", event(n))
+        time.sleep(0.001)  # several batches, so the gaps would show between them
+    eventually(lambda: len(only_a.events) == 100 and len(only_b.events) == 100)
+    assert [e.payload.counter for e in only_a.events] == list(range(100))
+    assert only_a.missed == only_b.missed == 0
+
+
+def test_a_turn_with_more_events_than_a_batch_holds(servers: Callable[[str], Server]) -> None:
+    """Events pushed within one reactor turn beyond a frame's 65,535 are split, not lost."""
+    host = servers("r")
+    channel = EventChannelFactory(host).create_channel("Many")
+    supplier = StructuredPushSupplier(channel)
+    consumer = Recorder(servers("c").resolve_channel("r/Many"))
+    consumer.set_subscriptions([("*", "*")])
+    eventually(lambda: supplier.has_subscribers("ExampleEvent"))
+    total = 70_000
+    value = event(1)
+    # All pushed on the reactor thread, in one turn: they leave together when it ends.
+    channel.reactor.call_soon(lambda: [supplier.push("ExampleEvent", value) for _ in range(total)])
+    eventually(lambda: len(consumer.events) == total, 30)
+    assert consumer.missed == 0
+
+
+def test_a_blocked_reactor_does_not_make_the_supplier_queue_grow(
+    servers: Callable[[str], Server],
+) -> None:
+    """While the reactor cannot send, push() queues a bounded number of events and counts
+    those it drops; consumers see the drop as a gap."""
+    from miro_gen.transport.events import QUEUE_EVENTS
+
+    host = servers("r")
+    channel = EventChannelFactory(host).create_channel("Blocked")
+    supplier = StructuredPushSupplier(channel)
+    consumer = Recorder(servers("c").resolve_channel("r/Blocked"))
+    consumer.set_subscriptions([("*", "*")])
+    eventually(lambda: supplier.has_subscribers("ExampleEvent"))
+    supplier.push("ExampleEvent", event(0))
+    eventually(lambda: len(consumer.events) == 1)
+    unblock = threading.Event()
+    channel.reactor.call_soon(unblock.wait, 30)
+    extra = 5_000
+    for n in range(QUEUE_EVENTS + extra):
+        supplier.push("ExampleEvent", event(n))
+    assert supplier.dropped == extra
+    unblock.set()
+    eventually(lambda: len(consumer.events) == 1 + QUEUE_EVENTS, 30)
+    supplier.push("ExampleEvent", event(0))
+    eventually(lambda: len(consumer.events) == 2 + QUEUE_EVENTS)
+    assert consumer.missed == extra
