@@ -282,3 +282,21 @@ def test_a_blocked_reactor_does_not_make_the_supplier_queue_grow(
     supplier.push("ExampleEvent", event(0))
     eventually(lambda: len(consumer.events) == 2 + QUEUE_EVENTS)
     assert consumer.missed == extra
+
+
+def test_events_larger_than_a_frame_travel_alone(servers: Callable[[str], Server]) -> None:
+    """An event above the frame's byte limit still leaves, in a frame of its own."""
+    from miro_gen.transport.events import MAX_BATCH_BYTES
+
+    host = servers("r")
+    channel = EventChannelFactory(host).create_channel("Big")
+    supplier = StructuredPushSupplier(channel)
+    consumer = Recorder(servers("c").resolve_channel("r/Big"))
+    consumer.set_subscriptions([("*", "*")])
+    eventually(lambda: supplier.has_subscribers("Group"))
+    points = [Miro.ExampleStructIDL(float(i), -float(i)) for i in range(MAX_BATCH_BYTES // 16 + 1)]
+    groups = [Miro.ExampleGroupIDL(n, points) for n in range(3)]
+    channel.reactor.call_soon(lambda: [supplier.push("Group", g) for g in groups])
+    eventually(lambda: len(consumer.events) == 3)
+    assert [e.payload for e in consumer.events] == groups
+    assert consumer.missed == 0

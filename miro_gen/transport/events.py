@@ -204,14 +204,18 @@ class _Topic:
     """What a supplier keeps per type name: the topic frame, the sequence numbers, whether
     anyone subscribes (recomputed when the subscriptions change), the events not yet sent."""
 
-    __slots__ = ("frame", "generation", "pending", "seq", "subscribed")
+    __slots__ = ("frame", "generation", "last", "last_hash", "pending", "seq", "subscribed")
 
     def __init__(self, frame: bytes) -> None:
         self.frame = frame
         self.seq = itertools.count()
         self.generation = -1  # of the supplier's subscriptions that `subscribed` reflects
         self.subscribed = False
-        self.pending: list[tuple[str, bytes]] = []  # (type hash, packed event)
+        # Runs of packed events with one type hash (one, unless the type changes), the last
+        # run's list and hash.
+        self.pending: list[tuple[str, list[bytes]]] = []
+        self.last: list[bytes] = []
+        self.last_hash = ""
 
 
 class StructuredPushSupplier:
@@ -278,9 +282,14 @@ class StructuredPushSupplier:
             if self._queued >= QUEUE_EVENTS or self._queued_bytes + len(packed) > QUEUE_BYTES:
                 self.dropped += 1
                 return True
-            if not t.pending:
-                self._dirty.append(t)
-            t.pending.append((payload._type_hash, packed))
+            type_hash = payload._type_hash
+            if type_hash == t.last_hash and t.pending:
+                t.last.append(packed)
+            else:
+                if not t.pending:
+                    self._dirty.append(t)
+                t.last, t.last_hash = [packed], type_hash
+                t.pending.append((type_hash, t.last))
             self._queued += 1
             self._queued_bytes += len(packed)
             if self._flush_pending:
@@ -295,24 +304,25 @@ class StructuredPushSupplier:
             queues = []
             for t in topics:
                 queues.append((t.frame, t.pending))
-                t.pending = []
+                t.pending, t.last, t.last_hash = [], [], ""
             self._queued = self._queued_bytes = 0
             self._flush_pending = False
-        for frame, events in queues:
-            start = 0
-            while start < len(events):  # one frame per run of one type hash, within limits
-                type_hash = events[start][0]
-                end, size = start, 0
-                while (
-                    end < len(events)
-                    and events[end][0] == type_hash
-                    and end - start < MAX_BATCH_EVENTS
-                    and (size < MAX_BATCH_BYTES or end == start)
-                ):
-                    size += len(events[end][1])
-                    end += 1
-                self._send(frame, type_hash, [e[1] for e in events[start:end]])
-                start = end
+        for frame, runs in queues:
+            for type_hash, events in runs:
+                if len(events) <= MAX_BATCH_EVENTS and sum(map(len, events)) <= MAX_BATCH_BYTES:
+                    self._send(frame, type_hash, events)
+                    continue
+                batch: list[bytes] = []
+                size = 0
+                for packed in events:  # a busy turn: several frames, within the limits
+                    if batch and (
+                        len(batch) == MAX_BATCH_EVENTS or size + len(packed) > MAX_BATCH_BYTES
+                    ):
+                        self._send(frame, type_hash, batch)
+                        batch, size = [], 0
+                    batch.append(packed)
+                    size += len(packed)
+                self._send(frame, type_hash, batch)
 
     def _send(self, frame: bytes, type_hash: str, packed: list[bytes]) -> None:
         raw = self._raw_hashes.get(type_hash)
