@@ -300,3 +300,33 @@ def test_events_larger_than_a_frame_travel_alone(servers: Callable[[str], Server
     eventually(lambda: len(consumer.events) == 3)
     assert [e.payload for e in consumer.events] == groups
     assert consumer.missed == 0
+
+
+def test_events_refused_at_the_high_water_mark_are_counted(
+    servers: Callable[[str], Server], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A channel that stops reading: the supplier's frames pile up to its high-water mark and
+    the kernel's buffers, then push() goes on without blocking and counts what it dropped."""
+    from miro_gen.transport import events
+
+    monkeypatch.setattr(events, "HWM", 10)
+    host = servers("r")
+    stuck = zmq.Context.instance().socket(zmq.XSUB)  # a channel whose proxy never reads
+    stuck.setsockopt(zmq.LINGER, 0)
+    stuck.setsockopt(zmq.RCVHWM, 10)
+    port = stuck.bind_to_random_port("tcp://127.0.0.1")
+    channel = events.EventChannel("r/Stuck", f"tcp://127.0.0.1:{port}", "", host.reactor(), "r")
+    supplier = StructuredPushSupplier(channel)
+    stuck.send(b"\x01")  # subscribe to everything (sent to the supplier once it attaches,
+    # which the socket notices when used: EVENTS processes its commands without reading)
+    eventually(lambda: stuck.getsockopt(zmq.EVENTS) >= 0 and supplier.has_subscribers("Group"))
+    points = [Miro.ExampleStructIDL(float(i), 0.0) for i in range(events.MAX_BATCH_BYTES // 16)]
+    group = Miro.ExampleGroupIDL(0, points)  # a frame of its own
+    total = 400  # ~100 MB: beyond what loopback buffers hold
+    start = time.monotonic()
+    channel.reactor.call_soon(lambda: [supplier.push("Group", group) for _ in range(total)])
+    eventually(lambda: supplier.sent + supplier.dropped == total, 30)
+    assert time.monotonic() - start < 20
+    assert supplier.dropped > 0
+    supplier.close()
+    stuck.close()

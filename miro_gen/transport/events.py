@@ -45,11 +45,12 @@ EVENT_VERSION = 1
 HWM = 10_000  # events a socket queues for one peer before dropping
 QUEUE_EVENTS = 100_000  # events a supplier holds for its reactor's next turn, at most
 QUEUE_BYTES = 64 << 20  # and bytes
-# Events in one frame, at most: the count is 16 bits, and a high-water mark counts frames, so
-# frames are kept small enough (below pyzmq's 64 KiB zero-copy threshold, too) that HWM frames
-# stay a bounded amount of memory. An event larger than MAX_BATCH_BYTES travels alone.
-MAX_BATCH_EVENTS = 4096
-MAX_BATCH_BYTES = 60_000
+# Events in one frame, at most. The count is 16 bits, and a high-water mark counts frames: HWM
+# frames must stay a bounded amount of memory. Yet frames must not be small: each send lets the
+# pushing thread take the GIL back for up to a switch interval, so a flush in many frames falls
+# behind a thread pushing flat out. An event larger than MAX_BATCH_BYTES travels alone.
+MAX_BATCH_EVENTS = 16_384
+MAX_BATCH_BYTES = 256 * 1024
 TURN_EVENTS = 4096  # events a consumer delivers per reactor turn, so other handlers get a turn
 _BATCH = Struct("<BBHQ32s")  # version, flags, count, supplier id, type hash
 _EVENT = Struct("<QqqI")  # sequence number, stamp ns, publish ns, payload length
@@ -246,6 +247,9 @@ class StructuredPushSupplier:
         self.socket.setsockopt(zmq.LINGER, 0)
         self.socket.setsockopt(zmq.SNDHWM, HWM)
         self.socket.setsockopt(zmq.XPUB_VERBOSER, 1)
+        # At the high-water mark an XPUB drops silently; with NODROP a non-blocking send fails
+        # instead, so that the supplier counts what it drops. It never blocks either way.
+        self.socket.setsockopt(zmq.XPUB_NODROP, 1)
         self.socket.connect(channel.supplier_endpoint)
         self.reactor.call_soon(self.reactor.register, self.socket, self._subscription_changed)
 
