@@ -86,6 +86,7 @@ def serve_commands(
     send: Callable[[int], object],
     send_stamped: Callable[[int], object],
     on_timer: Callable[[int, float], None] | None = None,
+    dropped: Callable[[], int] = lambda: 0,
 ) -> None:
     for line in sys.stdin:
         cmd, *args = line.split()
@@ -93,16 +94,16 @@ def serve_commands(
             count, rate = int(args[0]), float(args[1])
             start = time.monotonic()
             paced(count, rate, send)
-            print("SENT", count, time.monotonic() - start, flush=True)
+            print("SENT", count, time.monotonic() - start, dropped(), flush=True)
         elif cmd == "LATENCY":
             count, hz = int(args[0]), float(args[1])
             for i in range(count):
                 time.sleep(1 / hz)
                 send_stamped(i)
-            print("SENT", count, 0, flush=True)
+            print("SENT", count, 0, dropped(), flush=True)
         elif cmd == "LATENCY_TIMER" and on_timer is not None:
             on_timer(int(args[0]), float(args[1]))
-            print("SENT", args[0], 0, flush=True)
+            print("SENT", args[0], 0, dropped(), flush=True)
         else:
             return
 
@@ -166,7 +167,7 @@ def ours_supplier(naming: str) -> None:
     deadline = time.monotonic() + 10
     while not supplier.has_subscribers(EVENT) and time.monotonic() < deadline:
         time.sleep(0.01)
-    serve_commands(send, send_stamped, on_timer)
+    serve_commands(send, send_stamped, on_timer, lambda: supplier.dropped)
     server.shutdown()
 
 
@@ -231,6 +232,8 @@ class Supplier:
             text=True,
         )
         self.where = self._line("READY")
+        self.pushing = 0.0
+        self.dropped = 0
 
     def _line(self, word: str) -> str:
         assert self.proc.stdout is not None
@@ -240,13 +243,14 @@ class Supplier:
         return line.split(maxsplit=1)[1].strip()
 
     def command(self, *words: object) -> int:
-        """Send a command; how many events the supplier sent (and `self.pushing`: how many
-        seconds its push loop took)."""
+        """Send a command; how many events the supplier pushed (and `self.pushing`: how many
+        seconds its push loop took; `self.dropped`: how many events it has dropped so far)."""
         assert self.proc.stdin is not None
         self.proc.stdin.write(" ".join(map(str, words)) + "\n")
         self.proc.stdin.flush()
-        count, seconds = self._line("SENT").split()
+        count, seconds, dropped = self._line("SENT").split()
         self.pushing = float(seconds)
+        self.dropped = int(dropped)
         return int(count)
 
     def close(self) -> None:
@@ -324,8 +328,11 @@ class Bench:
     def throughput(self, count: int) -> list[Result]:
         """The flat-out run; if it lost events, then the paced run that lost none."""
         self.warm_up()
+        dropped = self.supplier.dropped
         _, c, lost = self.run(count, 0)
-        flat = Result(self.name, c.rate(), lost, "flat out")
+        dropped = self.supplier.dropped - dropped
+        note = f"flat out, the supplier dropped {dropped}" if dropped else "flat out"
+        flat = Result(self.name, c.rate(), lost, note)
         if not lost:
             return [flat]
         rate = flat.rate
