@@ -418,13 +418,14 @@ class StructuredPushConsumer:
                 parts = recv(zmq.NOBLOCK)
             except zmq.Again:
                 return
+            delivered += 1  # a frame counts, even one that is dropped
             try:
                 events = self._parse(parts)
             except (ValueError, StructError, UnicodeDecodeError) as e:
                 _log.warning("dropped an event frame on %s: %s", self.channel.name, e)
                 continue
             self.received += len(events)
-            delivered += len(events) + 1
+            delivered += len(events)
             for event in events:
                 try:
                     deliver(event)
