@@ -330,3 +330,24 @@ def test_events_refused_at_the_high_water_mark_are_counted(
     assert supplier.dropped > 0
     supplier.close()
     stuck.close()
+
+
+def test_a_slow_consumer_with_a_backlog_stops_promptly(
+    naming: str, servers: Callable[[str], Server]
+) -> None:
+    """shutdown() takes effect after the event being delivered, not after the whole backlog
+    (here 2,000 events at 10 ms each: 20 s)."""
+    host = servers("r")
+    channel = EventChannelFactory(host).create_channel("Backlog")
+    supplier = StructuredPushSupplier(channel)
+    slow_server = Running(naming, "slow")
+    slow = Recorder(slow_server.server.resolve_channel("r/Backlog"), delay=0.01)
+    slow.set_subscriptions([("*", "*")])
+    eventually(lambda: supplier.has_subscribers("ExampleEvent"))
+    value = event(1)
+    channel.reactor.call_soon(lambda: [supplier.push("ExampleEvent", value) for _ in range(2000)])
+    eventually(lambda: len(slow.events) > 0)
+    start = time.monotonic()
+    slow_server.stop()
+    assert not slow_server.thread.is_alive()
+    assert time.monotonic() - start < 3

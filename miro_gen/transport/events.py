@@ -412,6 +412,7 @@ class StructuredPushConsumer:
 
     def _readable(self) -> None:
         recv, deliver = self.socket.recv_multipart, self.push_structured_event
+        reactor = self.reactor
         delivered = 0
         while delivered < TURN_EVENTS:  # the poller reports the rest in the next turn
             try:
@@ -424,13 +425,19 @@ class StructuredPushConsumer:
             except (ValueError, StructError, UnicodeDecodeError) as e:
                 _log.warning("dropped an event frame on %s: %s", self.channel.name, e)
                 continue
-            self.received += len(events)
-            delivered += len(events)
+            n = 0
             for event in events:
+                if reactor.stopping:  # a slow consumer's backlog must not delay the shutdown
+                    break
                 try:
                     deliver(event)
                 except Exception:
                     _log.exception("push_structured_event failed on %s", event.type_name)
+                n += 1
+            self.received += n
+            delivered += n
+            if n < len(events):
+                return
 
     def _topic(self, head: bytes) -> tuple[str, str, bool]:
         """(domain, type name, whether subscribed) of a topic frame."""
