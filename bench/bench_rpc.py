@@ -1,4 +1,5 @@
-"""Benchmark: a generated-stub getData() round trip against a raw pyzmq DEALER/ROUTER echo.
+"""Benchmark: a generated-stub getData() round trip against a raw pyzmq DEALER/ROUTER echo,
+and beside them a Zenoh get/reply round trip.
 
     python bench/bench_rpc.py [--calls N] [--check]
 
@@ -9,6 +10,10 @@ servant may block) and getData() marked @nonblocking (run on the reactor thread,
 hand-offs fewer). Calls are measured in interleaved blocks, so that the machine's changing load
 falls on every row alike. Prints p50 and p99 latency and the ratios of the p50s. Target (issue
 "The ZeroMQ transport"): at most 1.25x; `--check` exits 1 when the @nonblocking row misses it.
+
+If `eclipse-zenoh` is installed (pip install miro-gen[bench]), a Zenoh queryable in a peer of its
+own (loopback, multicast scouting off, explicit endpoints) echoes the same bytes to a querier's
+get(), for comparison only: the time to the reply's arrival, from a Python caller.
 """
 
 from __future__ import annotations
@@ -33,6 +38,12 @@ TARGET = 1.25
 RAW = "raw pyzmq DEALER/ROUTER echo"
 POOL = "getData() on the worker pool"
 INLINE = "getData() @nonblocking"
+ZENOH = "Zenoh get/reply (peer)"
+
+try:
+    import zenoh
+except ImportError:  # optional: pip install miro-gen[bench]
+    zenoh = None
 
 ECHO = """
 import sys, zmq
@@ -45,8 +56,56 @@ while True:
 """
 
 
-def start(args: list[str]) -> tuple[subprocess.Popen[str], str]:
-    proc = subprocess.Popen(args, stdout=subprocess.PIPE, text=True)
+ZENOH_ECHO = """
+import sys, zenoh
+conf = zenoh.Config()
+conf.insert_json5("mode", '"peer"')
+conf.insert_json5("scouting/multicast/enabled", "false")
+conf.insert_json5("listen/endpoints", '["tcp/127.0.0.1:' + sys.argv[1] + '"]')
+session = zenoh.open(conf)
+queryable = session.declare_queryable(
+    "bench/getData", lambda q: q.reply(q.key_expr, q.payload.to_bytes())
+)
+print(sys.argv[1], flush=True)
+sys.stdin.read()
+"""
+
+
+def zenoh_port() -> str:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return str(s.getsockname()[1])
+
+
+class Zenoh:
+    """Sends the same bytes as a Zenoh get() to the echoing queryable and waits for the reply."""
+
+    def __init__(self, port: str, frames: list[bytes]) -> None:
+        conf = zenoh.Config()
+        conf.insert_json5("mode", '"peer"')
+        conf.insert_json5("scouting/multicast/enabled", "false")
+        conf.insert_json5("connect/endpoints", f'["tcp/127.0.0.1:{port}"]')
+        self.session = zenoh.open(conf)
+        self.querier = self.session.declare_querier("bench/getData", timeout=5.0)
+        self.data = b"".join(frames)
+
+    def call(self) -> None:
+        for reply in self.querier.get(payload=self.data):
+            reply.ok.payload.to_bytes()
+            return
+        raise RuntimeError("no reply from the Zenoh queryable")
+
+    def close(self) -> None:
+        self.querier.undeclare()
+        self.session.close()
+
+
+def start(args: list[str], stdin: bool = False) -> tuple[subprocess.Popen[str], str]:
+    """Start a server process; it and the last word of the first line it prints."""
+    stdin_pipe = subprocess.PIPE if stdin else None
+    proc = subprocess.Popen(args, stdin=stdin_pipe, stdout=subprocess.PIPE, text=True)
     assert proc.stdout is not None
     return proc, proc.stdout.readline().split()[-1]
 
@@ -90,7 +149,9 @@ class Raw:
         self.context.term()
 
 
-def measure(clients: dict[str, Raw | Ours], calls: int, block: int = 250) -> dict[str, list[float]]:
+def measure(
+    clients: dict[str, Raw | Ours | Zenoh], calls: int, block: int = 250
+) -> dict[str, list[float]]:
     """Round-trip times of each client, taken in interleaved blocks so that a change in the
     machine's load during the run affects all of them alike."""
     samples: dict[str, list[float]] = {name: [] for name in clients}
@@ -119,18 +180,24 @@ def main() -> int:
     server, endpoint = start([sys.executable, str(ROOT / "tests/procs/example_server.py")])
     echo, port = start([sys.executable, "-c", ECHO])
     reply = [bytes(24), Miro.ExampleStructIDL(1.0, 11.0).serialize()]
-    clients: dict[str, Raw | Ours] = {
+    clients: dict[str, Raw | Ours | Zenoh] = {
         RAW: Raw(port, reply),
         POOL: Ours(endpoint, b"ExampleA"),
         INLINE: Ours(endpoint, b"Quick"),
     }
+    queryable = None
+    if zenoh is not None:
+        queryable, zport = start([sys.executable, "-c", ZENOH_ECHO, zenoh_port()], stdin=True)
+        clients[ZENOH] = Zenoh(zport, reply)
     try:
         samples = measure(clients, args.calls)
     finally:
         for client in clients.values():
             client.close()
-        server.kill()
-        echo.kill()
+        for proc in (server, echo, queryable):
+            if proc is not None:
+                proc.kill()
+                proc.wait()
     p50 = {}
     print(f"{'round trip':34} {'p50 us':>8} {'p99 us':>8} {'ratio':>6}")
     for name, values in samples.items():
@@ -143,6 +210,11 @@ def main() -> int:
         verdict = "ok" if ratio <= TARGET else "MISSED"
         missed |= name == INLINE and ratio > TARGET
         print(f"p50 ratio {name} / raw pyzmq: {ratio:.2f} (target <= {TARGET}: {verdict})")
+    if ZENOH in p50:
+        for name in (INLINE, POOL):
+            print(f"p50 ratio {name} / Zenoh get: {p50[name] / p50[ZENOH]:.2f}")
+    else:
+        print("zenoh: skipped (eclipse-zenoh not installed)")
     return 1 if args.check and missed else 0
 
 

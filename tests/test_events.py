@@ -218,3 +218,136 @@ def test_malformed_event_frames_are_dropped(servers: Callable[[str], Server]) ->
     eventually(lambda: len(consumer.events) == 1)
     assert consumer.events[0].payload == event(5)
     rogue.close()
+
+
+def test_events_of_other_types_are_not_counted_as_missed(
+    servers: Callable[[str], Server],
+) -> None:
+    """Sequence numbers count per type: a consumer of one type sees no gaps from the others."""
+    host = servers("r")
+    supplier = StructuredPushSupplier(EventChannelFactory(host).create_channel("Two"))
+    remote = servers("c").resolve_channel("r/Two")
+    only_a, only_b = Recorder(remote), Recorder(remote)
+    only_a.set_subscriptions([("r", "A")])
+    only_b.set_subscriptions([("r", "B")])
+    eventually(lambda: supplier.has_subscribers("A") and supplier.has_subscribers("B"))
+    for n in range(100):
+        supplier.push("A", event(n))
+        supplier.push("B", event(n))
+        time.sleep(0.001)  # several batches, so the gaps would show between them
+    eventually(lambda: len(only_a.events) == 100 and len(only_b.events) == 100)
+    assert [e.payload.counter for e in only_a.events] == list(range(100))
+    assert only_a.missed == only_b.missed == 0
+
+
+def test_a_turn_with_more_events_than_a_batch_holds(servers: Callable[[str], Server]) -> None:
+    """Events pushed within one reactor turn beyond a frame's 65,535 are split, not lost."""
+    host = servers("r")
+    channel = EventChannelFactory(host).create_channel("Many")
+    supplier = StructuredPushSupplier(channel)
+    consumer = Recorder(servers("c").resolve_channel("r/Many"))
+    consumer.set_subscriptions([("*", "*")])
+    eventually(lambda: supplier.has_subscribers("ExampleEvent"))
+    total = 70_000
+    value = event(1)
+    # All pushed on the reactor thread, in one turn: they leave together when it ends.
+    channel.reactor.call_soon(lambda: [supplier.push("ExampleEvent", value) for _ in range(total)])
+    eventually(lambda: len(consumer.events) == total, 30)
+    assert consumer.missed == 0
+
+
+def test_a_blocked_reactor_does_not_make_the_supplier_queue_grow(
+    servers: Callable[[str], Server],
+) -> None:
+    """While the reactor cannot send, push() queues a bounded number of events and counts
+    those it drops; consumers see the drop as a gap."""
+    from miro_gen.transport.events import QUEUE_EVENTS
+
+    host = servers("r")
+    channel = EventChannelFactory(host).create_channel("Blocked")
+    supplier = StructuredPushSupplier(channel)
+    consumer = Recorder(servers("c").resolve_channel("r/Blocked"))
+    consumer.set_subscriptions([("*", "*")])
+    eventually(lambda: supplier.has_subscribers("ExampleEvent"))
+    supplier.push("ExampleEvent", event(0))
+    eventually(lambda: len(consumer.events) == 1)
+    unblock = threading.Event()
+    channel.reactor.call_soon(unblock.wait, 30)
+    extra = 5_000
+    for n in range(QUEUE_EVENTS + extra):
+        supplier.push("ExampleEvent", event(n))
+    assert supplier.dropped == extra
+    unblock.set()
+    eventually(lambda: len(consumer.events) == 1 + QUEUE_EVENTS, 30)
+    supplier.push("ExampleEvent", event(0))
+    eventually(lambda: len(consumer.events) == 2 + QUEUE_EVENTS)
+    assert consumer.missed == extra
+
+
+def test_events_larger_than_a_frame_travel_alone(servers: Callable[[str], Server]) -> None:
+    """An event above the frame's byte limit still leaves, in a frame of its own."""
+    from miro_gen.transport.events import MAX_BATCH_BYTES
+
+    host = servers("r")
+    channel = EventChannelFactory(host).create_channel("Big")
+    supplier = StructuredPushSupplier(channel)
+    consumer = Recorder(servers("c").resolve_channel("r/Big"))
+    consumer.set_subscriptions([("*", "*")])
+    eventually(lambda: supplier.has_subscribers("Group"))
+    points = [Miro.ExampleStructIDL(float(i), -float(i)) for i in range(MAX_BATCH_BYTES // 16 + 1)]
+    groups = [Miro.ExampleGroupIDL(n, points) for n in range(3)]
+    channel.reactor.call_soon(lambda: [supplier.push("Group", g) for g in groups])
+    eventually(lambda: len(consumer.events) == 3)
+    assert [e.payload for e in consumer.events] == groups
+    assert consumer.missed == 0
+
+
+def test_events_refused_at_the_high_water_mark_are_counted(
+    servers: Callable[[str], Server], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A channel that stops reading: the supplier's frames pile up to its high-water mark and
+    the kernel's buffers, then push() goes on without blocking and counts what it dropped."""
+    from miro_gen.transport import events
+
+    monkeypatch.setattr(events, "HWM", 10)
+    host = servers("r")
+    stuck = zmq.Context.instance().socket(zmq.XSUB)  # a channel whose proxy never reads
+    stuck.setsockopt(zmq.LINGER, 0)
+    stuck.setsockopt(zmq.RCVHWM, 10)
+    port = stuck.bind_to_random_port("tcp://127.0.0.1")
+    channel = events.EventChannel("r/Stuck", f"tcp://127.0.0.1:{port}", "", host.reactor(), "r")
+    supplier = StructuredPushSupplier(channel)
+    stuck.send(b"\x01")  # subscribe to everything (sent to the supplier once it attaches,
+    # which the socket notices when used: EVENTS processes its commands without reading)
+    eventually(lambda: stuck.getsockopt(zmq.EVENTS) >= 0 and supplier.has_subscribers("Group"))
+    points = [Miro.ExampleStructIDL(float(i), 0.0) for i in range(events.MAX_BATCH_BYTES // 16)]
+    group = Miro.ExampleGroupIDL(0, points)  # a frame of its own
+    total = 400  # ~100 MB: beyond what loopback buffers hold
+    start = time.monotonic()
+    channel.reactor.call_soon(lambda: [supplier.push("Group", group) for _ in range(total)])
+    eventually(lambda: supplier.sent + supplier.dropped == total, 30)
+    assert time.monotonic() - start < 20
+    assert supplier.dropped > 0
+    supplier.close()
+    stuck.close()
+
+
+def test_a_slow_consumer_with_a_backlog_stops_promptly(
+    naming: str, servers: Callable[[str], Server]
+) -> None:
+    """shutdown() takes effect after the event being delivered, not after the whole backlog
+    (here 2,000 events at 10 ms each: 20 s)."""
+    host = servers("r")
+    channel = EventChannelFactory(host).create_channel("Backlog")
+    supplier = StructuredPushSupplier(channel)
+    slow_server = Running(naming, "slow")
+    slow = Recorder(slow_server.server.resolve_channel("r/Backlog"), delay=0.01)
+    slow.set_subscriptions([("*", "*")])
+    eventually(lambda: supplier.has_subscribers("ExampleEvent"))
+    value = event(1)
+    channel.reactor.call_soon(lambda: [supplier.push("ExampleEvent", value) for _ in range(2000)])
+    eventually(lambda: len(slow.events) > 0)
+    start = time.monotonic()
+    slow_server.stop()
+    assert not slow_server.thread.is_alive()
+    assert time.monotonic() - start < 3

@@ -8,11 +8,13 @@ supplier whether anyone listens, and `push()` skips encoding when nobody does. C
 SUB sockets to its XPUB side.
 
 Each event carries its domain (by convention the supplier's naming context: the robot), its type
-name, the type hash of its payload, a per-supplier sequence number (so consumers count what they
-missed), the source time stamp and the publish time. Events pushed within one reactor turn leave
-in one frame per topic; at low rates that is one event per frame, as fast as a single message.
-Slow consumers never block suppliers: ZeroMQ drops at its high-water marks, and the sequence
-numbers make the drops visible (`StructuredPushConsumer.missed`).
+name, the type hash of its payload, a sequence number per supplier and type (so consumers count
+what they missed), the source time stamp and the publish time. Events pushed within one reactor
+turn leave in one frame per topic (split at MAX_BATCH_EVENTS / MAX_BATCH_BYTES), so throughput
+is not capped at one ZeroMQ message per event; at low rates that is one event per frame, as fast
+as a single message. Slow consumers never block suppliers: the supplier's queue and ZeroMQ's are
+bounded, what overflows is dropped and counted (`StructuredPushSupplier.dropped`), and the
+sequence numbers make the drops visible (`StructuredPushConsumer.missed`).
 """
 
 from __future__ import annotations
@@ -41,12 +43,22 @@ CHANNEL_REPO_ID = "IDL:miro-gen/EventChannel:1.0"
 DEFAULT_CHANNEL = "EventChannel"
 EVENT_VERSION = 1
 HWM = 10_000  # events a socket queues for one peer before dropping
+QUEUE_EVENTS = 100_000  # events a supplier holds for its reactor's next turn, at most
+QUEUE_BYTES = 64 << 20  # and bytes
+# Events in one frame, at most. The count is 16 bits, and a high-water mark counts frames: HWM
+# frames must stay a bounded amount of memory. Yet frames must not be small: each send lets the
+# pushing thread take the GIL back for up to a switch interval, so a flush in many frames falls
+# behind a thread pushing flat out. An event larger than MAX_BATCH_BYTES travels alone.
+MAX_BATCH_EVENTS = 16_384
+MAX_BATCH_BYTES = 256 * 1024
+TURN_EVENTS = 4096  # events a consumer delivers per reactor turn, so other handlers get a turn
 _BATCH = Struct("<BBHQ32s")  # version, flags, count, supplier id, type hash
 _EVENT = Struct("<QqqI")  # sequence number, stamp ns, publish ns, payload length
+_EVENT_SIZE = _EVENT.size
 ANY = "*"
 
 
-@dataclass
+@dataclass(slots=True)
 class StructuredEvent:
     """One event as a consumer receives it."""
 
@@ -190,79 +202,152 @@ def resolve_channel(server: Any, name: str = DEFAULT_CHANNEL) -> EventChannel:
 # ---- suppliers ------------------------------------------------------------------------------
 
 
+class _Topic:
+    """What a supplier keeps per type name: the topic frame, the sequence numbers, whether
+    anyone subscribes (recomputed when the subscriptions change), the events not yet sent."""
+
+    __slots__ = ("frame", "generation", "last", "last_hash", "pending", "seq", "subscribed")
+
+    def __init__(self, frame: bytes) -> None:
+        self.frame = frame
+        self.seq = itertools.count()
+        self.generation = -1  # of the supplier's subscriptions that `subscribed` reflects
+        self.subscribed = False
+        # Runs of packed events with one type hash (one, unless the type changes), the last
+        # run's list and hash.
+        self.pending: list[tuple[str, list[bytes]]] = []
+        self.last: list[bytes] = []
+        self.last_hash = ""
+
+
 class StructuredPushSupplier:
     """Pushes events into a channel. `push()` may be called from any thread; the sending
-    happens on the reactor thread, once per turn for all events pushed meanwhile."""
+    happens on the reactor thread, once per turn for all events pushed meanwhile.
+
+    Events wait for that turn in a bounded queue (QUEUE_EVENTS events, QUEUE_BYTES bytes): when
+    the reactor cannot keep up, `push()` drops the newest and counts them in `dropped`, as it
+    does those ZeroMQ refuses at its high-water mark. Consumers see them as gaps."""
 
     def __init__(self, channel: EventChannel, domain_name: str | None = None) -> None:
         self.channel = channel
         self.domain_name = channel.domain_name if domain_name is None else domain_name
         self.reactor = channel.reactor
         self.supplier_id = random.getrandbits(63)
-        self._seq = itertools.count()
-        self._queue: dict[str, list[tuple[int, int, bytes, str]]] = {}
+        self._topics: dict[str, _Topic] = {}
+        self._dirty: list[_Topic] = []  # topics with pending events, in the order they came
+        self._queued = 0
+        self._queued_bytes = 0
         self._lock = threading.Lock()
         self._flush_pending = False
         self._subscriptions: dict[bytes, int] = {}
+        self._generation = 0  # bumped whenever _subscriptions changes
+        self._raw_hashes: dict[str, bytes] = {}
         self.sent = 0
+        self.dropped = 0  # events pushed while someone subscribed that were never sent
         self.socket = self.reactor.context.socket(zmq.XPUB)
         self.socket.setsockopt(zmq.LINGER, 0)
         self.socket.setsockopt(zmq.SNDHWM, HWM)
         self.socket.setsockopt(zmq.XPUB_VERBOSER, 1)
+        # At the high-water mark an XPUB drops silently; with NODROP a non-blocking send fails
+        # instead, so that the supplier counts what it drops. It never blocks either way.
+        self.socket.setsockopt(zmq.XPUB_NODROP, 1)
         self.socket.connect(channel.supplier_endpoint)
         self.reactor.call_soon(self.reactor.register, self.socket, self._subscription_changed)
 
+    def _topic(self, type_name: str) -> _Topic:
+        t = self._topics.get(type_name)
+        if t is None:  # setdefault: two threads creating it at once share one counter
+            t = self._topics.setdefault(type_name, _Topic(topic(self.domain_name, type_name)))
+        return t
+
+    def _subscribed(self, t: _Topic) -> bool:
+        generation = self._generation
+        if t.generation != generation:
+            subs = list(self._subscriptions)
+            t.subscribed = any(t.frame.startswith(p) for p in subs)
+            t.generation = generation  # a change meanwhile bumped _generation: recomputed next
+        return t.subscribed
+
     def has_subscribers(self, type_name: str) -> bool:
         """Whether any consumer subscribes to this supplier's events of `type_name`."""
-        t = topic(self.domain_name, type_name)
-        return any(n > 0 and t.startswith(p) for p, n in list(self._subscriptions.items()))
+        return self._subscribed(self._topic(type_name))
 
     def push(self, type_name: str, payload: Any, stamp: float | None = None) -> bool:
         """Publish `payload` (a generated type) as an event of `type_name`; False when nobody
         subscribes (nothing is encoded then). `stamp`: when the data was taken (default now)."""
-        seq = next(self._seq)
-        if not self.has_subscribers(type_name):
+        t = self._topics.get(type_name) or self._topic(type_name)
+        seq = next(t.seq)
+        if not (t.subscribed if t.generation == self._generation else self._subscribed(t)):
             return False
-        stamp_ns = time.time_ns() if stamp is None else int(stamp * 1e9)
+        now = time.time_ns()
         data = payload.serialize()
+        packed = _EVENT.pack(seq, now if stamp is None else int(stamp * 1e9), now, len(data))
+        packed += data
         with self._lock:
-            self._queue.setdefault(type_name, []).append((seq, stamp_ns, data, payload._type_hash))
-            schedule = not self._flush_pending
+            if self._queued >= QUEUE_EVENTS or self._queued_bytes + len(packed) > QUEUE_BYTES:
+                self.dropped += 1
+                return True
+            type_hash = payload._type_hash
+            if type_hash == t.last_hash and t.pending:
+                t.last.append(packed)
+            else:
+                if not t.pending:
+                    self._dirty.append(t)
+                t.last, t.last_hash = [packed], type_hash
+                t.pending.append((type_hash, t.last))
+            self._queued += 1
+            self._queued_bytes += len(packed)
+            if self._flush_pending:
+                return True
             self._flush_pending = True
-        if schedule:
-            self.reactor.call_soon(self._flush)
+        self.reactor.call_soon(self._flush)
         return True
 
     def _flush(self) -> None:
         with self._lock:
-            queue, self._queue = self._queue, {}
+            topics, self._dirty = self._dirty, []
+            queues = []
+            for t in topics:
+                queues.append((t.frame, t.pending))
+                t.pending, t.last, t.last_hash = [], [], ""
+            self._queued = self._queued_bytes = 0
             self._flush_pending = False
-        publish_ns = time.time_ns()
-        for type_name, events in queue.items():
-            for type_hash, group in itertools.groupby(events, key=lambda e: e[3]):
-                batch = list(group)
-                parts = [
-                    _BATCH.pack(
-                        EVENT_VERSION, 0, len(batch), self.supplier_id, bytes.fromhex(type_hash)
-                    )
-                ]
-                for seq, stamp_ns, data, _ in batch:
-                    parts.append(_EVENT.pack(seq, stamp_ns, publish_ns, len(data)))
-                    parts.append(data)
-                try:
-                    self.socket.send_multipart(
-                        [topic(self.domain_name, type_name), b"".join(parts)], zmq.NOBLOCK
-                    )
-                    self.sent += len(batch)
-                except zmq.Again:  # at the high-water mark: dropped, visible as a gap
-                    pass
+        for frame, runs in queues:
+            for type_hash, events in runs:
+                if len(events) <= MAX_BATCH_EVENTS and sum(map(len, events)) <= MAX_BATCH_BYTES:
+                    self._send(frame, type_hash, events)
+                    continue
+                batch: list[bytes] = []
+                size = 0
+                for packed in events:  # a busy turn: several frames, within the limits
+                    if batch and (
+                        len(batch) == MAX_BATCH_EVENTS or size + len(packed) > MAX_BATCH_BYTES
+                    ):
+                        self._send(frame, type_hash, batch)
+                        batch, size = [], 0
+                    batch.append(packed)
+                    size += len(packed)
+                self._send(frame, type_hash, batch)
+
+    def _send(self, frame: bytes, type_hash: str, packed: list[bytes]) -> None:
+        raw = self._raw_hashes.get(type_hash)
+        if raw is None:
+            raw = self._raw_hashes[type_hash] = bytes.fromhex(type_hash)
+        head = _BATCH.pack(EVENT_VERSION, 0, len(packed), self.supplier_id, raw)
+        try:
+            self.socket.send_multipart([frame, head + b"".join(packed)], zmq.NOBLOCK)
+            self.sent += len(packed)
+        except zmq.Again:  # at the high-water mark: dropped, visible as a gap
+            with self._lock:
+                self.dropped += len(packed)
 
     def _subscription_changed(self) -> None:
+        changed = False
         while True:
             try:
                 msg = self.socket.recv(zmq.NOBLOCK)
             except zmq.Again:
-                return
+                break
             if not msg:
                 continue
             prefix = msg[1:]
@@ -271,6 +356,9 @@ class StructuredPushSupplier:
                 self._subscriptions[prefix] = n
             else:
                 self._subscriptions.pop(prefix, None)
+            changed = True
+        if changed:
+            self._generation += 1  # after the change, so a reader never keeps a stale answer
 
     def close(self) -> None:
         _close_on(self.reactor, self.socket)
@@ -292,7 +380,9 @@ class StructuredPushConsumer:
         self.socket.connect(channel.consumer_endpoint)
         self._filters: list[tuple[str, str]] = []
         self._prefixes: set[bytes] = set()
-        self._next_seq: dict[int, int] = {}
+        self._next_seq: dict[tuple[int, str], int] = {}  # per (supplier, type name)
+        self._topics: dict[bytes, tuple[str, str, bool]] = {}
+        self._classes: dict[bytes, type[Any]] = {}
         self._unknown: set[tuple[str, str]] = set()
         self.received = 0
         self.missed = 0  # events lost between suppliers and this consumer
@@ -311,6 +401,7 @@ class StructuredPushConsumer:
                 self.socket.setsockopt(zmq.SUBSCRIBE, p)
             self._prefixes = prefixes
             self._filters = subs
+            self._topics.clear()
 
         self.reactor.call_soon(apply)
 
@@ -321,68 +412,105 @@ class StructuredPushConsumer:
         return any((d in (ANY, domain)) and (t in (ANY, type_name)) for d, t in self._filters)
 
     def _readable(self) -> None:
-        for _ in range(1000):
+        recv, deliver = self.socket.recv_multipart, self.push_structured_event
+        reactor = self.reactor
+        delivered = 0
+        while delivered < TURN_EVENTS:  # the poller reports the rest in the next turn
             try:
-                parts = self.socket.recv_multipart(zmq.NOBLOCK)
+                parts = recv(zmq.NOBLOCK)
             except zmq.Again:
                 return
+            delivered += 1  # a frame counts, even one that is dropped
             try:
                 events = self._parse(parts)
             except (ValueError, StructError, UnicodeDecodeError) as e:
                 _log.warning("dropped an event frame on %s: %s", self.channel.name, e)
                 continue
+            n = 0
             for event in events:
-                self.received += 1
+                if reactor.stopping:  # a slow consumer's backlog must not delay the shutdown
+                    break
                 try:
-                    self.push_structured_event(event)
+                    deliver(event)
                 except Exception:
                     _log.exception("push_structured_event failed on %s", event.type_name)
+                n += 1
+            self.received += n
+            delivered += n
+            if n < len(events):
+                return
+
+    def _topic(self, head: bytes) -> tuple[str, str, bool]:
+        """(domain, type name, whether subscribed) of a topic frame."""
+        known = self._topics.get(head)
+        if known is None:
+            fields = head.split(b"\0")
+            if len(fields) != 3 or fields[2]:
+                raise ValueError("malformed topic")
+            domain, type_name = fields[0].decode(), fields[1].decode()
+            known = (domain, type_name, self._wanted(domain, type_name))
+            if len(self._topics) >= 4096:  # a bounded cache, whatever the channel carries
+                self._topics.clear()
+            self._topics[head] = known
+        return known
+
+    def _class(self, raw_hash: bytes, domain: str, type_name: str) -> type[Any] | None:
+        """The generated type of payloads with this type hash; None (reported once) if none."""
+        cls = self._classes.get(raw_hash)
+        if cls is None:
+            type_hash = raw_hash.hex()
+            cls = type_for_hash(type_hash)
+            if cls is not None:
+                self._classes[raw_hash] = cls
+            elif (type_name, type_hash) not in self._unknown:
+                self._unknown.add((type_name, type_hash))
+                _log.warning(
+                    "events %s/%s have type hash %s, which no imported generated type has: "
+                    "dropped (import the type's generated module, or regenerate it)",
+                    domain,
+                    type_name,
+                    type_hash[:12],
+                )
+        return cls
 
     def _parse(self, parts: list[bytes]) -> list[StructuredEvent]:
+        """The events of one message, decoded; raises if the frame does not parse (then none
+        of its events count, and the sequence numbers stay as they were)."""
         if len(parts) != 2:
             raise ValueError(f"{len(parts)} frames, expected 2")
         head, body = parts
-        fields = head.split(b"\0")
-        if len(fields) != 3 or fields[2]:
-            raise ValueError("malformed topic")
-        domain, type_name = fields[0].decode(), fields[1].decode()
-        if not self._wanted(domain, type_name):
+        domain, type_name, wanted = self._topic(head)
+        if not wanted:
             return []
         version, _, count, supplier, raw_hash = _BATCH.unpack_from(body)
         if version != EVENT_VERSION:
             raise ValueError(f"event version {version} is not supported")
+        cls = self._class(raw_hash, domain, type_name)
+        deserialize = None if cls is None else cls.deserialize
         type_hash = raw_hash.hex()
-        cls = type_for_hash(type_hash)
-        at = _BATCH.size
+        key = (supplier, type_name)
+        expected = self._next_seq.get(key)
+        missed = 0
+        unpack, size, at = _EVENT.unpack_from, len(body), _BATCH.size
         out = []
         for _ in range(count):
-            seq, stamp_ns, publish_ns, n = _EVENT.unpack_from(body, at)
-            at += _EVENT.size
-            data = body[at : at + n]
-            if len(data) != n:
+            seq, stamp_ns, publish_ns, n = unpack(body, at)
+            at += _EVENT_SIZE
+            if at + n > size:
                 raise ValueError("event payload is truncated")
-            at += n
-            expected = self._next_seq.get(supplier)
             if expected is not None and seq > expected:
-                self.missed += seq - expected
-            self._next_seq[supplier] = seq + 1
-            if cls is None:
-                self.undecodable += 1
-                if (type_name, type_hash) not in self._unknown:
-                    self._unknown.add((type_name, type_hash))
-                    _log.warning(
-                        "events %s/%s have type hash %s, which no imported generated type has: "
-                        "dropped (import the type's generated module, or regenerate it)",
-                        domain,
-                        type_name,
-                        type_hash[:12],
-                    )
+                missed += seq - expected
+            expected = seq + 1
+            if deserialize is None:
+                at += n
                 continue
             try:
-                payload = cls.deserialize(data)  # type: ignore[attr-defined]
+                payload = deserialize(body[at : at + n])
             except Exception as e:  # MARSHAL: a corrupt payload is reported, not delivered
                 _log.warning("dropped an undecodable %s event: %s", type_name, e)
+                at += n
                 continue
+            at += n
             out.append(
                 StructuredEvent(
                     domain,
@@ -395,8 +523,14 @@ class StructuredPushConsumer:
                     type_hash,
                 )
             )
-        if at != len(body):
+        if at != size:
             raise ValueError("trailing bytes after the events")
+        # Only a frame that parses to its end moves the sequence numbers.
+        if expected is not None:
+            self._next_seq[key] = expected
+        self.missed += missed
+        if deserialize is None:
+            self.undecodable += count
         return out
 
     def close(self) -> None:

@@ -165,6 +165,11 @@ class Reactor:
         self._stopping = True
         self._wake()
 
+    @property
+    def stopping(self) -> bool:
+        """Whether `run()` is to return: a handler with a long queue of work may stop early."""
+        return self._stopping
+
     def close(self) -> None:
         """After `run()` has returned: close the ZeroMQ sockets still registered (their owners,
         suppliers and consumers, live on this thread) and the wake-up sockets. A context with
