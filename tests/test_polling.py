@@ -194,3 +194,11 @@ def test_a_nonblocking_method_of_the_server_process(server: Server, invoker: Zmq
     stub = Miro.Example(ObjectRef(REPO_ID, server.endpoint, b"Quick"), invoker)
     stub.setData(4.0, 5.0)
     assert stub.getData() == Miro.ExampleStructIDL(5.0, 6.0)
+
+
+def test_a_stub_without_a_time_limit_waits_for_its_reply(
+    server: Server, invoker: ZmqInvoker
+) -> None:
+    patient = Miro.Example(server.ref, invoker, timeout=0)  # 0: no limit
+    patient.setData(-0.2, 5.0)  # the servant sleeps 0.2 s
+    assert patient.getData() == Miro.ExampleStructIDL(-0.2 + 1, 6.0)

@@ -148,7 +148,8 @@ class ZmqInvoker:
                     f"{operation}: no reply from {conn.endpoint} in time",
                     completed=CompletionStatus.MAYBE,
                 )
-            events = dict(conn.poller.poll(min(int(left * 1000) + 1, 2**31 - 1)))
+            wait_ms = -1 if left == float("inf") else min(int(left * 1000) + 1, 2**31 - 1)
+            events = dict(conn.poller.poll(wait_ms))
             if conn.monitor in events:
                 conn.read_monitor()
                 if conn.lost:
