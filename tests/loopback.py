@@ -15,6 +15,8 @@ from collections.abc import Callable
 import zmq
 from miro_cli import REPO
 
+from miro_gen import Server, StructuredEvent, StructuredPushConsumer
+
 
 def free_port() -> int:
     """A TCP port on 127.0.0.1 that nothing listens on (now)."""
@@ -74,8 +76,6 @@ class RunningServer:
     """A Server (naming context `context`) whose reactor runs in a thread of the test."""
 
     def __init__(self, naming: str, context: str) -> None:
-        from miro_gen import Server
-
         self.server = Server(["t", "--naming", naming, "-MNC", context], context=zmq.Context())
         self.thread = threading.Thread(target=self.server.run, daemon=True)
         self.thread.start()
@@ -83,6 +83,20 @@ class RunningServer:
     def stop(self) -> None:
         self.server.shutdown()
         self.thread.join(10)
+
+
+class Recorder(StructuredPushConsumer):
+    """A consumer that keeps what it receives (`events`), taking `delay` s over each."""
+
+    def __init__(self, *args: object, delay: float = 0.0) -> None:
+        super().__init__(*args)  # type: ignore[arg-type]
+        self.events: list[StructuredEvent] = []
+        self.delay = delay
+
+    def push_structured_event(self, event: StructuredEvent) -> None:
+        if self.delay:
+            time.sleep(self.delay)
+        self.events.append(event)
 
 
 def eventually(check: Callable[[], bool], seconds: float = 10) -> None:

@@ -10,13 +10,11 @@ from pathlib import Path
 import Miro
 import pytest
 import zmq
-from loopback import NamingProcess, eventually
+from loopback import NamingProcess, Recorder, RunningServer, eventually
 
 from miro_gen import (
     EventChannelFactory,
     Server,
-    StructuredEvent,
-    StructuredPushConsumer,
     StructuredPushSupplier,
 )
 
@@ -30,43 +28,18 @@ def naming() -> Iterator[str]:
     process.stop()
 
 
-class Running:
-    """A Server whose reactor runs in a thread of the test."""
-
-    def __init__(self, naming: str, context: str) -> None:
-        self.server = Server(["t", "--naming", naming, "-MNC", context], context=zmq.Context())
-        self.thread = threading.Thread(target=self.server.run, daemon=True)
-        self.thread.start()
-
-    def stop(self) -> None:
-        self.server.shutdown()
-        self.thread.join(10)
-
-
 @pytest.fixture
 def servers(naming: str) -> Iterator[Callable[[str], Server]]:
-    started: list[Running] = []
+    started: list[RunningServer] = []
 
     def make(context: str) -> Server:
-        r = Running(naming, context)
+        r = RunningServer(naming, context)
         started.append(r)
         return r.server
 
     yield make
     for r in reversed(started):
         r.stop()
-
-
-class Recorder(StructuredPushConsumer):
-    def __init__(self, *args: object, delay: float = 0.0) -> None:
-        super().__init__(*args)  # type: ignore[arg-type]
-        self.events: list[StructuredEvent] = []
-        self.delay = delay
-
-    def push_structured_event(self, event: StructuredEvent) -> None:
-        if self.delay:
-            time.sleep(self.delay)
-        self.events.append(event)
 
 
 def event(n: int) -> Miro.ExampleEventIDL:
@@ -340,7 +313,7 @@ def test_a_slow_consumer_with_a_backlog_stops_promptly(
     host = servers("r")
     channel = EventChannelFactory(host).create_channel("Backlog")
     supplier = StructuredPushSupplier(channel)
-    slow_server = Running(naming, "slow")
+    slow_server = RunningServer(naming, "slow")
     slow = Recorder(slow_server.server.resolve_channel("r/Backlog"), delay=0.01)
     slow.set_subscriptions([("*", "*")])
     eventually(lambda: supplier.has_subscribers("ExampleEvent"))

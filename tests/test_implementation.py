@@ -12,15 +12,13 @@ import Miro
 import Miro__POA
 import pytest
 import zmq
-from loopback import NamingProcess, eventually
+from loopback import NamingProcess, Recorder, eventually
 
 from miro_gen import (
     Client,
     EventChannelFactory,
     Implementation,
     Server,
-    StructuredEvent,
-    StructuredPushConsumer,
     StructuredPushSupplier,
 )
 
@@ -40,24 +38,15 @@ def fix(n: int) -> Miro.GpsDataIDL:
     return Miro.GpsDataIDL(latitude=45.0 + n, longitude=-75.0, satellitesUsed=n)
 
 
-class Collector(StructuredPushConsumer):
-    def __init__(self, *args: object) -> None:
-        super().__init__(*args)  # type: ignore[arg-type]
-        self.events: list[StructuredEvent] = []
-
-    def push_structured_event(self, event: StructuredEvent) -> None:
-        self.events.append(event)
-
-
 @pytest.fixture
-def gps() -> Iterator[tuple[GpsImpl, Miro.Gps, Collector]]:
+def gps() -> Iterator[tuple[GpsImpl, Miro.Gps, Recorder]]:
     naming = NamingProcess()
     args = ["t", "--naming", naming.endpoint, "-MNC", "rover"]
     server = Server(list(args), context=zmq.Context())
     channel = EventChannelFactory(server).create_channel()
     impl = GpsImpl(StructuredPushSupplier(channel))
     server.add_to_name_service(impl, "Gps")
-    consumer = Collector(channel)
+    consumer = Recorder(channel)
     consumer.set_subscriptions([("rover", "Gps")])
     thread = threading.Thread(target=server.run, daemon=True)
     thread.start()
@@ -72,7 +61,7 @@ def gps() -> Iterator[tuple[GpsImpl, Miro.Gps, Collector]]:
 
 
 def test_polling_returns_the_initial_then_the_latest_value(
-    gps: tuple[GpsImpl, Miro.Gps, Collector],
+    gps: tuple[GpsImpl, Miro.Gps, Recorder],
 ) -> None:
     impl, stub, _ = gps
     assert stub.getData().satellitesUsed == 0
@@ -83,7 +72,7 @@ def test_polling_returns_the_initial_then_the_latest_value(
 
 
 def test_wait_next_returns_the_next_value_not_the_current_one(
-    gps: tuple[GpsImpl, Miro.Gps, Collector],
+    gps: tuple[GpsImpl, Miro.Gps, Recorder],
 ) -> None:
     impl, stub, _ = gps
     impl.integrate_data(fix(1))
@@ -97,7 +86,7 @@ def test_wait_next_returns_the_next_value_not_the_current_one(
     assert [g.satellitesUsed for g in got] == [7]
 
 
-def test_many_waiters_are_woken_by_one_value(gps: tuple[GpsImpl, Miro.Gps, Collector]) -> None:
+def test_many_waiters_are_woken_by_one_value(gps: tuple[GpsImpl, Miro.Gps, Recorder]) -> None:
     impl, stub, _ = gps
     got: list[int] = []
     waiters = [
@@ -113,7 +102,7 @@ def test_many_waiters_are_woken_by_one_value(gps: tuple[GpsImpl, Miro.Gps, Colle
     assert got == [3, 3, 3, 3]
 
 
-def test_no_new_value_is_etimeout_at_the_client(gps: tuple[GpsImpl, Miro.Gps, Collector]) -> None:
+def test_no_new_value_is_etimeout_at_the_client(gps: tuple[GpsImpl, Miro.Gps, Recorder]) -> None:
     _, stub, _ = gps
     start = time.monotonic()
     with pytest.raises(Miro.ETimeOut) as caught:
@@ -122,7 +111,7 @@ def test_no_new_value_is_etimeout_at_the_client(gps: tuple[GpsImpl, Miro.Gps, Co
     assert "no new Gps value within 1 s" in caught.value.what
 
 
-def test_every_value_is_published_with_its_stamp(gps: tuple[GpsImpl, Miro.Gps, Collector]) -> None:
+def test_every_value_is_published_with_its_stamp(gps: tuple[GpsImpl, Miro.Gps, Recorder]) -> None:
     impl, _, consumer = gps
     eventually(lambda: impl.supplier is not None and impl.supplier.has_subscribers("Gps"))
     for n in range(5):

@@ -5,18 +5,9 @@ from __future__ import annotations
 import time
 
 import Miro
-from loopback import NamingProcess, RunningServer, eventually, run_miro
+from loopback import NamingProcess, Recorder, RunningServer, eventually, run_miro
 
-from miro_gen import StructuredEvent, StructuredPushConsumer, StructuredPushSupplier
-
-
-class Recorder(StructuredPushConsumer):
-    def __init__(self, *args: object) -> None:
-        super().__init__(*args)  # type: ignore[arg-type]
-        self.events: list[StructuredEvent] = []
-
-    def push_structured_event(self, event: StructuredEvent) -> None:
-        self.events.append(event)
+from miro_gen import StructuredPushSupplier
 
 
 def test_a_channel_hosted_by_naming_outlives_its_suppliers() -> None:
