@@ -3,10 +3,8 @@ loop://; split reads, writes, and a device that vanishes and comes back."""
 
 from __future__ import annotations
 
-import os
 import socket
 import threading
-import tty
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -24,42 +22,10 @@ from miro_gen.devices import (
     TtyConnection,
 )
 from miro_gen.devices.connection import DeviceUnavailable
+from miro_gen.sim.pty_device import PtyDevice
 from miro_gen.transport.reactor import Reactor
 
 FAST_RETRY = (0.05, 0.2)
-
-
-class Pty:
-    """A pseudo-terminal whose slave is reached through a link that survives re-creation, as a
-    udev rule gives a USB serial adapter a stable name."""
-
-    def __init__(self, link: Path) -> None:
-        self.link = link
-        self.master = -1
-        self.slave = -1
-        self.appear()
-
-    def appear(self) -> None:
-        self.master, self.slave = os.openpty()
-        tty.setraw(self.slave)  # bytes as they are, before the driver opens it
-        tmp = self.link.with_suffix(".new")
-        tmp.unlink(missing_ok=True)
-        tmp.symlink_to(os.ttyname(self.slave))
-        tmp.replace(self.link)
-
-    def vanish(self) -> None:
-        self.link.unlink(missing_ok=True)
-        os.close(self.slave)
-        os.close(self.master)
-
-    def write(self, data: bytes) -> None:
-        os.write(self.master, data)
-
-    def read(self, n: int) -> bytes:
-        out = b""
-        while len(out) < n:
-            out += os.read(self.master, n - len(out))
-        return out
 
 
 class Messages(DevConsumer):
@@ -99,8 +65,8 @@ def line_device(
 
 
 def test_lines_split_across_writes_arrive_whole(reactor: Reactor, tmp_path: Path) -> None:
-    pty = Pty(tmp_path / "gps0")
-    conn, got = line_device(reactor, TtyConnection, str(pty.link), {"baudrate": 4800})
+    pty = PtyDevice(tmp_path / "gps0")
+    conn, got = line_device(reactor, TtyConnection, pty.path, {"baudrate": 4800})
     try:
         eventually(lambda: conn.connected)
         for piece in (b"$GPGGA,1", b"23*00\r", b"\n$GPRMC", b",4*00\r\n", b"boom\r\nlast\r\n"):
@@ -117,8 +83,8 @@ def test_lines_split_across_writes_arrive_whole(reactor: Reactor, tmp_path: Path
 
 
 def test_a_device_that_vanishes_and_comes_back(reactor: Reactor, tmp_path: Path) -> None:
-    pty = Pty(tmp_path / "gps0")
-    conn, got = line_device(reactor, TtyConnection, str(pty.link))
+    pty = PtyDevice(tmp_path / "gps0")
+    conn, got = line_device(reactor, TtyConnection, pty.path)
     try:
         eventually(lambda: conn.connected)
         pty.write(b"before\r\npartial-")
@@ -144,7 +110,7 @@ def test_a_device_missing_at_start_is_waited_for(reactor: Reactor, tmp_path: Pat
     conn, got = line_device(reactor, TtyConnection, str(link))
     threading.Event().wait(0.3)
     assert not conn.connected
-    pty = Pty(link)
+    pty = PtyDevice(link)
     try:
         eventually(lambda: conn.connected)
         pty.write(b"hello\n")

@@ -23,6 +23,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub.add_parser(
         "demo", help="run the manual's examples A to D with a naming service", add_help=False
     )
+    sub.add_parser("sim", help="simulate a device (sim nmea: a GPS receiver)", add_help=False)
     return p
 
 
@@ -37,6 +38,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         run = naming.naming_main if args[0] == "naming" else naming.nslist_main
         return run(args[1:])
+    if args and args[0] == "sim":
+        from miro_gen.cli import sim
+
+        return sim.sim_main(args[1:])
     if args and args[0] == "demo":
         from miro_gen.cli import demo
 

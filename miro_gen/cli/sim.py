@@ -1,0 +1,98 @@
+"""`miro sim nmea`: a GPS receiver on a pseudo-terminal, to run the GPS driver without hardware."""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import threading
+import time
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+
+from miro_gen.sim.nmea import recorded_epochs, sentences, synthetic_fixes
+from miro_gen.sim.pty_device import PtyDevice
+
+
+def _synthetic(args: argparse.Namespace) -> Iterator[tuple[float, list[bytes]]]:
+    fixes = synthetic_fixes(
+        time.time() // 1, rate=args.rate, speed=args.speed, noise=args.noise, seed=args.seed
+    )
+    for fix in fixes:
+        yield 1.0 / args.rate, sentences(fix)
+
+
+def _recorded(args: argparse.Namespace) -> Iterator[tuple[float, list[bytes]]]:
+    while True:
+        previous: float | None = None
+        for when, lines in recorded_epochs(args.file):
+            gap = 1.0 / args.rate
+            if when is not None and previous is not None:
+                gap = (when - previous) % 86400 or gap  # across midnight too
+            previous = when if when is not None else previous
+            yield gap, lines
+        if not args.loop:
+            return
+
+
+def sim_main(argv: Sequence[str]) -> int:
+    p = argparse.ArgumentParser(
+        prog="miro sim nmea",
+        description="Play a GPS receiver: NMEA 0183 (GGA, GSA, RMC, VTG) on a pseudo-terminal, "
+        "at real-time rate, from a synthetic vehicle driving laps or from a recorded file. "
+        "Prints the device to give the GPS driver.",
+    )
+    p.add_argument("kind", choices=["nmea"], help="what to simulate")
+    p.add_argument("--file", type=Path, help="replay this NMEA file instead of the vehicle")
+    p.add_argument("--loop", action="store_true", help="replay the file again and again")
+    p.add_argument("--rate", type=float, default=1.0, help="fixes per second (default 1)")
+    p.add_argument("--speedup", type=float, default=1.0, help="play faster than real time")
+    p.add_argument("--speed", type=float, default=5.0, help="vehicle speed, m/s (default 5)")
+    p.add_argument("--noise", type=float, default=1.5, help="position noise, m (default 1.5)")
+    p.add_argument("--seed", type=int, help="random seed, for a repeatable drive")
+    p.add_argument("--link", type=Path, help="also reach the device at this path (a symlink)")
+    p.add_argument("--duration", type=float, default=0, help="stop after S seconds")
+    p.add_argument("--output", type=Path, help="write N seconds of NMEA to a file and exit")
+    args = p.parse_args(argv)
+    if args.rate <= 0 or args.speedup <= 0 or args.duration < 0:
+        p.error("--rate and --speedup must be more than 0, --duration at least 0")
+    if args.file is not None and not args.file.is_file():
+        p.error(f"{args.file}: no such file")
+    epochs = _recorded(args) if args.file else _synthetic(args)
+
+    if args.output is not None:
+        if not args.duration:
+            p.error("--output needs --duration (seconds of NMEA to write)")
+        written = 0.0
+        with args.output.open("wb") as out:
+            for gap, lines in epochs:
+                if written >= args.duration:
+                    break
+                out.write(b"".join(lines))
+                written += gap
+        return 0
+
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    try:
+        device = PtyDevice(args.link)
+    except OSError as e:
+        print(f"miro sim: cannot create the device: {e}", file=sys.stderr)
+        return 1
+    print(f"NMEA on {device.path} (Ctrl-C to stop)", flush=True)
+    sent = 0
+    start = due = time.monotonic()
+    end = start + args.duration if args.duration else float("inf")
+    try:
+        for gap, lines in epochs:
+            if stop.wait(max(0.0, due - time.monotonic())) or due >= end:
+                break
+            device.write(b"".join(lines))
+            sent += 1
+            due += gap / args.speedup
+    finally:
+        device.close()
+    lost = f", {device.dropped} bytes nobody read" if device.dropped else ""
+    print(f"sent {sent} epochs{lost}", flush=True)
+    return 0

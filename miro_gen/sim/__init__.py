@@ -1,0 +1,1 @@
+"""Simulated devices, so that drivers can be run and tested without hardware (`miro sim`)."""

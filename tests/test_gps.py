@@ -1,0 +1,152 @@
+"""The GPS driver as a process, against a pseudo-terminal fed NMEA with corrupt lines, split
+writes and a receiver that vanishes and comes back: every valid reading arrives as an event and
+through polling, and the driver's counts of bad sentences are right."""
+
+from __future__ import annotations
+
+import itertools
+import math
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import Miro
+import pytest
+from loopback import NamingProcess, Recorder, RunningServer, eventually, service_env
+
+from miro_gen import Client
+from miro_gen.sim.nmea import Fix, checksummed, sentences, synthetic_fixes
+from miro_gen.sim.pty_device import PtyDevice
+
+GPS = Path(__file__).resolve().parents[1] / "services" / "gps"
+
+
+class Driver:
+    """services/gps in a process of its own; its log in a file."""
+
+    def __init__(self, naming: str, device: Path, log: Path) -> None:
+        self.log = log
+        self.stderr = log.open("w")
+        self.proc = subprocess.Popen(
+            [sys.executable, str(GPS), "--device", str(device), "--naming", naming,
+             "-MNC", "rover", "--timeout", "2", "-MLL", "5"],
+            stdout=subprocess.PIPE,
+            stderr=self.stderr,
+            text=True,
+            env=service_env(),
+        )  # fmt: skip
+        assert self.proc.stdout is not None
+        assert self.proc.stdout.readline().startswith("gps: reading")
+
+    def logged(self, text: str) -> int:
+        return self.log.read_text().count(text)
+
+    def stop(self) -> str:
+        self.proc.send_signal(signal.SIGINT)
+        out, _ = self.proc.communicate(timeout=20)
+        self.stderr.close()
+        return out
+
+
+@pytest.fixture
+def rig(tmp_path: Path) -> Iterator[tuple[PtyDevice, Driver, Recorder, Miro.Gps]]:
+    naming = NamingProcess()
+    device = PtyDevice(tmp_path / "gps0")
+    driver = Driver(naming.endpoint, device.link or Path(), tmp_path / "gps.log")
+    gui = RunningServer(naming.endpoint, "gui")
+    client = Client(["t", "--naming", naming.endpoint])
+    try:
+        events = Recorder(gui.server.resolve_channel("rover/EventChannel"))
+        events.set_subscriptions([("rover", "Gps")])
+        yield device, driver, events, client.resolve_name("rover/Gps", Miro.Gps)
+    finally:
+        client.close()
+        gui.stop()
+        if driver.proc.poll() is None:
+            driver.proc.kill()
+        device.close()
+        naming.stop()
+
+
+def test_the_driver_against_a_pseudo_terminal(
+    rig: tuple[PtyDevice, Driver, Recorder, Miro.Gps],
+) -> None:
+    device, driver, events, gps = rig
+    fixes: Iterator[Fix] = synthetic_fixes(1.7e9, rate=10, seed=7)
+    epochs = 0
+
+    def send(fix: Fix, pieces: int = 1) -> None:
+        nonlocal epochs
+        data = b"".join(sentences(fix))
+        step = math.ceil(len(data) / pieces)
+        for at in range(0, len(data), step):
+            device.write(data[at : at + step])
+            time.sleep(0.002)
+        epochs += 1
+
+    eventually(lambda: driver.logged("receiver connected") == 1)
+    while not events.events:  # the subscription travels to the driver meanwhile
+        send(next(fixes))
+        time.sleep(0.1)
+    eventually(lambda: len(events.events) == 2 * epochs)  # GGA and RMC each make a reading
+    settled = len(events.events)
+
+    # Ten epochs written in pieces, with bad sentences and noise among them.
+    bad = [
+        checksummed("GPGGA,123519,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,")[:-5]
+        + b"*00\r\n",
+        b"$GPRMC,123520,A,4807.040,S,01131.002,W,022.4,084.4,230394,003.1,W*11\r\n",
+        checksummed("GPGGA,12x519,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,"),
+        checksummed("GPGSV,3,1,11,03,03,111,00,04,15,270,00"),
+        b"line noise\r\n",
+    ]
+    sent: list[Fix] = []
+    for n in range(10):
+        sent.append(next(fixes))
+        send(sent[-1], pieces=1 + n % 4)
+        if n < len(bad):
+            device.write(bad[n])
+    eventually(lambda: len(events.events) == settled + 20)
+    assert events.missed == 0
+    last = events.events[-1].payload
+    assert isinstance(last, Miro.GpsDataIDL)
+    assert math.isclose(last.latitude, sent[-1].latitude, abs_tol=2e-6)
+    assert math.isclose(last.longitude, sent[-1].longitude, abs_tol=2e-6)
+
+    # Polling: the latest reading, then the next one.
+    assert math.isclose(gps.getData().latitude, sent[-1].latitude, abs_tol=2e-6)
+    waited: list[Miro.GpsDataIDL] = []
+    caller = threading.Thread(target=lambda: waited.append(gps.getWaitData()))
+    caller.start()
+    later: list[Fix] = []
+    while caller.is_alive() and len(later) < 50:
+        time.sleep(0.1)
+        later.append(next(fixes))
+        send(later[-1])
+    caller.join(5)
+    assert waited and any(math.isclose(waited[0].latitude, f.latitude, abs_tol=2e-6) for f in later)
+    eventually(lambda: len(events.events) == 2 * epochs)
+
+    # The receiver goes away and comes back.
+    device.vanish()
+    eventually(lambda: driver.logged("receiver lost") == 1)
+    with pytest.raises(Miro.ETimeOut):
+        gps.getWaitData()
+    device.appear()
+    eventually(lambda: driver.logged("receiver connected") == 2)
+    before = len(events.events)
+    for fix in itertools.islice(fixes, 3):
+        send(fix, pieces=3)
+    eventually(lambda: len(events.events) == before + 6)
+    assert events.missed == 0
+
+    summary = driver.stop()
+    assert (
+        f"gps: {4 * epochs} sentences used, 1 ignored, 2 with a bad checksum, 1 malformed, "
+        in summary
+    ), summary
+    assert f"{2 * epochs} readings" in summary
