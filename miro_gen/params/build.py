@@ -124,7 +124,9 @@ class ModuleBuilder:
                 cls.constants.append(f)
             else:
                 cls.fields.append(f)
-        if item.constructor is not None:
+        if item.constructor is not None and item.dummy:
+            self.diag.error(item.constructor.pos, "a dummy item has no constructor")
+        elif item.constructor is not None:
             from miro_gen.params.constructor import compile_constructor
 
             cls.construct = compile_constructor(item, self, self.diag)
@@ -211,11 +213,11 @@ class ModuleBuilder:
         state: dict[str, int] = {}
 
         def uses(c: PyClass) -> list[str]:
-            names = [c.base] if c.base in by_name else []
+            names = [c.base] if c.base in by_name else []  # (extern items have no class)
             for f in c.fields + c.constants:
                 t: PyType | None = f.type
                 while t is not None:
-                    if t.item is not None and t.item.file is self.f:
+                    if t.item is not None and t.item.class_name in by_name:
                         names.append(t.item.class_name)
                     t = t.element
             return names

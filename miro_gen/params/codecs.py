@@ -7,6 +7,7 @@ mistakes at once; a failed read returns `FAIL` and the caller keeps its current 
 
 from __future__ import annotations
 
+import copy
 import datetime
 import math
 import re
@@ -109,7 +110,7 @@ class Scalar(Codec):
         self.compact = compact
 
     def default(self) -> Any:
-        return self._default
+        return copy.deepcopy(self._default)
 
     def read(self, elem: etree._Element, current: Any, where: str, probs: Problems) -> Any:
         text = elem.get("value")

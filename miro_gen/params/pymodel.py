@@ -80,6 +80,7 @@ class PyParamsModule:
     imports: dict[str, str] = field(default_factory=dict)  # module -> alias
     sections: dict[str, list[str]] = field(default_factory=dict)
     uses_datetime: bool = False
+    uses_math: bool = False
     doc: str = ""
 
     @property

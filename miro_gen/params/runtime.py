@@ -346,6 +346,19 @@ def resize(items: list[T], n: int, make: Callable[[], T]) -> None:
     items.extend(make() for _ in range(n - len(items)))
 
 
+def cxx_div(a: int, b: int) -> int:
+    """C++ integer division (truncates towards zero), for constructor blocks."""
+    if b == 0:
+        raise ZeroDivisionError("integer division by zero in a <constructor> block")
+    q = abs(a) // abs(b)
+    return q if (a >= 0) == (b >= 0) else -q
+
+
+def cxx_mod(a: int, b: int) -> int:
+    """C++ `%` (the sign of the dividend), for constructor blocks."""
+    return a - cxx_div(a, b) * b
+
+
 class SerialParams(Config):
     """`ACE_TTY_IO::Serial_Params`: a serial line's settings (`pyserial()` for `serial.Serial`)."""
 
@@ -413,4 +426,4 @@ class SchedParams(Config):
         os.sched_setscheduler(pid, policy, os.sched_param(self.priority))
 
 
-__all__ += ["FAIL", "Scalar", "show_lines"]
+__all__ += ["FAIL", "Scalar", "cxx_div", "cxx_mod", "show_lines"]
