@@ -27,6 +27,7 @@ EPILOG = """\
 examples:
   miro-params -I params -o generated params/Parameters.xml   generate generated/Test/Parameters.py
   miro-params -I params --check params/*.xml                 fail if generated/ is stale (for CI)
+  miro-params -I params --xsd params/Parameters.xml > p.xsd  a schema of run-time documents
 """
 
 
@@ -65,6 +66,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--check",
         action="store_true",
         help="write nothing; exit 1 listing every generated file that would change",
+    )
+    mode.add_argument(
+        "--xsd",
+        action="store_true",
+        help="print an XML Schema of the run-time documents for these classes (for XML "
+        "editors) and write nothing",
     )
     p.add_argument("--version", action=VersionAction)
     return p
@@ -111,6 +118,8 @@ def compile_files(
 
 
 def _run(args: argparse.Namespace, diag: Diagnostics) -> int:
+    if args.xsd:
+        return _xsd(args, diag)
     from miro_gen.codegen.generate import changed_files, write_files
     from miro_gen.params import generate
     from miro_gen.params.pymodel import PyParamsModule
@@ -135,6 +144,16 @@ def _run(args: argparse.Namespace, diag: Diagnostics) -> int:
         print(f"wrote {outdir / rel}")
     if not changed:
         print(f"miro-params: {len(files)} files in {outdir} are up to date")
+    return 0
+
+
+def _xsd(args: argparse.Namespace, diag: Diagnostics) -> int:
+    from miro_gen.params import dynamic
+    from miro_gen.params.xsd import render_xsd
+
+    classes = dynamic.load(args.files, args.include_dirs, diag)
+    diag.print()
+    sys.stdout.write(render_xsd(c.cls for c in classes if c.target))
     return 0
 
 
