@@ -124,3 +124,10 @@ def test_validate_refuses_broken_and_hostile_documents(tmp_path: Path, text: str
     doc = write(tmp_path / "d.xml", text)
     rc, _, err = miro_params("validate", str(doc))
     assert rc == 1 and f"{doc}:1" in err
+
+
+def test_loading_10000_parameters_takes_under_half_a_second() -> None:
+    """bench/bench_params.py --check: the issue's target, on this machine."""
+    out = run_module("bench.bench_params", "--check", timeout=300)
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert out.stdout.count(" ok") == 3, out.stdout
