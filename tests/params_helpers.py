@@ -32,8 +32,8 @@ def write(path: Path, text: str) -> Path:
 
 
 def compile_params(out: Path, *files: Path | str, extra: tuple[str, ...] = ()) -> None:
-    """Run `miro-params -I params -o OUT FILES`; fail the test with its stderr if it fails."""
-    result = run_miro_params("-I", str(PARAMS), *extra, "-o", str(out), *map(str, files))
+    """Run `miro-params -I idl -o OUT FILES`; fail the test with its stderr if it fails."""
+    result = run_miro_params("-I", str(REPO / "idl"), *extra, "-o", str(out), *map(str, files))
     assert result.returncode == 0, result.stderr
 
 

@@ -6,13 +6,13 @@ from pathlib import Path
 
 import pytest
 from lxml import etree
-from miro_cli import run_miro_params, run_module
+from miro_cli import REPO, run_miro_params, run_module
 from params_helpers import ALL_TYPES, PARAMS, write
 from test_params_runtime import ALL_VALUES
 
 
 def schema(*files: Path | str) -> etree.XMLSchema:
-    out = run_miro_params("-I", str(PARAMS), "--xsd", *map(str, files))
+    out = run_miro_params("-I", str(REPO / "idl"), "--xsd", *map(str, files))
     assert out.returncode == 0, out.stderr
     return etree.XMLSchema(etree.fromstring(out.stdout.encode()))
 

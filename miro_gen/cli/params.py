@@ -25,9 +25,9 @@ angle (degrees in XML, radians in memory), ACE_Time_Value ("sec, usec"), ACE_INE
 
 EPILOG = """\
 examples:
-  miro-params -I params -o generated params/Parameters.xml   generate generated/Test/Parameters.py
-  miro-params -I params --check params/*.xml                 fail if generated/ is stale (for CI)
-  miro-params -I params --xsd params/Parameters.xml > p.xsd  a schema of run-time documents
+  miro-params -I idl -o generated params/Parameters.xml  generate generated/Test/Parameters.py
+  miro-params -I idl --check params/*.xml               fail if generated/ is stale (for CI)
+  miro-params --xsd params/Parameters.xml > p.xsd       a schema of run-time documents
 """
 
 

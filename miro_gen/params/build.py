@@ -92,6 +92,7 @@ class ModuleBuilder:
         )
         if item.dummy:
             cls.dummy_target = self.mapper.class_ref(item)
+            self._check_idl_type(item)
         cls.doc = item.doc or (
             f"The parameters of {item.file.namespace + '::' if item.file.namespace else ''}"
             f"{item.class_name}" + (f" (section {item.group!r})." if item.group else ".")
@@ -131,6 +132,39 @@ class ModuleBuilder:
 
             cls.construct = compile_constructor(item, self, self.diag)
         return cls
+
+    def _check_idl_type(self, item: ItemDecl) -> None:
+        """A dummy item names an IDL struct: it must be a dataclass of the generated IDL
+        package (a warning when that package cannot be imported here)."""
+        import dataclasses
+        import importlib
+
+        *scope, name = item.scoped_name.split("::")
+        package = ".".join(scope) or "_GlobalIDL"
+        try:
+            module = importlib.import_module(package)
+        except ImportError:
+            self.diag.warning(
+                item.pos, f"cannot import the IDL package {package} to check {item.scoped_name}"
+            )
+            return
+        target = getattr(module, name, None)
+        if not (isinstance(target, type) and dataclasses.is_dataclass(target)):
+            self.diag.error(
+                item.pos,
+                f"dummy item {item.scoped_name} names no IDL struct of the generated package "
+                f"{package} (compile its IDL file with miro-idl)",
+            )
+            return
+        members = {f.name for f in dataclasses.fields(target)}
+        for p in item.params:
+            if p.attr not in members:
+                self.diag.error(
+                    p.pos,
+                    f"{item.scoped_name} has no member {p.attr!r} (it has: "
+                    + ", ".join(sorted(members))
+                    + ")",
+                )
 
     def _inherited_type(self, parent: ItemDecl | None, attr: str) -> PyType | None:
         while parent is not None:

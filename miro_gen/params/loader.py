@@ -174,6 +174,12 @@ class Loader:
                     if candidate.is_file():
                         inc.idl_file = candidate
                         return
+            self.diag.warning(
+                inc.pos,
+                f"include {inc.value!r}: {idl} is not in the including file's folder or an -I "
+                "folder; its types come from the generated IDL package",
+            )
+            return
         xml = stem + ".xml"
         sub = header.rsplit("/", 1)[0] + "/" + xml if "/" in header else xml
         for folder in folders:
