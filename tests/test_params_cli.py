@@ -56,7 +56,7 @@ def test_output_is_deterministic(tmp_path: Path) -> None:
             "-m",
             "miro_gen.cli.params",
             "-I",
-            "params",
+            "idl",
             "-o",
             str(tmp_path / "b"),
             *files,

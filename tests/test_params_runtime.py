@@ -140,6 +140,10 @@ ALL_VALUES = """\
     <parameter><parameter name="X" value="1"/><parameter name="Y" value="2"/></parameter>
     <parameter><parameter name="x" value="3"/></parameter>
   </parameter>
+  <parameter name="Grid">
+    <parameter><parameter><parameter name="Y" value="1"/></parameter></parameter>
+    <parameter/>
+  </parameter>
   <parameter name="Tty">
     <parameter name="Device" value="/dev/ttyUSB0"/>
     <parameter name="TtyParams"><parameter name="Baudrate" value="57600"/></parameter>
@@ -196,6 +200,7 @@ def test_reading_every_type(types_module: ModuleType) -> None:
     assert a.matrix == [[1.0, 2.0], [3.0, 4.0]]  # rows compact or element by element
     assert (a.origin.x, a.origin.y) == (1.5, 7.0)  # a nested structure keeps unnamed defaults
     assert [(p.x, p.y) for p in a.path] == [(1.0, 2.0), (3.0, 0.0)]
+    assert [[(p.x, p.y) for p in row] for row in a.grid] == [[(1.5, 1.0)], []]  # any depth
     assert a.tty.device == "/dev/ttyUSB0" and a.tty.ttyParams.baudrate == 57600
     assert a.scan.scanType == 2
     group = a.scan.group[0]
@@ -228,6 +233,7 @@ def test_reading_every_type(types_module: ModuleType) -> None:
         ('<parameter name="Origin" value="1 2"/>', "is a structure"),
         ('<parameter name="Int"><parameter value="1"/></parameter>', "takes value=..."),
         ('<parameter name="Int"/>', "missing value=..."),
+        ('<parameter name="Int" value="1">2</parameter>', "text inside <parameter> is not read"),
         ('<parameter name="Intt" value="1"/>', "unknown parameter 'Intt'"),
         ('<parameter name="Version" value="4"/>', "Version is a constant"),
         ('<parameter value="4"/>', "needs a name="),
@@ -356,6 +362,7 @@ def all_values(draw: st.DrawFn, module: ModuleType) -> object:
         matrix=draw(st.lists(st.lists(_finite, min_size=1, max_size=3), max_size=3)),
         origin=draw(point),
         path=draw(st.lists(point, max_size=3)),
+        grid=draw(st.lists(st.lists(point, max_size=2), max_size=2)),
     )
 
 

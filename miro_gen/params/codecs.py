@@ -75,8 +75,16 @@ def new_parameter(parent: etree._Element, name: str | None) -> etree._Element:
     return elem
 
 
+def _stray_text(elem: etree._Element, where: str, probs: Problems) -> None:
+    """Text inside a `<parameter>` is not a value (Miro reads `value=` only): say so."""
+    texts = [elem.text] + [c.tail for c in elem]
+    if any(t is not None and t.strip() for t in texts):
+        probs.error(elem, f"{where}: text inside <parameter> is not read; give it as value=...")
+
+
 def children(elem: etree._Element, where: str, probs: Problems) -> list[etree._Element]:
     """The `<parameter>` children of an element; anything else is reported."""
+    _stray_text(elem, where, probs)
     out = []
     for child in elem:
         if not isinstance(child.tag, str):
@@ -117,6 +125,7 @@ class Scalar(Codec):
         if len(elem):
             probs.error(elem, f"{where}: a {self.label} takes value=..., not nested parameters")
             return FAIL
+        _stray_text(elem, where, probs)
         if text is None:
             probs.error(elem, f"{where}: missing value=... (a {self.label})")
             return FAIL
