@@ -297,6 +297,19 @@ def test_pydantic_checks_keyword_arguments_and_assignments(types_module: ModuleT
     assert types_module.AllParameters.model_fields["double"].description == "[m]"
 
 
+def test_sched_params_apply_to_this_process() -> None:
+    import os
+
+    from miro_gen.params.runtime import SchedParams
+
+    before = os.sched_getscheduler(0), os.sched_getparam(0)
+    try:
+        SchedParams(policy="SCHED_OTHER", priority=0).apply()  # needs no privileges
+        assert os.sched_getscheduler(0) == os.SCHED_OTHER
+    finally:
+        os.sched_setscheduler(0, *before)
+
+
 # -- round trips ----------------------------------------------------------------------------
 
 

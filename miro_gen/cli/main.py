@@ -13,7 +13,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="miro",
         description="miro-gen: Miro (Middleware for Robots) in Python.",
-        epilog="The IDL compiler is `miro-idl` (also `miro idl`); see `miro-idl --help`.",
+        epilog="The IDL compiler is `miro-idl` (also `miro idl`), the parameter compiler "
+        "`miro-params` (also `miro params`); see their --help.",
     )
     p.add_argument("--version", action=VersionAction)
     sub = p.add_subparsers(dest="command", metavar="COMMAND")

@@ -6,7 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from miro_gen.diagnostics import Diagnostics
-from miro_gen.params.model import ItemDecl, ParamsFile
+from miro_gen.params.model import ItemDecl, ParamDecl, ParamsFile
 from miro_gen.params.pymodel import (
     CONFIG_BASES,
     PyClass,
@@ -19,6 +19,7 @@ from miro_gen.params.pymodel import (
     literal,
     module_for,
     package_for,
+    value_literal,
 )
 
 
@@ -204,10 +205,8 @@ class ModuleBuilder:
                 return self.field_type(parent, attr)
         return None
 
-    def _field(self, p: object, t: PyType) -> PyField | None:
-        from miro_gen.params.model import ParamDecl
-
-        assert isinstance(p, ParamDecl)
+    def _field(self, p: ParamDecl, t: PyType) -> PyField | None:
+        """A field (or class constant) with its default checked and rendered."""
         default: str | None = None
         factory: str | None = None
         if p.default is not None:
@@ -219,8 +218,6 @@ class ModuleBuilder:
         elif t.factory is not None:
             factory = t.factory
         elif t.runtime is not None:
-            from miro_gen.params.pymodel import value_literal
-
             default = value_literal(t.runtime, t.runtime.default())
         else:  # pragma: no cover - every type has one or the other
             self.diag.error(p.pos, f"no default for {t.spelling}")
