@@ -298,3 +298,26 @@ def test_dummy_items_are_checked_against_the_idl_package(tmp_path: Path) -> None
     assert out.returncode == 1
     assert "D.xml:6: error: Miro::SensorPositionIDL has no member 'omega'" in out.stderr
     assert "D.xml:8: error: dummy item Miro::NoSuchIDL names no IDL struct" in out.stderr
+
+
+def test_packages_follow_the_namespace_or_the_folder(tmp_path: Path) -> None:
+    nested = write(
+        tmp_path / "robots" / "Nested.xml",
+        """\
+        <config>
+          <config_global name="namespace" value="Outer::Inner" />
+          <config_item name="A" parent="Miro::Config"><config_parameter name="X" type="int"/>
+          </config_item>
+        </config>
+        """,
+    )
+    plain = write(
+        tmp_path / "robots" / "Plain.xml",
+        '<config><config_item name="B"><config_parameter name="Y" type="int"/></config_item>'
+        "</config>",
+    )
+    compile_params(tmp_path / "out", nested, plain)
+    assert (tmp_path / "out" / "Outer" / "Inner" / "Nested.py").is_file()
+    assert (tmp_path / "out" / "Outer" / "__init__.py").is_file()
+    assert (tmp_path / "out" / "Outer" / "Inner" / "__init__.py").is_file()
+    assert (tmp_path / "out" / "robots" / "Plain.py").is_file()  # no namespace: the folder

@@ -13,8 +13,8 @@ from miro_gen.params.pymodel import (
     PyField,
     PyParamsModule,
     PyType,
-    TypeError_,
     TypeMapper,
+    UnsupportedType,
     attr_name,
     literal,
     module_for,
@@ -114,7 +114,7 @@ class ModuleBuilder:
             else:
                 try:
                     t = self.mapper.map(p.type, p)
-                except TypeError_ as e:
+                except UnsupportedType as e:
                     self.diag.error(p.pos, f"parameter {p.name}: {e}")
                     continue
             self._field_types[(id(item), p.attr)] = t
@@ -175,7 +175,7 @@ class ModuleBuilder:
                         return TypeMapper(
                             parent.file, self.mapper.items, self.module, self.mapper.modules
                         ).map(p.type, p)
-                    except TypeError_:
+                    except UnsupportedType:
                         return None
             if not parent.parent or parent.parent in CONFIG_BASES:
                 return None
@@ -195,7 +195,7 @@ class ModuleBuilder:
                     return TypeMapper(
                         item.file, self.mapper.items, self.module, self.mapper.modules
                     ).map(p.type, p)
-                except TypeError_:
+                except UnsupportedType:
                     return None
         if item.parent and item.parent not in CONFIG_BASES:
             parent = TypeMapper(

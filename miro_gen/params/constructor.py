@@ -21,7 +21,7 @@ import lark
 
 from miro_gen.diagnostics import Diagnostics, SourcePos
 from miro_gen.params.model import ItemDecl
-from miro_gen.params.pymodel import CONFIG_BASES, PyType, TypeError_, TypeMapper, attr_name
+from miro_gen.params.pymodel import CONFIG_BASES, PyType, TypeMapper, attr_name
 
 if TYPE_CHECKING:
     from miro_gen.params.build import ModuleBuilder
@@ -670,6 +670,3 @@ def _src(node: lark.Tree[Any]) -> str:
     for seg in node.children[1:]:
         out += f".{seg.children[0]}" if seg.data == "member" else "[...]"
     return out
-
-
-__all__ = ["TypeError_", "compile_constructor"]
