@@ -321,3 +321,18 @@ def test_packages_follow_the_namespace_or_the_folder(tmp_path: Path) -> None:
     assert (tmp_path / "out" / "Outer" / "__init__.py").is_file()
     assert (tmp_path / "out" / "Outer" / "Inner" / "__init__.py").is_file()
     assert (tmp_path / "out" / "robots" / "Plain.py").is_file()  # no namespace: the folder
+
+
+def test_include_cycles_and_misplaced_values(tmp_path: Path) -> None:
+    write(tmp_path / "A.xml", '<config><config_global name="include" value="B.h"/></config>')
+    write(tmp_path / "B.xml", '<config><config_global name="include" value="A.h"/></config>')
+    out = run_miro_params("-o", str(tmp_path / "out"), str(tmp_path / "A.xml"))
+    assert out.returncode == 1 and "B.xml:1: error: " in out.stderr
+    assert "include cycle" in out.stderr
+    src = write(
+        tmp_path / "V.xml",
+        '<config><config_item name="V">\n<config_parameter name="N" type="int" values="a, b"/>'
+        "\n</config_item></config>",
+    )
+    out = run_miro_params("-o", str(tmp_path / "out"), str(src))
+    assert out.returncode == 0 and "V.xml:2: warning: values= is read for Enumeration" in out.stderr

@@ -117,6 +117,8 @@ class ModuleBuilder:
                 except UnsupportedType as e:
                     self.diag.error(p.pos, f"parameter {p.name}: {e}")
                     continue
+            if p.values is not None and not t.choices and not (t.element and t.element.choices):
+                self.diag.warning(p.pos, f"values= is read for Enumeration types only ({p.name})")
             self._field_types[(id(item), p.attr)] = t
             f = self._field(p, t)
             if f is None:

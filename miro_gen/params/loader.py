@@ -84,7 +84,7 @@ class Loader:
         if key in self.files:
             return self.files[key]
         if key in self._loading:
-            self.diag.error(pos, f"'{path}' includes itself")
+            self.diag.error(pos, f"'{path}' is included again while it is read (an include cycle)")
             return None
         self._loading.add(key)
         try:
