@@ -43,7 +43,7 @@ def test_constructor_builds_the_defaults(ctor: ModuleType) -> None:
     assert s.weights == [0.5, 0.25, 0.25]  # local table, a descending loop, *=
     assert s.modes == ["off"]
     assert s.period.total_seconds() == 0.1
-    assert s.label == "ring-16"
+    assert s.label == "ring-16-big"  # if / else
     assert s.line.baudrate == 38400
     assert s.sensors == 2  # C++ arithmetic: 7 / 2 + (-7) % 3
     assert ctor.SonarParameters.instance() is ctor.SonarParameters.instance()
@@ -110,6 +110,7 @@ def _ctor_file(tmp_path: Path, body: str, params: str = "") -> Path:
         ('int k = 1; k = "x";', 11, "cannot store a str in k"),
         ("static const int t[2] = {1, 2, 3};", 11, "t[2] is given 3 values"),
         ("delete this;", 11, "unexpected"),
+        ("if (v) n = 1;", 11, "structures and vectors cannot be used as values"),
     ],
 )
 def test_constructor_errors_name_line_and_construct(

@@ -187,6 +187,8 @@ class Translator:
             return [pad + self.incdec(node)]
         if kind == "for_stmt":
             return self.for_stmt(node, depth)
+        if kind == "if_stmt":
+            return self.if_stmt(node, depth)
         raise ConstructorError(node.meta, f"{kind} statements are not supported")
 
     def _local_name(self, name: str, meta: Any) -> str:
@@ -321,6 +323,17 @@ class Translator:
         return [f"{pad}for {local} in range({start.code}, {end}{step_arg}):"] + (
             inner or [pad + "    pass"]
         )
+
+    def if_stmt(self, node: lark.Tree[Any], depth: int) -> list[str]:
+        cond_node, then, *rest = [c for c in node.children if c is not None]
+        cond = self.expr(cond_node)
+        if cond.kind not in ("bool", "int", "float"):
+            raise ConstructorError(node.meta, f"an if needs a condition (got a {cond.kind})")
+        pad = "    " * depth
+        out = [f"{pad}if {cond.code}:"] + (self.statements([then], depth + 1) or [pad + "    pass"])
+        if rest:
+            out += [f"{pad}else:"] + (self.statements(rest, depth + 1) or [pad + "    pass"])
+        return out
 
     def step(self, node: lark.Tree[Any], name: str) -> str:
         tokens = [c for c in node.children if isinstance(c, lark.Token)]
