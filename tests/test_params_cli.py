@@ -271,7 +271,6 @@ def test_includes_resolve_through_include_dirs(tmp_path: Path) -> None:
     )
     out = run_miro_params("-I", str(tmp_path / "inc"), "-o", str(tmp_path / "out"), str(src))
     assert out.returncode == 0, out.stderr
-    assert "Derived.xml:4: warning: include 'idl/NoSuchC.h': NoSuch.idl is not" in out.stderr
     code = (tmp_path / "out" / "PInc" / "Derived.py").read_text()
     assert "import PInc.Base as _m_PInc_Base" in code
     assert "class DerivedParameters(_m_PInc_Base.BaseParameters):" in code

@@ -66,7 +66,10 @@ def test_generated_constructor_code_is_plain_python(tmp_path: Path) -> None:
     compile_params(tmp_path, CTOR)
     code = (tmp_path / "PCtor" / "Constructor.py").read_text()
     assert "for _l_i in range(0, self.sensors):" in code
-    assert "_rt.resize(self.scanDescription.group, 1, _m_Miro.SensorGroupIDL)" in code
+    assert (
+        "_rt.resize(self.scanDescription.group, 1, _m_Miro_ScanDescription_idl.SensorGroupIDL)"
+        in code
+    )
     assert "exec(" not in code and "eval(" not in code
 
 

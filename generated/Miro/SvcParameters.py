@@ -9,7 +9,7 @@ import typing as _t
 
 import pydantic as _pd
 
-import Miro as _m_Miro
+import Miro.ScanDescription_idl as _m_Miro_ScanDescription_idl
 import miro_gen.params.runtime as _rt
 
 __all__ = [
@@ -167,7 +167,7 @@ class DifferentialMotionParameters(MotionParameters):
 
 # SensorDescriptionIDL is defined elsewhere (IDL): only its run-time XML layout is generated here.
 SensorDescriptionIDL_xml: _rt.Layout = _rt.Layout(
-    _m_Miro.SensorDescriptionIDL,
+    _m_Miro_ScanDescription_idl.SensorDescriptionIDL,
     (
         _rt.XmlField("MinRange", "minRange", _rt.LONG, "mm"),
         _rt.XmlField("MaxRange", "maxRange", _rt.LONG, "mm"),
@@ -178,7 +178,7 @@ SensorDescriptionIDL_xml: _rt.Layout = _rt.Layout(
 
 # SensorPositionIDL is defined elsewhere (IDL): only its run-time XML layout is generated here.
 SensorPositionIDL_xml: _rt.Layout = _rt.Layout(
-    _m_Miro.SensorPositionIDL,
+    _m_Miro_ScanDescription_idl.SensorPositionIDL,
     (
         _rt.XmlField("Height", "height", _rt.LONG, "mm"),
         _rt.XmlField("Distance", "distance", _rt.LONG, "mm"),
@@ -192,7 +192,7 @@ SensorPositionIDL_xml: _rt.Layout = _rt.Layout(
 
 # SensorGroupIDL is defined elsewhere (IDL): only its run-time XML layout is generated here.
 SensorGroupIDL_xml: _rt.Layout = _rt.Layout(
-    _m_Miro.SensorGroupIDL,
+    _m_Miro_ScanDescription_idl.SensorGroupIDL,
     (
         _rt.XmlField("Description", "description", _rt.Struct(SensorDescriptionIDL_xml)),
         _rt.XmlField("Sensor", "sensor", _rt.Vector(_rt.Struct(SensorPositionIDL_xml))),
@@ -202,7 +202,7 @@ SensorGroupIDL_xml: _rt.Layout = _rt.Layout(
 
 # ScanDescriptionIDL is defined elsewhere (IDL): only its run-time XML layout is generated here.
 ScanDescriptionIDL_xml: _rt.Layout = _rt.Layout(
-    _m_Miro.ScanDescriptionIDL,
+    _m_Miro_ScanDescription_idl.ScanDescriptionIDL,
     (
         _rt.XmlField("ScanType", "scanType", _rt.LONG),
         _rt.XmlField("EventName", "eventName", _rt.STRING),
@@ -214,8 +214,8 @@ ScanDescriptionIDL_xml: _rt.Layout = _rt.Layout(
 class RangeSensorParameters(_rt.Config):
     """A range sensor (sonar ring, laser scanner): its layout."""
 
-    scanDescription: _m_Miro.ScanDescriptionIDL = _pd.Field(
-        default_factory=_m_Miro.ScanDescriptionIDL,
+    scanDescription: _m_Miro_ScanDescription_idl.ScanDescriptionIDL = _pd.Field(
+        default_factory=_m_Miro_ScanDescription_idl.ScanDescriptionIDL,
     )
 
     _xml_fields: _t.ClassVar[tuple[_rt.XmlField, ...]] = (

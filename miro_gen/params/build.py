@@ -16,6 +16,7 @@ from miro_gen.params.pymodel import (
     TypeMapper,
     UnsupportedType,
     attr_name,
+    idl_module_of,
     literal,
     module_for,
     package_for,
@@ -142,8 +143,8 @@ class ModuleBuilder:
         import dataclasses
         import importlib
 
-        *scope, name = item.scoped_name.split("::")
-        package = ".".join(scope) or "_GlobalIDL"
+        name = item.scoped_name.split("::")[-1]
+        package = idl_module_of(item)
         try:
             module = importlib.import_module(package)
         except ImportError:

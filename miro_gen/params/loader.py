@@ -4,7 +4,8 @@ An include names a C++ header; it stands for the compile-time file or IDL file t
 generated from: `miro/SvcParameters.h` is `SvcParameters.xml`, `idl/ScanDescriptionC.h` (TAO's
 client header) is `ScanDescription.idl`. They are looked for in the including file's folder, then
 in the `-I` folders, then in the project's own `params/`. Other headers (`vector`, `ace/...`) are
-C++ matters and are ignored.
+C++ matters and are ignored. An IDL header needs no IDL file: its types are imported from the
+module miro-idl generated for it (`Miro.ScanDescription_idl`).
 """
 
 from __future__ import annotations
@@ -168,17 +169,14 @@ class Loader:
             return  # <vector>, <set>: C++ only
         folders = [f.path.parent, *self.include_dirs]
         if stem.endswith("C") and ext == "h":  # TAO's client header of an IDL file
+            # its types come from the module miro-idl generated for it (<stem>_idl)
+            inc.idl_stem = stem[:-1]
             idl = stem[:-1] + ".idl"
             for folder in folders:
                 for candidate in (folder / idl, folder / header.rsplit("/", 1)[0] / idl):
                     if candidate.is_file():
                         inc.idl_file = candidate
                         return
-            self.diag.warning(
-                inc.pos,
-                f"include {inc.value!r}: {idl} is not in the including file's folder or an -I "
-                "folder; its types come from the generated IDL package",
-            )
             return
         xml = stem + ".xml"
         sub = header.rsplit("/", 1)[0] + "/" + xml if "/" in header else xml

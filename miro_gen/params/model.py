@@ -74,7 +74,8 @@ class Include:
     pos: SourcePos
     kind: str  # "include", "Include" or "src_Include"
     params_file: Path | None = None  # a compile-time file it stands for
-    idl_file: Path | None = None  # an IDL file it stands for
+    idl_file: Path | None = None  # an IDL file it stands for, when found
+    idl_stem: str | None = None  # `ScanDescription` for `idl/ScanDescriptionC.h`
 
 
 @dataclass

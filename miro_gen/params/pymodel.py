@@ -311,8 +311,7 @@ class TypeMapper:
         """How this module names an item's class (importing its module when needed)."""
         if item.dummy:
             scoped = item.scoped_name.split("::")
-            package = ".".join(scoped[:-1]) or "_GlobalIDL"
-            return f"{self._import(package)}.{scoped[-1]}"
+            return f"{self._import(idl_module_of(item))}.{scoped[-1]}"
         if item.extern:
             package = package_for(item.file)
             return f"{self._import(package)}.{item.class_name}"
@@ -346,6 +345,33 @@ class TypeMapper:
     def lookup_parent(self, name: str) -> ItemDecl | None:
         """`parent="Miro::Dev"` (makeParams appends Parameters) or `"Miro::DevParameters"`."""
         return self._lookup(name + "Parameters") or self._lookup(name)
+
+
+@cache
+def _idl_module_has(module: str, name: str) -> bool:
+    import importlib
+
+    try:
+        return hasattr(importlib.import_module(module), name)
+    except ImportError:
+        return False
+
+
+def idl_module_of(item: ItemDecl) -> str:
+    """The generated module of a dummy item's IDL struct: `Miro.ScanDescription_idl` for an
+    item of namespace Miro whose file includes `idl/ScanDescriptionC.h` (the module of the
+    first included IDL file that declares it), else the IDL package (`Miro`), which re-exports
+    the declarations of all its modules."""
+    from miro_gen.codegen.names import module_stem
+
+    *scope, name = item.scoped_name.split("::")
+    package = ".".join(scope) or "_GlobalIDL"
+    for inc in item.file.includes:
+        if inc.idl_stem is not None:
+            module = f"{package}.{module_stem(inc.idl_stem + '.idl')}"
+            if _idl_module_has(module, name):
+                return module
+    return package
 
 
 def _pyrepr(value: object) -> str:
