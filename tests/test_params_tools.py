@@ -131,3 +131,9 @@ def test_loading_10000_parameters_takes_under_half_a_second() -> None:
     out = run_module("bench.bench_params", "--check", timeout=300)
     assert out.returncode == 0, out.stdout + out.stderr
     assert out.stdout.count(" ok") == 3, out.stdout
+
+
+def test_miro_params_without_a_tool_is_the_compiler() -> None:
+    rc, out, err = miro_params("-I", "idl", "--check", *sorted(map(str, PARAMS.glob("*.xml"))))
+    assert rc == 0, err
+    assert "up to date" in out
