@@ -134,6 +134,5 @@ def test_loading_10000_parameters_takes_under_half_a_second() -> None:
 
 
 def test_miro_params_without_a_tool_is_the_compiler() -> None:
-    rc, out, err = miro_params("-I", "idl", "--check", *sorted(map(str, PARAMS.glob("*.xml"))))
-    assert rc == 0, err
-    assert "up to date" in out
+    rc, _, err = miro_params("-I", "idl", "--check", *sorted(map(str, PARAMS.glob("*.xml"))))
+    assert rc == 0 and err == "", err  # generated/ is fresh: --check says nothing
