@@ -12,7 +12,7 @@ from typing import NamedTuple, TextIO
 
 
 class SourcePos(NamedTuple):
-    """A position in an original source file (1-based line and column).
+    """A position in an original source file (1-based line and column; column 0 when unknown).
 
     A named tuple: parsers create one per declaration, and tuples are cheap to build.
     """
@@ -22,6 +22,9 @@ class SourcePos(NamedTuple):
     col: int
 
     def __str__(self) -> str:
+        # col 0: only the line is known (lxml reports no columns for elements)
+        if self.col <= 0:
+            return f"{self.path}:{self.line}"
         return f"{self.path}:{self.line}:{self.col}"
 
 

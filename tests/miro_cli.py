@@ -10,6 +10,33 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 
 
+def run_module(
+    module: str, *args: str, cwd: Path | None = None, timeout: float = 120
+) -> subprocess.CompletedProcess[str]:
+    """`python -m MODULE ARGS` in `cwd` (default: the repository), from this checkout."""
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(
+        [str(REPO), str(REPO / "generated"), env.get("PYTHONPATH", "")]
+    )
+    env.pop("MIRO_DEBUG", None)
+    return subprocess.run(
+        [sys.executable, "-m", module, *args],
+        cwd=cwd or REPO,
+        env=env,
+        capture_output=True,
+        text=True,
+        errors="replace",
+        timeout=timeout,
+    )
+
+
+def run_miro_params(
+    *args: str, cwd: Path | None = None, timeout: float = 120
+) -> subprocess.CompletedProcess[str]:
+    """`miro-params ARGS` as a user runs it, from this checkout."""
+    return run_module("miro_gen.cli.params", *args, cwd=cwd, timeout=timeout)
+
+
 def run_miro_idl(
     *args: str, cwd: Path | None = None, timeout: float = 120, hash_seed: str | None = None
 ) -> subprocess.CompletedProcess[str]:

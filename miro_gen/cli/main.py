@@ -13,11 +13,18 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="miro",
         description="miro-gen: Miro (Middleware for Robots) in Python.",
-        epilog="The IDL compiler is `miro-idl` (also `miro idl`); see `miro-idl --help`.",
+        epilog="The IDL compiler is `miro-idl` (also `miro idl`), the parameter compiler "
+        "`miro-params` (also `miro params`); see their --help.",
     )
     p.add_argument("--version", action=VersionAction)
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
     sub.add_parser("idl", help="compile IDL files (same as miro-idl)", add_help=False)
+    sub.add_parser(
+        "params",
+        help="compile parameter files (same as miro-params); `miro params show|validate FILE` "
+        "checks run-time documents",
+        add_help=False,
+    )
     sub.add_parser("naming", help="run the naming service", add_help=False)
     sub.add_parser("nslist", help="print the names bound in the naming service", add_help=False)
     sub.add_parser(
@@ -33,6 +40,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         from miro_gen.cli import idl
 
         return idl.main(args[1:])
+    if args and args[0] == "params":
+        if len(args) > 1 and args[1] in ("show", "validate"):
+            from miro_gen.cli import params_tools
+
+            return params_tools.main(args[1:])
+        from miro_gen.cli import params
+
+        return params.main(args[1:])
     if args and args[0] in ("naming", "nslist"):
         from miro_gen.cli import naming
 
