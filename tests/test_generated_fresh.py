@@ -18,8 +18,10 @@ def test_generated_is_fresh() -> None:
 
 def test_generated_params_are_fresh() -> None:
     params = sorted(glob.glob(str(REPO / "params" / "*.xml")))
+    params += sorted(glob.glob(str(REPO / "services" / "*" / "*Parameters.xml")))
     out = run_miro_params("-I", "idl", "--check", *params)
     assert out.returncode == 0, (
-        "generated/ is stale; run `miro-params -I idl params/*.xml` and commit the result:\n"
+        "generated/ is stale; run `miro-params -I idl params/*.xml services/*/*Parameters.xml`"
+        " and commit the result:\n"
         + out.stderr
     )

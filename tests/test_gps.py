@@ -23,6 +23,12 @@ from miro_gen.sim.nmea import Fix, checksummed, sentences, synthetic_fixes
 from miro_gen.sim.pty_device import PtyDevice
 
 GPS = Path(__file__).resolve().parents[1] / "services" / "gps"
+CONFIG = """<config><section name="Gps"><parameter name="Gps">
+  <parameter name="Device" value="{device}"/>
+  <parameter name="TtyParams"><parameter name="Baudrate" value="9600"/></parameter>
+  <parameter name="WaitTimeout" value="2, 0"/>
+</parameter></section></config>
+"""
 
 
 class Driver:
@@ -31,9 +37,11 @@ class Driver:
     def __init__(self, naming: str, device: Path, log: Path) -> None:
         self.log = log
         self.stderr = log.open("w")
+        config = log.with_name("rover.xml")  # the robot's run-time document
+        config.write_text(CONFIG.format(device=device))
         self.proc = subprocess.Popen(
-            [sys.executable, str(GPS), "--device", str(device), "--naming", naming,
-             "-MNC", "rover", "--timeout", "2", "-MLL", "5"],
+            [sys.executable, str(GPS), "-MCF", str(config), "--naming", naming,
+             "-MNC", "rover", "-MLL", "5"],
             stdout=subprocess.PIPE,
             stderr=self.stderr,
             text=True,
@@ -150,3 +158,26 @@ def test_the_driver_against_a_pseudo_terminal(
         in summary
     ), summary
     assert f"{2 * epochs} readings" in summary
+
+
+def test_a_wrong_parameter_document_stops_the_driver_with_its_line(tmp_path: Path) -> None:
+    config = tmp_path / "rover.xml"
+    config.write_text(
+        '<config><section name="Gps"><parameter name="Gps">\n'
+        '  <parameter name="Baud" value="9600"/>\n'
+        "</parameter></section></config>\n"
+    )
+    naming = NamingProcess()
+    try:
+        done = subprocess.run(
+            [sys.executable, str(GPS), "-MCF", str(config), "--naming", naming.endpoint],
+            capture_output=True,
+            text=True,
+            env=service_env(),
+            timeout=30,
+        )
+    finally:
+        naming.stop()
+    assert done.returncode == 1
+    assert f"{config}:2:" in done.stderr and "Baud" in done.stderr, done.stderr
+    assert "Traceback" not in done.stderr

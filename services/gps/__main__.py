@@ -1,8 +1,13 @@
 """The GPS driver: an NMEA 0183 receiver on a serial port, in the manual's Publish Server and
 Reactor shape (§7.5), and a template for new drivers.
 
-    python services/gps --device /dev/ttyUSB0 [--baud 4800] [common options]
+    python services/gps [-MCF robot.xml] [--device PATH] [--baud N] [common options]
     miro sim nmea --link /tmp/gps0 &  python services/gps --device /tmp/gps0
+
+Its parameters (services/gps/GpsParameters.xml, compiled into Miro.GpsParameters: device, serial
+settings, object, channel and event names, getWaitData's timeout) come from the run-time document
+(`-MCF FILE`, else `<hostname>.xml`), section "Gps", category "Gps" (services/gps/etc/gps.xml is
+an example); `--device` and `--baud` override the document, for a quick start.
 
 The pieces, each replaceable when writing another driver:
 - Connection: `TtyConnection` (any pyserial URL) on the server's reactor, reopened when the
@@ -30,6 +35,7 @@ if __package__ in (None, ""):  # run as a script: the generated code and this fo
 import Miro
 import Miro__POA
 import MiroNaming
+from Miro.GpsParameters import GpsParameters
 from nmea import NmeaParser
 
 from miro_gen import (
@@ -48,19 +54,23 @@ from miro_gen.devices import (
     DevMessage,
     TtyConnection,
 )
+from miro_gen.params import ConfigDocument, ParamsError
 from miro_gen.transport.events import EventChannel
 from miro_gen.transport.options import UsageError
 
 _log = log.logger("GPS")
-EVENT = "Gps"
 
 
 class GpsImpl(Miro__POA.Gps, Implementation[Miro.GpsDataIDL]):
     """Miro::Gps: the latest reading, or the next one."""
 
-    def __init__(self, supplier: StructuredPushSupplier | None, timeout: float) -> None:
+    def __init__(self, supplier: StructuredPushSupplier | None, params: GpsParameters) -> None:
         Implementation.__init__(
-            self, supplier, EVENT, initial=NmeaParser().reading, timeout=timeout
+            self,
+            supplier,
+            params.eventName,
+            initial=NmeaParser().reading,
+            timeout=params.waitTimeout.total_seconds(),
         )
 
     @nonblocking
@@ -103,25 +113,44 @@ def main(argv: list[str] | None = None) -> int:
         print(f"gps: {e}", file=sys.stderr)
         return 2
     p = argparse.ArgumentParser(prog="gps", description=__doc__.split("\n\n")[0])
-    p.add_argument("--device", required=True, help="serial port or pyserial URL of the receiver")
-    p.add_argument("--baud", type=int, default=4800, help="baud rate (default 4800, NMEA's)")
-    p.add_argument("--channel", default="EventChannel", help="event channel (default EventChannel)")
-    p.add_argument("--name", default="Gps", help="name in the naming service (default Gps)")
-    p.add_argument("--timeout", type=float, default=5.0, help="getWaitData's limit, s (default 5)")
+    p.add_argument("--device", help="serial port or pyserial URL (overrides the document)")
+    p.add_argument("--baud", type=int, help="baud rate (overrides the document)")
     args = p.parse_args(server.argv[1:])
+    params = GpsParameters.instance()
     try:
-        supplier = StructuredPushSupplier(channel_for(server, args.channel))
+        config = (
+            ConfigDocument(path=server.options.config_file)
+            if server.options.config_file
+            else ConfigDocument([])
+        )
+        config.set_section("Gps")
+        config.get_parameters("Gps", params)
+    except ParamsError as e:
+        print(f"gps: {e}", file=sys.stderr)
+        return 1
+    if args.device:
+        params.device = args.device
+    if args.baud:
+        params.ttyParams.baudrate = args.baud
+    _log.debug("parameters:\n%s", params)
+    try:
+        supplier = StructuredPushSupplier(channel_for(server, params.channelName))
     except SystemException as e:
         print(f"gps: {e}", file=sys.stderr)
         return 1
-    impl = GpsImpl(supplier, args.timeout)
+    impl = GpsImpl(supplier, params)
     consumer = NmeaConsumer(impl)
     framer = DelimitedFramer(b"$", b"\n", max_length=256)  # NMEA: at most 82 characters
     handler = DevEventHandler(framer, consumer)
-    connection = TtyConnection(server.reactor(), handler, args.device, {"baudrate": args.baud})
-    server.add_to_name_service(impl, args.name)
+    settings = params.ttyParams.pyserial()
+    connection = TtyConnection(server.reactor(), handler, params.device, settings)
+    server.add_to_name_service(impl, params.objectName)
     connection.open()
-    print(f"gps: reading {args.device}, serving {args.name}, publishing {EVENT}", flush=True)
+    print(
+        f"gps: reading {params.device}, serving {params.objectName}, "
+        f"publishing {params.eventName} on {params.channelName}",
+        flush=True,
+    )
     server.on_shutdown(connection.close)
     server.run()
     c = consumer.parser.counts
