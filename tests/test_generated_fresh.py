@@ -22,6 +22,5 @@ def test_generated_params_are_fresh() -> None:
     out = run_miro_params("-I", "idl", "--check", *params)
     assert out.returncode == 0, (
         "generated/ is stale; run `miro-params -I idl params/*.xml services/*/*Parameters.xml`"
-        " and commit the result:\n"
-        + out.stderr
+        " and commit the result:\n" + out.stderr
     )
