@@ -23,7 +23,6 @@ if __package__ in (None, ""):  # run as a script from a checkout: the generated 
     sys.path[:0] = [str(Path(__file__).resolve().parents[1] / "generated")]
 
 import Miro
-import MiroNaming
 
 from miro_gen import (
     EventChannelFactory,
@@ -99,10 +98,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.rate <= 0:
         p.error("--rate must be more than 0")
     try:
-        try:
-            channel = server.resolve_channel(args.channel)
-        except MiroNaming.NotFound:
-            channel = EventChannelFactory(server).create_channel(args.channel)
+        channel = EventChannelFactory(server).find_or_create_channel(args.channel)
     except SystemException as e:
         print(f"gps_position: {e}", file=sys.stderr)
         return 1

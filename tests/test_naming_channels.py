@@ -7,7 +7,7 @@ import time
 import Miro
 from loopback import NamingProcess, Recorder, RunningServer, eventually, run_miro
 
-from miro_gen import StructuredPushSupplier
+from miro_gen import EventChannelFactory, StructuredPushSupplier
 
 
 def test_a_channel_hosted_by_naming_outlives_its_suppliers() -> None:
@@ -43,3 +43,18 @@ def test_an_invalid_channel_name_is_a_usage_error() -> None:
     result = run_miro("naming", "--channel", "a//b")
     assert result.returncode == 2
     assert "--channel 'a//b' is not a valid name" in result.stderr
+
+
+def test_find_or_create_uses_a_bound_channel_and_hosts_a_missing_one() -> None:
+    naming = NamingProcess(options=("--channel", "Shared"))
+    service = RunningServer(naming.endpoint, "robot")
+    try:
+        factory = EventChannelFactory(service.server)
+        shared = factory.find_or_create_channel("Shared")
+        assert shared.name == "Shared" and not service.server.hosted_channels
+        mine = factory.find_or_create_channel("Mine")
+        assert mine.name == "robot/Mine" and "robot/Mine" in service.server.hosted_channels
+        assert factory.find_or_create_channel("Mine") is mine
+    finally:
+        service.stop()
+        naming.stop()

@@ -184,6 +184,17 @@ class EventChannelFactory:
         self._channels[full] = channel
         return channel
 
+    def find_or_create_channel(self, name: str = DEFAULT_CHANNEL) -> EventChannel:
+        """The channel bound as `name` (in this process's context, then at the root: one that
+        `miro naming --channel` or another service hosts), else one hosted here."""
+        hosted = self._channels.get(self.server.naming.full_name(name))
+        if hosted is not None:
+            return hosted
+        try:
+            return resolve_channel(self.server, name)
+        except MiroNaming.NotFound:
+            return self.create_channel(name)
+
 
 def resolve_channel(server: Any, name: str = DEFAULT_CHANNEL) -> EventChannel:
     """The channel bound as `name` (naming rules as for objects)."""

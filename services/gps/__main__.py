@@ -34,7 +34,6 @@ if __package__ in (None, ""):  # run as a script: the generated code and this fo
 
 import Miro
 import Miro__POA
-import MiroNaming
 from Miro.GpsParameters import GpsParameters
 from nmea import NmeaParser
 
@@ -55,7 +54,6 @@ from miro_gen.devices import (
     TtyConnection,
 )
 from miro_gen.params import ConfigDocument, ParamsError
-from miro_gen.transport.events import EventChannel
 from miro_gen.transport.options import UsageError
 
 _log = log.logger("GPS")
@@ -97,15 +95,6 @@ class NmeaConsumer(DevConsumer):
         _log.notice("receiver %s", "connected" if connected else "lost")
 
 
-def channel_for(server: Server, name: str) -> EventChannel:
-    """The event channel `name`: the one bound in naming if there is one, else hosted here."""
-    try:
-        channel: EventChannel = server.resolve_channel(name)
-        return channel
-    except MiroNaming.NotFound:
-        return EventChannelFactory(server).create_channel(name)
-
-
 def main(argv: list[str] | None = None) -> int:
     try:
         server = Server(sys.argv if argv is None else argv)
@@ -134,7 +123,9 @@ def main(argv: list[str] | None = None) -> int:
         params.ttyParams.baudrate = args.baud
     _log.debug("parameters:\n%s", params)
     try:
-        supplier = StructuredPushSupplier(channel_for(server, params.channelName))
+        supplier = StructuredPushSupplier(
+            EventChannelFactory(server).find_or_create_channel(params.channelName)
+        )
     except SystemException as e:
         print(f"gps: {e}", file=sys.stderr)
         return 1
