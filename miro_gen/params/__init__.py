@@ -7,7 +7,7 @@ by `miro-params` only.
 
 from __future__ import annotations
 
-from miro_gen.params.document import ConfigDocument, Instance
+from miro_gen.params.document import ConfigDocument, Instance, read_parameters
 from miro_gen.params.runtime import Config, InetAddr, ParamsError, SchedParams, SerialParams
 
 __all__ = [
@@ -18,4 +18,5 @@ __all__ = [
     "ParamsError",
     "SchedParams",
     "SerialParams",
+    "read_parameters",
 ]

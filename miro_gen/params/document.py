@@ -176,3 +176,15 @@ class ConfigDocument:
     def get_instance(self, instance: Instance, params: Config) -> None:
         """Update `params` from an instance's parameters."""
         params.from_xml(instance.element, self.path)
+
+
+def read_parameters(
+    params: Config, section: str, category: str | None = None, config_file: str | None = None
+) -> bool:
+    """A service's start-up read: `params` from `category` (default: `section`) of `section` in
+    `config_file` (a Server's `options.config_file`, from `-MCF`), else in `<hostname>.xml` on the
+    search path; the defaults stay when there is no document or it does not mention them.
+    Whether the document had the category. ParamsError when the document is wrong."""
+    document = ConfigDocument(path=config_file) if config_file else ConfigDocument([])
+    document.set_section(section)
+    return document.get_parameters(category or section, params)

@@ -53,7 +53,7 @@ from miro_gen.devices import (
     DevMessage,
     TtyConnection,
 )
-from miro_gen.params import ConfigDocument, ParamsError
+from miro_gen.params import ParamsError, read_parameters
 from miro_gen.transport.options import UsageError
 
 _log = log.logger("GPS")
@@ -107,13 +107,7 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(server.argv[1:])
     params = GpsParameters.instance()
     try:
-        config = (
-            ConfigDocument(path=server.options.config_file)
-            if server.options.config_file
-            else ConfigDocument([])
-        )
-        config.set_section("Gps")
-        config.get_parameters("Gps", params)
+        read_parameters(params, "Gps", config_file=server.options.config_file)
     except ParamsError as e:
         print(f"gps: {e}", file=sys.stderr)
         return 1
