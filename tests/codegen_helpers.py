@@ -35,7 +35,7 @@ CODEGEN = REPO / "tests" / "codegen"
 GOLDEN = CODEGEN / "golden"
 REFUSED = CODEGEN / "refused"
 IDL_FILES = sorted(CODEGEN.glob("*.idl"))
-GOLDEN_PACKAGES = ("CodecOther", "CodecTest", "CodecTest__POA", "CodecUnions")
+GOLDEN_PACKAGES = ("CodecOther", "CodecTest", "CodecTest__POA", "CodecUnions", "EnumOnly")
 REGENERATE = (
     "python -m miro_gen.cli.idl -I tests/codegen -o tests/codegen/golden tests/codegen/*.idl"
 )

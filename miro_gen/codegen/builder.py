@@ -288,6 +288,7 @@ class Builder:
                 self.nested.setdefault(id(container), []).append((name, f"{item.name}.{name}"))
             elif not place.nesting:
                 self.m.exports.append(name)
+                self.m.uses.add("typing")  # the module constant is `_t.Final`
 
     def _check_xcdr1(self, d: Any, members: list[Any]) -> None:
         for a in d.annotations:
