@@ -31,6 +31,8 @@ def build_parser() -> argparse.ArgumentParser:
         "demo", help="run the manual's examples A to D with a naming service", add_help=False
     )
     sub.add_parser("sim", help="simulate a device (sim nmea: a GPS receiver)", add_help=False)
+    sub.add_parser("new", help="scaffold a service in one of Miro's patterns", add_help=False)
+    sub.add_parser("run", help="run a service of this project (services/NAME)", add_help=False)
     return p
 
 
@@ -53,6 +55,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         run = naming.naming_main if args[0] == "naming" else naming.nslist_main
         return run(args[1:])
+    if args and args[0] in ("new", "run"):
+        from miro_gen.cli import new
+
+        return (new.new_main if args[0] == "new" else new.run_main)(args[1:])
     if args and args[0] == "sim":
         from miro_gen.cli import sim
 

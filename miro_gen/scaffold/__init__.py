@@ -1,0 +1,1 @@
+"""`miro new`: scaffold a service in one of the manual's design patterns (templates/service/)."""
