@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import re
 import signal
 import sys
@@ -30,9 +31,10 @@ def naming_main(argv: Sequence[str]) -> int:
     )
     p.add_argument(
         "--endpoint",
-        default=DEFAULT_NAMING,
-        help=f"where to serve (default {DEFAULT_NAMING}, this machine only; for other hosts "
-        "use this machine's address, or tcp://0.0.0.0:2809 for every interface)",
+        default=os.environ.get("MIRO_NAMING") or DEFAULT_NAMING,
+        help=f"where to serve (default $MIRO_NAMING, where services look for it, else "
+        f"{DEFAULT_NAMING}, this machine only; for other hosts use this machine's address, "
+        "or tcp://0.0.0.0:2809 for every interface)",
     )
     p.add_argument(
         "--channel",
