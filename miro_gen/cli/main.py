@@ -23,6 +23,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub.add_parser(
         "demo", help="run the manual's examples A to D with a naming service", add_help=False
     )
+    sub.add_parser("log", help="record, replay and inspect event logs (MCAP)", add_help=False)
     return p
 
 
@@ -41,6 +42,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         from miro_gen.cli import demo
 
         return demo.demo_main(args[1:])
+    if args and args[0] == "log":
+        from miro_gen.cli import log
+
+        return log.main(args[1:])
     parser = build_parser()
     ns = parser.parse_args(args)
     if ns.command is None:
