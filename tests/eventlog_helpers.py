@@ -15,15 +15,14 @@ from miro_cli import REPO
 PROCS = REPO / "tests" / "procs"
 
 
-def miro(*args: str, **kw: Any) -> subprocess.Popen[str]:
+def miro(*args: str, env: dict[str, str] | None = None) -> subprocess.Popen[str]:
     """`miro ARGS` from this checkout, in the background."""
     return subprocess.Popen(
         [sys.executable, "-m", "miro_gen.cli.main", *args],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
-        env=service_env(),
-        **kw,
+        env=service_env() if env is None else env,
     )
 
 
@@ -38,9 +37,11 @@ def proc(script: str, *args: str) -> subprocess.Popen[str]:
     )
 
 
-def start_recorder(naming: str, path: Path, *topics: str) -> subprocess.Popen[str]:
+def start_recorder(
+    naming: str, path: Path, *topics: str, env: dict[str, str] | None = None
+) -> subprocess.Popen[str]:
     """`miro log record`, returned once it has found its channel."""
-    rec = miro("log", "record", "--naming", naming, "-o", str(path), *topics)
+    rec = miro("log", "record", "--naming", naming, "-o", str(path), *topics, env=env)
     assert rec.stderr is not None
     line = rec.stderr.readline()
     assert line.startswith("recording "), line
