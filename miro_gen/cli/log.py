@@ -47,7 +47,7 @@ def topic_arg(text: str) -> tuple[str, str]:
         raise argparse.ArgumentTypeError(str(e)) from None
 
 
-def _split_common(p: argparse.ArgumentParser, argv: Sequence[str]) -> list[str]:
+def split_common(p: argparse.ArgumentParser, argv: Sequence[str]) -> list[str]:
     """The arguments left after the common options (checked here, so that a bad one is a
     usage error before any socket exists)."""
     try:
@@ -57,7 +57,7 @@ def _split_common(p: argparse.ArgumentParser, argv: Sequence[str]) -> list[str]:
     return rest
 
 
-def _server(p: argparse.ArgumentParser, prog: str, argv: Sequence[str]) -> Any:
+def make_server(p: argparse.ArgumentParser, prog: str, argv: Sequence[str]) -> Any:
     from miro_gen.transport.server import Server
 
     try:
@@ -66,7 +66,7 @@ def _server(p: argparse.ArgumentParser, prog: str, argv: Sequence[str]) -> Any:
         p.error(str(e))
 
 
-def _resolve_or_wait(server: Any, name: str, prog: str) -> Any:
+def resolve_or_wait(server: Any, name: str, prog: str) -> Any:
     """The channel `name`; waits for it to be bound (a recorder may start before the robot)."""
     import MiroNaming
 
@@ -104,14 +104,14 @@ def record_main(argv: Sequence[str]) -> int:
         metavar="TOPIC",
         help="DOMAIN/TYPE to record, * for any part (robot1/*, */Odometry); default all",
     )
-    ns = p.parse_args(_split_common(p, argv))
+    ns = p.parse_args(split_common(p, argv))
     if os.path.exists(ns.output) and not ns.force:
         p.error(f"{ns.output} exists (use --force to overwrite it)")
     from miro_gen.eventlog.progress import StatusLine
     from miro_gen.eventlog.recorder import Recorder
     from miro_gen.eventlog.writer import LogWriter
 
-    server = _server(p, prog, argv)
+    server = make_server(p, prog, argv)
     try:
         writer = LogWriter(ns.output)
     except OSError as e:
@@ -120,7 +120,7 @@ def record_main(argv: Sequence[str]) -> int:
         return 1
     status = StatusLine()
     try:
-        channel = _resolve_or_wait(server, ns.channel, prog)
+        channel = resolve_or_wait(server, ns.channel, prog)
     except KeyboardInterrupt:
         writer.finish()
         server.close()
@@ -300,7 +300,7 @@ def play_main(argv: Sequence[str]) -> int:
         metavar="S",
         help="seconds to let consumers connect before the first event (default 0.5)",
     )
-    ns = p.parse_args(_split_common(p, argv))
+    ns = p.parse_args(split_common(p, argv))
     if not ns.rate > 0:
         p.error("--rate must be more than 0")
     if ns.start < 0 or (ns.end is not None and ns.end < ns.start):
@@ -332,7 +332,7 @@ def _play(p: argparse.ArgumentParser, prog: str, argv: Sequence[str], ns: Any, l
     from miro_gen.exceptions import SystemException
     from miro_gen.transport.events import EventChannelFactory, StructuredPushSupplier
 
-    server = _server(p, prog, argv)
+    server = make_server(p, prog, argv)
     try:
         try:
             channel = server.resolve_channel(ns.channel)

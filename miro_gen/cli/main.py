@@ -24,6 +24,8 @@ def build_parser() -> argparse.ArgumentParser:
         "demo", help="run the manual's examples A to D with a naming service", add_help=False
     )
     sub.add_parser("log", help="record, replay and inspect event logs (MCAP)", add_help=False)
+    sub.add_parser("echo", help="print the events of a topic as they arrive", add_help=False)
+    sub.add_parser("hz", help="print the rate of the events of a topic", add_help=False)
     return p
 
 
@@ -46,6 +48,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         from miro_gen.cli import log
 
         return log.main(args[1:])
+    if args and args[0] in ("echo", "hz"):
+        from miro_gen.cli import live
+
+        return (live.echo_main if args[0] == "echo" else live.hz_main)(args[1:])
     parser = build_parser()
     ns = parser.parse_args(args)
     if ns.command is None:

@@ -14,6 +14,7 @@ from typing import Any
 
 import zmq
 
+from miro_gen.eventlog.gaps import GapCounter
 from miro_gen.eventlog.types import matches
 from miro_gen.eventlog.wire import FrameError, RawEvent, parse_batch, split_topic
 from miro_gen.log import logger
@@ -42,9 +43,8 @@ class RawEventTap:
         self.filters = list(subscriptions)
         self.skip = set(skip)
         self.received = 0
-        self.missed = 0
+        self.gaps = GapCounter()
         self.bad_frames = 0
-        self._next_seq: dict[tuple[int, str], int] = {}
         self._wanted: dict[bytes, bool] = {}
         self.socket: zmq.Socket[Any] = self.reactor.context.socket(zmq.SUB)
         self.socket.setsockopt(zmq.LINGER, 0)
@@ -86,19 +86,15 @@ class RawEventTap:
         if not wanted:
             return []
         events = parse_batch(domain, type_name, body)
-        if events:
-            key = (events[0].supplier, type_name)
-            expected = self._next_seq.get(key)
-            first = events[0].seq
-            if expected is not None and first > expected:
-                self.missed += first - expected
-            last = first
-            for e in events[1:]:
-                if e.seq > last + 1:
-                    self.missed += e.seq - last - 1
-                last = e.seq
-            self._next_seq[key] = last + 1
+        observe = self.gaps.observe
+        for e in events:
+            observe(e.supplier, type_name, e.seq)
         return events
+
+    @property
+    def missed(self) -> int:
+        """Events lost between their suppliers and this tap."""
+        return self.gaps.missed
 
     def close(self) -> None:
         def close() -> None:
