@@ -118,14 +118,18 @@ def test_a_killed_recorder_leaves_a_readable_file(naming: str, tmp_path: Path) -
 def test_damaged_files_are_errors_not_tracebacks(recorded: Path, tmp_path: Path) -> None:
     cut = tmp_path / "cut.mcap"
     data = recorded.read_bytes()
-    cut.write_bytes(data[: len(data) // 2])
+    with open(recorded, "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    chunk = summary.chunk_indexes[0]
+    cut.write_bytes(data[: chunk.chunk_start_offset + chunk.chunk_length // 2])
     garbage = tmp_path / "garbage.mcap"
     garbage.write_bytes(b"\x89MCAP0\r\n" + bytes(range(256)) * 4)
     text = tmp_path / "notes.txt"
     text.write_text("not a log\n")
     for path, why in (
-        (cut, "corrupt"),
-        (garbage, "corrupt"),
+        (cut, "truncated inside a record"),
+        (garbage, "after byte 8"),
         (text, "not an MCAP file"),
         (tmp_path / "missing.mcap", "cannot open"),
     ):

@@ -194,6 +194,8 @@ class Player:
                     message.data,
                 )
                 self.sent += 1
+                if self._paused:  # a step: followers move to this event's time
+                    self.publish_clock()
                 if self.on_progress is not None and self.sent % 64 == 0:
                     self.on_progress(self)
             if not self.options.loop:

@@ -10,6 +10,7 @@ or, for a fault further in, after the events before it were delivered.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from typing import IO
@@ -156,12 +157,15 @@ class LogReader:
     def _streamed(
         self, wanted: set[str] | None, start_ns: int | None, end_ns: int | None
     ) -> Iterator[tuple[Topic, Message]]:
-        self._file.seek(0)
+        f = self._file
+        size = os.fstat(f.fileno()).st_size
+        f.seek(0)
         schemas: dict[int, Schema] = {}
         topics: dict[int, Topic] = {}
-        stream = StreamReader(self._file)
+        complete = len(MAGIC)  # where the last record read whole ends
         try:
-            for record in stream.records:
+            for record in StreamReader(f).records:
+                complete = f.tell()
                 if isinstance(record, Schema):
                     schemas[record.id] = record
                 elif isinstance(record, Channel):
@@ -180,12 +184,13 @@ class LogReader:
                     if end_ns is not None and record.log_time >= end_ns:
                         continue
                     yield topic, record
-        except EndOfFile:
-            pass  # unfinished: cut at (or in the length of) a record
         except LogError:
             raise
         except Exception as e:
-            raise LogError(f"corrupt or cut inside a record: {_describe(e)}") from None
+            if isinstance(e, EndOfFile) and complete == size:
+                return  # unfinished, but cut between records: all it holds was read
+            where = "truncated inside a record" if f.tell() >= size else "corrupt data"
+            raise LogError(f"{where} after byte {complete}: {_describe(e)}") from None
         finally:
             if self._topics is None:
                 self._topics = dict(topics)
