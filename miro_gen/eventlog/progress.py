@@ -39,8 +39,9 @@ class StatusLine:
         self._shown = True
 
     def done(self, text: str) -> None:
-        if self._shown:
-            self.stream.write("\r")
+        if self._shown:  # over the status line, all of it
+            width = shutil.get_terminal_size((100, 20)).columns - 1
+            text = "\r" + text.ljust(width)
         self.stream.write(text + "\n")
         self.stream.flush()
         self._shown = False
