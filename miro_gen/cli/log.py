@@ -361,9 +361,9 @@ def _play(p: argparse.ArgumentParser, prog: str, argv: Sequence[str], ns: Any, l
     span = max(1, (player.end_ns or player.last_ns) - player.begin_ns)
     shown = [0.0]
 
-    def progress(pl: Player) -> None:
+    def progress(pl: Player, force: bool = False) -> None:
         now = time.monotonic()
-        if now - shown[0] < 0.1:
+        if now - shown[0] < 0.1 and not force:
             return
         shown[0] = now
         at = pl.log_now() - pl.begin_ns
@@ -382,7 +382,7 @@ def _play(p: argparse.ArgumentParser, prog: str, argv: Sequence[str], ns: Any, l
             player.step()
         elif ch in "qQ":
             player.stop()
-        progress(player)
+        progress(player, force=True)
 
     signal.signal(signal.SIGTERM, lambda *_: player.stop())
     print(f"playing {ns.file} into {channel.name} at x{ns.rate:g}", file=sys.stderr)

@@ -155,7 +155,12 @@ class Player:
                         self._steps -= 1
                         self._rebase(max(log_ns, self._log_anchor))
                         return True
-                    self._cond.wait(CLOCK_PERIOD)
+                    self._cond.release()
+                    try:
+                        self._tick()
+                    finally:
+                        self._cond.acquire()
+                    self._cond.wait(0.1)
                     continue
                 ahead = (log_ns - self._log_now_locked()) / 1e9 / self.rate
                 if ahead <= 0:
