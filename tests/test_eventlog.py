@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import signal
 import statistics
+import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -21,6 +22,10 @@ from eventlog_helpers import proc, read_events, start_recorder, stop, supply
 from loopback import NamingProcess, run_miro
 from mcap.exceptions import EndOfFile
 from mcap.reader import NonSeekingReader, make_reader
+from miro_cli import REPO, run_miro_idl
+
+from miro_gen.eventlog.wire import RawEvent
+from miro_gen.eventlog.writer import LogWriter
 
 
 @pytest.fixture(scope="module")
@@ -186,3 +191,26 @@ def test_usage_errors(tmp_path: Path) -> None:
         result = run_miro(*args)
         assert result.returncode == 2, (args, result.stderr)
         assert message in result.stderr and "usage:" in result.stderr
+
+
+def test_echo_decodes_types_not_generated_here_from_the_log(tmp_path: Path) -> None:
+    """A log from another project: its types are compiled from the schemas in the file."""
+    compiled = run_miro_idl("-o", str(tmp_path / "gen"), str(REPO / "tests/foxglove/FoxTest.idl"))
+    assert compiled.returncode == 0, compiled.stderr
+    sys.path.insert(0, str(tmp_path / "gen"))
+    try:
+        import FoxTest
+
+        scan = FoxTest.Scan(id=7, name="far", last_reading=FoxTest.Reading(label="x"))
+        h = FoxTest.Scan._type_hash
+        path = tmp_path / "foreign.mcap"
+        writer = LogWriter(str(path))
+        writer.write([RawEvent("r", "Scan", h, 1, 0, 5, 5, scan.serialize())], 10)
+        writer.finish()
+    finally:
+        sys.path.remove(str(tmp_path / "gen"))
+        for name in [m for m in sys.modules if m.split(".")[0] == "FoxTest"]:
+            del sys.modules[name]
+    result = run_miro("log", "echo", str(path))  # FoxTest is not on this one's path
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.rstrip().endswith(repr(scan)), result.stdout

@@ -225,6 +225,22 @@ def info_main(argv: Sequence[str]) -> int:
     return 0
 
 
+def _compile_missing_types(path: str, log: Any) -> None:
+    """Compile the log's schemas whose types are not generated here, so that they decode."""
+    from miro_gen.eventlog.types import find_type, types_from_schemas
+
+    missing = [
+        t
+        for t in log.topics()
+        if t.schema_encoding == "omgidl" and t.type_hash and find_type(t.type_hash) is None
+    ]
+    if missing:
+        why = types_from_schemas([t.schema.decode("utf-8", "replace") for t in missing])
+        if why is not None:
+            names = ", ".join(t.topic for t in missing)
+            print(f"{path}: warning: cannot decode {names}: {why}", file=sys.stderr)
+
+
 def echo_main(argv: Sequence[str]) -> int:
     p = argparse.ArgumentParser(
         prog="miro log echo",
@@ -246,6 +262,7 @@ def echo_main(argv: Sequence[str]) -> int:
     shown = 0
     with log:
         try:
+            _compile_missing_types(ns.file, log)
             for topic, message in log.messages():
                 if ns.topics and not any(
                     matches(f, topic.domain, topic.type_name) for f in ns.topics

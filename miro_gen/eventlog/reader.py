@@ -10,6 +10,7 @@ or, for a fault further in, after the events before it were delivered.
 
 from __future__ import annotations
 
+import hashlib
 import os
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
@@ -46,12 +47,15 @@ class Topic:
 def _topic(channel: Channel, schema: Schema | None) -> Topic:
     meta = channel.metadata
     domain, _, type_name = channel.topic.rpartition("/")
+    type_hash = meta.get("type_hash", "")
+    if not type_hash and schema is not None and schema.encoding == "omgidl":
+        type_hash = hashlib.sha256(schema.data).hexdigest()  # as miro-idl makes them
     return Topic(
         channel.id,
         channel.topic,
         meta.get("domain", domain),
         meta.get("type_name", type_name),
-        meta.get("type_hash", ""),
+        type_hash,
         schema.name if schema else "",
         schema.encoding if schema else "",
         schema.data if schema else b"",
