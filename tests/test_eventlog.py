@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import signal
 import statistics
+import subprocess
 import sys
 import time
 from collections.abc import Iterator
@@ -19,7 +20,7 @@ from typing import Any
 import Miro
 import pytest
 from eventlog_helpers import proc, read_events, start_recorder, stop, supply
-from loopback import NamingProcess, run_miro
+from loopback import NamingProcess, run_miro, service_env
 from mcap.exceptions import EndOfFile
 from mcap.reader import NonSeekingReader, make_reader
 from miro_cli import REPO, run_miro_idl
@@ -214,3 +215,21 @@ def test_echo_decodes_types_not_generated_here_from_the_log(tmp_path: Path) -> N
     result = run_miro("log", "echo", str(path))  # FoxTest is not on this one's path
     assert result.returncode == 0, result.stderr
     assert result.stdout.rstrip().endswith(repr(scan)), result.stdout
+
+
+def test_an_empty_log_and_a_reader_that_goes_away(recorded: Path, tmp_path: Path) -> None:
+    empty = tmp_path / "empty.mcap"
+    LogWriter(str(empty)).finish()
+    info = run_miro("log", "info", str(empty))
+    assert info.returncode == 0 and "(finished)" in info.stdout and "events:    0" in info.stdout
+    assert info.stderr == ""
+    # `| head -1`: the rest of the output has nowhere to go, and that is not an error.
+    piped = subprocess.run(
+        f"{sys.executable} -m miro_gen.cli.main log echo {recorded} | head -1",
+        shell=True,
+        capture_output=True,
+        text=True,
+        env=service_env(),
+        timeout=30,
+    )
+    assert piped.stdout.count("\n") == 1 and piped.stderr == ""

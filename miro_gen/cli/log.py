@@ -32,12 +32,22 @@ def main(argv: Sequence[str]) -> int:
     args = list(argv)
     if args and args[0] in ("record", "play", "info", "echo"):
         run = {"record": record_main, "play": play_main, "info": info_main, "echo": echo_main}
-        return run[args[0]](args[1:])
+        return piped(run[args[0]], args[1:])
     ns = p.parse_args(args)
     if ns.command is None:
         p.print_help()
         return 0
     return 0  # pragma: no cover
+
+
+def piped(command: Any, argv: Sequence[str]) -> int:
+    """Run `command(argv)`; a reader that went away (`| head`) ends it quietly."""
+    try:
+        return int(command(argv))
+    except BrokenPipeError:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())  # so that the exit's flush does not fail again
+        return 0
 
 
 def topic_arg(text: str) -> tuple[str, str]:
@@ -277,9 +287,6 @@ def echo_main(argv: Sequence[str]) -> int:
             sys.stdout.flush()
             print(f"{ns.file}: error: {e}", file=sys.stderr)
             return 1
-        except BrokenPipeError:  # `| head`
-            sys.stderr.close()
-            return 0
     if log.unfinished:
         _unfinished_warning(ns.file)
     return 0

@@ -50,8 +50,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return log.main(args[1:])
     if args and args[0] in ("echo", "hz"):
         from miro_gen.cli import live
+        from miro_gen.cli.log import piped
 
-        return (live.echo_main if args[0] == "echo" else live.hz_main)(args[1:])
+        return piped(live.echo_main if args[0] == "echo" else live.hz_main, args[1:])
     parser = build_parser()
     ns = parser.parse_args(args)
     if ns.command is None:

@@ -91,8 +91,6 @@ class LogReader:
             summary = SeekingReader(self._file).get_summary()
         except Exception:  # no footer or a damaged one: read it as unfinished
             return None
-        if summary is None or not summary.chunk_indexes:
-            return None
         return summary
 
     def close(self) -> None:
@@ -133,7 +131,7 @@ class LogReader:
         """The messages of `topics` (all when None) with start_ns <= log time < end_ns, in
         log-time order (file order for an unfinished file). Raises LogError at a fault."""
         wanted = None if topics is None else set(topics)
-        if self.summary is not None:
+        if self.summary is not None and self.summary.chunk_indexes:
             yield from self._indexed(wanted, start_ns, end_ns)
         else:
             yield from self._streamed(wanted, start_ns, end_ns)
