@@ -6,7 +6,7 @@ import argparse
 from collections.abc import Sequence
 from typing import Any
 
-from miro_gen.cli.log import COMMON, make_server, resolve_or_wait, split_common, topic_arg
+from miro_gen.cli.eventargs import COMMON, make_server, resolve_or_wait, split_common, topic_arg
 
 
 def _parser(prog: str, description: str) -> argparse.ArgumentParser:

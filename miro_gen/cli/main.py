@@ -50,7 +50,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return log.main(args[1:])
     if args and args[0] in ("echo", "hz"):
         from miro_gen.cli import live
-        from miro_gen.cli.log import piped
+        from miro_gen.cli.eventargs import piped
 
         return piped(live.echo_main if args[0] == "echo" else live.hz_main, args[1:])
     parser = build_parser()
