@@ -42,7 +42,11 @@ def test_echo_prints_decoded_events_and_gaps(naming: str, supplier: ReplaySuppli
         supplier.push_encoded(
             "robot5", "ExampleEvent", event(seq)._type_hash, 77, seq, now, now, data
         )
-    out, err = echo.communicate(timeout=20)
+    try:
+        out, err = echo.communicate(timeout=20)
+    finally:
+        if echo.poll() is None:
+            echo.kill()
     assert echo.returncode == 0, err
     lines = out.splitlines()
     assert len(lines) == 6, out
