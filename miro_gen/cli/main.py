@@ -33,6 +33,9 @@ def build_parser() -> argparse.ArgumentParser:
     sub.add_parser("sim", help="simulate a device (sim nmea: a GPS receiver)", add_help=False)
     sub.add_parser("new", help="scaffold a service in one of Miro's patterns", add_help=False)
     sub.add_parser("run", help="run a service of this project (services/NAME)", add_help=False)
+    sub.add_parser("log", help="record, replay and inspect event logs (MCAP)", add_help=False)
+    sub.add_parser("echo", help="print the events of a topic as they arrive", add_help=False)
+    sub.add_parser("hz", help="print the rate of the events of a topic", add_help=False)
     return p
 
 
@@ -67,6 +70,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         from miro_gen.cli import demo
 
         return demo.demo_main(args[1:])
+    if args and args[0] == "log":
+        from miro_gen.cli import log
+
+        return log.main(args[1:])
+    if args and args[0] in ("echo", "hz"):
+        from miro_gen.cli import live
+        from miro_gen.cli.eventargs import piped
+
+        return piped(live.echo_main if args[0] == "echo" else live.hz_main, args[1:])
     parser = build_parser()
     ns = parser.parse_args(args)
     if ns.command is None:

@@ -23,7 +23,6 @@ import itertools
 import os
 import random
 import threading
-import time
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from struct import Struct
@@ -33,6 +32,7 @@ from typing import Any
 import MiroNaming
 import zmq
 
+from miro_gen import clock
 from miro_gen.log import logger
 from miro_gen.runtime.cdr import type_for_hash
 from miro_gen.transport.reactor import Reactor
@@ -285,12 +285,13 @@ class StructuredPushSupplier:
 
     def push(self, type_name: str, payload: Any, stamp: float | None = None) -> bool:
         """Publish `payload` (a generated type) as an event of `type_name`; False when nobody
-        subscribes (nothing is encoded then). `stamp`: when the data was taken (default now)."""
+        subscribes (nothing is encoded then). `stamp`: when the data was taken (default now, on the
+        process's clock: the replayed time under `--clock log`)."""
         t = self._topics.get(type_name) or self._topic(type_name)
         seq = next(t.seq)
         if not (t.subscribed if t.generation == self._generation else self._subscribed(t)):
             return False
-        now = time.time_ns()
+        now = clock.current().time_ns()  # log time under --clock log, else the wall clock
         data = payload.serialize()
         packed = _EVENT.pack(seq, now if stamp is None else int(stamp * 1e9), now, len(data))
         packed += data

@@ -20,9 +20,10 @@ Waiting happens on the server's worker pool, never on the reactor thread.
 from __future__ import annotations
 
 import threading
-import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Generic, TypeVar
+
+from miro_gen import clock
 
 if TYPE_CHECKING:
     from miro_gen.transport.events import StructuredPushSupplier
@@ -58,7 +59,7 @@ class Implementation(Generic[T]):
     def integrate_data(self, data: T, stamp: float | None = None) -> None:
         """Keep `data` as the latest value, wake the callers waiting for it, and push it as an
         event (encoded only when someone subscribes). `stamp`: when it was measured (now)."""
-        stamp = time.time() if stamp is None else stamp
+        stamp = clock.now() if stamp is None else stamp
         with self._changed:
             self._latest = data
             self._stamp = stamp

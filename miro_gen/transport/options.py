@@ -12,7 +12,10 @@ takes what it knows and leaves the service's own ones. The contract (DESIGN.md, 
 * `-MLF CAT [CAT ...]` / `-MiroLogFilter CAT [CAT ...]`: the log categories to show (default all);
 * `-MCF FILE` / `-MiroConfigFile FILE`: the run-time parameter document;
 * `--host HOST` (env `MIRO_HOST`): the address other machines reach this process at; by default
-  the one towards the naming service (see `miro_gen.transport.addresses`, docs/PROTOCOL.md).
+  the one towards the naming service (see `miro_gen.transport.addresses`, docs/PROTOCOL.md);
+* `--clock wall|log|log:CHANNEL`: the time `miro_gen.clock.now()` and reactor timers follow:
+  wall time (default), or the clock of a log player (`miro log play`), published on the
+  channel `LogClock` (or CHANNEL); see docs/LOGS.md.
 
 Options may also be written `--naming=URL`. A missing or malformed value raises `UsageError`
 with a message naming the option.
@@ -53,6 +56,7 @@ class CommonOptions:
     log_filter: list[str] = field(default_factory=list)  # empty: every category
     config_file: str | None = None
     host: str | None = None
+    clock: str = "wall"  # or "log" (the channel LogClock), or "log:CHANNEL"
     ignored: list[str] = field(default_factory=list)  # -ORB options given, for the notice
 
 
@@ -101,7 +105,9 @@ def parse_common_options(
         if name == "--":  # everything after belongs to the service
             rest += args[i:]
             break
-        if name in ("--naming", "--host") or arg in ("-MNC", "-MiroNamingContext", "-MCF"):
+        if name == "--clock":
+            opts.clock = _clock(inline if eq else value(name))
+        elif name in ("--naming", "--host") or arg in ("-MNC", "-MiroNamingContext", "-MCF"):
             text = inline if eq else value(name)
             if name == "--naming":
                 opts.naming = naming_endpoint(text)
@@ -139,6 +145,13 @@ def parse_common_options(
             rest.append(arg)
         i += 1
     return opts, rest
+
+
+def _clock(text: str) -> str:
+    kind, sep, channel = text.partition(":")
+    if text == "wall" or (kind == "log" and (not sep or channel.strip("/"))):
+        return text
+    raise UsageError(f"--clock takes wall, log or log:CHANNEL, not {text!r}")
 
 
 def _level(text: str, option: str) -> int:

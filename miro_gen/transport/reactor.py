@@ -8,6 +8,9 @@ a ZeroMQ socket must only be used by the thread that owns it, so this is how the
 
 A handler that raises is logged (category MIRO) and the reactor goes on: one bad handler must
 not stop a service.
+
+Timers run on the reactor's clock (`miro_gen.clock`): wall time by default; a log player's
+replayed time in a process started with `--clock log`, so that periods are periods of log time.
 """
 
 from __future__ import annotations
@@ -19,13 +22,13 @@ import math
 import signal
 import socket
 import threading
-import time
 from collections import deque
 from collections.abc import Callable
 from typing import Any
 
 import zmq
 
+from miro_gen.clock import Clock
 from miro_gen.log import logger
 
 _log = logger("MIRO")
@@ -53,8 +56,10 @@ class _Timer:
 class Reactor:
     """Dispatches sockets, descriptors and timers on the thread that calls `run()`."""
 
-    def __init__(self, context: zmq.Context[Any] | None = None) -> None:
+    def __init__(self, context: zmq.Context[Any] | None = None, clock: Clock | None = None) -> None:
         self.context = context if context is not None else zmq.Context.instance()
+        self.clock = clock if clock is not None else Clock()
+        self._timer_time = self.clock.timer_time
         self._poller = zmq.Poller()
         self._handlers: dict[Any, Callable[[], object]] = {}
         self._timers: list[_Timer] = []
@@ -71,6 +76,7 @@ class Reactor:
         self._stopping = False
         self._thread: threading.Thread | None = None
         self._closed = False
+        self.clock.add_listener(self._clock_changed)
 
     # ---- sockets and descriptors ---------------------------------------------------------------
 
@@ -92,13 +98,14 @@ class Reactor:
         """Call `handler(arg)` (or `handler.handle_timeout(arg)`, as ACE does) after `delay`
         seconds, then every `interval` seconds if `interval` > 0. Returns the timer's id for
         `cancel_timer`. Safe from any thread. A periodic timer keeps its rate: a late run does
-        not push the next ones back, and runs missed entirely are skipped, not bunched."""
+        not push the next ones back, and runs missed entirely are skipped, not bunched.
+        Seconds are those of the reactor's clock (log seconds under `--clock log`)."""
         if delay < 0 or interval < 0 or math.isnan(delay) or math.isnan(interval):
             raise ValueError("timer delay and interval must be zero or more seconds")
         fn = getattr(handler, "handle_timeout", handler)
         if not callable(fn):
             raise TypeError("a timer handler is a callable or has handle_timeout(arg)")
-        timer = _Timer(next(self._ids), time.monotonic() + delay, interval, fn, arg)
+        timer = _Timer(next(self._ids), self._timer_time() + delay, interval, fn, arg)
         with self._lock:
             self._timer_by_id[timer.id] = timer
             heapq.heappush(self._timers, timer)
@@ -113,6 +120,14 @@ class Reactor:
             return False
         timer.cancelled = True
         return True
+
+    def _clock_changed(self, jump: float) -> None:
+        """The clock jumped (or changed its pace): move the timers with it and look again."""
+        if jump:
+            with self._lock:
+                for timer in self._timers:
+                    timer.due += jump  # the same shift for all: the heap stays ordered
+        self._wake()
 
     # ---- calls from other threads ---------------------------------------------------------------
 
@@ -201,7 +216,7 @@ class Reactor:
 
     def _run_due_timers(self) -> int | None:
         """Run the timers that are due; milliseconds until the next one (None: no timer)."""
-        now = time.monotonic()
+        now = self._timer_time()
         due: list[_Timer] = []
         with self._lock:
             while self._timers and (self._timers[0].cancelled or self._timers[0].due <= now):
@@ -221,7 +236,10 @@ class Reactor:
                 self._safely(timer.handler, timer.arg)
         if next_due is None:
             return None
-        return max(0, math.ceil((next_due - time.monotonic()) * 1000))
+        wait = self.clock.real_delay(next_due - self._timer_time())
+        if wait is None:  # the clock stands still: a change of it wakes the reactor
+            return None
+        return max(0, math.ceil(wait * 1000))
 
     def _wake(self) -> None:
         if not self._woken:

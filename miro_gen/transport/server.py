@@ -96,7 +96,13 @@ class Server(Client):
         self.addresses = server_addresses(self.options.naming, self.options.host)
         if bind_host is not None:
             self.addresses = dataclasses.replace(self.addresses, bind=bind_host)
-        self._reactor = Reactor(self.context)
+        clock = None
+        if self.options.clock != "wall":  # --clock log: timers and now() follow a log player
+            from miro_gen.clock import LogClock, use
+
+            clock = LogClock()
+            use(clock)
+        self._reactor = Reactor(self.context, clock)
         self.adapter = ObjectAdapter(
             self._reactor,
             self.invoker,
@@ -112,6 +118,10 @@ class Server(Client):
         self._renewer: threading.Thread | None = None
         self._on_shutdown: list[Callable[[], object]] = []
         self.hosted_channels: dict[str, Any] = {}  # event channels hosted here, by full name
+        if clock is not None:
+            from miro_gen.eventlog.follow import follow_log_clock
+
+            follow_log_clock(self, self.options.clock.partition(":")[2] or "LogClock", clock)
 
     def reactor(self) -> Reactor:
         return self._reactor

@@ -1,0 +1,88 @@
+"""What the event-log commands share: topic arguments, the common options, a server, the
+event channel (waited for), opening a log, and quiet ends of pipes."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from collections.abc import Sequence
+from typing import Any
+
+from miro_gen.eventlog.types import parse_topic
+from miro_gen.transport.options import UsageError, parse_common_options
+
+COMMON = "Accepts the common options (--naming tcp://HOST:PORT, -MNC NAME, -MLL N, --host ADDR)."
+
+
+def piped(command: Any, argv: Sequence[str]) -> int:
+    """Run `command(argv)`; a reader that went away (`| head`) ends it quietly."""
+    try:
+        return int(command(argv))
+    except BrokenPipeError:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())  # so that the exit's flush does not fail again
+        return 0
+
+
+def topic_arg(text: str) -> tuple[str, str]:
+    try:
+        return parse_topic(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+
+
+def split_common(p: argparse.ArgumentParser, argv: Sequence[str]) -> list[str]:
+    """The arguments left after the common options (checked here, so that a bad one is a
+    usage error before any socket exists)."""
+    try:
+        _, rest = parse_common_options(list(argv))
+    except UsageError as e:
+        p.error(str(e))
+    return rest
+
+
+def make_server(p: argparse.ArgumentParser, prog: str, argv: Sequence[str]) -> Any:
+    from miro_gen.transport.server import Server
+
+    try:
+        return Server([prog, *argv])
+    except UsageError as e:
+        p.error(str(e))
+
+
+def resolve_or_wait(server: Any, name: str, prog: str) -> Any:
+    """The channel `name`; waits for it to be bound (a recorder may start before the robot)."""
+    import MiroNaming
+
+    from miro_gen.exceptions import SystemException
+
+    told = False
+    while True:
+        try:
+            return server.resolve_channel(name)
+        except (MiroNaming.NotFound, SystemException) as e:
+            if not told:
+                why = f"{e.name} is not bound" if isinstance(e, MiroNaming.NotFound) else str(e)
+                print(f"{prog}: waiting for the event channel {name} ({why})", file=sys.stderr)
+                told = True
+            time.sleep(0.5)
+
+
+def open_log(path: str) -> Any:
+    from miro_gen.eventlog.reader import LogError, LogReader
+
+    try:
+        return LogReader(path)
+    except LogError as e:
+        print(f"{path}: error: {e}", file=sys.stderr)
+        return None
+
+
+def unfinished_warning(path: str) -> None:
+    print(
+        f"{path}: warning: the file is unfinished (no summary: its recorder was killed?); "
+        "read up to its last complete chunk",
+        file=sys.stderr,
+    )

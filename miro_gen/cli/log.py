@@ -1,0 +1,168 @@
+"""`miro log record|play|info|echo`: Miro's LogNotify and LogPlayer on MCAP files; this module
+dispatches them and holds the two that only read a file, info and echo."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from typing import Any
+
+from miro_gen.cli.eventargs import (
+    open_log,
+    piped,
+    topic_arg,
+    unfinished_warning,
+)
+
+
+def main(argv: Sequence[str]) -> int:
+    p = argparse.ArgumentParser(
+        prog="miro log",
+        description="Record event channels into MCAP files, replay them, and look into them.",
+    )
+    sub = p.add_subparsers(dest="command", metavar="COMMAND")
+    for name, text in (
+        ("record", "record events of a channel into an MCAP file (Miro's LogNotify)"),
+        ("play", "replay a log into a channel with its original timing (Miro's LogPlayer)"),
+        ("info", "summarise a log: topics, types, counts, time span, rates"),
+        ("echo", "print the events of a log, decoded"),
+    ):
+        sub.add_parser(name, help=text, add_help=False)
+    args = list(argv)
+    if args and args[0] in ("record", "play", "info", "echo"):
+        run = {"record": _record, "play": _play, "info": info_main, "echo": echo_main}
+        return piped(run[args[0]], args[1:])
+    ns = p.parse_args(args)
+    if ns.command is None:
+        p.print_help()
+        return 0
+    return 0  # pragma: no cover
+
+
+def info_main(argv: Sequence[str]) -> int:
+    p = argparse.ArgumentParser(
+        prog="miro log info",
+        description="Summarise an event log: topics, types, counts, time span and rates.",
+    )
+    p.add_argument("file", help="an MCAP file")
+    ns = p.parse_args(argv)
+    from miro_gen.eventlog.reader import LogError
+    from miro_gen.eventlog.show import date_text
+
+    log = open_log(ns.file)
+    if log is None:
+        return 1
+    counts: dict[int, int] = {}
+    first = last = None
+    error = None
+    with log:
+        if log.summary is not None and log.summary.statistics is not None:
+            stats = log.summary.statistics
+            counts = dict(stats.channel_message_counts)
+            if stats.message_count:
+                first, last = stats.message_start_time, stats.message_end_time
+        else:
+            try:
+                for topic, message in log.messages():
+                    counts[topic.id] = counts.get(topic.id, 0) + 1
+                    t = message.log_time
+                    first = t if first is None else min(first, t)
+                    last = t if last is None else max(last, t)
+            except LogError as e:
+                error = str(e)
+        topics = log.topics()
+    total = sum(counts.values())
+    duration = (last - first) / 1e9 if first is not None and last is not None else 0.0
+    state = "unfinished (no summary)" if log.unfinished else "finished"
+    print(f"file:      {ns.file} ({state})")
+    print(f"events:    {total}")
+    if first is not None and last is not None:
+        print(f"start:     {date_text(first)} ({first / 1e9:.9f})")
+        print(f"end:       {date_text(last)} ({last / 1e9:.9f})")
+        print(f"duration:  {duration:.3f} s")
+    print(f"topics:    {len(topics)}")
+    width = max((len(t.topic) for t in topics), default=0)
+    type_width = max((len(t.schema_name or "(no schema)") for t in topics), default=0)
+    for t in topics:
+        n = counts.get(t.id, 0)
+        rate = f"{n / duration:10.2f} Hz" if duration > 0 else ""
+        print(
+            f"  {t.topic:<{width}}  {t.schema_name or '(no schema)':<{type_width}}  "
+            f"{n:8d} events{rate}  hash {t.type_hash[:12]}"
+        )
+    if error is not None:
+        print(f"{ns.file}: error: {error}", file=sys.stderr)
+        return 1
+    if log.unfinished:
+        unfinished_warning(ns.file)
+    return 0
+
+
+def _compile_missing_types(path: str, log: Any) -> None:
+    """Compile the log's schemas whose types are not generated here, so that they decode."""
+    from miro_gen.eventlog.types import find_type, types_from_schemas
+
+    missing = [
+        t
+        for t in log.topics()
+        if t.schema_encoding == "omgidl" and t.type_hash and find_type(t.type_hash) is None
+    ]
+    if missing:
+        why = types_from_schemas([t.schema.decode("utf-8", "replace") for t in missing])
+        if why is not None:
+            names = ", ".join(t.topic for t in missing)
+            print(f"{path}: warning: cannot decode {names}: {why}", file=sys.stderr)
+
+
+def echo_main(argv: Sequence[str]) -> int:
+    p = argparse.ArgumentParser(
+        prog="miro log echo",
+        description="Print the events of a log, decoded with the generated types here.",
+    )
+    p.add_argument("file", help="an MCAP file")
+    p.add_argument(
+        "topics", nargs="*", type=topic_arg, metavar="TOPIC", help="DOMAIN/TYPE (default all)"
+    )
+    p.add_argument("-n", "--count", type=int, default=0, help="stop after N events")
+    ns = p.parse_args(argv)
+    from miro_gen.eventlog.reader import LogError
+    from miro_gen.eventlog.show import clock_text, payload_text
+    from miro_gen.eventlog.types import matches
+
+    log = open_log(ns.file)
+    if log is None:
+        return 1
+    shown = 0
+    with log:
+        try:
+            _compile_missing_types(ns.file, log)
+            for topic, message in log.messages():
+                if ns.topics and not any(
+                    matches(f, topic.domain, topic.type_name) for f in ns.topics
+                ):
+                    continue
+                text = payload_text(topic.type_hash, message.data)
+                print(f"{clock_text(message.log_time)} {topic.topic} #{message.sequence} {text}")
+                shown += 1
+                if ns.count and shown >= ns.count:
+                    break
+        except LogError as e:
+            sys.stdout.flush()
+            print(f"{ns.file}: error: {e}", file=sys.stderr)
+            return 1
+    if log.unfinished:
+        unfinished_warning(ns.file)
+    return 0
+
+
+def _record(argv: Sequence[str]) -> int:
+    from miro_gen.cli.log_record import record_main
+
+    return record_main(argv)
+
+
+def _play(argv: Sequence[str]) -> int:
+    from miro_gen.cli.log_play import play_main
+
+    return play_main(argv)

@@ -1,0 +1,75 @@
+"""`miro log record`: Miro's LogNotify, recording a channel into an MCAP file."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from collections.abc import Sequence
+
+from miro_gen.cli.eventargs import (
+    COMMON,
+    make_server,
+    resolve_or_wait,
+    split_common,
+    topic_arg,
+)
+
+
+def record_main(argv: Sequence[str]) -> int:
+    prog = "miro log record"
+    p = argparse.ArgumentParser(
+        prog=prog,
+        description="Record the events of a channel into an MCAP file, a channel per "
+        "DOMAIN/TYPE topic, until Ctrl-C (or SIGTERM), which finishes the file. " + COMMON,
+    )
+    p.add_argument("-o", "--output", required=True, metavar="FILE", help="the MCAP file")
+    p.add_argument("-f", "--force", action="store_true", help="overwrite FILE if it exists")
+    p.add_argument("--channel", default="EventChannel", metavar="NAME", help="default EventChannel")
+    p.add_argument(
+        "topics",
+        nargs="*",
+        type=topic_arg,
+        metavar="TOPIC",
+        help="DOMAIN/TYPE to record, * for any part (robot1/*, */Odometry); default all",
+    )
+    ns = p.parse_args(split_common(p, argv))
+    if os.path.exists(ns.output) and not ns.force:
+        p.error(f"{ns.output} exists (use --force to overwrite it)")
+    from miro_gen.eventlog.progress import StatusLine
+    from miro_gen.eventlog.recorder import Recorder
+    from miro_gen.eventlog.writer import LogWriter
+
+    server = make_server(p, prog, argv)
+    try:
+        writer = LogWriter(ns.output)
+    except OSError as e:
+        print(f"{ns.output}: error: cannot write: {e.strerror or e}", file=sys.stderr)
+        server.close()
+        return 1
+    status = StatusLine()
+    try:
+        channel = resolve_or_wait(server, ns.channel, prog)
+    except KeyboardInterrupt:
+        writer.finish()
+        server.close()
+        status.done(f"{ns.output}: 0 events (stopped before {ns.channel} was bound)")
+        return 130
+    subs = ns.topics or [("*", "*")]
+    recorder = Recorder(server, channel, subs, writer, status)
+    shown = " ".join(f"{d}/{t}" for d, t in subs)
+    print(f"recording {shown} from {channel.name} into {ns.output}", file=sys.stderr)
+    recorder.run()
+    for topic, type_hash in sorted(writer.unknown_types):
+        print(
+            f"{prog}: warning: {topic}: no generated type here has the type hash "
+            f"{type_hash[:12]}; recorded without a schema (Foxglove cannot decode it)",
+            file=sys.stderr,
+        )
+    missed = f", {recorder.tap.missed} missed (sequence gaps)" if recorder.tap.missed else ""
+    status.done(
+        f"{ns.output}: {writer.messages} events{missed} in "
+        f"{time.monotonic() - recorder.started:.1f} s"
+    )
+    return 0

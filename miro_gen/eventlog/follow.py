@@ -1,0 +1,63 @@
+"""`--clock log`: make a process's clock follow a log player's.
+
+The player publishes `MiroLogClock` events (`MiroLog::Clock`) on its clock channel (`LogClock`
+in its naming context). A follower resolves that channel, waiting for the player to bind it,
+and hands every clock message to the process's `LogClock`, on the reactor thread.
+"""
+
+from __future__ import annotations
+
+import threading
+from typing import Any
+
+import MiroLog
+import MiroNaming
+
+from miro_gen.clock import LogClock
+from miro_gen.exceptions import SystemException
+from miro_gen.log import logger
+from miro_gen.transport.events import StructuredEvent, StructuredPushConsumer
+
+CLOCK_TYPE = "MiroLogClock"
+RETRY = 0.2  # seconds between attempts to resolve the clock channel
+_log = logger("MIRO")
+
+
+class ClockFollower(StructuredPushConsumer):
+    """Feeds a player's clock messages to `clock`."""
+
+    def __init__(self, channel: Any, clock: LogClock) -> None:
+        super().__init__(channel)
+        self.clock = clock
+        self.set_subscriptions([("*", CLOCK_TYPE)])
+
+    def push_structured_event(self, event: StructuredEvent) -> None:
+        c = event.payload
+        if isinstance(c, MiroLog.Clock):
+            self.clock.update(c.log_time_ns, c.rate, c.paused, c.epoch)
+
+
+def follow_log_clock(server: Any, channel_name: str, clock: LogClock) -> threading.Thread:
+    """Follow the clock published on `channel_name`, from a thread that waits for the channel
+    to be bound (the process may start before the player)."""
+    stop = threading.Event()
+    server.on_shutdown(stop.set)
+
+    def run() -> None:
+        told = False
+        while not stop.is_set():
+            try:
+                channel = server.resolve_channel(channel_name)
+            except (MiroNaming.NotFound, SystemException) as e:
+                if not told:
+                    _log.notice("--clock log: waiting for %s (%s)", channel_name, e)
+                    told = True
+                stop.wait(RETRY)
+                continue
+            ClockFollower(channel, clock)
+            _log.notice("--clock log: following the clock on %s", channel.name)
+            return
+
+    thread = threading.Thread(target=run, name="miro-log-clock", daemon=True)
+    thread.start()
+    return thread

@@ -1,0 +1,32 @@
+"""Rate statistics of a stream of events, for `miro hz` (like rostopic hz)."""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+
+class RateWindow:
+    """The periods between the last `window` + 1 arrivals: their rate, min, max and spread."""
+
+    def __init__(self, window: int = 100) -> None:
+        self.periods: deque[float] = deque(maxlen=window)
+        self.last: float | None = None
+        self.count = 0
+
+    def add(self, t: float) -> None:
+        """An arrival at `t` seconds."""
+        if self.last is not None:
+            self.periods.append(t - self.last)
+        self.last = t
+        self.count += 1
+
+    def stats(self) -> tuple[float, float, float, float] | None:
+        """(rate Hz, min s, max s, standard deviation s), or None before two arrivals."""
+        n = len(self.periods)
+        if n == 0:
+            return None
+        mean = sum(self.periods) / n
+        std = math.sqrt(sum((p - mean) ** 2 for p in self.periods) / n)
+        rate = 1 / mean if mean > 0 else math.inf
+        return rate, min(self.periods), max(self.periods), std

@@ -1,0 +1,73 @@
+"""Miro's LogNotify: record the events of a channel into an MCAP log.
+
+Everything happens on the recorder's reactor thread: a raw tap hands over each frame's events,
+the writer appends them to the current chunk, and a timer closes chunks that are a second old
+and refreshes the progress line. The reactor stops on SIGINT, SIGTERM or SIGHUP, and the file
+is then finished whatever the way out.
+"""
+
+from __future__ import annotations
+
+import signal
+import time
+from collections.abc import Sequence
+from typing import Any
+
+from miro_gen.eventlog.progress import StatusLine, human_bytes
+from miro_gen.eventlog.tap import RawEventTap
+from miro_gen.eventlog.types import import_generated_packages
+from miro_gen.eventlog.wire import RawEvent
+from miro_gen.eventlog.writer import LogWriter
+
+CLOCK_TYPE = "MiroLogClock"  # a player's clock: not an event of the robot, never recorded
+TICK = 0.25  # seconds between chunk checks and progress updates
+
+
+class Recorder:
+    """Records `subscriptions` of `channel` (resolved by `server`) into `writer`."""
+
+    def __init__(
+        self,
+        server: Any,
+        channel: Any,
+        subscriptions: Sequence[tuple[str, str]],
+        writer: LogWriter,
+        status: StatusLine,
+    ) -> None:
+        self.server = server
+        self.writer = writer
+        self.status = status
+        self.started = time.monotonic()
+        self._last = (self.started, 0)
+        self.rate = 0.0
+        import_generated_packages()  # now, not on the first event: that would delay it
+        self.tap = RawEventTap(channel, subscriptions, self._write, skip=[CLOCK_TYPE])
+        server.reactor().schedule_timer(TICK, TICK, self._tick)
+
+    def _write(self, events: list[RawEvent], received_ns: int) -> None:
+        self.writer.write(events, received_ns)
+
+    def _tick(self, _: object = None) -> None:
+        self.writer.tick()
+        now = time.monotonic()
+        then, count = self._last
+        if now - then >= 1.0:
+            self.rate = (self.writer.messages - count) / (now - then)
+            self._last = (now, self.writer.messages)
+        self.status.update(self.line())
+
+    def line(self) -> str:
+        missed = f", {self.tap.missed} missed" if self.tap.missed else ""
+        return (
+            f"recording {self.writer.path}: {self.writer.messages} events{missed}, "
+            f"{self.rate:.0f}/s, {human_bytes(self.writer.size())}"
+        )
+
+    def run(self) -> None:
+        """Record until a signal (or `server.shutdown()`); the file is finished after."""
+        old = signal.signal(signal.SIGHUP, lambda *_: self.server.shutdown())
+        try:
+            self.server.run()
+        finally:
+            signal.signal(signal.SIGHUP, old)
+            self.writer.finish()

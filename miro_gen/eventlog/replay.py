@@ -1,0 +1,92 @@
+"""A supplier that sends events already encoded, with the stamps they were recorded with.
+
+A player must publish each logged event as its original supplier did: same domain, type name,
+type hash, sequence number and source stamp, the CDR payload untouched. `ReplaySupplier` is a
+`StructuredPushSupplier` (its socket, its connection to the channel, its `push()` for the
+player's own events) with `push_encoded()` for those. Like `push()`, it may be called from any
+thread: the events wait for the reactor's next turn and leave in one frame per run of events of
+one topic, type hash and supplier.
+"""
+
+from __future__ import annotations
+
+import threading
+from typing import NamedTuple
+
+import zmq
+
+from miro_gen.eventlog.wire import MAX_EVENTS, pack_batch
+from miro_gen.transport.events import EventChannel, StructuredPushSupplier, topic
+
+
+class _Encoded(NamedTuple):
+    domain: str
+    type_name: str
+    type_hash: str
+    supplier: int
+    seq: int
+    stamp_ns: int
+    publish_ns: int
+    data: bytes
+
+
+class ReplaySupplier(StructuredPushSupplier):
+    """Publishes pre-encoded events into `channel` (and, with `push()`, its own)."""
+
+    def __init__(self, channel: EventChannel, domain_name: str | None = None) -> None:
+        super().__init__(channel, domain_name)
+        self._pending: list[_Encoded] = []
+        self._pending_lock = threading.Lock()
+        self._scheduled = False
+        self.replayed = 0
+        self.replay_dropped = 0
+
+    def push_encoded(
+        self,
+        domain: str,
+        type_name: str,
+        type_hash: str,
+        supplier: int,
+        seq: int,
+        stamp_ns: int,
+        publish_ns: int,
+        data: bytes,
+    ) -> None:
+        """Queue one event as it was recorded: `data` is its CDR payload."""
+        event = _Encoded(domain, type_name, type_hash, supplier, seq, stamp_ns, publish_ns, data)
+        with self._pending_lock:
+            self._pending.append(event)
+            schedule = not self._scheduled
+            self._scheduled = True
+        if schedule:
+            self.reactor.call_soon(self._send_encoded)
+
+    def _send_encoded(self) -> None:
+        with self._pending_lock:
+            pending, self._pending = self._pending, []
+            self._scheduled = False
+        run: list[_Encoded] = []
+        for e in pending:
+            if run and (
+                (e.domain, e.type_name, e.type_hash, e.supplier)
+                != (run[0].domain, run[0].type_name, run[0].type_hash, run[0].supplier)
+                or len(run) == MAX_EVENTS
+            ):
+                self._send_run(run)
+                run = []
+            run.append(e)
+        if run:
+            self._send_run(run)
+
+    def _send_run(self, run: list[_Encoded]) -> None:
+        first = run[0]
+        body = pack_batch(
+            first.supplier,
+            first.type_hash,
+            [(e.seq, e.stamp_ns, e.publish_ns, e.data) for e in run],
+        )
+        try:
+            self.socket.send_multipart([topic(first.domain, first.type_name), body], zmq.NOBLOCK)
+            self.replayed += len(run)
+        except zmq.Again:  # at the high-water mark: dropped, as a live supplier's would be
+            self.replay_dropped += len(run)

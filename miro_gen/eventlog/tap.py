@@ -1,0 +1,104 @@
+"""A raw consumer of an event channel: events as they travel, payloads not decoded.
+
+What the recorder and `miro hz` need: every event's bytes, stamps and sequence number, at the
+rate the channel carries them, without the cost of decoding. Like the transport's consumers it
+subscribes by (domain, type), `*` matching any, filters at the socket where a prefix can, and
+counts the events it missed per supplier and type from their sequence numbers.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterable
+from typing import Any
+
+import zmq
+
+from miro_gen.eventlog.gaps import GapCounter
+from miro_gen.eventlog.types import matches
+from miro_gen.eventlog.wire import FrameError, RawEvent, parse_batch, split_topic
+from miro_gen.log import logger
+from miro_gen.transport.events import HWM, EventChannel, subscription_prefix
+
+_log = logger("MIRO")
+RCVHWM = 100_000  # frames: a recorder would rather queue than drop while it writes a chunk
+
+Handler = Callable[[list[RawEvent], int], object]  # events of one frame, receive time ns
+
+
+class RawEventTap:
+    """Calls `handler(events, received_ns)` on the reactor thread for each frame received
+    whose topic matches `subscriptions`. `skip` type names are never delivered."""
+
+    def __init__(
+        self,
+        channel: EventChannel,
+        subscriptions: Iterable[tuple[str, str]],
+        handler: Handler,
+        skip: Iterable[str] = (),
+    ) -> None:
+        self.channel = channel
+        self.reactor = channel.reactor
+        self.handler = handler
+        self.filters = list(subscriptions)
+        self.skip = set(skip)
+        self.received = 0
+        self.gaps = GapCounter()
+        self.bad_frames = 0
+        self._wanted: dict[bytes, bool] = {}
+        self.socket: zmq.Socket[Any] = self.reactor.context.socket(zmq.SUB)
+        self.socket.setsockopt(zmq.LINGER, 0)
+        self.socket.setsockopt(zmq.RCVHWM, max(HWM, RCVHWM))
+        for prefix in {subscription_prefix(d, t) for d, t in self.filters}:
+            self.socket.setsockopt(zmq.SUBSCRIBE, prefix)
+        self.socket.connect(channel.consumer_endpoint)
+        self.reactor.call_soon(self.reactor.register, self.socket, self._readable)
+
+    def _readable(self) -> None:
+        for _ in range(1000):
+            try:
+                parts = self.socket.recv_multipart(zmq.NOBLOCK, copy=True)
+            except zmq.Again:
+                return
+            received_ns = time.time_ns()
+            try:
+                events = self._parse(parts)
+            except FrameError as e:
+                self.bad_frames += 1
+                _log.warning("dropped an event frame on %s: %s", self.channel.name, e)
+                continue
+            if events:
+                self.received += len(events)
+                self.handler(events, received_ns)
+
+    def _parse(self, parts: list[bytes]) -> list[RawEvent]:
+        if len(parts) != 2:
+            raise FrameError(f"{len(parts)} frames, expected 2")
+        head, body = parts
+        wanted = self._wanted.get(head)
+        domain, type_name = split_topic(head)
+        if wanted is None:
+            wanted = type_name not in self.skip and any(
+                matches(f, domain, type_name) for f in self.filters
+            )
+            if len(self._wanted) < 10_000:
+                self._wanted[head] = wanted
+        if not wanted:
+            return []
+        events = parse_batch(domain, type_name, body)
+        observe = self.gaps.observe
+        for e in events:
+            observe(e.supplier, type_name, e.seq)
+        return events
+
+    @property
+    def missed(self) -> int:
+        """Events lost between their suppliers and this tap."""
+        return self.gaps.missed
+
+    def close(self) -> None:
+        def close() -> None:
+            self.reactor.unregister(self.socket)
+            self.socket.close(0)
+
+        self.reactor.call_soon(close)

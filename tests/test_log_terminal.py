@@ -1,0 +1,115 @@
+"""The log tools on a terminal (a pseudo-terminal here): the player's keys and progress bar,
+the recorder's progress line."""
+
+from __future__ import annotations
+
+import os
+import pty
+import select
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from eventlog_helpers import proc, read_events, stop
+from loopback import NamingProcess, service_env
+from test_log_clock import synthetic_log
+
+
+@pytest.fixture(scope="module")
+def naming() -> Iterator[str]:
+    process = NamingProcess(options=("--channel", "EventChannel"))
+    yield process.endpoint
+    process.stop()
+
+
+class Terminal:
+    """`miro ARGS` with a pseudo-terminal as its stdin and stderr."""
+
+    def __init__(self, *args: str, cwd: Path | None = None) -> None:
+        self.master, slave = pty.openpty()
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "miro_gen.cli.main", *args],
+            stdin=slave,
+            stdout=subprocess.DEVNULL,
+            stderr=slave,
+            env=service_env(),
+            cwd=cwd,
+        )
+        os.close(slave)
+        self.screen = ""
+
+    def read(self, seconds: float) -> str:
+        """What it printed in the next `seconds`."""
+        end = time.monotonic() + seconds
+        while (left := end - time.monotonic()) > 0:
+            ready, _, _ = select.select([self.master], [], [], left)
+            if ready:
+                try:
+                    self.screen += os.read(self.master, 4096).decode(errors="replace")
+                except OSError:  # it has exited
+                    break
+        return self.screen
+
+    def key(self, ch: str) -> None:
+        os.write(self.master, ch.encode())
+
+    def close(self) -> int:
+        code = self.proc.wait(20)
+        os.close(self.master)
+        return code
+
+
+def received(printer: subprocess.Popen[str]) -> int:
+    return len(read_events(stop(printer, signal.SIGTERM)[0]))
+
+
+def test_space_pauses_s_steps_and_q_quits(naming: str, tmp_path: Path) -> None:
+    log = tmp_path / "ten_seconds.mcap"
+    synthetic_log(log, 10)  # 41 events, one every 0.25 s
+    printer = proc("event_printer.py", "--naming", naming, "-MNC", "gui", "EventChannel")
+    assert printer.stdout is not None and printer.stdout.readline().strip() == "READY"
+    term = Terminal("log", "play", str(log), "--naming", naming, "-MNC", "robot1")
+    try:
+        screen = term.read(1.5)
+        assert "playing " in screen and "[#" in screen and " events  x1" in screen
+        term.key(" ")
+        assert "paused (space: resume, s: step)" in term.read(0.5)
+        before = term.screen.count("\r")
+        term.read(1.0)
+        term.key("s")
+        term.key("s")
+        term.read(0.5)
+        term.key("q")
+        term.read(1.0)
+        assert term.close() == 0
+        assert term.screen.count("\r") > before
+    finally:
+        if term.proc.poll() is None:
+            term.proc.kill()
+        got = received(printer)
+    # Paused after about 1 s (some 3 events), then two steps: far fewer than the 41 logged.
+    summary = term.screen.rsplit("replayed ", 1)[1].split()[0]
+    assert got == int(summary)
+    assert 3 <= got <= 10
+
+
+def test_the_recorder_shows_its_progress(naming: str, tmp_path: Path) -> None:
+    path = tmp_path / "progress.mcap"
+    term = Terminal("log", "record", "--naming", naming, "-o", path.name, cwd=tmp_path)
+    try:
+        term.read(1.5)
+        sup = proc("event_supplier.py", "--naming", naming, "-MNC", "robot9", "EventChannel", "30")
+        sup.communicate(timeout=30)
+        screen = term.read(1.0)
+        assert "\rrecording " in screen and "30 events" in screen and "/s, " in screen
+        term.proc.send_signal(signal.SIGINT)
+        term.read(1.0)
+        assert term.close() == 0
+        assert f"{path.name}: 30 events in" in term.screen
+    finally:
+        if term.proc.poll() is None:
+            term.proc.kill()
