@@ -324,3 +324,22 @@ def test_a_slow_consumer_with_a_backlog_stops_promptly(
     slow_server.stop()
     assert not slow_server.thread.is_alive()
     assert time.monotonic() - start < 3
+
+
+def test_a_type_is_found_by_hash_without_its_package_imported() -> None:
+    """A recorder or echo tool handles any event type: it finds generated packages itself."""
+    import subprocess
+    import sys
+
+    from loopback import service_env
+
+    code = (
+        "import sys\n"
+        "from miro_gen.runtime.cdr import type_for_hash\n"
+        f"cls = type_for_hash({Miro.GpsDataIDL._type_hash!r})\n"
+        "print(cls.__module__, cls.__name__)\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env=service_env()
+    )
+    assert done.stdout.strip() == "Miro.Gps_idl GpsDataIDL", done.stderr

@@ -213,3 +213,17 @@ def test_miro_sim_replays_the_shipped_recording(tmp_path: Path) -> None:
         sim.send_signal(signal.SIGINT)
         sim.wait(10)
     assert not link.exists()  # the simulator cleans up its link
+
+
+def test_the_shipped_recording_of_the_drivers_events_decodes() -> None:
+    from mcap.reader import make_reader
+
+    with (GPS / "data" / "drive.mcap").open("rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        assert summary is not None
+        schemas = {s.name for s in summary.schemas.values()}
+        assert schemas == {"Miro::GpsDataIDL"}
+        fixes = [Miro.GpsDataIDL.deserialize(m.data) for _, _, m in reader.iter_messages()]
+    assert len(fixes) >= 100
+    assert all(f.valid and 45.38 < f.latitude < 45.39 for f in fixes)
