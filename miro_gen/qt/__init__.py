@@ -20,5 +20,6 @@ except ImportError as _e:
     ) from _e
 
 from miro_gen.qt.bridge import QtEventBridge, Subscription
+from miro_gen.qt.calls import CallRunner, PendingCall
 
-__all__ = ["QtEventBridge", "Subscription"]
+__all__ = ["CallRunner", "PendingCall", "QtEventBridge", "Subscription"]
