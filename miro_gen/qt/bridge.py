@@ -231,6 +231,11 @@ class QtEventBridge(QObject):
         for sub in self.subscriptions:
             sub.close()
         thread = self._thread
+        if thread is None and first and isinstance(self.server, Server):
+            # Never started: one turn of its loop, so that the Server unbinds and closes its
+            # sockets as after any run (a ZeroMQ context with open sockets hangs at exit).
+            self.reactor.call_soon(self.server.shutdown)
+            self.server.run()
         if thread is not None and thread.is_alive():
             if isinstance(self.server, Server):
                 self.server.shutdown()
