@@ -48,8 +48,8 @@ class Subscription(QObject):
     With `queue=None` only the latest event of each topic (domain, type) waits for the GUI;
     with `queue=N` up to N events wait in order and the oldest give way. Waiting events are
     delivered together, at most `max_rate` times a second (0: as fast as the GUI takes them).
-    `dropped` counts the events that never reached the GUI; `consumer.missed` those lost on
-    the way from the supplier."""
+    `deliveries` counts the turns of the GUI thread that delivered events, `dropped` the events
+    that never reached the GUI, `consumer.missed` those lost on the way from the supplier."""
 
     received = Signal(object)  # a StructuredEvent
     _wake = Signal()
@@ -70,6 +70,7 @@ class Subscription(QObject):
         self.queue = queue
         self.interval = 1.0 / max_rate if max_rate > 0 else 0.0
         self.delivered = 0
+        self.deliveries = 0
         self.dropped = 0
         self._lock = threading.Lock()
         self._latest: dict[tuple[str, str], StructuredEvent] = {}
@@ -125,6 +126,7 @@ class Subscription(QObject):
                 self._fifo.clear()
             self._wake_pending = False
         self._last_delivery = time.monotonic()
+        self.deliveries += 1
         for event in events:
             if self._closed:
                 break
