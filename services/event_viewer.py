@@ -132,6 +132,11 @@ class ViewerWindow(QMainWindow):
 
     def _update_status(self) -> None:
         sub = self.subscription
+        if sub is not None and self.last_event is None and sub.consumer.undecodable:
+            self.status.setText(
+                f"{sub.consumer.undecodable} {self.type_name} events of a type no imported "
+                "generated module has: --import its package"
+            )
         if sub is None or self.last_event is None:
             return
         then, received_then, _ = self._rate

@@ -17,9 +17,10 @@ from loopback import NamingProcess
 from qt_procs import ServiceProcess
 from qt_support import QCloseEvent, QLabel, QTimer, QWidget, application, qt_run, qt_wait
 
-from miro_gen import Server, StructuredEvent
+from miro_gen import Client, Server, StructuredEvent
 from miro_gen.qt import QtEventBridge, Subscription
 from miro_gen.transport.events import EventChannel
+from miro_gen.transport.reactor import Reactor
 
 FLOOD = 150_000
 FLOODER = "tests/procs/flood_supplier.py"
@@ -211,3 +212,27 @@ def test_closing_the_window_stops_the_reactor_thread(
     seen = len(got)
     qt_run(0.5)
     assert len(got) == seen  # nothing delivered after the stop
+
+
+def test_a_bridge_over_a_bare_reactor(naming: str, services: Callable[..., ServiceProcess]) -> None:
+    """Any reactor will do: here one with no Server, given a channel found by a Client."""
+    supplier = services(FLOODER, "--naming", naming, "-MNC", "b", "B1", "100000", "200")
+    supplier.wait_line("READY")
+    application()
+    context = zmq.Context()
+    client = Client(["gui", "--naming", naming], context=context)
+    entry = client.naming.resolve("b/B1")
+    reactor = Reactor(context)
+    channel = EventChannel(entry.name, entry.endpoint, bytes(entry.key).decode(), reactor)
+    bridge = QtEventBridge(reactor)
+    with pytest.raises(TypeError, match="pass channels"):
+        bridge.subscribe([("*", "*")], "b/B1")
+    sub = bridge.subscribe([("*", "ExampleEvent")], channel)
+    got: list[int] = []
+    sub.received.connect(lambda e: got.append(e.payload.counter))
+    bridge.start()
+    qt_wait(lambda: len(got) >= 5, 15)
+    assert got == sorted(got)
+    assert bridge.stop() and not bridge.running
+    reactor.close()  # a bare reactor is its owner's to close
+    client.close()

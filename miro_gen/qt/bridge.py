@@ -152,7 +152,8 @@ class Subscription(QObject):
 class QtEventBridge(QObject):
     """Runs a Server's (or a bare Reactor's) loop in a background thread for a Qt GUI, and
     hands its events to the GUI thread through `Subscription`s. Stops when `stop()` is
-    called, when the application quits, or when the `window` it watches closes."""
+    called, when the application quits, or when the `window` it watches closes. A Server
+    closes its sockets when its loop ends; a bare Reactor is left for its owner to close."""
 
     stopped = Signal()
 
