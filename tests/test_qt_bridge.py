@@ -236,3 +236,12 @@ def test_a_bridge_over_a_bare_reactor(naming: str, services: Callable[..., Servi
     assert bridge.stop() and not bridge.running
     reactor.close()  # a bare reactor is its owner's to close
     client.close()
+
+
+def test_stopping_at_once_after_starting(bridges: Callable[..., QtEventBridge]) -> None:
+    """A window closed as soon as it opened: stop() right after start() still stops."""
+    bridge = bridges()
+    bridge.start()
+    start = time.monotonic()
+    assert bridge.stop()
+    assert time.monotonic() - start < 2 and not bridge.running

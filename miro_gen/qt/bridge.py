@@ -240,10 +240,9 @@ class QtEventBridge(QObject):
             self.reactor.call_soon(self.server.shutdown)
             self.server.run()
         if thread is not None and thread.is_alive():
-            if isinstance(self.server, Server):
-                self.server.shutdown()
-            else:
-                self.reactor.stop()
+            halt = self.server.shutdown if isinstance(self.server, Server) else self.reactor.stop
+            halt()
+            self.reactor.call_soon(halt)  # also if the loop had not begun yet (run() resets)
             thread.join(timeout)
             if thread.is_alive():
                 _log.warning("the reactor thread did not stop within %g s", timeout)
