@@ -3,6 +3,7 @@ and the errors a wrong form gets (named, all at once, no traceback)."""
 
 from __future__ import annotations
 
+import logging
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -189,3 +190,57 @@ def test_the_panel_command_refuses_a_bad_form_plainly(naming: str, tmp_path: Pat
         )
         assert out.returncode == 1, out.stderr
         assert message in out.stderr and "Traceback" not in out.stderr
+
+
+def test_a_field_that_events_lack_is_reported_once(
+    naming: str, robot: None, tmp_path: Path
+) -> None:
+    application()
+    path = form_with(
+        tmp_path,
+        item("QLabel", "event__ExampleEvent__data__c")
+        + item("QLabel", "event__ExampleEvent__counter")
+        + item("QLabel", "status"),
+    )
+    form = load_ui(path)
+    server = Server(["panel", "--naming", naming, "-MNC", "robot"], context=zmq.Context())
+    bridge = QtEventBridge(server, window=form)
+    binding = FormBinding(form, bridge, channel="ExampleEventChannel")
+    errors: list[str] = []
+    binding.error.connect(errors.append)
+    binding.bind()
+    form.show()
+    bridge.start()
+    try:
+        counter = form.findChild(QLabel, "event__ExampleEvent__counter")
+        status = form.findChild(QLabel, "status")
+        assert counter is not None and status is not None
+        qt_wait(lambda: counter.text() not in ("", "0"), 15)
+        first = int(counter.text())
+        qt_wait(lambda: int(counter.text()) >= first + 3)  # the good field goes on
+        assert errors == ["event__ExampleEvent__data__c: data has no field 'c' (a, b)"]
+        assert status.text() == errors[0]
+    finally:
+        form.close()
+        qt_wait(lambda: not bridge.running, 5)
+
+
+def test_a_form_promoting_to_an_unknown_widget_loads_with_a_warning(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    application()
+    path = tmp_path / "promoted.ui"
+    path.write_text(
+        '<?xml version="1.0"?><ui version="4.0"><widget class="QWidget" name="Form">'
+        '<widget class="Gauge" name="gauge"/></widget><customwidgets><customwidget>'
+        "<class>Gauge</class><extends>QWidget</extends><header>gauges.h</header>"
+        "</customwidget></customwidgets></ui>"
+    )
+    qt_log = logging.getLogger("miro.QT")  # miro's loggers do not propagate to pytest's
+    qt_log.addHandler(caplog.handler)
+    try:
+        form = load_ui(path)
+    finally:
+        qt_log.removeHandler(caplog.handler)
+    assert form.findChild(QWidget, "gauge") is not None  # made as its base class
+    assert "custom widget of the class 'Gauge'" in caplog.text

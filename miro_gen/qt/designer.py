@@ -94,6 +94,8 @@ def load_ui(path: str | Path, parent: QWidget | None = None) -> QWidget:
     if form is None:
         why = said[-1] if said else loader.errorString()
         raise UiError(f"{path}: not a Qt Designer form: {why.removeprefix('Designer: ')}")
+    for message in said:  # loaded, with remarks (a promoted class it does not know, ...)
+        _log.warning("%s: %s", path, message.removeprefix("Designer: "))
     return form
 
 
