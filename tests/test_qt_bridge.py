@@ -17,7 +17,7 @@ from loopback import NamingProcess
 from qt_procs import ServiceProcess
 from qt_support import QCloseEvent, QLabel, QTimer, QWidget, application, qt_run, qt_wait
 
-from miro_gen import Client, Server, StructuredEvent
+from miro_gen import Client, Server, StructuredEvent, StructuredPushConsumer
 from miro_gen.qt import QtEventBridge, Subscription
 from miro_gen.transport.events import EventChannel
 from miro_gen.transport.reactor import Reactor
@@ -245,3 +245,37 @@ def test_stopping_at_once_after_starting(bridges: Callable[..., QtEventBridge]) 
     start = time.monotonic()
     assert bridge.stop()
     assert time.monotonic() - start < 2 and not bridge.running
+
+
+def test_a_consumer_of_your_own_feeds_a_mailbox(
+    bridges: Callable[..., QtEventBridge], services: Callable[..., ServiceProcess], naming: str
+) -> None:
+    supplier = services(FLOODER, "--naming", naming, "-MNC", "m", "M1", str(FLOOD))
+    supplier.wait_line("READY")
+    bridge = bridges()
+    box = bridge.mailbox()  # latest only
+
+    class Mine(StructuredPushConsumer):
+        def push_structured_event(self, event: StructuredEvent) -> None:
+            box.offer(event.payload.counter, key="counter")
+
+    mine = Mine(resolved(bridge, "m/M1"))
+    mine.set_subscriptions([("*", "ExampleEvent")])
+    got: list[int] = []
+    box.received.connect(got.append)
+    bridge.start()
+    qt_wait(lambda: supplier.line("SENT") is not None, 60)
+    qt_wait(lambda: bool(got) and got[-1] == FLOOD, 10)
+    assert got == sorted(set(got)) and len(got) < mine.received / 10
+    assert box.delivered + box.dropped == mine.received
+
+    queued = bridge.mailbox(queue=5, max_rate=0)  # and from a thread of your own
+    taken: list[int] = []
+    queued.received.connect(taken.append)
+    feeder = threading.Thread(target=lambda: [queued.offer(n) for n in range(1000)])
+    feeder.start()
+    feeder.join()
+    qt_wait(lambda: bool(taken) and taken[-1] == 999)
+    assert taken == sorted(taken) and queued.delivered + queued.dropped == 1000
+    with pytest.raises(ValueError):
+        bridge.mailbox(queue=0)

@@ -19,7 +19,7 @@ except ImportError as _e:
         f"miro_gen.qt needs PySide6, which cannot be imported ({_e}): pip install miro-gen[qt]"
     ) from _e
 
-from miro_gen.qt.bridge import QtEventBridge, Subscription
+from miro_gen.qt.bridge import Mailbox, QtEventBridge, Subscription
 from miro_gen.qt.calls import CallRunner, PendingCall
 
-__all__ = ["CallRunner", "PendingCall", "QtEventBridge", "Subscription"]
+__all__ = ["CallRunner", "Mailbox", "PendingCall", "QtEventBridge", "Subscription"]

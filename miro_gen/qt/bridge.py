@@ -15,7 +15,8 @@ import math
 import threading
 import time
 from collections import deque
-from collections.abc import Iterable
+from collections.abc import Hashable, Iterable
+from typing import Any
 
 import shiboken6
 from PySide6.QtCore import QCoreApplication, QEvent, QObject, Qt, QTimer, Signal
@@ -31,40 +32,28 @@ STOP_TIMEOUT = 5.0  # seconds stop() waits for the reactor thread
 DEFAULT_RATE = 50.0  # deliveries a second, at most, per subscription
 
 
-class _Consumer(StructuredPushConsumer):
-    """Hands each event, on the reactor thread, to its subscription's buffer."""
+class Mailbox(QObject):
+    """Items handed over by any thread with `offer()`, emitted on the GUI thread by `received`.
 
-    def __init__(self, channel: EventChannel, subscription: Subscription) -> None:
-        super().__init__(channel)
-        self._subscription = subscription
+    With `queue=None` only the latest item of each key (an event's topic, domain and type)
+    waits for the GUI; with `queue=N` up to N items wait in order and the oldest give way.
+    Waiting items are delivered together, at most `max_rate` times a second (0: as fast as the
+    GUI takes them). `deliveries` counts the turns of the GUI thread that delivered items,
+    `delivered` the items, `dropped` those that never reached the GUI. Create it on the GUI
+    thread (`QtEventBridge.mailbox()`); a consumer of your own may feed it."""
 
-    def push_structured_event(self, event: StructuredEvent) -> None:
-        self._subscription._offer(event)
-
-
-class Subscription(QObject):
-    """The events of some (domain, type) pairs, emitted on the GUI thread by `received`.
-
-    With `queue=None` only the latest event of each topic (domain, type) waits for the GUI;
-    with `queue=N` up to N events wait in order and the oldest give way. Waiting events are
-    delivered together, at most `max_rate` times a second (0: as fast as the GUI takes them).
-    `deliveries` counts the turns of the GUI thread that delivered events, `dropped` the events
-    that never reached the GUI, `consumer.missed` those lost on the way from the supplier."""
-
-    received = Signal(object)  # a StructuredEvent
+    received = Signal(object)
     _wake = Signal()
 
     def __init__(
         self,
-        channel: EventChannel,
-        subscriptions: Iterable[tuple[str, str]],
         queue: int | None = None,
         max_rate: float = DEFAULT_RATE,
         parent: QObject | None = None,
     ) -> None:
         super().__init__(parent)
         if queue is not None and queue < 1:
-            raise ValueError("a subscription's queue holds at least 1 event (None: latest only)")
+            raise ValueError("a queue holds at least 1 item (queue=None: the latest only)")
         if not max_rate >= 0:
             raise ValueError("max_rate is deliveries a second: 0 (no limit) or more")
         self.queue = queue
@@ -73,8 +62,8 @@ class Subscription(QObject):
         self.deliveries = 0
         self.dropped = 0
         self._lock = threading.Lock()
-        self._latest: dict[tuple[str, str], StructuredEvent] = {}
-        self._fifo: deque[StructuredEvent] = deque()
+        self._latest: dict[Hashable, Any] = {}
+        self._fifo: deque[Any] = deque()
         self._wake_pending = False
         self._closed = False
         self._last_delivery = -math.inf
@@ -82,24 +71,25 @@ class Subscription(QObject):
         self._timer.setSingleShot(True)
         self._timer.timeout.connect(self._deliver)
         self._wake.connect(self._drain, Qt.ConnectionType.QueuedConnection)
-        self.consumer = _Consumer(channel, self)
-        self.consumer.set_subscriptions(subscriptions)
 
-    def _offer(self, event: StructuredEvent) -> None:
-        """Keep `event` for the GUI (reactor thread); wake the GUI unless a wake-up is pending."""
+    def offer(self, item: Any, key: Hashable = None) -> None:
+        """Keep `item` for the GUI (from any thread) and wake the GUI unless a wake-up is
+        already pending. Latest-only, an item replaces the waiting one of the same `key`
+        (default: an event's (domain, type); else all items share one)."""
+        if key is None and isinstance(item, StructuredEvent):
+            key = (item.domain_name, item.type_name)
         with self._lock:
             if self._closed:
                 return
             if self.queue is None:
-                key = (event.domain_name, event.type_name)
                 if key in self._latest:
                     self.dropped += 1
-                self._latest[key] = event
+                self._latest[key] = item
             else:
                 if len(self._fifo) >= self.queue:
                     self._fifo.popleft()
                     self.dropped += 1
-                self._fifo.append(event)
+                self._fifo.append(item)
             if self._wake_pending:
                 return
             self._wake_pending = True
@@ -119,26 +109,26 @@ class Subscription(QObject):
     def _deliver(self) -> None:
         with self._lock:
             if self.queue is None:
-                events = list(self._latest.values())
+                items = list(self._latest.values())
                 self._latest.clear()
             else:
-                events = list(self._fifo)
+                items = list(self._fifo)
                 self._fifo.clear()
             self._wake_pending = False
         self._last_delivery = time.monotonic()
         self.deliveries += 1
-        for event in events:
+        for item in items:
             if self._closed:
                 break
             self.delivered += 1
-            self.received.emit(event)
+            self.received.emit(item)
 
     @property
     def closed(self) -> bool:
         return self._closed
 
     def close(self) -> None:
-        """Stop receiving; events still waiting are discarded."""
+        """Take no more items; those still waiting are discarded."""
         with self._lock:
             if self._closed:
                 return
@@ -146,7 +136,41 @@ class Subscription(QObject):
             self._latest.clear()
             self._fifo.clear()
         self._timer.stop()
-        self.consumer.close()
+
+
+class _Consumer(StructuredPushConsumer):
+    """Hands each event, on the reactor thread, to its subscription."""
+
+    def __init__(self, channel: EventChannel, mailbox: Mailbox) -> None:
+        super().__init__(channel)
+        self._mailbox = mailbox
+
+    def push_structured_event(self, event: StructuredEvent) -> None:
+        self._mailbox.offer(event)
+
+
+class Subscription(Mailbox):
+    """The events of some (domain, type) pairs, emitted on the GUI thread by `received` (a
+    StructuredEvent), latest-only per topic or queued as for any `Mailbox`. Its consumer is
+    its own (`consumer.missed` counts the events lost on the way from the supplier)."""
+
+    def __init__(
+        self,
+        channel: EventChannel,
+        subscriptions: Iterable[tuple[str, str]],
+        queue: int | None = None,
+        max_rate: float = DEFAULT_RATE,
+        parent: QObject | None = None,
+    ) -> None:
+        super().__init__(queue, max_rate, parent)
+        self.consumer = _Consumer(channel, self)
+        self.consumer.set_subscriptions(subscriptions)
+
+    def close(self) -> None:
+        """Stop receiving; events still waiting are discarded."""
+        if not self.closed:
+            super().close()
+            self.consumer.close()
 
 
 class QtEventBridge(QObject):
@@ -167,7 +191,7 @@ class QtEventBridge(QObject):
         super().__init__(parent)
         self.server = server
         self.reactor = server.reactor() if isinstance(server, Server) else server
-        self.subscriptions: list[Subscription] = []
+        self.subscriptions: list[Mailbox] = []  # and mailboxes: what stop() closes
         self._thread: threading.Thread | None = None
         self._stopped = False
         self._windows: list[QWidget] = []
@@ -203,6 +227,14 @@ class QtEventBridge(QObject):
         sub = Subscription(channel, subscriptions, queue, max_rate, self)
         self.subscriptions.append(sub)
         return sub
+
+    def mailbox(self, queue: int | None = None, max_rate: float = DEFAULT_RATE) -> Mailbox:
+        """A Mailbox that a consumer of your own (or any thread) feeds with `offer()`."""
+        if self._stopped:
+            raise RuntimeError("this bridge is stopped")
+        box = Mailbox(queue, max_rate, self)
+        self.subscriptions.append(box)
+        return box
 
     # ---- the reactor thread --------------------------------------------------------------------
 
