@@ -36,8 +36,9 @@ try:
     from miro_gen.qt.app import application, no_display
     from miro_gen.qt.fields import FieldError, get_field, is_number, leaves
     from miro_gen.qt.widgets import FieldsView, PlotWidget
-except ImportError as e:
-    print(f"event_viewer: {e}", file=sys.stderr)
+except ImportError as e:  # PySide6 missing (or a system library Qt needs)
+    hint = "" if "miro-gen[qt]" in str(e) else ": pip install miro-gen[qt]"
+    print(f"event_viewer: {e}{hint}", file=sys.stderr)
     sys.exit(1)
 
 RETRY_MS = 1000  # how often to look for a channel that is not bound yet

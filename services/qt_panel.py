@@ -30,8 +30,9 @@ try:
     from miro_gen.qt import QtEventBridge
     from miro_gen.qt.app import application, no_display
     from miro_gen.qt.designer import FormBinding, UiError, load_ui
-except ImportError as e:
-    print(f"qt_panel: {e}", file=sys.stderr)
+except ImportError as e:  # PySide6 missing (or a system library Qt needs)
+    hint = "" if "miro-gen[qt]" in str(e) else ": pip install miro-gen[qt]"
+    print(f"qt_panel: {e}{hint}", file=sys.stderr)
     sys.exit(1)
 
 FORM = Path(__file__).resolve().with_name("example_panel.ui")
