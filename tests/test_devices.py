@@ -5,11 +5,9 @@ from __future__ import annotations
 
 import socket
 import threading
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-import zmq
 from loopback import eventually
 
 from miro_gen.devices import (
@@ -43,16 +41,6 @@ class Messages(DevConsumer):
 
     def data(self) -> list[bytes]:
         return [m.data for m in self.messages]
-
-
-@pytest.fixture
-def reactor() -> Iterator[Reactor]:
-    r = Reactor(zmq.Context())
-    thread = r.run_in_thread()
-    yield r
-    r.stop()
-    thread.join(5)
-    r.close()
 
 
 def line_device(

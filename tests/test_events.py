@@ -10,7 +10,7 @@ from pathlib import Path
 import Miro
 import pytest
 import zmq
-from loopback import NamingProcess, Recorder, RunningServer, eventually
+from loopback import Recorder, RunningServer, eventually
 
 from miro_gen import (
     EventChannelFactory,
@@ -19,13 +19,6 @@ from miro_gen import (
 )
 
 REPO = Path(__file__).resolve().parents[1]
-
-
-@pytest.fixture(scope="module")
-def naming() -> Iterator[str]:
-    process = NamingProcess()
-    yield process.endpoint
-    process.stop()
 
 
 @pytest.fixture

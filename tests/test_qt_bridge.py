@@ -13,7 +13,6 @@ import Miro  # noqa: F401 - the event types, for decoding
 import MiroNaming
 import pytest
 import zmq
-from loopback import NamingProcess
 from qt_procs import ServiceProcess
 from qt_support import QCloseEvent, QLabel, QTimer, QWidget, application, qt_run, qt_wait
 
@@ -24,13 +23,6 @@ from miro_gen.transport.reactor import Reactor
 
 FLOOD = 150_000
 FLOODER = "tests/procs/flood_supplier.py"
-
-
-@pytest.fixture(scope="module")
-def naming() -> Iterator[str]:
-    process = NamingProcess()
-    yield process.endpoint
-    process.stop()
 
 
 @pytest.fixture

@@ -11,19 +11,11 @@ from collections.abc import Iterator
 import Miro
 import pytest
 import zmq
-from loopback import NamingProcess
 from qt_procs import ServiceProcess
 from qt_support import QPushButton, QTimer, application, qt_wait
 
 from miro_gen import Client, SystemException
 from miro_gen.qt import CallRunner
-
-
-@pytest.fixture(scope="module")
-def naming() -> Iterator[str]:
-    process = NamingProcess()
-    yield process.endpoint
-    process.stop()
 
 
 @pytest.fixture

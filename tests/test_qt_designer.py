@@ -12,7 +12,7 @@ from pathlib import Path
 import Miro
 import pytest
 import zmq
-from loopback import NamingProcess, service_env
+from loopback import service_env
 from qt_procs import REPO, ServiceProcess
 from qt_support import QLabel, QPushButton, QWidget, application, qt_wait
 
@@ -23,13 +23,6 @@ from miro_gen.qt.widgets import PlotWidget
 
 FORM = REPO / "services" / "example_panel.ui"
 PANEL = REPO / "services" / "qt_panel.py"
-
-
-@pytest.fixture(scope="module")
-def naming() -> Iterator[str]:
-    process = NamingProcess()
-    yield process.endpoint
-    process.stop()
 
 
 @pytest.fixture

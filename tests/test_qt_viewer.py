@@ -13,7 +13,7 @@ from pathlib import Path
 import Miro
 import pytest
 import zmq
-from loopback import NamingProcess, service_env
+from loopback import service_env
 from qt_procs import REPO, ServiceProcess
 from qt_support import QImage, application, qt_wait
 
@@ -27,13 +27,6 @@ assert _spec is not None and _spec.loader is not None
 event_viewer = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(event_viewer)
 ViewerWindow = event_viewer.ViewerWindow
-
-
-@pytest.fixture(scope="module")
-def naming() -> Iterator[str]:
-    process = NamingProcess()
-    yield process.endpoint
-    process.stop()
 
 
 @pytest.fixture

@@ -7,7 +7,6 @@ import os
 import signal
 import threading
 import time
-from collections.abc import Iterator
 from typing import Any
 
 import pytest
@@ -15,18 +14,6 @@ import zmq
 
 from miro_gen import log
 from miro_gen.transport.reactor import Reactor
-
-
-@pytest.fixture
-def reactor() -> Iterator[Reactor]:
-    r = Reactor(zmq.Context())
-    thread = r.run_in_thread()
-    yield r
-    r.stop()
-    thread.join(5)
-    assert not thread.is_alive(), "the reactor did not stop"
-    r.close()
-    r.context.term()
 
 
 def on_reactor(r: Reactor, fn: Any, *args: Any) -> Any:
