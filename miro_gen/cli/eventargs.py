@@ -70,6 +70,19 @@ def resolve_or_wait(server: Any, name: str, prog: str) -> Any:
             time.sleep(0.5)
 
 
+def server_and_channel(
+    p: argparse.ArgumentParser, prog: str, argv: Sequence[str], name: str
+) -> tuple[Any, Any] | None:
+    """A Server for a live tool and the channel `name`, waited for; None when Ctrl-C comes
+    first (the server is closed then)."""
+    server = make_server(p, prog, argv)
+    try:
+        return server, resolve_or_wait(server, name, prog)
+    except KeyboardInterrupt:
+        server.close()
+        return None
+
+
 def open_log(path: str) -> Any:
     from miro_gen.eventlog.reader import LogError, LogReader
 
@@ -78,6 +91,17 @@ def open_log(path: str) -> Any:
     except LogError as e:
         print(f"{path}: error: {e}", file=sys.stderr)
         return None
+
+
+def read_status(path: str, log: Any, error: object) -> int:
+    """The exit status of a tool that read the log at `path`: 1 after a reading `error` (said),
+    else 0, with a warning when the file is unfinished."""
+    if error is not None:
+        print(f"{path}: error: {error}", file=sys.stderr)
+        return 1
+    if log.unfinished:
+        unfinished_warning(path)
+    return 0
 
 
 def unfinished_warning(path: str) -> None:

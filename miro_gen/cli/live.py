@@ -6,7 +6,7 @@ import argparse
 from collections.abc import Sequence
 from typing import Any
 
-from miro_gen.cli.eventargs import COMMON, make_server, resolve_or_wait, split_common, topic_arg
+from miro_gen.cli.eventargs import COMMON, server_and_channel, split_common, topic_arg
 
 
 def _parser(prog: str, description: str) -> argparse.ArgumentParser:
@@ -39,12 +39,10 @@ def echo_main(argv: Sequence[str]) -> int:
     from miro_gen.eventlog.show import clock_text, payload_text
     from miro_gen.eventlog.wire import RawEvent
 
-    server = make_server(p, prog, argv)
-    try:
-        channel = resolve_or_wait(server, ns.channel, prog)
-    except KeyboardInterrupt:
-        server.close()
+    found = server_and_channel(p, prog, argv, ns.channel)
+    if found is None:
         return 0
+    server, channel = found
     gaps = GapCounter()
     shown = [0]
 
@@ -85,12 +83,10 @@ def hz_main(argv: Sequence[str]) -> int:
     from miro_gen.eventlog.rates import RateWindow
     from miro_gen.eventlog.wire import RawEvent
 
-    server = make_server(p, prog, argv)
-    try:
-        channel = resolve_or_wait(server, ns.channel, prog)
-    except KeyboardInterrupt:
-        server.close()
+    found = server_and_channel(p, prog, argv, ns.channel)
+    if found is None:
         return 0
+    server, channel = found
     windows: dict[str, RateWindow] = {}
     gaps: dict[str, GapCounter] = {}
 

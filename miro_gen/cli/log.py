@@ -11,6 +11,7 @@ from typing import Any
 from miro_gen.cli.eventargs import (
     open_log,
     piped,
+    read_status,
     topic_arg,
     unfinished_warning,
 )
@@ -91,12 +92,7 @@ def info_main(argv: Sequence[str]) -> int:
             f"  {t.topic:<{width}}  {t.schema_name or '(no schema)':<{type_width}}  "
             f"{n:8d} events{rate}  hash {t.type_hash[:12]}"
         )
-    if error is not None:
-        print(f"{ns.file}: error: {error}", file=sys.stderr)
-        return 1
-    if log.unfinished:
-        unfinished_warning(ns.file)
-    return 0
+    return read_status(ns.file, log, error)
 
 
 def _compile_missing_types(path: str, log: Any) -> None:

@@ -13,9 +13,9 @@ from miro_gen.cli.eventargs import (
     COMMON,
     make_server,
     open_log,
+    read_status,
     split_common,
     topic_arg,
-    unfinished_warning,
 )
 
 
@@ -151,9 +151,4 @@ def _run(p: argparse.ArgumentParser, prog: str, argv: Sequence[str], ns: Any, lo
         server.shutdown()
         reactor_thread.join(5)
     status.done(f"{ns.file}: replayed {player.sent} events into {channel.name}")
-    if error is not None:
-        print(f"{ns.file}: error: {error}", file=sys.stderr)
-        return 1
-    if log.unfinished:
-        unfinished_warning(ns.file)
-    return 0
+    return read_status(ns.file, log, error)
