@@ -16,6 +16,7 @@ import zmq
 from miro_cli import REPO
 
 from miro_gen import Server, StructuredEvent, StructuredPushConsumer
+from miro_gen.transport.events import KEEP_ALL
 
 
 def free_port() -> int:
@@ -86,10 +87,13 @@ class RunningServer:
 
 
 class Recorder(StructuredPushConsumer):
-    """A consumer that keeps what it receives (`events`), taking `delay` s over each."""
+    """A consumer that keeps what it receives (`events`), taking `delay` s over each; it keeps
+    every event waiting unless given another `depth` (or `latest_only`)."""
 
-    def __init__(self, *args: object, delay: float = 0.0) -> None:
-        super().__init__(*args)  # type: ignore[arg-type]
+    def __init__(
+        self, *args: object, delay: float = 0.0, depth: int = KEEP_ALL, latest_only: bool = False
+    ) -> None:
+        super().__init__(*args, depth=depth, latest_only=latest_only)  # type: ignore[arg-type]
         self.events: list[StructuredEvent] = []
         self.delay = delay
 

@@ -35,9 +35,9 @@ def echo_main(argv: Sequence[str]) -> int:
     p = _parser(prog, "Print the events of TOPIC as they arrive, decoded, and sequence gaps.")
     p.add_argument("-n", "--count", type=int, default=0, help="exit after N events")
     ns = p.parse_args(split_common(p, argv))
-    from miro_gen.eventlog.gaps import GapCounter
     from miro_gen.eventlog.show import clock_text, payload_text
     from miro_gen.eventlog.wire import RawEvent
+    from miro_gen.transport.gaps import GapCounter
 
     found = server_and_channel(p, prog, argv, ns.channel)
     if found is None:
@@ -79,9 +79,9 @@ def hz_main(argv: Sequence[str]) -> int:
     ns = p.parse_args(split_common(p, argv))
     if ns.window < 1:
         p.error("--window must be 1 or more")
-    from miro_gen.eventlog.gaps import GapCounter
     from miro_gen.eventlog.rates import RateWindow
     from miro_gen.eventlog.wire import RawEvent
+    from miro_gen.transport.gaps import GapCounter
 
     found = server_and_channel(p, prog, argv, ns.channel)
     if found is None:

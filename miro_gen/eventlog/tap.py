@@ -14,11 +14,11 @@ from typing import Any
 
 import zmq
 
-from miro_gen.eventlog.gaps import GapCounter
 from miro_gen.eventlog.types import matches
 from miro_gen.eventlog.wire import FrameError, RawEvent, parse_batch, split_topic
 from miro_gen.log import logger
 from miro_gen.transport.events import HWM, EventChannel, subscription_prefix
+from miro_gen.transport.gaps import GapCounter
 
 _log = logger("MIRO")
 RCVHWM = 100_000  # frames: a recorder would rather queue than drop while it writes a chunk

@@ -5,8 +5,11 @@ method marked `@nonblocking`): each request goes to a bounded pool of worker thr
 may block (wait for the next value) or call another service that calls back into this one
 (A -> B -> A) without stopping the process from serving. The reply is handed back to the reactor
 thread, which alone touches the socket. A frame that does not parse
-is logged and dropped; a request for an unknown object gets OBJECT_NOT_EXIST; a request whose
-caller has stopped waiting by the time a worker is free is not run.
+is logged and dropped; a request for an unknown object gets OBJECT_NOT_EXIST, one for an
+operation the object does not have BAD_OPERATION (before anything about it is kept: a peer
+must not grow this process's memory with made-up names); a request whose caller has stopped
+waiting by the time a worker is free is not run. A reply larger than the maximum message size
+becomes MARSHAL.
 """
 
 from __future__ import annotations
@@ -19,7 +22,13 @@ from concurrent.futures import ThreadPoolExecutor
 
 import zmq
 
-from miro_gen.exceptions import OBJECT_NOT_EXIST, TRANSIENT, CompletionStatus
+from miro_gen.exceptions import (
+    BAD_OPERATION,
+    MARSHAL,
+    OBJECT_NOT_EXIST,
+    TRANSIENT,
+    CompletionStatus,
+)
 from miro_gen.log import logger
 from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.runtime.rpc import (
@@ -29,13 +38,14 @@ from miro_gen.runtime.rpc import (
     is_nonblocking,
     system_exception_reply,
 )
-from miro_gen.transport import frames
+from miro_gen.transport import frames, sockets
 from miro_gen.transport.reactor import Reactor
 
 _log = logger("MIRO")
 
 DEFAULT_WORKERS = 16
 MAX_PENDING = 10_000  # requests queued for workers; beyond this, TRANSIENT (try again later)
+MAX_PENDING_BYTES = 256 << 20  # and bytes of their bodies
 
 
 class ObjectAdapter:
@@ -52,11 +62,12 @@ class ObjectAdapter:
     ) -> None:
         self.reactor = reactor
         self.invoker = invoker
-        self.socket = reactor.context.socket(zmq.ROUTER)
-        self.socket.setsockopt(zmq.LINGER, 0)
+        self.socket = sockets.listening_socket(reactor.context, zmq.ROUTER)
         self.socket.setsockopt(zmq.ROUTER_HANDOVER, 1)
-        self.socket.setsockopt(zmq.HEARTBEAT_IVL, 500)
-        self.socket.setsockopt(zmq.HEARTBEAT_TIMEOUT, 2000)
+        hwm = sockets.queue_limit(reactor.context)
+        self.socket.setsockopt(zmq.RCVHWM, hwm)
+        self.socket.setsockopt(zmq.SNDHWM, hwm)
+        self.max_message_size = sockets.policy(reactor.context).max_message_size
         self.socket.bind(bind)
         bound = self.socket.getsockopt_string(zmq.LAST_ENDPOINT)
         self.endpoint = _advertised(bound, host)
@@ -66,6 +77,7 @@ class ObjectAdapter:
         self._lock = threading.Lock()
         self._pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="miro-worker")
         self._pending = 0
+        self._pending_bytes = 0
         self._closed = False
         self._inline: dict[tuple[type, str], bool] = {}  # (servant class, operation): @nonblocking
         reactor.call_soon(reactor.register, self.socket, self._readable)
@@ -123,7 +135,19 @@ class ObjectAdapter:
                 ),
             )
             return
-        if self._pending >= MAX_PENDING:
+        if req.operation not in servant._dispatch:
+            self._reply(
+                peer,
+                req,
+                system_exception_reply(
+                    BAD_OPERATION(
+                        f"{servant._repo_id} has no operation '{req.operation[:100]}'",
+                        completed=CompletionStatus.NO,
+                    )
+                ),
+            )
+            return
+        if self._pending >= MAX_PENDING or self._pending_bytes + len(body) > MAX_PENDING_BYTES:
             self._reply(
                 peer,
                 req,
@@ -140,6 +164,7 @@ class ObjectAdapter:
             self._reply(peer, req, servant._invoke(req.operation, body, self.invoker))
             return
         self._pending += 1
+        self._pending_bytes += len(body)
         received = time.monotonic()
         self._pool.submit(self._work, servant, peer, req, body, received)
 
@@ -156,16 +181,25 @@ class ObjectAdapter:
                 return
             reply = servant._invoke(req.operation, body, self.invoker)
         finally:  # one hand-off back to the reactor thread per request
-            self.reactor.call_soon(self._done, peer, req, reply)
+            self.reactor.call_soon(self._done, peer, req, len(body), reply)
 
-    def _done(self, peer: bytes, req: frames.Request, reply: Reply | None) -> None:
+    def _done(self, peer: bytes, req: frames.Request, size: int, reply: Reply | None) -> None:
         self._pending -= 1
+        self._pending_bytes -= size
         if reply is not None:
             self._reply(peer, req, reply)
 
     def _reply(self, peer: bytes, req: frames.Request, reply: Reply) -> None:
         if req.oneway or self._closed:
             return
+        if len(reply.body) > self.max_message_size:
+            reply = system_exception_reply(
+                MARSHAL(
+                    f"the reply to {req.operation} is {len(reply.body)} bytes, more than the "
+                    f"maximum message size ({self.max_message_size}; --max-message-size)",
+                    completed=CompletionStatus.YES,
+                )
+            )
         head = frames.encode_reply(frames.Reply(req.request_id, reply.status, reply.repo_id))
         try:
             self.socket.send_multipart([peer, head, reply.body], zmq.NOBLOCK)

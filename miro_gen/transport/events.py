@@ -13,8 +13,12 @@ what they missed), the source time stamp and the publish time. Events pushed wit
 turn leave in one frame per topic (split at MAX_BATCH_EVENTS / MAX_BATCH_BYTES), so throughput
 is not capped at one ZeroMQ message per event; at low rates that is one event per frame, as fast
 as a single message. Slow consumers never block suppliers: the supplier's queue and ZeroMQ's are
-bounded, what overflows is dropped and counted (`StructuredPushSupplier.dropped`), and the
-sequence numbers make the drops visible (`StructuredPushConsumer.missed`).
+bounded (in bytes: transport.sockets), what overflows is dropped and counted
+(`StructuredPushSupplier.dropped`), and the sequence numbers make the drops visible
+(`StructuredPushConsumer.missed`). A consumer keeps the events waiting for its handler as its
+quality of service says (keep-last depth, latest-only: transport.event_queue), so a slow one
+gets recent events and counts what it skipped (`dropped`, `lag`). Suppliers and consumers find
+their channel again when its host restarts elsewhere (transport.channel_link).
 """
 
 from __future__ import annotations
@@ -23,7 +27,8 @@ import itertools
 import os
 import random
 import threading
-from collections.abc import Iterable
+import time
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from struct import Struct
 from struct import error as StructError
@@ -35,6 +40,11 @@ import zmq
 from miro_gen import clock
 from miro_gen.log import logger
 from miro_gen.runtime.cdr import type_for_hash
+from miro_gen.transport import sockets
+from miro_gen.transport.channel_link import ChannelLink
+from miro_gen.transport.event_queue import DEFAULT_DEPTH, EventQueue, Waiting
+from miro_gen.transport.event_queue import KEEP_ALL as KEEP_ALL  # for consumers' depth=
+from miro_gen.transport.gaps import GapCounter, gap
 from miro_gen.transport.reactor import Reactor
 
 _log = logger("MIRO")
@@ -42,7 +52,9 @@ _log = logger("MIRO")
 CHANNEL_REPO_ID = "IDL:miro-gen/EventChannel:1.0"
 DEFAULT_CHANNEL = "EventChannel"
 EVENT_VERSION = 1
-HWM = 10_000  # events a socket queues for one peer before dropping
+HWM = 10_000  # frames a socket queues for one peer before dropping, at most (see queue_limit)
+MAX_SUBSCRIPTIONS = 10_000  # prefixes a supplier tracks; beyond, it sends every topic
+MAX_PREFIX = 4096  # bytes of a subscription prefix a supplier tracks
 QUEUE_EVENTS = 100_000  # events a supplier holds for its reactor's next turn, at most
 QUEUE_BYTES = 64 << 20  # and bytes
 # Events in one frame, at most. The count is 16 bits, and a high-water mark counts frames: HWM
@@ -52,6 +64,7 @@ QUEUE_BYTES = 64 << 20  # and bytes
 MAX_BATCH_EVENTS = 16_384
 MAX_BATCH_BYTES = 256 * 1024
 TURN_EVENTS = 4096  # events a consumer delivers per reactor turn, so other handlers get a turn
+TURN_FRAMES = 256  # frames a consumer reads per reactor turn
 _BATCH = Struct("<BBHQ32s")  # version, flags, count, supplier id, type hash
 _EVENT = Struct("<QqqI")  # sequence number, stamp ns, publish ns, payload length
 _EVENT_SIZE = _EVENT.size
@@ -111,6 +124,9 @@ class EventChannel:
     reactor: Reactor
     domain_name: str = ""  # the default domain of suppliers (the process's naming context)
     _host: ChannelHost | None = field(default=None, repr=False)
+    # Looks the channel up again (in the naming service) when its host has gone: None for a
+    # channel at fixed endpoints (one hosted here, or made by hand).
+    resolve: Callable[[], EventChannel] | None = field(default=None, repr=False)
 
 
 class ChannelHost:
@@ -118,12 +134,12 @@ class ChannelHost:
     in the process that creates the channel, or in `miro naming --channel`."""
 
     def __init__(self, context: zmq.Context[Any], bind_host: str, advertise: str) -> None:
-        self.xsub = context.socket(zmq.XSUB)
-        self.xpub = context.socket(zmq.XPUB)
+        self.xsub = sockets.listening_socket(context, zmq.XSUB)
+        self.xpub = sockets.listening_socket(context, zmq.XPUB)
+        hwm = min(HWM, sockets.queue_limit(context))  # frames of up to the maximum size
         for s in (self.xsub, self.xpub):
-            s.setsockopt(zmq.LINGER, 0)
-            s.setsockopt(zmq.SNDHWM, HWM)
-            s.setsockopt(zmq.RCVHWM, HWM)
+            s.setsockopt(zmq.SNDHWM, hwm)
+            s.setsockopt(zmq.RCVHWM, hwm)
         self.xpub.setsockopt(zmq.XPUB_VERBOSER, 1)  # every (un)subscription reaches suppliers
         port_in = self.xsub.bind_to_random_port(f"tcp://{bind_host}")
         port_out = self.xpub.bind_to_random_port(f"tcp://{bind_host}")
@@ -207,6 +223,7 @@ def resolve_channel(server: Any, name: str = DEFAULT_CHANNEL) -> EventChannel:
         bytes(entry.key).decode(),
         server.reactor(),
         server.options.naming_context,
+        resolve=lambda: resolve_channel(server, entry.name),
     )
 
 
@@ -237,7 +254,9 @@ class StructuredPushSupplier:
 
     Events wait for that turn in a bounded queue (QUEUE_EVENTS events, QUEUE_BYTES bytes): when
     the reactor cannot keep up, `push()` drops the newest and counts them in `dropped`, as it
-    does those ZeroMQ refuses at its high-water mark. Consumers see them as gaps."""
+    does those ZeroMQ refuses at its high-water mark, those larger than the maximum message
+    size, and those pushed for subscribers while the channel is gone (its host died; the
+    supplier finds it again when it is bound anew). Consumers see them as gaps."""
 
     def __init__(self, channel: EventChannel, domain_name: str | None = None) -> None:
         self.channel = channel
@@ -255,14 +274,28 @@ class StructuredPushSupplier:
         self._raw_hashes: dict[str, bytes] = {}
         self.sent = 0
         self.dropped = 0  # events pushed while someone subscribed that were never sent
-        self.socket = self.reactor.context.socket(zmq.XPUB)
-        self.socket.setsockopt(zmq.LINGER, 0)
-        self.socket.setsockopt(zmq.SNDHWM, HWM)
+        self._too_large: set[str] = set()  # types with an event too large to send (said once)
+        context = self.reactor.context
+        self.max_event = sockets.policy(context).max_message_size - _BATCH.size
+        self.socket = sockets.connecting_socket(context, zmq.XPUB)
+        self.socket.setsockopt(zmq.SNDHWM, min(HWM, sockets.queue_limit(context)))
         self.socket.setsockopt(zmq.XPUB_VERBOSER, 1)
         # At the high-water mark an XPUB drops silently; with NODROP a non-blocking send fails
         # instead, so that the supplier counts what it drops. It never blocks either way.
         self.socket.setsockopt(zmq.XPUB_NODROP, 1)
-        self.socket.connect(channel.supplier_endpoint)
+        # No queue for a connection that is down: the channel's subscriptions end with it, and
+        # what is pushed meanwhile is counted as dropped, not sent into the void.
+        self.socket.setsockopt(zmq.IMMEDIATE, 1)
+        self._connected = False
+        self._lost: set[bytes] = set()  # the subscriptions when the channel went away
+        resolve = channel.resolve
+        self.link = ChannelLink(
+            self.reactor,
+            self.socket,
+            channel.supplier_endpoint,
+            None if resolve is None else lambda: resolve().supplier_endpoint,
+            self._connection_changed,
+        )
         self.reactor.call_soon(self.reactor.register, self.socket, self._subscription_changed)
 
     def _topic(self, type_name: str) -> _Topic:
@@ -290,11 +323,18 @@ class StructuredPushSupplier:
         t = self._topics.get(type_name) or self._topic(type_name)
         seq = next(t.seq)
         if not (t.subscribed if t.generation == self._generation else self._subscribed(t)):
+            if not self._connected and any(t.frame.startswith(p) for p in self._lost):
+                with self._lock:  # subscribed when the channel went away: lost
+                    self.dropped += 1
+                return True
             return False
         now = clock.current().time_ns()  # log time under --clock log, else the wall clock
         data = payload.serialize()
         packed = _EVENT.pack(seq, now if stamp is None else int(stamp * 1e9), now, len(data))
         packed += data
+        if len(packed) > self.max_event:
+            self._refuse_large(type_name, len(packed))
+            return True
         with self._lock:
             if self._queued >= QUEUE_EVENTS or self._queued_bytes + len(packed) > QUEUE_BYTES:
                 self.dropped += 1
@@ -341,7 +381,33 @@ class StructuredPushSupplier:
                     size += len(packed)
                 self._send(frame, type_hash, batch)
 
+    def _refuse_large(self, type_name: str, size: int) -> None:
+        with self._lock:
+            self.dropped += 1
+        if type_name not in self._too_large and len(self._too_large) < 1000:
+            self._too_large.add(type_name)
+            _log.warning(
+                "dropped a %s event of %d bytes: more than the maximum message size "
+                "(%d; --max-message-size)",
+                type_name,
+                size,
+                self.max_event + _BATCH.size,
+            )
+
+    def _connection_changed(self, up: bool) -> None:
+        """The connection to the channel came up or went down (reactor thread)."""
+        if up:
+            self._lost = set()
+        else:
+            self._lost = set(self._subscriptions)
+            _log.notice("lost the event channel %s; looking for it", self.channel.name)
+        self._connected = up
+
     def _send(self, frame: bytes, type_hash: str, packed: list[bytes]) -> None:
+        if not self._connected:  # nobody to send to: the events are lost
+            with self._lock:
+                self.dropped += len(packed)
+            return
         raw = self._raw_hashes.get(type_hash)
         if raw is None:
             raw = self._raw_hashes[type_hash] = bytes.fromhex(type_hash)
@@ -354,7 +420,11 @@ class StructuredPushSupplier:
                 self.dropped += len(packed)
 
     def _subscription_changed(self) -> None:
+        # A lost connection's subscriptions end with unsubscriptions that ZeroMQ queues after
+        # its monitor event: read that event first, so that `_lost` still holds them.
+        self.link.read_events()
         changed = False
+        subs = self._subscriptions
         while True:
             try:
                 msg = self.socket.recv(zmq.NOBLOCK)
@@ -362,18 +432,25 @@ class StructuredPushSupplier:
                 break
             if not msg:
                 continue
-            prefix = msg[1:]
-            n = self._subscriptions.get(prefix, 0) + (1 if msg[0] == 1 else -1)
+            prefix = msg[1 : MAX_PREFIX + 1]  # a longer prefix matches no fewer topics
+            if prefix not in subs and len(subs) >= MAX_SUBSCRIPTIONS:
+                prefix = b""  # too many to track: send every topic (the channel filters)
+            n = subs.get(prefix, 0) + (1 if msg[0] == 1 else -1)
             if n > 0:
-                self._subscriptions[prefix] = n
+                subs[prefix] = n
             else:
-                self._subscriptions.pop(prefix, None)
+                subs.pop(prefix, None)
             changed = True
         if changed:
             self._generation += 1  # after the change, so a reader never keeps a stale answer
 
     def close(self) -> None:
-        _close_on(self.reactor, self.socket)
+        def close() -> None:
+            self.link.close()
+            self.reactor.unregister(self.socket)
+            self.socket.close(0)
+
+        self.reactor.call_soon(close)
 
 
 # ---- consumers ------------------------------------------------------------------------------
@@ -381,25 +458,52 @@ class StructuredPushSupplier:
 
 class StructuredPushConsumer:
     """Receives the events it subscribes to. Subclass it and override
-    `push_structured_event(event)`; it runs on the reactor thread, so it must not block."""
+    `push_structured_event(event)`; it runs on the reactor thread, so it must not block.
 
-    def __init__(self, channel: EventChannel) -> None:
+    Events wait for the handler in a queue kept as `depth` says (transport.event_queue): the
+    newest 10 per topic by default, as ROS 2 keeps them; `latest_only` keeps the newest one;
+    `depth=KEEP_ALL` keeps everything up to the queue's byte limit. `missed` counts events lost
+    on the way (sequence gaps), `dropped` those this consumer skipped because its handler fell
+    behind, `lag` how old (seconds since it was pushed) the last event delivered was."""
+
+    def __init__(
+        self, channel: EventChannel, *, depth: int = DEFAULT_DEPTH, latest_only: bool = False
+    ) -> None:
         self.channel = channel
         self.reactor = channel.reactor
-        self.socket = self.reactor.context.socket(zmq.SUB)
-        self.socket.setsockopt(zmq.LINGER, 0)
-        self.socket.setsockopt(zmq.RCVHWM, HWM)
-        self.socket.connect(channel.consumer_endpoint)
+        self.queue = EventQueue(depth, latest_only)
+        context = self.reactor.context
+        self.socket = sockets.connecting_socket(context, zmq.SUB)
+        self.socket.setsockopt(zmq.RCVHWM, min(HWM, sockets.queue_limit(context)))
+        resolve = channel.resolve
+        self.link = ChannelLink(
+            self.reactor,
+            self.socket,
+            channel.consumer_endpoint,
+            None if resolve is None else lambda: resolve().consumer_endpoint,
+            lambda up: None,
+        )
         self._filters: list[tuple[str, str]] = []
         self._prefixes: set[bytes] = set()
-        self._next_seq: dict[tuple[int, str], int] = {}  # per (supplier, type name)
+        self._gaps = GapCounter()  # per (supplier, type name), bounded
         self._topics: dict[bytes, tuple[str, str, bool]] = {}
         self._classes: dict[bytes, type[Any]] = {}
         self._unknown: set[tuple[str, str]] = set()
+        self._scheduled = False
         self.received = 0
-        self.missed = 0  # events lost between suppliers and this consumer
         self.undecodable = 0  # events whose type hash matches no imported generated type
+        self.lag = 0.0  # seconds between the push and the delivery of the last event delivered
         self.reactor.call_soon(self.reactor.register, self.socket, self._readable)
+
+    @property
+    def missed(self) -> int:
+        """Events lost between their suppliers and this consumer (sequence gaps)."""
+        return self._gaps.missed
+
+    @property
+    def dropped(self) -> int:
+        """Events received but skipped: the handler fell behind (depth, latest-only)."""
+        return self.queue.dropped
 
     def set_subscriptions(self, subscriptions: Iterable[tuple[str, str]]) -> None:
         """Receive the events of these (domain, type) pairs, `*` for any; replaces the last."""
@@ -424,33 +528,55 @@ class StructuredPushConsumer:
         return any((d in (ANY, domain)) and (t in (ANY, type_name)) for d, t in self._filters)
 
     def _readable(self) -> None:
-        recv, deliver = self.socket.recv_multipart, self.push_structured_event
-        reactor = self.reactor
-        delivered = 0
-        while delivered < TURN_EVENTS:  # the poller reports the rest in the next turn
+        """Take every frame waiting (so that the queue, not ZeroMQ, decides what waits), then
+        deliver a turn's worth of events."""
+        recv, queue = self.socket.recv_multipart, self.queue
+        for _ in range(TURN_FRAMES):
             try:
                 parts = recv(zmq.NOBLOCK)
             except zmq.Again:
-                return
-            delivered += 1  # a frame counts, even one that is dropped
+                break
             try:
-                events = self._parse(parts)
+                self._parse(parts)
             except (ValueError, StructError, UnicodeDecodeError) as e:
                 _log.warning("dropped an event frame on %s: %s", self.channel.name, e)
+        else:
+            self._schedule()  # more frames may wait: read them next turn
+        if len(queue):
+            self._deliver()
+
+    def _schedule(self) -> None:
+        if not self._scheduled:
+            self._scheduled = True
+            self.reactor.call_soon(self._resume)
+
+    def _resume(self) -> None:
+        self._scheduled = False
+        self._readable()
+
+    def _deliver(self) -> None:
+        deliver, queue, reactor = self.push_structured_event, self.queue, self.reactor
+        pop = queue.pop
+        n = 0
+        while n < TURN_EVENTS and not reactor.stopping:
+            w = pop()
+            if w is None:
+                break
+            event = w.event
+            try:
+                event.payload = w.cls.deserialize(event.payload)
+            except Exception as e:  # MARSHAL: a corrupt payload is reported, not delivered
+                _log.warning("dropped an undecodable %s event: %s", event.type_name, e)
                 continue
-            n = 0
-            for event in events:
-                if reactor.stopping:  # a slow consumer's backlog must not delay the shutdown
-                    break
-                try:
-                    deliver(event)
-                except Exception:
-                    _log.exception("push_structured_event failed on %s", event.type_name)
-                n += 1
-            self.received += n
-            delivered += n
-            if n < len(events):
-                return
+            n += 1
+            self.lag = time.time() - event.publish_time
+            try:
+                deliver(event)
+            except Exception:
+                _log.exception("push_structured_event failed on %s", event.type_name)
+        self.received += n
+        if len(queue) and not reactor.stopping:
+            self._schedule()  # the rest next turn: other handlers get theirs meanwhile
 
     def _topic(self, head: bytes) -> tuple[str, str, bool]:
         """(domain, type name, whether subscribed) of a topic frame."""
@@ -474,7 +600,7 @@ class StructuredPushConsumer:
             cls = type_for_hash(type_hash)
             if cls is not None:
                 self._classes[raw_hash] = cls
-            elif (type_name, type_hash) not in self._unknown:
+            elif (type_name, type_hash) not in self._unknown and len(self._unknown) < 1000:
                 self._unknown.add((type_name, type_hash))
                 _log.warning(
                     "events %s/%s have type hash %s, which no imported generated type has: "
@@ -485,65 +611,62 @@ class StructuredPushConsumer:
                 )
         return cls
 
-    def _parse(self, parts: list[bytes]) -> list[StructuredEvent]:
-        """The events of one message, decoded; raises if the frame does not parse (then none
-        of its events count, and the sequence numbers stay as they were)."""
+    def _parse(self, parts: list[bytes]) -> None:
+        """Queue the events of one message; raises if the frame does not parse (then none of
+        its events count, and the sequence numbers stay as they were)."""
         if len(parts) != 2:
             raise ValueError(f"{len(parts)} frames, expected 2")
         head, body = parts
         domain, type_name, wanted = self._topic(head)
         if not wanted:
-            return []
+            return
         version, _, count, supplier, raw_hash = _BATCH.unpack_from(body)
         if version != EVENT_VERSION:
             raise ValueError(f"event version {version} is not supported")
         cls = self._class(raw_hash, domain, type_name)
-        deserialize = None if cls is None else cls.deserialize
         type_hash = raw_hash.hex()
-        key = (supplier, type_name)
-        expected = self._next_seq.get(key)
+        expected = self._gaps.expected(supplier, type_name)
+        first = expected
         missed = 0
         unpack, size, at = _EVENT.unpack_from, len(body), _BATCH.size
-        out = []
-        for _ in range(count):
+        topic_key = (domain, type_name)
+        waiting = []
+        keep_from = count - 1 if self.queue.latest_only else 0  # latest-only: only the last
+        for i in range(count):
             seq, stamp_ns, publish_ns, n = unpack(body, at)
             at += _EVENT_SIZE
             if at + n > size:
                 raise ValueError("event payload is truncated")
-            if expected is not None and seq > expected:
-                missed += seq - expected
+            missed += gap(expected, seq)
             expected = seq + 1
-            if deserialize is None:
-                at += n
-                continue
-            try:
-                payload = deserialize(body[at : at + n])
-            except Exception as e:  # MARSHAL: a corrupt payload is reported, not delivered
-                _log.warning("dropped an undecodable %s event: %s", type_name, e)
-                at += n
-                continue
-            at += n
-            out.append(
-                StructuredEvent(
+            if cls is not None and i >= keep_from:
+                event = StructuredEvent(
                     domain,
                     type_name,
-                    payload,
+                    body[at : at + n],  # decoded when delivered
                     seq,
                     stamp_ns / 1e9,
                     publish_ns / 1e9,
                     supplier,
                     type_hash,
                 )
-            )
+                waiting.append(Waiting(topic_key, event, cls, n))
+            at += n
         if at != size:
             raise ValueError("trailing bytes after the events")
         # Only a frame that parses to its end moves the sequence numbers.
-        if expected is not None:
-            self._next_seq[key] = expected
-        self.missed += missed
-        if deserialize is None:
+        if expected is not None and expected != first:
+            self._gaps.advance(supplier, type_name, expected, missed)
+        if cls is None:
             self.undecodable += count
-        return out
+        elif waiting:
+            self.queue.dropped += keep_from
+            self.queue.add(topic_key, waiting)
 
     def close(self) -> None:
-        _close_on(self.reactor, self.socket)
+        def close() -> None:
+            self.link.close()
+            self.reactor.unregister(self.socket)
+            self.socket.close(0)
+
+        self.reactor.call_soon(close)

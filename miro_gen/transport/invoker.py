@@ -23,18 +23,21 @@ from typing import Any
 import zmq
 from zmq.utils.monitor import parse_monitor_message
 
-from miro_gen.exceptions import COMM_FAILURE, TIMEOUT, TRANSIENT, CompletionStatus
+from miro_gen.exceptions import COMM_FAILURE, MARSHAL, TIMEOUT, TRANSIENT, CompletionStatus
 from miro_gen.log import logger
 from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.runtime.rpc import Reply, ReplyStatus, Servant
-from miro_gen.transport import frames
+from miro_gen.transport import frames, sockets
 
 _log = logger("MIRO")
 
 CONNECT_TIMEOUT = 2.0  # seconds a call waits for a connection before TRANSIENT
-HEARTBEAT_IVL_MS = 500
-HEARTBEAT_TIMEOUT_MS = 2000
 _LOST = zmq.EVENT_DISCONNECTED | zmq.EVENT_CLOSED
+_REFUSED = (  # the server would not have us: no key, another key, or too many connections
+    zmq.EVENT_HANDSHAKE_FAILED_AUTH
+    | zmq.EVENT_HANDSHAKE_FAILED_PROTOCOL
+    | zmq.EVENT_HANDSHAKE_FAILED_NO_DETAIL
+)
 
 
 class _Connection:
@@ -42,18 +45,15 @@ class _Connection:
 
     def __init__(self, context: zmq.Context[Any], endpoint: str) -> None:
         self.endpoint = endpoint
-        self.socket = context.socket(zmq.DEALER)
+        self.socket = sockets.connecting_socket(context, zmq.DEALER)
         s = self.socket
-        s.setsockopt(zmq.LINGER, 0)
         s.setsockopt(zmq.IMMEDIATE, 1)
-        s.setsockopt(zmq.HEARTBEAT_IVL, HEARTBEAT_IVL_MS)
-        s.setsockopt(zmq.HEARTBEAT_TIMEOUT, HEARTBEAT_TIMEOUT_MS)
-        s.setsockopt(zmq.HEARTBEAT_TTL, HEARTBEAT_TIMEOUT_MS)
         s.setsockopt(zmq.RECONNECT_IVL, 100)
-        self.monitor = s.get_monitor_socket(zmq.EVENT_HANDSHAKE_SUCCEEDED | _LOST)
+        self.monitor = s.get_monitor_socket(zmq.EVENT_HANDSHAKE_SUCCEEDED | _LOST | _REFUSED)
         s.connect(endpoint)
         self.connected = False
         self.lost = False
+        self.refused = False
         self.poller = zmq.Poller()
         self.poller.register(s, zmq.POLLIN)
         self.poller.register(self.monitor, zmq.POLLIN)
@@ -68,11 +68,13 @@ class _Connection:
                 self.connected = True
             elif event["event"] & _LOST and self.connected:
                 self.lost = True
+            elif event["event"] & _REFUSED:
+                self.refused = True
 
     def wait_connected(self, deadline: float) -> bool:
         while not self.connected:
             left = deadline - time.monotonic()
-            if left <= 0:
+            if left <= 0 or self.refused:
                 return False
             if self.monitor.poll(int(left * 1000) + 1):
                 self.read_monitor()
@@ -111,12 +113,24 @@ class ZmqInvoker:
     ) -> Reply | None:
         if not ref.endpoint:
             raise TRANSIENT("the object reference has no endpoint (nil reference?)")
+        limit = sockets.policy(self.context).max_message_size
+        if len(body) > limit:  # the server would drop the connection: say why instead
+            raise MARSHAL(
+                f"{operation}: the request is {len(body)} bytes, more than the maximum message "
+                f"size ({limit}; --max-message-size)",
+                completed=CompletionStatus.NO,
+            )
         wait = 0.0 if timeout is None else max(0.0, timeout)
         started = time.monotonic()
         deadline = started + wait if wait else float("inf")
         conn = self._connection(ref.endpoint)
         if not conn.wait_connected(min(deadline, started + CONNECT_TIMEOUT)):
             self._drop(conn)
+            if conn.refused:
+                raise TRANSIENT(
+                    f"{ref.endpoint} refused the connection for {operation}: it needs the "
+                    "robot's or fleet's key (--keys), or has too many connections"
+                )
             raise TRANSIENT(f"cannot reach {ref.endpoint} for {operation}")
         request_id = next(self._ids)
         header = frames.encode_request(

@@ -22,6 +22,7 @@ import dataclasses
 import signal
 import sys
 import threading
+import time
 import uuid
 from collections.abc import Callable, MutableSequence, Sequence
 from types import FrameType
@@ -34,6 +35,7 @@ from miro_gen import log
 from miro_gen.exceptions import SystemException
 from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.runtime.rpc import Servant, Stub
+from miro_gen.transport import sockets
 from miro_gen.transport.adapter import ObjectAdapter
 from miro_gen.transport.addresses import server_addresses
 from miro_gen.transport.invoker import ZmqInvoker
@@ -43,6 +45,7 @@ from miro_gen.transport.reactor import Reactor
 
 StubT = TypeVar("StubT", bound=Stub)
 RENEW_TIMEOUT = 2.0  # seconds a lease renewal may take
+RETRY_BIND = 0.2  # seconds between attempts to bind a name another owner's lease still holds
 _log = log.logger("MIRO")
 
 
@@ -65,6 +68,7 @@ class Client:
     def __init__(self, argv: Sequence[str] | None = None, *, context: Any = None) -> None:
         self.options, self.argv = _take_options(argv)
         self.context = context if context is not None else zmq.Context.instance()
+        self._configure_sockets(None)
         self.invoker = ZmqInvoker(self.context)
         self.naming = NamingClient(self.invoker, self.options.naming, self.options.naming_context)
 
@@ -75,6 +79,19 @@ class Client:
         if entry.repo_id != stub._repo_id:
             _log.debug("%s is a %s, used as a %s", entry.name, entry.repo_id, stub._repo_id)
         return stub(ObjectRef(entry.repo_id, entry.endpoint, entry.key), self.invoker)
+
+    def _configure_sockets(self, binds: str | None) -> None:
+        """The limits and security of this process's sockets (transport.sockets), from its
+        options, what it binds on and where its naming service is."""
+        o = self.options
+        policy = sockets.policy_for(
+            keys=o.keys,
+            insecure=o.insecure,
+            max_message_size=o.max_message_size,
+            binds=binds,
+            talks_to=sockets.endpoint_host(o.naming),
+        )
+        sockets.configure(self.context, policy)
 
     def close(self) -> None:
         self.invoker.close()
@@ -93,9 +110,10 @@ class Server(Client):
     ) -> None:
         super().__init__(argv, context=context)
         # Before any socket exists: a --host that is not ours is a UsageError, nothing to close.
-        self.addresses = server_addresses(self.options.naming, self.options.host)
+        self.addresses = server_addresses(self.options.naming, self.options.host, self.options.bind)
         if bind_host is not None:
             self.addresses = dataclasses.replace(self.addresses, bind=bind_host)
+        self._configure_sockets(self.addresses.bind)
         clock = None
         if self.options.clock != "wall":  # --clock log: timers and now() follow a log player
             from miro_gen.clock import LogClock, use
@@ -126,6 +144,10 @@ class Server(Client):
     def reactor(self) -> Reactor:
         return self._reactor
 
+    def close(self) -> None:
+        super().close()
+        sockets.release(self.context)  # the admission thread of its listening sockets
+
     def add_to_name_service(self, servant: Servant, name: str) -> ObjectRef:
         """Serve `servant` and bind it as `name` under this server's naming context (or at the
         path given); its reference. Replaces an older binding of the name, as Miro does."""
@@ -135,8 +157,27 @@ class Server(Client):
         return ref
 
     def bind_entry(self, entry: MiroNaming.Entry) -> None:
-        """Bind a naming entry under this server's lease (objects, event channels)."""
-        self.naming.registry.rebind(entry, self.owner, int(self.lease * 1000))
+        """Bind a naming entry under this server's lease (objects, event channels). A name
+        that another server holds is waited for, up to a lease (the entry of a server killed
+        without unbinding lives that long); AlreadyBound after that."""
+        lease_ms = int(self.lease * 1000)
+        deadline = time.monotonic() + max(self.lease, DEFAULT_LEASE) + 0.5
+        told = False
+        while True:
+            try:
+                self.naming.registry.rebind(entry, self.owner, lease_ms)
+                break
+            except MiroNaming.AlreadyBound:
+                if time.monotonic() >= deadline:
+                    raise
+                if not told:
+                    told = True
+                    _log.notice(
+                        "%s is bound by another server (one killed without unbinding?): "
+                        "waiting for its lease to end",
+                        entry.name,
+                    )
+                time.sleep(RETRY_BIND)
         with self._names_lock:
             self._names[entry.name] = entry
         self._start_renewing()
@@ -180,7 +221,7 @@ class Server(Client):
             names, self._names = list(self._names), {}
         for name in names:
             with contextlib.suppress(SystemException, MiroNaming.NotFound):
-                self.naming.registry.unbind(name)
+                self.naming.registry.unbind(name, self.owner)
         for fn in reversed(self._on_shutdown):
             try:
                 fn()
@@ -203,18 +244,30 @@ class Server(Client):
             self._renewer.start()
 
     def _renew_loop(self) -> None:
+        held_elsewhere: set[str] = set()  # lost names another server holds now (said once)
         while not self._stop.wait(self.lease / 3):
+            lease_ms = int(self.lease * 1000)
+            with self._names_lock:
+                entries = dict(self._names)
             try:
-                known = self._registry_for_renewal.renew(self.owner, int(self.lease * 1000))
-                if not known:  # the naming service restarted (or we were cut off too long)
-                    self._rebind_all()
+                # The naming service says, name by name, which it does not hold for us (it
+                # restarted, a lease ran out while we were cut off): those are bound again.
+                lost = self._registry_for_renewal.renew(self.owner, list(entries), lease_ms)
+                for name in lost:
+                    if name not in entries:
+                        continue
+                    try:
+                        self._registry_for_renewal.rebind(entries[name], self.owner, lease_ms)
+                    except MiroNaming.AlreadyBound:
+                        if name not in held_elsewhere:
+                            held_elsewhere.add(name)
+                            _log.warning(
+                                "%s is bound by another server now; it is bound again here "
+                                "when that one's lease ends",
+                                name,
+                            )
+                        continue
+                    held_elsewhere.discard(name)
+                    _log.notice("bound %s again in the naming service", name)
             except SystemException as e:
                 _log.warning("cannot renew names: %s", e)
-
-    def _rebind_all(self) -> None:
-        with self._names_lock:
-            entries = list(self._names.values())
-        for entry in entries:
-            self._registry_for_renewal.rebind(entry, self.owner, int(self.lease * 1000))
-        if entries:
-            _log.notice("bound %d names again in a restarted naming service", len(entries))
