@@ -8,6 +8,8 @@ from typing import Any
 
 from miro_gen.cli.eventargs import COMMON, server_and_channel, split_common, topic_arg
 
+MAX_TOPICS = 1000  # topics `miro hz` keeps statistics of
+
 
 def _parser(prog: str, description: str) -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog=prog, description=description + " " + COMMON)
@@ -73,7 +75,9 @@ def hz_main(argv: Sequence[str]) -> int:
     p = _parser(
         prog,
         "Print, every second, the rate at which the events of TOPIC arrive, the min, max and "
-        "standard deviation of the period, and the events missed (sequence gaps).",
+        "standard deviation of the period, their lag (how long after their push they arrive: "
+        "a consumer that falls behind sees it grow) and the events missed (sequence gaps: "
+        "dropped on the way, or by a supplier while its channel was gone).",
     )
     p.add_argument("-w", "--window", type=int, default=100, help="periods averaged (default 100)")
     ns = p.parse_args(split_common(p, argv))
@@ -96,9 +100,11 @@ def hz_main(argv: Sequence[str]) -> int:
             topic = f"{e.domain}/{e.type_name}"
             window = windows.get(topic)
             if window is None:
+                if len(windows) >= MAX_TOPICS:  # a bounded table, whatever the channel carries
+                    continue
                 window = windows[topic] = RateWindow(ns.window)
                 gaps[topic] = GapCounter()
-            window.add(t)
+            window.add(t, (received_ns - e.publish_ns) / 1e9)
             gaps[topic].observe(e.supplier, e.type_name, e.seq)
 
     def report(_: object = None) -> None:
@@ -112,9 +118,11 @@ def hz_main(argv: Sequence[str]) -> int:
                 print(f"{topic}: 1 event", flush=True)
                 continue
             rate, low, high, std = stats
+            lag_mean, lag_max = windows[topic].lag() or (0.0, 0.0)
             print(
                 f"{topic}: {rate:.2f} Hz  min {low:.4f} s  max {high:.4f} s  "
-                f"std {std:.4f} s  window {len(windows[topic].periods)}  missed {missed}",
+                f"std {std:.4f} s  window {len(windows[topic].periods)}  "
+                f"lag {lag_mean * 1000:.1f} ms (max {lag_max * 1000:.1f})  missed {missed}",
                 flush=True,
             )
 

@@ -7,19 +7,29 @@ from collections import deque
 
 
 class RateWindow:
-    """The periods between the last `window` + 1 arrivals: their rate, min, max and spread."""
+    """The periods between the last `window` + 1 arrivals: their rate, min, max and spread;
+    and the lag of the last `window` arrivals (how long after its push each one arrived)."""
 
     def __init__(self, window: int = 100) -> None:
         self.periods: deque[float] = deque(maxlen=window)
+        self.lags: deque[float] = deque(maxlen=window)
         self.last: float | None = None
         self.count = 0
 
-    def add(self, t: float) -> None:
-        """An arrival at `t` seconds."""
+    def add(self, t: float, lag: float | None = None) -> None:
+        """An arrival at `t` seconds, `lag` seconds after it was pushed."""
         if self.last is not None:
             self.periods.append(t - self.last)
         self.last = t
         self.count += 1
+        if lag is not None:
+            self.lags.append(lag)
+
+    def lag(self) -> tuple[float, float] | None:
+        """(mean, max) lag in seconds, or None before the first arrival with one."""
+        if not self.lags:
+            return None
+        return sum(self.lags) / len(self.lags), max(self.lags)
 
     def stats(self) -> tuple[float, float, float, float] | None:
         """(rate Hz, min s, max s, standard deviation s), or None before two arrivals."""

@@ -15,8 +15,13 @@ from typing import NamedTuple
 
 import zmq
 
-from miro_gen.eventlog.wire import MAX_EVENTS, pack_batch
-from miro_gen.transport.events import EventChannel, StructuredPushSupplier, topic
+from miro_gen.eventlog.wire import EVENT_HEADER, MAX_EVENTS, pack_batch
+from miro_gen.transport.events import (
+    MAX_BATCH_BYTES,
+    EventChannel,
+    StructuredPushSupplier,
+    topic,
+)
 
 
 class _Encoded(NamedTuple):
@@ -66,19 +71,28 @@ class ReplaySupplier(StructuredPushSupplier):
             pending, self._pending = self._pending, []
             self._scheduled = False
         run: list[_Encoded] = []
+        size = 0
         for e in pending:
+            if EVENT_HEADER + len(e.data) > self.max_event:  # more than a frame may hold
+                self.replay_dropped += 1
+                continue
             if run and (
                 (e.domain, e.type_name, e.type_hash, e.supplier)
                 != (run[0].domain, run[0].type_name, run[0].type_hash, run[0].supplier)
                 or len(run) == MAX_EVENTS
+                or size + len(e.data) > MAX_BATCH_BYTES
             ):
                 self._send_run(run)
-                run = []
+                run, size = [], 0
             run.append(e)
+            size += len(e.data)
         if run:
             self._send_run(run)
 
     def _send_run(self, run: list[_Encoded]) -> None:
+        if not self._connected:  # the channel is gone: lost, as a live supplier's would be
+            self.replay_dropped += len(run)
+            return
         first = run[0]
         body = pack_batch(
             first.supplier,
