@@ -74,10 +74,12 @@ def run_miro(*args: str, timeout: float = 30) -> subprocess.CompletedProcess[str
 
 
 class RunningServer:
-    """A Server (naming context `context`) whose reactor runs in a thread of the test."""
+    """A Server (naming context `context`, more common `options`) whose reactor runs in a
+    thread of the test."""
 
-    def __init__(self, naming: str, context: str) -> None:
-        self.server = Server(["t", "--naming", naming, "-MNC", context], context=zmq.Context())
+    def __init__(self, naming: str, context: str, *options: str) -> None:
+        argv = ["t", "--naming", naming, "-MNC", context, *options]
+        self.server = Server(argv, context=zmq.Context())
         self.thread = threading.Thread(target=self.server.run, daemon=True)
         self.thread.start()
 
@@ -101,6 +103,15 @@ class Recorder(StructuredPushConsumer):
         if self.delay:
             time.sleep(self.delay)
         self.events.append(event)
+
+
+def rss_mb(pid: int) -> float:
+    """The resident memory of process `pid`, in MiB."""
+    with open(f"/proc/{pid}/status") as f:
+        for line in f:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+    raise AssertionError(f"no VmRSS for process {pid}")
 
 
 def eventually(check: Callable[[], bool], seconds: float = 10) -> None:
