@@ -48,9 +48,9 @@ class Host:
     """channel_host.py hosting `Events` in the context `robot`."""
 
     def __init__(self, naming: NamingProcess, *options: str) -> None:
+        argv = [str(HOST), "--naming", naming.endpoint, "-MNC", "robot", *options, "Events"]
         self.proc = subprocess.Popen(
-            [sys.executable, str(HOST), "--naming", naming.endpoint, "-MNC", "robot"]
-            + [*options, "Events"],
+            [sys.executable, *argv],
             stdout=subprocess.PIPE,
             text=True,
             env=service_env(),
