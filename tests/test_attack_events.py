@@ -329,7 +329,7 @@ def test_binding_beyond_loopback_needs_a_key_or_insecure(tmp_path: Path) -> None
         capture_output=True,
         text=True,
         env=env,
-        timeout=30,
+        timeout=120,
     )
     assert done.returncode == 2
     assert "binds 0.0.0.0, beyond this machine" in done.stderr and "--insecure" in done.stderr

@@ -24,6 +24,7 @@ MAX_CHUNK_BYTES = 256 << 20  # decompressed bytes of one chunk (ours are about 1
 _ZSTD_WINDOW = 1 << 27  # the largest window a zstd frame may ask for (128 MiB)
 _RECORD_HEAD = struct.Struct("<BQ")  # opcode, length
 _CHUNK_HEAD = struct.Struct("<QQQI")  # start, end, uncompressed size, uncompressed CRC
+_MESSAGE_HEAD = struct.Struct("<HIQQ")  # channel id, sequence, log time, publish time
 
 
 class ChunkError(ValueError):
@@ -83,22 +84,29 @@ def check_against_index(chunk: Chunk, index: ChunkIndex) -> None:
         raise ChunkError("its compressed size is not what the file's index says")
 
 
-def chunk_records(chunk: Chunk, max_bytes: int = MAX_CHUNK_BYTES) -> list[McapRecord]:
-    """The schema, channel and message records of a chunk, after checking it."""
+def chunk_records(
+    chunk: Chunk, max_bytes: int = MAX_CHUNK_BYTES, messages_only: bool = False
+) -> list[McapRecord]:
+    """The schema, channel and message records of a chunk (only the messages when the file's
+    summary holds the rest), after checking it."""
     if chunk.uncompressed_size > max_bytes:
         raise ChunkError(
             f"it says it holds {chunk.uncompressed_size} bytes, more than the "
             f"{max_bytes} a chunk may hold"
         )
     data = _decompress(chunk, chunk.uncompressed_size)
-    if len(data) != chunk.uncompressed_size:
+    if len(data) > chunk.uncompressed_size:
         raise ChunkError(
-            f"it decompresses to {'more than ' if len(data) > chunk.uncompressed_size else ''}"
-            f"{len(data)} bytes, not the {chunk.uncompressed_size} its header says"
+            f"it decompresses to more than the {chunk.uncompressed_size} bytes its header says"
+        )
+    if len(data) < chunk.uncompressed_size:
+        raise ChunkError(
+            f"it decompresses to {len(data)} bytes, not the {chunk.uncompressed_size} its "
+            "header says"
         )
     if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
         raise ChunkError("its CRC does not match its data: the data is damaged")
-    return _records(data)
+    return _records(data, messages_only)
 
 
 def _decompress(chunk: Chunk, expected: int) -> bytes:
@@ -128,25 +136,32 @@ def _decompress(chunk: Chunk, expected: int) -> bytes:
     raise ChunkError(f"its compression {chunk.compression!r} is not one MCAP knows")
 
 
-def _records(data: bytes) -> list[McapRecord]:
+def _records(data: bytes, messages_only: bool) -> list[McapRecord]:
     out: list[McapRecord] = []
     at, end = 0, len(data)
+    head, message_head = _RECORD_HEAD.unpack_from, _MESSAGE_HEAD.unpack_from
     while at < end:
         if end - at < _RECORD_HEAD.size:
             raise ChunkError("a record is cut off at its end")
-        opcode, length = _RECORD_HEAD.unpack_from(data, at)
+        opcode, length = head(data, at)
         at += _RECORD_HEAD.size
         if length > end - at:
             raise ChunkError("a record runs past the chunk's end")
+        if opcode == Opcode.MESSAGE:
+            if length < _MESSAGE_HEAD.size:
+                raise ChunkError("a message record is too short")
+            channel, sequence, log_time, publish_time = message_head(data, at)
+            start = at + _MESSAGE_HEAD.size
+            at += length
+            out.append(Message(channel, log_time, data[start:at], publish_time, sequence))
+            continue
         body = data[at : at + length]
         at += length
+        if messages_only:
+            continue
         stream = ReadDataStream(io.BytesIO(body))
         try:
-            if opcode == Opcode.MESSAGE:
-                if length < 22:
-                    raise ChunkError("a message record is too short")
-                out.append(Message.read(stream, length))
-            elif opcode == Opcode.CHANNEL:
+            if opcode == Opcode.CHANNEL:
                 out.append(Channel.read(stream))
             elif opcode == Opcode.SCHEMA:
                 out.append(Schema.read(stream))

@@ -236,7 +236,7 @@ class LogReader:
         try:
             chunk = read_chunk(self._file, index.chunk_start_offset, self._size)
             check_against_index(chunk, index)
-            records = chunk_records(chunk)
+            records = chunk_records(chunk, messages_only=True)
         except ChunkError as e:
             raise LogError(_chunk_fault(number, index.chunk_start_offset, index, e)) from None
         return [r for r in records if isinstance(r, Message)]
