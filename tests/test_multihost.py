@@ -4,9 +4,10 @@ joined by veth links to a bridge (in a fourth, hub namespace), with addresses in
 Each namespace has its own interfaces, routes and loopback, so a server that advertised
 127.0.0.1, or bound only loopback, could not be reached from the others; that is what these
 tests would catch. Beyond loopback the transport needs the robot's or fleet's key (CURVE): every
-process here gets one made by `miro keys new` (MIRO_KEYS), and a process without it is refused. Creating namespaces needs root and iproute2 (`ip netns`); without them, or
-where `ip netns add` is refused (a container without CAP_SYS_ADMIN), the tests are skipped and
-say why.
+process here gets one made by `miro keys new` (MIRO_KEYS), and a process without it is
+refused. Creating namespaces needs root and iproute2 (`ip netns`); without them, or where
+`ip netns add` is refused (a container without CAP_SYS_ADMIN), the tests are skipped and say
+why.
 """
 
 from __future__ import annotations
