@@ -111,7 +111,7 @@ class ChannelWatcher:
         while True:
             with self._lock:
                 self._links = {k for k in self._links if not (k.connected or k.closed)}
-                if not self._links or self.reactor._closed:
+                if not self._links or self.reactor.closed:
                     self._thread = None
                     return
                 links = list(self._links)

@@ -181,6 +181,11 @@ class Reactor:
         self._wake()
 
     @property
+    def closed(self) -> bool:
+        """Whether `close()` has been called: nothing runs on this reactor any more."""
+        return self._closed
+
+    @property
     def stopping(self) -> bool:
         """Whether `run()` is to return: a handler with a long queue of work may stop early."""
         return self._stopping

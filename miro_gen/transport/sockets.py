@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import ipaddress
 import os
+import socket
 import threading
 import weakref
 from dataclasses import dataclass
@@ -86,13 +87,13 @@ def queue_limit(context: zmq.Context[Any], budget: int = QUEUE_BYTES_PER_PEER) -
     return max(16, min(10_000, budget // policy(context).max_message_size))
 
 
-def _common(socket: zmq.Socket[Any], p: SocketPolicy) -> None:
-    socket.setsockopt(zmq.LINGER, 0)
-    socket.setsockopt(zmq.MAXMSGSIZE, p.max_message_size)
-    socket.setsockopt(zmq.HEARTBEAT_IVL, HEARTBEAT_IVL_MS)
-    socket.setsockopt(zmq.HEARTBEAT_TIMEOUT, HEARTBEAT_TIMEOUT_MS)
-    socket.setsockopt(zmq.HEARTBEAT_TTL, HEARTBEAT_TIMEOUT_MS)
-    socket.setsockopt(zmq.HANDSHAKE_IVL, HANDSHAKE_MS)
+def _common(s: zmq.Socket[Any], p: SocketPolicy) -> None:
+    s.setsockopt(zmq.LINGER, 0)
+    s.setsockopt(zmq.MAXMSGSIZE, p.max_message_size)
+    s.setsockopt(zmq.HEARTBEAT_IVL, HEARTBEAT_IVL_MS)
+    s.setsockopt(zmq.HEARTBEAT_TIMEOUT, HEARTBEAT_TIMEOUT_MS)
+    s.setsockopt(zmq.HEARTBEAT_TTL, HEARTBEAT_TIMEOUT_MS)
+    s.setsockopt(zmq.HANDSHAKE_IVL, HANDSHAKE_MS)
 
 
 def listening_socket(context: zmq.Context[Any], kind: int) -> zmq.Socket[Any]:
@@ -101,27 +102,27 @@ def listening_socket(context: zmq.Context[Any], kind: int) -> zmq.Socket[Any]:
     from miro_gen.transport.admission import admission
 
     p = policy(context)
-    socket: zmq.Socket[Any] = context.socket(kind)
-    _common(socket, p)
+    s: zmq.Socket[Any] = context.socket(kind)
+    _common(s, p)
     if p.keys is not None:
-        socket.setsockopt(zmq.CURVE_SERVER, 1)
-        socket.setsockopt(zmq.CURVE_SECRETKEY, p.keys.secret)
-        socket.setsockopt(_ZAP_ENFORCE_DOMAIN, 1)  # no admission thread: no connection
-    admission(context, p).watch(socket)
-    return socket
+        s.setsockopt(zmq.CURVE_SERVER, 1)
+        s.setsockopt(zmq.CURVE_SECRETKEY, p.keys.secret)
+        s.setsockopt(_ZAP_ENFORCE_DOMAIN, 1)  # no admission thread: no connection
+    admission(context, p).watch(s)
+    return s
 
 
 def connecting_socket(context: zmq.Context[Any], kind: int) -> zmq.Socket[Any]:
     """A socket that will `connect`: a CURVE client, holding the key, when the policy has
     one (the servers of a robot or fleet all have its key)."""
     p = policy(context)
-    socket: zmq.Socket[Any] = context.socket(kind)
-    _common(socket, p)
+    s: zmq.Socket[Any] = context.socket(kind)
+    _common(s, p)
     if p.keys is not None:
-        socket.setsockopt(zmq.CURVE_SERVERKEY, p.keys.public)
-        socket.setsockopt(zmq.CURVE_PUBLICKEY, p.keys.public)
-        socket.setsockopt(zmq.CURVE_SECRETKEY, p.keys.secret)
-    return socket
+        s.setsockopt(zmq.CURVE_SERVERKEY, p.keys.public)
+        s.setsockopt(zmq.CURVE_PUBLICKEY, p.keys.public)
+        s.setsockopt(zmq.CURVE_SECRETKEY, p.keys.secret)
+    return s
 
 
 def release(context: zmq.Context[Any]) -> None:
@@ -154,14 +155,26 @@ def read_keys(path: str) -> Keys:
 
 
 def is_loopback(host: str) -> bool:
-    """Whether `host` (an address, `*`, `localhost` or an interface name) stays on this machine."""
+    """Whether binding on `host` (an address, `*`, `localhost` or an interface name) serves
+    this machine only."""
     host = host.strip("[]")
     if host in ("localhost", "lo"):
         return True
     try:
         return ipaddress.ip_address(host).is_loopback
     except ValueError:
-        return False  # `*`, 0.0.0.0 is caught above as not loopback, a host or interface name
+        return False  # `*`, a host or interface name
+
+
+def _reaches_only_here(host: str) -> bool:
+    """Whether connecting to `host` (an address or a name) stays on this machine."""
+    if is_loopback(host) or host in ("0.0.0.0", "*"):
+        return True
+    try:
+        infos = socket.getaddrinfo(host, None, socket.AF_INET, socket.SOCK_STREAM)
+    except (OSError, UnicodeError):
+        return False
+    return all(ipaddress.ip_address(info[4][0]).is_loopback for info in infos)
 
 
 def endpoint_host(endpoint: str) -> str:
@@ -187,16 +200,17 @@ def policy_for(
         return SocketPolicy(size)
     if keys:
         return SocketPolicy(size, read_keys(keys))
-    wide = [h for h in (binds, talks_to) if h is not None and not is_loopback(h)]
-    if talks_to in ("0.0.0.0", "*"):  # connecting there reaches this machine
-        wide = [h for h in wide if h != talks_to]
+    wide = []
+    if binds is not None and not is_loopback(binds):
+        wide.append(f"binds {binds}")
+    if talks_to is not None and not _reaches_only_here(talks_to):
+        wide.append(f"talks to {talks_to}")
     if not wide:
         return SocketPolicy(size)
     if os.path.exists(os.path.expanduser(DEFAULT_KEY)):
         return SocketPolicy(size, read_keys(DEFAULT_KEY))
-    what = f"binds {wide[0]}" if binds in wide else f"talks to {wide[0]}"
     raise UsageError(
-        f"this process {what}, beyond this machine: give the robot's or fleet's key with "
+        f"this process {wide[0]}, beyond this machine: give the robot's or fleet's key with "
         "--keys FILE (or MIRO_KEYS; make one with `miro keys new`), or --insecure to send "
         "everything in the clear to anyone who can connect"
     )
