@@ -16,8 +16,8 @@ from pathlib import Path
 
 import Miro
 import pytest
-from gps_rig import GPS, Driver
-from loopback import NamingProcess, Recorder, RunningServer, eventually, service_env
+from device_rig import GPS, Driver, GpsRig
+from loopback import NamingProcess, Recorder, eventually, service_env
 
 from miro_gen import Client
 from miro_gen.sim.nmea import Fix, checksummed, sentences, synthetic_fixes
@@ -26,22 +26,13 @@ from miro_gen.sim.pty_device import PtyDevice
 
 @pytest.fixture
 def rig(tmp_path: Path) -> Iterator[tuple[PtyDevice, Driver, Recorder, Miro.Gps]]:
-    naming = NamingProcess()
-    device = PtyDevice(tmp_path / "gps0")
-    driver = Driver(naming.endpoint, device.link or Path(), tmp_path / "gps.log")
-    gui = RunningServer(naming.endpoint, "gui")
-    client = Client(["t", "--naming", naming.endpoint])
+    rig = GpsRig(tmp_path)
+    client = Client(["t", "--naming", rig.naming.endpoint])
     try:
-        events = Recorder(gui.server.resolve_channel("rover/EventChannel"))
-        events.set_subscriptions([("rover", "Gps")])
-        yield device, driver, events, client.resolve_name("rover/Gps", Miro.Gps)
+        yield rig.device, rig.driver, rig.events, client.resolve_name("rover/Gps", Miro.Gps)
     finally:
         client.close()
-        gui.stop()
-        if driver.proc.poll() is None:
-            driver.proc.kill()
-        device.close()
-        naming.stop()
+        rig.close()
 
 
 def test_the_driver_against_a_pseudo_terminal(

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import Miro
 import pytest
-from gps_rig import Rig
+from device_rig import GpsRig
 from nmea_captures import (
     OurCapture,
     compare,
@@ -101,16 +101,16 @@ def test_real_receiver_logs_give_gpsds_fixes(log: Path) -> None:
 
 
 @pytest.fixture
-def rig(tmp_path: Path, request: pytest.FixtureRequest) -> Iterator[Rig]:
+def rig(tmp_path: Path, request: pytest.FixtureRequest) -> Iterator[GpsRig]:
     parameters: dict[str, str] = getattr(request, "param", {})
-    r = Rig(tmp_path, **parameters)
+    r = GpsRig(tmp_path, **parameters)
     try:
         yield r
     finally:
         r.close()
 
 
-def through_the_driver(rig: Rig, lines: list[bytes]) -> list[Miro.GpsDataIDL]:
+def through_the_driver(rig: GpsRig, lines: list[bytes]) -> list[Miro.GpsDataIDL]:
     readings = rig.replay(lines)
     assert rig.events.missed == 0
     summary = rig.close()
@@ -131,7 +131,7 @@ CAPTURES = {c.path.name: c for c in our_captures()}
     indirect=["rig"],
     ids=["gns", "demo", "rollover"],
 )
-def test_our_captures_through_the_driver(rig: Rig, name: str) -> None:
+def test_our_captures_through_the_driver(rig: GpsRig, name: str) -> None:
     capture = CAPTURES[name]
     readings = through_the_driver(rig, data_lines(capture.path))
     result = compare(capture.fixes, valid_fixes(readings))
@@ -151,7 +151,7 @@ def replayed_logs() -> list[object]:
 
 
 @pytest.mark.parametrize("log", replayed_logs())
-def test_real_logs_through_the_driver(rig: Rig, log: Path | None) -> None:
+def test_real_logs_through_the_driver(rig: GpsRig, log: Path | None) -> None:
     if log is None:
         pytest.skip("this log is not among the fetched captures")
     readings = through_the_driver(rig, data_lines(log))

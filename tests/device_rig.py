@@ -1,5 +1,5 @@
-"""The GPS driver as a process on a pseudo-terminal, with a consumer of its readings: for the tests
-and for bench/gps_captures.py."""
+"""Device drivers (services/gps, services/laser, services/camera) as processes, with consumers of
+their events: for the tests and for bench/."""
 
 from __future__ import annotations
 
@@ -15,26 +15,28 @@ from loopback import NamingProcess, Recorder, RunningServer, eventually, service
 
 from miro_gen.sim.pty_device import PtyDevice
 
-GPS = Path(__file__).resolve().parents[1] / "services" / "gps"
-CONFIG = """<config><section name="Gps"><parameter name="Gps">
-  <parameter name="Device" value="{device}"/>
-  <parameter name="TtyParams"><parameter name="Baudrate" value="9600"/></parameter>
-  <parameter name="WaitTimeout" value="2, 0"/>{extra}
-</parameter></section></config>
-"""
+SERVICES = Path(__file__).resolve().parents[1] / "services"
+GPS = SERVICES / "gps"
 
 
 class Driver:
-    """services/gps in a process of its own, in naming context "rover"; its log in a file."""
+    """services/NAME in a process of its own, in naming context "rover", its parameters in a
+    run-time document (section and category `category`); its log in a file."""
 
-    def __init__(self, naming: str, device: Path, log: Path, **parameters: str) -> None:
+    def __init__(
+        self, name: str, category: str, naming: str, log: Path, **parameters: object
+    ) -> None:
+        self.name = name
         self.log = log
         self.stderr = log.open("w")
-        config = log.with_name("rover.xml")  # the robot's run-time document
-        extra = "".join(f'\n  <parameter name="{k}" value="{v}"/>' for k, v in parameters.items())
-        config.write_text(CONFIG.format(device=device, extra=extra))
+        config = log.with_name(f"{name}-rover.xml")  # the robot's run-time document
+        config.write_text(
+            f'<config><section name="{category}"><parameter name="{category}">'
+            + "".join(_parameter(k, v) for k, v in parameters.items())
+            + "</parameter></section></config>\n"
+        )
         self.proc = subprocess.Popen(
-            [sys.executable, str(GPS), "-MCF", str(config), "--naming", naming,
+            [sys.executable, str(SERVICES / name), "-MCF", str(config), "--naming", naming,
              "-MNC", "rover", "-MLL", "5"],
             stdout=subprocess.PIPE,
             stderr=self.stderr,
@@ -42,7 +44,8 @@ class Driver:
             env=service_env(),
         )  # fmt: skip
         assert self.proc.stdout is not None
-        assert self.proc.stdout.readline().startswith("gps: reading")
+        first = self.proc.stdout.readline()
+        assert first.startswith(f"{name}: reading"), first + log.read_text()
 
     def logged(self, text: str) -> int:
         return self.log.read_text().count(text)
@@ -61,14 +64,25 @@ class Driver:
         self.stderr.close()
 
 
-class Rig:
+def _parameter(name: str, value: object) -> str:
+    """A run-time document's <parameter>: a value, or a structure given as a dict."""
+    if isinstance(value, dict):
+        inner = "".join(_parameter(k, v) for k, v in value.items())
+        return f'<parameter name="{name}">{inner}</parameter>'
+    return f'<parameter name="{name}" value="{value}"/>'
+
+
+class GpsRig:
     """A naming service, a pseudo-terminal, the driver on it and a consumer of its `Gps` events,
     subscribed before anything is sent (the driver logs when it sees the subscription)."""
 
     def __init__(self, tmp: Path, **parameters: str) -> None:
         self.naming = NamingProcess()
         self.device = PtyDevice(tmp / "gps0")
-        self.driver = Driver(self.naming.endpoint, tmp / "gps0", tmp / "gps.log", **parameters)
+        settings = {"Device": tmp / "gps0", "TtyParams": {"Baudrate": 9600}, "WaitTimeout": "2, 0"}
+        self.driver = Driver(
+            "gps", "Gps", self.naming.endpoint, tmp / "gps.log", **settings, **parameters
+        )
         self.gui = RunningServer(self.naming.endpoint, "gui")
         self.events = Recorder(self.gui.server.resolve_channel("rover/EventChannel"))
         self.events.set_subscriptions([("rover", "Gps")])
