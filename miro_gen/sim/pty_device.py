@@ -55,7 +55,7 @@ class PtyDevice:
             try:
                 view = view[os.write(self.master, view) :]
             except OSError as e:
-                if e.errno not in (errno.EAGAIN, errno.EIO):
+                if e.errno not in (errno.EAGAIN, errno.EIO, errno.EBADF):  # EBADF: vanished
                     raise
                 if e.errno == errno.EAGAIN and select.select([], [self.master], [], wait)[1]:
                     continue

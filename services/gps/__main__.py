@@ -56,6 +56,7 @@ from miro_gen.devices import (
     DevConsumer,
     DevEventHandler,
     DevMessage,
+    SubscriberNotice,
     TtyConnection,
 )
 from miro_gen.params import ParamsError, read_parameters
@@ -95,7 +96,7 @@ class NmeaConsumer(DevConsumer):
         self.impl = impl
         self.parser = parser
         self.last_input = 0.0  # host time of the last sentence
-        self.subscribed = False
+        self.subscribers = SubscriberNotice(impl.supplier, impl.type_name, "readings")
 
     def handle_message(self, message: DevMessage) -> None:
         self.last_input = time.time()
@@ -110,13 +111,7 @@ class NmeaConsumer(DevConsumer):
             self.last_input = 0.0
             for reading in self.parser.flush():
                 self.impl.integrate_data(reading, time.time())
-        supplier = self.impl.supplier
-        if (
-            supplier is not None
-            and supplier.has_subscribers(self.impl.type_name) != self.subscribed
-        ):
-            self.subscribed = not self.subscribed
-            _log.notice("%s subscribes to the readings", "someone" if self.subscribed else "nobody")
+        self.subscribers.check()
 
     def connection_changed(self, connected: bool) -> None:
         _log.notice("receiver %s", "connected" if connected else "lost")
