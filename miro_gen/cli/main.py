@@ -32,7 +32,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub.add_parser(
         "sim",
-        help="simulate a device: nmea (a GPS receiver), scip (a laser scanner)",
+        help="simulate a device: nmea (a GPS receiver), scip (a laser scanner), camera",
         add_help=False,
     )
     sub.add_parser("new", help="scaffold a service in one of Miro's patterns", add_help=False)

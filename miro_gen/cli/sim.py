@@ -42,6 +42,7 @@ def _recorded(args: argparse.Namespace) -> Iterator[tuple[float, list[bytes]]]:
 KINDS = {
     "nmea": "a GPS receiver (NMEA 0183) on a pseudo-terminal",
     "scip": "a Hokuyo laser scanner (SCIP 2.0) on a pseudo-terminal or a TCP port",
+    "camera": "a camera: a video file, or an MJPEG stream over HTTP",
 }
 
 
@@ -51,6 +52,8 @@ def sim_main(argv: Sequence[str]) -> int:
         return nmea_main(argv[1:])
     if kind == "scip":
         return scip_main(argv[1:])
+    if kind == "camera":
+        return camera_main(argv[1:])
     usage = "usage: miro sim KIND [OPTIONS]   (miro sim KIND --help for its options)\n\n"
     usage += "\n".join(f"  {k:8s}{what}" for k, what in KINDS.items())
     if kind in ("-h", "--help"):
@@ -187,4 +190,50 @@ def scip_main(argv: Sequence[str]) -> int:
         link.close()
     sent = ", ".join(f"{n} {k}" for k, n in faults.sent.items() if n)
     print(f"sent {device.scans} scans{' (' + sent + ')' if sent else ''}", flush=True)
+    return 0
+
+
+def camera_main(argv: Sequence[str]) -> int:
+    p = argparse.ArgumentParser(
+        prog="miro sim camera",
+        description="Play a camera: a synthetic video (a disc circling over a gradient, each "
+        "frame's number in a bar code at the top left) written to a file (Motion JPEG in .avi, "
+        "MPEG-4 in .mp4) or served as an MJPEG stream over HTTP, as IP cameras serve it. "
+        "Needs OpenCV (pip install 'miro-gen[camera]').",
+    )
+    out = p.add_mutually_exclusive_group(required=True)
+    out.add_argument("--output", type=Path, help="write the video to this file and exit")
+    out.add_argument("--http", type=int, metavar="PORT", help="serve it on this port (0: any)")
+    p.add_argument("--width", type=int, default=1280, help="pixels (default 1280)")
+    p.add_argument("--height", type=int, default=720, help="pixels (default 720)")
+    p.add_argument("--rate", type=float, default=30.0, help="frames a second (default 30)")
+    p.add_argument("--frames", type=int, default=300, help="frames to write (default 300)")
+    p.add_argument("--duration", type=float, default=0, help="stop serving after S seconds")
+    args = p.parse_args(argv)
+    if min(args.width, args.height, args.frames) <= 0 or args.rate <= 0 or args.duration < 0:
+        p.error("--width, --height, --frames and --rate must be more than 0")
+    try:
+        from miro_gen.sim import camera
+    except ImportError as e:
+        print(f"miro sim: needs OpenCV ({e}): pip install 'miro-gen[camera]'", file=sys.stderr)
+        return 1
+    if args.output is not None:
+        try:
+            camera.write_video(args.output, args.frames, args.width, args.height, args.rate)
+        except OSError as e:
+            print(f"miro sim: {e}", file=sys.stderr)
+            return 1
+        print(f"wrote {args.frames} frames of {args.width}x{args.height} to {args.output}")
+        return 0
+    stop = _stop_on_signals()
+    try:
+        stream = camera.MjpegStream(args.width, args.height, args.rate, args.http)
+    except OSError as e:
+        print(f"miro sim: cannot serve on port {args.http}: {e}", file=sys.stderr)
+        return 1
+    stream.serve()
+    print(f"MJPEG on {stream.url} (Ctrl-C to stop)", flush=True)
+    stop.wait(args.duration or None)
+    stream.close()
+    print(f"sent {stream.sent} frames", flush=True)
     return 0
