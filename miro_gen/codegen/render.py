@@ -1,4 +1,10 @@
-"""The Jinja environment of the Python back end: templates/idl/ and the filters they use."""
+"""The Jinja environment of the code generators (templates/), its filters, and the rendering of
+the Python back end's contexts into file contents.
+
+Filters: `pyrepr` (a Python literal), `docstring` (a docstring literal, wrapped) and `wrap` with
+the global `bracket` (line breaking, see layout.py). Templates do no arithmetic and no layout
+decisions of their own.
+"""
 
 from __future__ import annotations
 
@@ -10,7 +16,8 @@ from typing import Any
 import jinja2
 
 from miro_gen import __version__
-from miro_gen.codegen.model import PyModule, isort_key
+from miro_gen.codegen.contexts import ModuleContext, PackageContext
+from miro_gen.codegen.layout import bracket, wrap
 
 LINE = 100
 
@@ -71,11 +78,13 @@ def environment() -> jinja2.Environment:
     )
     env.filters["pyrepr"] = pyrepr
     env.filters["docstring"] = docstring
+    env.filters["wrap"] = wrap
+    env.globals["bracket"] = bracket
     env.globals["version"] = __version__
     return env
 
 
-def render_module(module: PyModule) -> str:
+def render_module(module: ModuleContext) -> str:
     """The module's code; it exempts itself from the line-length rule only when it must
     (long IDL names and literals can make lines longer than the project's limit)."""
     template = environment().get_template("idl/module.py.j2")
@@ -85,28 +94,6 @@ def render_module(module: PyModule) -> str:
     return text
 
 
-def render_package_init(
-    doc: str,
-    modules: list[str],
-    subpackages: list[tuple[str, str]],
-    exports: list[tuple[str, str]],
-    submodules: list[str],
-    hashes: list[tuple[str, str]],
-) -> str:
+def render_package_init(package: PackageContext) -> str:
     """A package `__init__` that imports its modules' names lazily (see the template)."""
-    public = sorted(
-        {name for name, _ in exports} | {name for _, name in subpackages}, key=isort_key
-    )
-    return (
-        environment()
-        .get_template("idl/package_init.py.j2")
-        .render(
-            doc=doc,
-            modules=modules,
-            subpackages=subpackages,
-            exports=exports,
-            submodules=submodules,
-            public=public,
-            hashes=hashes,
-        )
-    )
+    return environment().get_template("idl/package_init.py.j2").render(p=package)
