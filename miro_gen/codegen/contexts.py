@@ -16,6 +16,7 @@ from __future__ import annotations
 import hashlib
 import re
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import ClassVar
 
 from miro_gen.codegen import names
@@ -115,7 +116,7 @@ class DataTypeContext(Item):
     decode: list[DecodeStep]
     construct_args: list[str]  # what the decoder passes to the class
 
-    @property
+    @cached_property
     def type_hash(self) -> str:
         return hashlib.sha256(self.schema.encode("utf-8")).hexdigest()
 

@@ -9,13 +9,14 @@ decisions of their own.
 from __future__ import annotations
 
 import textwrap
-from functools import cache
+from functools import cache, lru_cache
 from pathlib import Path
 from typing import Any
 
 import jinja2
 
 from miro_gen import __version__
+from miro_gen.cache import cache_dir
 from miro_gen.codegen.contexts import ModuleContext, PackageContext
 from miro_gen.codegen.layout import bracket, wrap
 
@@ -33,11 +34,16 @@ def template_dir() -> Path:
 def pyrepr(value: Any) -> str:
     """A Python literal: strings always in double quotes (as ruff formats them)."""
     if isinstance(value, str):
-        text = repr(value)
-        if text.startswith("'") and '"' not in value:
-            text = '"' + text[1:-1].replace("\\'", "'") + '"'
-        return text
+        return _string_literal(value)
     return repr(value)
+
+
+@lru_cache(maxsize=4096)  # names and schema lines recur across a file's types
+def _string_literal(value: str) -> str:
+    text = repr(value)
+    if text.startswith("'") and '"' not in value:
+        text = '"' + text[1:-1].replace("\\'", "'") + '"'
+    return text
 
 
 def docstring(text: str | None, indent: int, fallback: str | None = None) -> str:
@@ -66,6 +72,12 @@ def _wrap_block(line: str, width: int) -> list[str]:
     ) or [line]
 
 
+def _bytecode_cache() -> jinja2.BytecodeCache | None:
+    """Templates compiled by an earlier run (checked against their source), per user."""
+    folder = cache_dir()
+    return jinja2.FileSystemBytecodeCache(folder) if folder is not None else None
+
+
 @cache
 def environment() -> jinja2.Environment:
     env = jinja2.Environment(
@@ -75,6 +87,8 @@ def environment() -> jinja2.Environment:
         keep_trailing_newline=True,
         undefined=jinja2.StrictUndefined,
         autoescape=False,
+        auto_reload=False,  # templates do not change during a run: no stat per use
+        bytecode_cache=_bytecode_cache(),
     )
     env.filters["pyrepr"] = pyrepr
     env.filters["docstring"] = docstring
@@ -84,14 +98,20 @@ def environment() -> jinja2.Environment:
     return env
 
 
+# Rendered in the place of the module's ruff exemptions, which are known once it is rendered.
+_NOQA_MARK = "\x00"
+
+
 def render_module(module: ModuleContext) -> str:
     """The module's code; it exempts itself from the line-length rule only when it must
     (long IDL names and literals can make lines longer than the project's limit)."""
-    template = environment().get_template("idl/module.py.j2")
-    text = template.render(m=module, noqa=sorted(module.noqa))
-    if any(len(line) > LINE for line in text.split("\n")):
-        text = template.render(m=module, noqa=sorted({*module.noqa, "E501"}))
-    return text
+    text = environment().get_template("idl/module.py.j2").render(m=module, noqa=[_NOQA_MARK])
+    codes = set(module.noqa)
+    if max(map(len, text.split("\n"))) > LINE:
+        codes.add("E501")
+    mark = f"# ruff: noqa: {_NOQA_MARK}\n"
+    exemption = f"# ruff: noqa: {', '.join(sorted(codes))}\n" if codes else ""
+    return text.replace(mark, exemption, 1)
 
 
 def render_package_init(package: PackageContext) -> str:
