@@ -105,7 +105,7 @@ _NOQA_MARK = "\x00"
 def render_module(module: ModuleContext) -> str:
     """The module's code; it exempts itself from the line-length rule only when it must
     (long IDL names and literals can make lines longer than the project's limit)."""
-    text = environment().get_template("idl/module.py.j2").render(m=module, noqa=[_NOQA_MARK])
+    text = environment().get_template("idl/module.py.j2").render(m=module, noqa_mark=_NOQA_MARK)
     codes = set(module.noqa)
     if max(map(len, text.split("\n"))) > LINE:
         codes.add("E501")
