@@ -48,10 +48,16 @@ class Item:
     """A generated declaration: a class, an alias or a constant at module level."""
 
     template: ClassVar[str]
+    idl_kind: ClassVar[str] = ""  # the IDL keyword, for the docstring of undocumented types
 
     name: str  # the module-level Python name
     scoped_name: str  # the IDL name, Miro::Example
     doc: str | None
+
+    @property
+    def fallback_doc(self) -> str:
+        """The docstring when the IDL has no doc comment."""
+        return f"{self.idl_kind} {self.scoped_name}"
 
 
 @dataclass
@@ -67,12 +73,9 @@ class EnumContext(Item):
     """`class E(enum.IntEnum)`, its ordinal tables, and its enumerators as module constants."""
 
     template = "idl/enum.py.j2"
+    idl_kind = "enum"
 
     enumerators: list[EnumeratorContext]
-
-    @property
-    def fallback_doc(self) -> str:
-        return f"enum {self.scoped_name}"
 
 
 @dataclass
@@ -127,30 +130,28 @@ class DataTypeContext(Item):
 
 
 @dataclass
-class StructContext(DataTypeContext):
-    """`@dataclass(slots=True) class S` with its codec functions `_enc_S`, `_dec_S`."""
-
-    template = "idl/struct.py.j2"
+class RecordContext(DataTypeContext):
+    """A data type with dataclass fields: a struct or an exception."""
 
     fields: list[FieldContext]
-    bases: list[str]  # the base struct, or empty
-
-    @property
-    def fallback_doc(self) -> str:
-        return f"struct {self.scoped_name}"
 
 
 @dataclass
-class ExceptionContext(DataTypeContext):
+class StructContext(RecordContext):
+    """`@dataclass(slots=True) class S` with its codec functions `_enc_S`, `_dec_S`."""
+
+    template = "idl/struct.py.j2"
+    idl_kind = "struct"
+
+    bases: list[str] = field(default_factory=list)  # the base struct, if any
+
+
+@dataclass
+class ExceptionContext(RecordContext):
     """`class E(UserException)` dataclass with its codec functions."""
 
     template = "idl/exception.py.j2"
-
-    fields: list[FieldContext]
-
-    @property
-    def fallback_doc(self) -> str:
-        return f"exception {self.scoped_name}"
+    idl_kind = "exception"
 
 
 @dataclass
@@ -173,15 +174,12 @@ class UnionContext(DataTypeContext):
     """A subclass of `IdlUnion` with one property per branch and its codec functions."""
 
     template = "idl/union.py.j2"
+    idl_kind = "union"
 
     branches: list[BranchContext]
     discriminator: str  # annotation of `_d`
     default_branch: str | None  # the branch `default:` selects
     default_discriminator: str  # the discriminator it gets, as Cyclone DDS chooses it
-
-    @property
-    def fallback_doc(self) -> str:
-        return f"union {self.scoped_name}"
 
 
 @dataclass

@@ -4,6 +4,7 @@ and constants (interfaces are in `lower_interface.py`)."""
 from __future__ import annotations
 
 from decimal import Decimal
+from typing import TypeVar
 
 from miro_gen.codegen import names
 from miro_gen.codegen.codec import CodecPlanner, Encoded, single_unpack
@@ -38,6 +39,7 @@ from miro_gen.runtime.cdr import default_discriminator
 XCDR2_ANNOTATIONS = {"appendable", "mutable", "optional", "external"}
 
 Nested = list[tuple[str, str]]
+Record = TypeVar("Record", StructContext, ExceptionContext)
 
 
 class DataLowering:
@@ -100,29 +102,30 @@ class DataLowering:
         m.use("dc", "cdr")
         members = d.all_members
         _check_xcdr1(d, members)
-        fields = self._fields(d.members, names.STRUCT_ATTRIBUTES, m)
-        bases = [self.scope.ref(d.base, m)] if d.base is not None else []
-        encode, decode, args = self._codec(d, members, names.STRUCT_ATTRIBUTES, m)
-        return StructContext(
-            name=self.scope.place(d).cls,
-            scoped_name=d.scoped_name,
-            doc=d.doc,
-            repo_id=d.repo_id,
-            schema=data_schema(d),
-            nested=nested,
-            encode=encode,
-            decode=decode,
-            construct_args=args,
-            fields=fields,
-            bases=bases,
-        )
+        struct = self._record(StructContext, d, members, names.STRUCT_ATTRIBUTES, m, nested)
+        struct.bases = [self.scope.ref(d.base, m)] if d.base is not None else []
+        return struct
 
     def exception(self, d: ast.Exception_, m: ModuleContext, nested: Nested) -> ExceptionContext:
         m.use("dc", "cdr", "exc")
         _check_xcdr1(d, d.members)
-        fields = self._fields(d.members, names.EXCEPTION_ATTRIBUTES, m)
-        encode, decode, args = self._codec(d, d.members, names.EXCEPTION_ATTRIBUTES, m)
-        return ExceptionContext(
+        reserved = names.EXCEPTION_ATTRIBUTES
+        return self._record(ExceptionContext, d, d.members, reserved, m, nested)
+
+    def _record(
+        self,
+        kind: type[Record],
+        d: ast.Struct | ast.Exception_,
+        members: list[ast.Member],
+        reserved: frozenset[str],
+        m: ModuleContext,
+        nested: Nested,
+    ) -> Record:
+        """A struct or exception: its own members as fields; `members` (with the base
+        struct's) encoded in order."""
+        fields = self._fields(d.members, reserved, m)
+        encode, decode, args = self._codec(d, members, reserved, m)
+        return kind(
             name=self.scope.place(d).cls,
             scoped_name=d.scoped_name,
             doc=d.doc,
