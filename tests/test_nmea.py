@@ -14,6 +14,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from services.gps.nmea import Sentence, decode
 from services.gps.nmea_epochs import NmeaParser
 
 Q = Miro.GpsFixQualityIDL
@@ -47,34 +48,80 @@ GGA = "GPGGA,123519.50,4807.038,N,01131.000,E,2,08,0.9,545.4,M,46.9,M,3.2,0123"
 RMC = "GPRMC,123519.50,A,4807.040,S,01131.002,W,022.4,084.4,230394,003.1,W"
 
 
+def said(body: str) -> Sentence:
+    """What one sentence says (services/gps/nmea.py alone)."""
+    kind, _, s = decode(sentence(body))
+    assert s is not None, kind
+    return s
+
+
+def test_what_each_sentence_says() -> None:
+    gga = said(GGA)
+    assert gga.time_of_day == 12 * 3600 + 35 * 60 + 19.5 and gga.position
+    assert (gga.fix, gga.quality) == (True, Q.GPS_FIX_DGPS)
+    assert math.isclose(gga.fields["latitude"], 48 + 7.038 / 60)  # type: ignore[arg-type]
+    assert (gga.fields["satellitesUsed"], gga.fields["dgpsStation"]) == (8, 123)
+    rmc = said(RMC)
+    assert rmc.date == MAR_23_1994 and (rmc.fix, rmc.quality) == (True, Q.GPS_FIX_GPS)
+    assert rmc.fields["latitude"] < 0 and rmc.fields["longitude"] < 0  # type: ignore[operator]
+    gll = said("GPGLL,4916.45,N,12311.12,W,225444,A,D")
+    assert (gll.time_of_day, gll.fix, gll.quality) == (82484, True, Q.GPS_FIX_DGPS)
+    assert said("GPGLL,4916.45,N,12311.12,W,225444,V,N").fix is False
+    assert said("GPGLL,4916.45,N,12311.12,W").fix is None  # NMEA 1.5: no status, says nothing
+    gns = said(
+        "GNGNS,224749.00,3333.4268304,N,11153.3538273,W,NDD,19,0.6,406.110,-26.294,6.0,0138,S"
+    )
+    assert (gns.fix, gns.quality) == (True, Q.GPS_FIX_DGPS)  # GLONASS and Galileo: differential
+    assert gns.fields["altitude"] == 406.11 and gns.fields["satellitesUsed"] == 19
+    assert said("GNGNS,224749.00,,,,,NNNN,00,,,,,,V").fix is False
+    assert said("GNGNS,224749.00,3333.42,N,11153.35,W,AA,19,0.6,406.1,-26.2,,,U").fix is None
+    assert (
+        said("GPGSA,A,1,,,,,,,,,,,,,,,").fix is False
+        and said("GPGSA,A,3,04,,,,,,,,,,,,2.5,1.3,2.1").fix
+    )
+    assert said("GPZDA,160012.71,11,03,2004,-1,00").date == 1078963200  # 2004-03-11
+    assert math.isclose(said("PGRMZ,246,f,3").fields["altitude"], 246 * 0.3048)  # type: ignore[arg-type]
+    for body, quality in (
+        ("GPGGA,1,4807.038,N,01131.000,E,6,08,0.9,545.4,M,46.9,M,,", Q.GPS_FIX_ESTIMATED),
+        ("GPRMC,1,A,4807.04,S,01131.00,W,0,0,230394,,,M", Q.GPS_FIX_MANUAL),
+        ("GPGGA,1,4807.038,N,01131.000,E,8,08,0.9,545.4,M,46.9,M,,", Q.GPS_FIX_SIMULATION),
+    ):
+        assert said(body.replace(",1,", ",120000,", 1)).quality is quality
+
+
 def test_the_sentences_of_one_fix_make_one_reading_with_all_their_fields() -> None:
     parser = NmeaParser()
     vtg = "GPVTG,054.7,T,034.4,M,005.5,N,010.2,K"
     assert feed(parser, GGA, "GNGSA,A,3,04,05,,09,12,,,24,,,,,2.5,1.3,2.1", RMC, vtg) == []
     [r] = parser.flush()  # the receiver fell silent: the fix is complete
+    assert parser.flush() == []  # one reading a fix
     assert r.utcTime == Miro.TimeIDL(MAR_23_1994 + 12 * 3600 + 35 * 60 + 19, 500000)
     assert math.isclose(r.latitude, -(48 + 7.040 / 60)) and r.longitude < 0  # the last one's
-    assert r.quality is Q.GPS_FIX_DGPS and r.valid
+    assert r.quality is Q.GPS_FIX_DGPS and r.valid  # GGA's quality
     assert (r.satellitesUsed, r.altitude, r.dgpsStation) == (8, 545.4, 123)
     assert math.isclose(r.dgpsAge, 3.2, rel_tol=1e-6)
     assert r.mode is Miro.GpsFixModeIDL.GPS_MODE_3D and r.satellites == [4, 5, 9, 12, 24]
-    assert math.isclose(r.speed, 10.2 / 3.6, rel_tol=1e-6)  # VTG's, the last said
     assert math.isclose(r.magneticVariation, -3.1, rel_tol=1e-6)
+    # The fix as it was when it was reported, at the RMC (no cycle end known yet: at every
+    # sentence with a position); the VTG after it goes with the next fix.
+    assert math.isclose(r.speed, 22.4 * 1852 / 3600, rel_tol=1e-6)
     assert parser.counts.good == 4
 
 
-def test_a_fix_goes_out_at_the_cycle_end_once_it_is_learnt() -> None:
+def test_each_fix_goes_out_once_complete() -> None:
     parser = NmeaParser()
-    readings = []
-    for second in range(5):
-        for body in epoch(f"1235{second:02d}"):
-            readings.append(feed(parser, body))
-    # Epochs 0 and 1 end when the next one starts (at its GGA); from epoch 2 on, the receiver's
-    # last sentence (RMC) is known to end a fix, and the reading goes out with it.
-    assert [len(r) for r in readings] == [0, 0, 0, 1, 0, 0, 1, 0, 1, 0, 0, 1, 0, 0, 1]
-    assert parser.flush() == []  # already out
-    times = [r[0].utcTime.sec % DAY for r in readings if r]
+    readings = [feed(parser, body) for second in range(5) for body in epoch(f"1235{second:02d}")]
+    # A fix goes out when the next one starts (at its GGA), or when the receiver falls silent.
+    assert [len(r) for r in readings] == [0, 0, 0] + [1, 0, 0] * 4
+    [last] = parser.flush()
+    times = [r[0].utcTime.sec % DAY for r in readings if r] + [last.utcTime.sec % DAY]
     assert times == [12 * 3600 + 35 * 60 + s for s in range(5)]
+    assert all(r[0].valid for r in readings if r) and last.valid
+    # A cycle cut short before its end (the RMC, learnt from the first epochs) is no fix.
+    feed(parser, *epoch("123505")[:2])
+    [cut, whole] = feed(parser, *epoch("123506")) + parser.flush()
+    assert not cut.valid and cut.utcTime.sec % DAY == 12 * 3600 + 35 * 60 + 5
+    assert whole.valid and whole.utcTime.sec % DAY == 12 * 3600 + 35 * 60 + 6
 
 
 def test_a_repeated_time_is_the_same_fix_not_a_new_reading() -> None:
@@ -83,23 +130,28 @@ def test_a_repeated_time_is_the_same_fix_not_a_new_reading() -> None:
     assert [r.utcTime.sec % 60 for r in out + parser.flush()] == [0, 1, 2]
 
 
-def test_gll_and_gns_from_any_talker_give_fixes() -> None:
-    parser = NmeaParser()
-    out = feed(
-        parser,
-        "GPZDA,120100.00,14,03,2025,00,00",
-        "GPGLL,4807.100,N,01131.000,E,120100.00,A,A",
-        "GNGNS,120101.00,3342.0500,S,15112.0300,E,NAAN,14,0.8,41.2,22.3,,,S",
-        "BDGSA,A,3,214,,,,,,,,,,,,1.6,0.8,1.4",
-        "GAGSA,A,3,301,305,,,,,,,,,,,1.6,0.8,1.4",
-        "GLGNS,120102.00,3342.0600,S,15112.0300,E,ANNN,14,0.8,41.2,22.3,,,V",
-    )
-    out += parser.flush()
-    assert [r.valid for r in out] == [True, True, True]
+def test_gll_and_gns_receivers() -> None:
+    old, gnss = NmeaParser(), NmeaParser()
+    out: list[Miro.GpsDataIDL] = []
+    for second in range(3):  # an old receiver: GLL and ZDA only
+        t = f"12010{second}.00"
+        gll = f"GPGLL,4807.10{second},N,01131.000,E,{t},A,A"
+        out += feed(old, f"GPZDA,{t},14,03,2025,00,00", gll)
+    for second in range(3):  # a GNSS receiver: GNS, one GSA per constellation
+        t = f"12011{second}.00"
+        out += feed(
+            gnss,
+            f"GNRMC,{t},A,3342.0500,S,15112.0300,E,0.5,12.0,140325,,,A,S",
+            f"GNGNS,{t},3342.0500,S,15112.0300,E,NAAN,14,0.8,41.2,22.3,,,S",
+            "GPGSA,A,3,05,12,,,,,,,,,,,1.6,0.8,1.4",
+            "BDGSA,A,3,214,,,,,,,,,,,,1.6,0.8,1.4",
+        )
+    out += old.flush() + gnss.flush()
+    assert [r.valid for r in out] == [True] * 6
     assert out[0].utcTime.sec == 1741953660  # 2025-03-14 12:01:00
-    assert math.isclose(out[1].latitude, -(33 + 42.05 / 60))
-    assert out[1].quality is Q.GPS_FIX_GPS and out[1].altitude == 41.2
-    assert out[1].satellites == [214, 301, 305]  # one GSA per constellation, added up
+    assert math.isclose(out[-1].latitude, -(33 + 42.05 / 60))
+    assert out[-1].quality is Q.GPS_FIX_GPS and out[-1].altitude == 41.2
+    assert out[-1].satellites == [5, 12, 214]  # one GSA per constellation, added up
 
 
 def test_demo_mode_dead_reckoning_and_manual_input_are_no_fixes() -> None:

@@ -373,8 +373,8 @@ HANDLERS: dict[str, Callable[[str, list[str]], Sentence]] = {
 }
 
 
-def decode(line: bytes) -> tuple[str, Sentence | None]:
-    """The sentence's type and what it says (None for a type not read here)."""
+def decode(line: bytes) -> tuple[str, list[str], Sentence | None]:
+    """The sentence's type, its fields, and what it says (None for a type not read here)."""
     talker, kind, fields = split_sentence(line)
     handler = HANDLERS.get(kind)
-    return kind, handler(talker, fields) if handler is not None else None
+    return kind, fields, handler(talker, fields) if handler is not None else None

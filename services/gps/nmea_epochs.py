@@ -5,43 +5,46 @@ them together into an *epoch* and returns one reading per epoch. Fields keep the
 until a sentence carries a new one; fields never received (or left empty by the receiver) are NaN
 or 0, as the IDL says.
 
-*When an epoch is over*: when a sentence with another UTC time arrives; at once at the sentence
-that ended the last two epochs (the receiver's *cycle end*, learnt as gpsd learns it, so that a
-reading goes out as soon as the receiver has said all it says about a fix); or, at `flush()`,
-which the driver calls when the receiver falls silent, if the epoch has every type of position
-sentence the one before had (a log that stops in the middle of an epoch leaves it incomplete).
+*When a reading goes out*: once per epoch, when the next epoch starts or at `flush()`, which the
+driver calls when the receiver has been silent for a quarter of a second. It is a fix if, at one
+of the moments gpsd would report the epoch, it was one, and it is the reading as it was at the
+last such moment. Those moments come from the receiver's rhythm (services/gps/nmea_cycle.py):
+its cycle end, learnt from the first epochs, and the sentences that follow it; until the cycle
+end is known, every sentence with a position or a fix mode. An epoch cut short before its cycle
+end (a receiver that skipped its last sentence, a log that stops) is not a fix, as gpsd does not
+report it either.
 
-*Valid*: a reading is valid when its epoch has a position, the last sentence that said anything
-about the fix said there is one (services/gps/nmea.py lists what each says), no sentence said the
-position is estimated, manual or simulated, and its UTC date is known. Other readings are still
-published, with `valid` FALSE; `quality` says why: GGA's fix quality when the epoch had a GGA,
-else the first mode indicator's (`E` GPS_FIX_ESTIMATED, `M` GPS_FIX_MANUAL, `S`
-GPS_FIX_SIMULATION, `N` GPS_FIX_INVALID). A receiver in demo mode (RMC `V` with mode `S`, GGA
-quality 8) gives no valid reading.
+*Valid*: at that moment, the epoch has a position, the last sentence that said anything about the
+fix said there is one (services/gps/nmea.py lists what each says), no sentence said the position
+is estimated, manual or simulated, and the UTC date is known. Other readings are published too,
+with `valid` FALSE; `quality` says why: GGA's fix quality when the epoch had a GGA, else the first
+mode indicator's (`E` GPS_FIX_ESTIMATED, `M` GPS_FIX_MANUAL, `S` GPS_FIX_SIMULATION, `N`
+GPS_FIX_INVALID). A receiver in demo mode (RMC `V` with mode `S`, GGA quality 8) gives no fix.
 
 *Dates*: from an RMC with status `A` or a ZDA. A GGA, GNS or GLL time takes the last date, moved to
 the next day when the time of day jumps back by more than twelve hours (midnight). Until a date
 has come, `utcTime` is the time of day and the reading is not valid; with `host_date` (the
 driver's `HostDate` parameter, for receivers that send neither RMC nor ZDA) the host clock gives
-the date meanwhile. An epoch whose GGA came before the first date (the RMC later in the same
-epoch) is not valid either once the cycle end is known, as gpsd, the reference, reports it before
-that RMC. Old receivers count GPS weeks in ten bits and, after a week rollover (1999-08-22,
-2019-04-07), report dates 1024 weeks (19.6 years) too early; nothing in the data tells such a date
-from a true old one (a replayed log), so the correction is explicit: `date_not_before` (the
-driver's `DateNotBefore` parameter) moves any earlier date forward by 1024 weeks, as often as
-needed, and `rollovers` counts the dates so corrected.
+the date meanwhile. A receiver without a fix that sends empty GGA or RMC (Quectel) makes the
+parser forget the date and the cycle end, as gpsd does. Old receivers count GPS weeks in ten bits
+and, after a week rollover (1999-08-22, 2019-04-07), report dates 1024 weeks (19.6 years) too
+early; nothing in the data tells such a date from a true old one (a replayed log), so the
+correction is explicit: `date_not_before` (the driver's `DateNotBefore` parameter) moves any
+earlier date forward by 1024 weeks, as often as needed, and `rollovers` counts the dates so
+corrected.
 """
 
 from __future__ import annotations
 
 import copy
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from datetime import UTC, date, datetime
 
 import Miro
 
 from .nmea import NAN, NOT_REAL, NmeaError, Q, Sentence, decode, empty_reading, time_idl
+from .nmea_cycle import Cycle
 
 DAY = 86400
 ROLLOVER = 1024 * 7 * DAY  # seconds in 1024 GPS weeks
@@ -63,15 +66,14 @@ class Epoch:
 
     time_of_day: float | None = None
     stamp: float = 0.0  # host time of the latest sentence
-    keys: list[tuple[str, int]] = field(default_factory=list)  # (type, nth of its type)
-    kinds: set[str] = field(default_factory=set)  # of the sentences with a time that came
     position: bool = False  # a GGA, RMC, GNS or GLL came
+    gsa: int = 0  # GSA sentences so far (one per constellation)
     fix: bool | None = None  # what the last sentence that said anything said
     quality: Miro.GpsFixQualityIDL | None = None  # GGA's, else the first mode indicator's
     not_real: bool = False  # a sentence said estimated, manual or simulated
     quality_from_gga: bool = False
     altitude_from_gga: bool = False
-    dated: bool = False  # the date was known at its first position sentence
+    fixed: Miro.GpsDataIDL | None = None  # the reading at its last report as a fix
     published: bool = False
 
 
@@ -93,13 +95,11 @@ class NmeaParser:
         self._date: float | None = None  # midnight of the last good RMC or ZDA date
         self._date_time: float | None = None  # the time of day that date came with
         self._epoch = Epoch()
-        self._end: tuple[str, int] | None = None  # the learnt cycle end
-        self._end_candidate: tuple[str, int] | None = None
-        self._last_kinds: set[str] = set()  # the timed sentence types of the last epoch
+        self._cycle = Cycle()
 
     def feed(self, sentence: bytes, stamp: float) -> list[Miro.GpsDataIDL]:
         try:
-            kind, s = decode(sentence)
+            kind, fields, s = decode(sentence)
         except NmeaError as e:
             if e.kind == "checksum":
                 self.counts.checksum += 1
@@ -118,27 +118,28 @@ class NmeaParser:
                 epoch = self._epoch
                 epoch.time_of_day = s.time_of_day
             self._apply(epoch, kind, s)
-            if s.position and s.time_of_day is None:  # a receiver without a fix (Quectel's
-                self._end = self._end_candidate = None  # empty GGA/RMC): cycle end unknown
-        # Every good sentence counts towards the cycle, as in gpsd: the receiver's last one may
-        # be a type this parser does not read.
+            if s.position and s.time_of_day is None and s.fix is False:
+                # A receiver without a fix sending empty GGA/RMC (Quectel): gpsd forgets the
+                # date and its cycle, and so do we.
+                self._cycle.forget()
+                self._date = None
         epoch.stamp = stamp
-        epoch.keys.append((kind, 1 + sum(1 for k, _ in epoch.keys if k == kind)))
-        if epoch.keys[-1] == self._end:
-            out += self._publish(epoch)
+        data = s is not None or kind == "GSV"
+        if self._cycle.report(kind, fields, data) and self._valid(epoch):
+            epoch.fixed = self._reading(epoch, True)
         return out
 
     def flush(self) -> list[Miro.GpsDataIDL]:
-        """The reading of the epoch in progress, if it has not gone out yet and is complete."""
-        epoch = self._epoch
-        if epoch.kinds >= self._last_kinds:
-            return self._publish(epoch)
-        return []
+        """The reading of the epoch in progress, if it has not gone out yet (the driver calls
+        this when the receiver falls silent)."""
+        return self._publish(self._epoch)
 
     def _apply(self, epoch: Epoch, kind: str, s: Sentence) -> None:
         fields = dict(s.fields)
-        if kind == "GSA" and any(k == "GSA" for k, _ in epoch.keys):  # one per constellation
-            fields["satellites"] = self.reading.satellites + list(fields["satellites"])  # type: ignore[call-overload]
+        if kind == "GSA":
+            if epoch.gsa:  # one per constellation: add them up
+                fields["satellites"] = self.reading.satellites + list(fields["satellites"])  # type: ignore[call-overload]
+            epoch.gsa += 1
         if kind in ("GGA", "GNS") and math.isfinite(fields.get("altitude", NAN)):  # type: ignore[arg-type]
             epoch.altitude_from_gga = True
         elif kind == "PGRMZ" and epoch.altitude_from_gga:  # GGA's altitude is the more precise
@@ -147,11 +148,7 @@ class NmeaParser:
             setattr(self.reading, name, value)
         if s.date is not None:
             self._date, self._date_time = self._corrected(s.date), s.time_of_day
-        if s.position and not epoch.position:
-            epoch.dated = self._date is not None
         epoch.position |= s.position
-        if s.time_of_day is not None:
-            epoch.kinds.add(kind)
         if s.fix is not None:
             epoch.fix = s.fix
         if s.quality is not None:
@@ -167,33 +164,35 @@ class NmeaParser:
             self.rollovers += 1
         return day
 
+    def _valid(self, epoch: Epoch) -> bool:
+        """Whether the epoch is a fix now: a position, the last word a fix, nothing estimated,
+        manual or simulated, and the date known."""
+        r = self.reading
+        located = math.isfinite(r.latitude) and math.isfinite(r.longitude)
+        if not (epoch.position and located and epoch.fix and not epoch.not_real):
+            return False
+        return self._utc(epoch.time_of_day, epoch.stamp)[1]
+
     def _close(self) -> list[Miro.GpsDataIDL]:
-        """The epoch is over (another time arrived): learn the cycle end, start the next."""
-        epoch = self._epoch
-        if epoch.keys:
-            last = epoch.keys[-1]
-            self._end = last if last == self._end_candidate else None
-            self._end_candidate = last
-        if epoch.position:
-            self._last_kinds = epoch.kinds
-        out = self._publish(epoch)
+        """The epoch is over (another time arrived)."""
+        out = self._publish(self._epoch)
         self._epoch = Epoch()
         return out
 
     def _publish(self, epoch: Epoch) -> list[Miro.GpsDataIDL]:
+        """The epoch's reading: as it was at its last report as a fix, else as no fix."""
         if epoch.published or not epoch.position:
             return []
         epoch.published = True
-        r = self.reading
-        r.utcTime, dated = self._utc(epoch.time_of_day, epoch.stamp)
-        # A date that arrives in the middle of an epoch (an RMC after the GGA) counts once the
-        # cycle end is known only: gpsd, the reference, reports that epoch before the RMC.
-        dated = dated and (epoch.dated or self._end is None or self.host_date)
-        located = math.isfinite(r.latitude) and math.isfinite(r.longitude)
-        r.valid = located and dated and bool(epoch.fix) and not epoch.not_real
+        return [epoch.fixed or self._reading(epoch, False)]
+
+    def _reading(self, epoch: Epoch, valid: bool) -> Miro.GpsDataIDL:
+        r = copy.deepcopy(self.reading)
+        r.utcTime = self._utc(epoch.time_of_day, epoch.stamp)[0]
+        r.valid = valid
         r.quality = epoch.quality if epoch.quality is not None else Q.GPS_FIX_INVALID
         r.time = time_idl(epoch.stamp)
-        return [copy.deepcopy(r)]
+        return r
 
     def _utc(self, time_of_day: float | None, stamp: float) -> tuple[Miro.TimeIDL, bool]:
         """The fix's UTC time, and whether its date is known."""
