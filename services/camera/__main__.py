@@ -33,17 +33,12 @@ import Miro__POA
 from Miro.CameraParameters import CameraParameters
 
 from miro_gen import (
-    EventChannelFactory,
     Implementation,
-    Server,
     StructuredPushSupplier,
-    SystemException,
     log,
     nonblocking,
 )
-from miro_gen.devices import SubscriberNotice
-from miro_gen.params import ParamsError, read_parameters
-from miro_gen.transport.options import UsageError
+from miro_gen.devices import SubscriberNotice, startup
 
 _log = log.logger("Camera")
 
@@ -77,42 +72,27 @@ class CameraImpl(Miro__POA.Camera, Implementation[Miro.ImageEventIDL]):
         self.integrate_data(image, stamp)
 
 
-def main(argv: list[str] | None = None) -> int:
-    try:
-        server = Server(sys.argv if argv is None else argv)
-    except UsageError as e:
-        print(f"camera: {e}", file=sys.stderr)
-        return 2
-    p = argparse.ArgumentParser(prog="camera", description=__doc__.split("\n\n")[0])
+def options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--device", help="V4L2 device or number, video file or URL (overrides)")
-    args = p.parse_args(server.argv[1:])
+
+
+def main(argv: list[str] | None = None) -> int:
+    server, args = startup.start("camera", argv, __doc__, options)
     try:
         from .capture import FrameSource
     except ImportError as e:
-        print(f"camera: needs OpenCV ({e}): pip install 'miro-gen[camera]'", file=sys.stderr)
-        return 1
+        startup.fail("camera", f"needs OpenCV ({e}): pip install 'miro-gen[camera]'")
     params = CameraParameters.instance()
-    try:
-        read_parameters(params, "Camera", config_file=server.options.config_file)
-    except ParamsError as e:
-        print(f"camera: {e}", file=sys.stderr)
-        return 1
+    startup.read(params, "Camera", server, "camera")
     if args.device:
         params.device = args.device
     _log.debug("parameters:\n%s", params)
-    try:
-        supplier = StructuredPushSupplier(
-            EventChannelFactory(server).find_or_create_channel(params.channelName)
-        )
-    except SystemException as e:
-        print(f"camera: {e}", file=sys.stderr)
-        return 1
+    supplier = startup.supplier_on(server, params.channelName, "camera")
     impl = CameraImpl(supplier, params)
     try:
         source = FrameSource(params, impl.integrate_image)
     except ValueError as e:
-        print(f"camera: {e}", file=sys.stderr)
-        return 1
+        startup.fail("camera", e)
     impl.format = source.format
     subscribers = SubscriberNotice(supplier, params.eventName, "images")
     server.add_to_name_service(impl, params.objectName)

@@ -43,11 +43,8 @@ import Miro__POA
 from Miro.GpsParameters import GpsParameters
 
 from miro_gen import (
-    EventChannelFactory,
     Implementation,
-    Server,
     StructuredPushSupplier,
-    SystemException,
     log,
     nonblocking,
 )
@@ -58,9 +55,8 @@ from miro_gen.devices import (
     DevMessage,
     SubscriberNotice,
     TtyConnection,
+    startup,
 )
-from miro_gen.params import ParamsError, read_parameters
-from miro_gen.transport.options import UsageError
 
 from .nmea_epochs import NmeaParser, parse_date
 
@@ -117,22 +113,15 @@ class NmeaConsumer(DevConsumer):
         _log.notice("receiver %s", "connected" if connected else "lost")
 
 
-def main(argv: list[str] | None = None) -> int:
-    try:
-        server = Server(sys.argv if argv is None else argv)
-    except UsageError as e:
-        print(f"gps: {e}", file=sys.stderr)
-        return 2
-    p = argparse.ArgumentParser(prog="gps", description=__doc__.split("\n\n")[0])
+def options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--device", help="serial port or pyserial URL (overrides the document)")
     p.add_argument("--baud", type=int, help="baud rate (overrides the document)")
-    args = p.parse_args(server.argv[1:])
+
+
+def main(argv: list[str] | None = None) -> int:
+    server, args = startup.start("gps", argv, __doc__, options)
     params = GpsParameters.instance()
-    try:
-        read_parameters(params, "Gps", config_file=server.options.config_file)
-    except ParamsError as e:
-        print(f"gps: {e}", file=sys.stderr)
-        return 1
+    startup.read(params, "Gps", server, "gps")
     if args.device:
         params.device = args.device
     if args.baud:
@@ -140,16 +129,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         not_before = parse_date(params.dateNotBefore)
     except ValueError as e:
-        print(f"gps: DateNotBefore: {e}", file=sys.stderr)
-        return 1
+        startup.fail("gps", f"DateNotBefore: {e}")
     _log.debug("parameters:\n%s", params)
-    try:
-        supplier = StructuredPushSupplier(
-            EventChannelFactory(server).find_or_create_channel(params.channelName)
-        )
-    except SystemException as e:
-        print(f"gps: {e}", file=sys.stderr)
-        return 1
+    supplier = startup.supplier_on(server, params.channelName, "gps")
     impl = GpsImpl(supplier, params)
     consumer = NmeaConsumer(impl, NmeaParser(not_before, params.hostDate))
     framer = DelimitedFramer(b"$", b"\n", max_length=256)  # NMEA: at most 82 characters

@@ -45,11 +45,8 @@ import Miro__POA
 from Miro.LaserParameters import LaserParameters
 
 from miro_gen import (
-    EventChannelFactory,
     Implementation,
-    Server,
     StructuredPushSupplier,
-    SystemException,
     log,
     nonblocking,
 )
@@ -62,6 +59,7 @@ from miro_gen.devices import (
     SockConnection,
     SubscriberNotice,
     TtyConnection,
+    startup,
 )
 from miro_gen.devices.connection import DeviceUnavailable
 from miro_gen.devices.scip import (
@@ -73,8 +71,6 @@ from miro_gen.devices.scip import (
     parse_info,
     split_response,
 )
-from miro_gen.params import ParamsError, read_parameters
-from miro_gen.transport.options import UsageError
 from miro_gen.transport.reactor import Reactor
 
 _log = log.logger("Laser")
@@ -360,38 +356,22 @@ def connect(
     return TtyConnection(reactor, handler, device, params.ttyParams.pyserial())
 
 
+def options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--device", help="serial port, pyserial URL or HOST:PORT (overrides)")
+
+
 def main(argv: list[str] | None = None) -> int:
-    try:
-        server = Server(sys.argv if argv is None else argv)
-    except UsageError as e:
-        print(f"laser: {e}", file=sys.stderr)
-        return 2
-    p = argparse.ArgumentParser(prog="laser", description=__doc__.split("\n\n")[0])
-    p.add_argument(
-        "--device", help="serial port, pyserial URL or HOST:PORT (overrides the document)"
-    )
-    args = p.parse_args(server.argv[1:])
+    server, args = startup.start("laser", argv, __doc__, options)
     params = LaserParameters.instance()
-    try:
-        read_parameters(params, "Laser", config_file=server.options.config_file)
-    except ParamsError as e:
-        print(f"laser: {e}", file=sys.stderr)
-        return 1
+    startup.read(params, "Laser", server, "laser")
     if args.device:
         params.device = args.device
     try:
         ScanCommand(0, 0, params.cluster, params.encoding, params.continuous, params.skip)
     except ValueError as e:
-        print(f"laser: {e}", file=sys.stderr)
-        return 1
+        startup.fail("laser", e)
     _log.debug("parameters:\n%s", params)
-    try:
-        supplier = StructuredPushSupplier(
-            EventChannelFactory(server).find_or_create_channel(params.channelName)
-        )
-    except SystemException as e:
-        print(f"laser: {e}", file=sys.stderr)
-        return 1
+    supplier = startup.supplier_on(server, params.channelName, "laser")
     impl = LaserImpl(supplier, params)
     consumer = ScipConsumer(impl, params)
     framer = LineFramer(b"\n\n", max_length=MAX_FRAME)  # a response ends with an empty line
