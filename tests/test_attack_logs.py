@@ -195,7 +195,8 @@ def test_a_hostile_schema_is_not_preprocessed(tmp_path: Path, include: str) -> N
     assert echo.returncode == 0, echo.stderr
     assert "preprocessor directives" in echo.stderr
     assert "no generated type here has type hash abababababab" in echo.stdout
-    assert "root:" not in echo.stdout + echo.stderr
+    said = echo.stdout + echo.stderr  # before: "/etc/passwd:1:1: error: unexpected 'root'"
+    assert "passwd:" not in said and "'root'" not in said
     assert time.monotonic() - started < 120
 
 

@@ -136,7 +136,6 @@ def naming_main(argv: Sequence[str]) -> int:
         service = NamingService(reactor, invoker, endpoint, ns.host, ns.quota, ns.max_names)
     except zmq.ZMQError as e:
         print(f"miro naming: cannot serve on {endpoint}: {e}", file=sys.stderr)
-        sockets.release(reactor.context)
         return 1
     channels = [_host_channel(service, name) for name in ns.channel]
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -148,15 +147,14 @@ def naming_main(argv: Sequence[str]) -> int:
         note += f"; CURVE with the key {policy.keys.path}"
     elif not sockets.is_loopback(sockets.endpoint_host(bound)):
         note += "; --insecure: anyone who can connect may change names"
-    print(f"naming service at {bound}{note}", flush=True)
-    for name in ns.channel:
-        print(f"event channel {name}", flush=True)
+    lines = [f"naming service at {bound}{note}", *(f"event channel {n}" for n in ns.channel)]
+    # Said once the reactor runs: a signal from whoever waited for these lines then stops it.
+    reactor.call_soon(lambda: print("\n".join(lines), flush=True))
     reactor.run()
     for channel in channels:
         channel.close()
     service.close()
     reactor.close()
-    sockets.release(reactor.context)
     return 0
 
 

@@ -21,6 +21,7 @@ import zmq
 from zmq.utils.monitor import parse_monitor_message
 
 from miro_gen.log import logger
+from miro_gen.transport import sockets
 from miro_gen.transport.reactor import Reactor
 
 _log = logger("MIRO")
@@ -50,7 +51,7 @@ class ChannelLink:
         self.connected = False
         self.closed = False
         self.moves = 0  # times the channel was found at another endpoint
-        self._monitor = socket.get_monitor_socket(_EVENTS)
+        self._monitor = sockets.monitor(socket, _EVENTS)
         socket.connect(endpoint)
         reactor.call_soon(reactor.register, self._monitor, self.read_events)
 

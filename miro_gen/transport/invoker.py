@@ -32,7 +32,12 @@ from miro_gen.transport import frames, sockets
 _log = logger("MIRO")
 
 CONNECT_TIMEOUT = 2.0  # seconds a call waits for a connection before TRANSIENT
-_LOST = zmq.EVENT_DISCONNECTED | zmq.EVENT_CLOSED
+# Only events that come once per connection: a monitor that nobody reads (the socket of a
+# thread that made one call long ago) must not fill up, or libzmq's I/O thread blocks sending
+# to it (a failed reconnection to a dead server would give an event every RECONNECT_IVL).
+_LOST = zmq.EVENT_DISCONNECTED
+_RECONNECT_STOP = 109  # libzmq 4.3's ZMQ_RECONNECT_STOP (a draft name in pyzmq)
+_STOP_AFTER_HANDSHAKE_FAILED = 2  # ZMQ_RECONNECT_STOP_HANDSHAKE_FAILED
 _REFUSED = (  # the server would not have us: no key, another key, or too many connections
     zmq.EVENT_HANDSHAKE_FAILED_AUTH
     | zmq.EVENT_HANDSHAKE_FAILED_PROTOCOL
@@ -49,7 +54,10 @@ class _Connection:
         s = self.socket
         s.setsockopt(zmq.IMMEDIATE, 1)
         s.setsockopt(zmq.RECONNECT_IVL, 100)
-        self.monitor = s.get_monitor_socket(zmq.EVENT_HANDSHAKE_SUCCEEDED | _LOST | _REFUSED)
+        s.setsockopt(zmq.RECONNECT_IVL_MAX, 2000)
+        with contextlib.suppress(zmq.ZMQError):  # refused (no key, the cap): do not retry
+            s.setsockopt(_RECONNECT_STOP, _STOP_AFTER_HANDSHAKE_FAILED)
+        self.monitor = sockets.monitor(s, zmq.EVENT_HANDSHAKE_SUCCEEDED | _LOST | _REFUSED)
         s.connect(endpoint)
         self.connected = False
         self.lost = False

@@ -144,10 +144,6 @@ class Server(Client):
     def reactor(self) -> Reactor:
         return self._reactor
 
-    def close(self) -> None:
-        super().close()
-        sockets.release(self.context)  # the admission thread of its listening sockets
-
     def add_to_name_service(self, servant: Servant, name: str) -> ObjectRef:
         """Serve `servant` and bind it as `name` under this server's naming context (or at the
         path given); its reference. Replaces an older binding of the name, as Miro does."""
