@@ -16,7 +16,7 @@ from pathlib import Path
 import Miro
 import pytest
 import zstandard
-from loopback import service_env
+from loopback import run_miro, service_env
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
@@ -49,16 +49,6 @@ def read_all(path: Path) -> list[tuple[str, int, int, int, bytes]]:
             (t.topic, m.log_time, m.publish_time, m.sequence, bytes(m.data))
             for t, m in log.messages()
         ]
-
-
-def run(*args: str, timeout: float = 60) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "miro_gen.cli.main", *args],
-        capture_output=True,
-        text=True,
-        env=service_env(),
-        timeout=timeout,
-    )
 
 
 def test_bit_flips_are_errors_or_harmless_never_wrong_values(tmp_path: Path) -> None:
@@ -95,7 +85,7 @@ def test_bit_flips_are_errors_or_harmless_never_wrong_values(tmp_path: Path) -> 
     damaged = bytearray(data)
     damaged[index.chunk_start_offset + index.chunk_length - 20] ^= 0x10  # in its zstd data
     flipped.write_bytes(damaged)
-    echo = run("log", "echo", str(flipped))
+    echo = run_miro("log", "echo", str(flipped))
     assert echo.returncode == 1
     assert f"chunk 3 (at byte {index.chunk_start_offset}" in echo.stderr, echo.stderr
     assert "Traceback" not in echo.stderr

@@ -108,9 +108,4 @@ class RawEventTap:
         return self.gaps.missed
 
     def close(self) -> None:
-        def close() -> None:
-            self.link.close()
-            self.reactor.unregister(self.socket)
-            self.socket.close(0)
-
-        self.reactor.call_soon(close)
+        self.link.close_socket()

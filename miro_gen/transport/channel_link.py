@@ -82,13 +82,19 @@ class ChannelLink:
         self.moves += 1
         self.socket.connect(endpoint)
 
-    def close(self) -> None:
-        """Stop watching (reactor thread, before the socket closes)."""
-        self.closed = True
-        self.reactor.unregister(self._monitor)
-        with contextlib.suppress(zmq.ZMQError):
-            self.socket.disable_monitor()
-        self._monitor.close(0)
+    def close_socket(self) -> None:
+        """Stop watching and close the socket, on the reactor thread (from any thread)."""
+
+        def close() -> None:
+            self.closed = True
+            self.reactor.unregister(self._monitor)
+            with contextlib.suppress(zmq.ZMQError):
+                self.socket.disable_monitor()
+            self._monitor.close(0)
+            self.reactor.unregister(self.socket)
+            self.socket.close(0)
+
+        self.reactor.call_soon(close)
 
 
 class ChannelWatcher:

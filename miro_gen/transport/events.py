@@ -100,16 +100,6 @@ def subscription_prefix(domain: str, type_name: str) -> bytes:
     return topic(domain, type_name)
 
 
-def _close_on(reactor: Reactor, socket: zmq.Socket[Any]) -> None:
-    """Close a socket of the reactor's thread, on that thread."""
-
-    def close() -> None:
-        reactor.unregister(socket)
-        socket.close(0)
-
-    reactor.call_soon(close)
-
-
 # ---- channels -------------------------------------------------------------------------------
 
 
@@ -445,12 +435,7 @@ class StructuredPushSupplier:
             self._generation += 1  # after the change, so a reader never keeps a stale answer
 
     def close(self) -> None:
-        def close() -> None:
-            self.link.close()
-            self.reactor.unregister(self.socket)
-            self.socket.close(0)
-
-        self.reactor.call_soon(close)
+        self.link.close_socket()
 
 
 # ---- consumers ------------------------------------------------------------------------------
@@ -664,9 +649,4 @@ class StructuredPushConsumer:
             self.queue.add(topic_key, waiting)
 
     def close(self) -> None:
-        def close() -> None:
-            self.link.close()
-            self.reactor.unregister(self.socket)
-            self.socket.close(0)
-
-        self.reactor.call_soon(close)
+        self.link.close_socket()
