@@ -115,12 +115,24 @@ def include_tree(tmp_path: Path) -> dict[str, Path]:
     return {"root": tmp_path, "main": main_dir, "inc1": inc1, "inc2": inc2}
 
 
-@pytest.mark.parametrize("spelling", ['"x.idl"', "<x.idl>"])
-def test_include_prefers_including_folder(include_tree: dict[str, Path], spelling: str) -> None:
-    main = write(include_tree["main"] / "main.idl", f"#include {spelling}\n")
+def test_quoted_include_prefers_including_folder(include_tree: dict[str, Path]) -> None:
+    main = write(include_tree["main"] / "main.idl", '#include "x.idl"\n')
     got = decls(main, [include_tree["inc1"], include_tree["inc2"]])
     assert got["WHICH"]["value"] == 0
     assert Path(got["WHICH"]["file"]).parent == include_tree["main"]
+
+
+def test_angle_include_searches_only_include_dirs(include_tree: dict[str, Path]) -> None:
+    """As in the C preprocessor and omniidl: `<x.idl>` never looks beside the including file."""
+    main = write(include_tree["main"] / "main.idl", "#include <x.idl>\n")
+    assert decls(main, [include_tree["inc1"], include_tree["inc2"]])["WHICH"]["value"] == 1
+    diag = Diagnostics()
+    with pytest.raises(CompileError):
+        compile_idl(str(main), [], None, diag)
+    (error,) = [d for d in diag.items if d.severity == "error"]
+    assert error.pos is not None and error.pos.line == 1
+    assert "cannot find include file 'x.idl' (searched: no -I folders given;" in error.message
+    assert 'it is beside the including file: write #include "x.idl" or add -I' in error.message
 
 
 @pytest.mark.parametrize("spelling", ['"x.idl"', "<x.idl>"])

@@ -48,8 +48,17 @@ def build_parser() -> argparse.ArgumentParser:
         dest="defines",
         action="append",
         default=[],
+        type=lambda text: ("D", text),
         metavar="NAME[=VALUE]",
         help="define a preprocessor macro (VALUE defaults to 1); may be repeated",
+    )
+    p.add_argument(
+        "-U",
+        dest="defines",
+        action="append",
+        type=lambda text: ("U", text),
+        metavar="NAME",
+        help="undefine a predefined macro (__MIRO_IDL__, __OMNIIDL__); may be repeated",
     )
     p.add_argument(
         "-o",

@@ -16,7 +16,7 @@ from miro_gen.idl.resolver import Resolver
 def compile_idl(
     path: str,
     include_dirs: Sequence[str] = (),
-    defines: dict[str, str] | None = None,
+    defines: dict[str, str | None] | None = None,
     diagnostics: Diagnostics | None = None,
 ) -> ast.Specification:
     """Parse and resolve one IDL file (one translation unit, with its includes).
@@ -53,7 +53,7 @@ def _recursion_limit(limit: int) -> Iterator[None]:
 def _compile(
     path: str,
     include_dirs: Sequence[str],
-    defines: dict[str, str] | None,
+    defines: dict[str, str | None] | None,
     diag: Diagnostics,
     resolver: Resolver,
 ) -> ast.Specification:

@@ -96,8 +96,28 @@ class _AstBuilder:
         self.named.append((tok.start_pos or 0, node))
         return node
 
+    def use_ident(self, tok: Token) -> str:
+        """An identifier in a scoped name (a use, not a declaration).
+
+        As in omniidl, only declarations are checked against the keywords ignoring case: real
+        files escape a declaration (`typedef Object _Factory;`) and use the plain spelling
+        (`sequence<Factory>`). `CORBA::Object` and `CORBA::ValueBase` name the built-in types.
+        """
+        v = str(tok)
+        if v[0] == "_":
+            if len(v) == 1 or not v[1].isalpha():
+                self.diag.error(self.pos(tok), f"invalid identifier '{v}'")
+            return v[1:]
+        if v in RESERVED and tok.type == "IDENT":
+            self.diag.error(
+                self.pos(tok),
+                f"'{v}' is a keyword and cannot be used as a name here "
+                f"(write '_{v}' to use it as an identifier)",
+            )
+        return v
+
     def scoped(self, toks: _Children, absolute: bool) -> ast.ScopedName:
-        return ast.ScopedName(tuple(self.ident(t) for t in toks), absolute, self.pos(toks[0]))
+        return ast.ScopedName(tuple(self.use_ident(t) for t in toks), absolute, self.pos(toks[0]))
 
     def instance(self, tok: Token) -> int:
         return self.src.instance_at(tok.start_pos)

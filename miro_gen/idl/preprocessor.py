@@ -26,6 +26,11 @@ MAX_EXPANSION_DEPTH = 200
 MAX_EXPANDED_LINE = 1_000_000
 MAX_CONDITION_DEPTH = 2_000
 
+# `__OMNIIDL__` too, with omniidl 4.2's value: ORB IDL trees (Debian's omniORB tree) choose their
+# workarounds by it (`typedef Object _Factory;`, `#include <ir.idl>`), and miro-idl reads IDL as
+# omniidl does (as clang defines `__GNUC__`). `-U __OMNIIDL__` removes it.
+PREDEFINED_MACROS = {"__MIRO_IDL__": "1", "__OMNIIDL__": "0x2630"}
+
 _DIRECTIVE = re.compile(r"\s*#\s*([A-Za-z_]\w*)?\s*(.*)$", re.S)
 _IDENT = re.compile(r"[A-Za-z_]\w*")
 # Pieces of a line that matter for comment tracking and macro expansion.
@@ -131,14 +136,19 @@ class Preprocessor:
     def __init__(
         self,
         include_dirs: list[str] | tuple[str, ...] = (),
-        defines: dict[str, str] | None = None,
+        defines: dict[str, str | None] | None = None,
         diagnostics: Diagnostics | None = None,
     ) -> None:
         self.include_dirs = list(include_dirs)
         self.diag = diagnostics if diagnostics is not None else Diagnostics()
-        self._initial_macros: dict[str, Macro] = {"__MIRO_IDL__": Macro("__MIRO_IDL__", None, "1")}
+        self._initial_macros = {
+            name: Macro(name, None, value) for name, value in PREDEFINED_MACROS.items()
+        }
         for name, value in (defines or {}).items():
-            self._initial_macros[name] = Macro(name, None, value)
+            if value is None:  # -U NAME
+                self._initial_macros.pop(name, None)
+            else:
+                self._initial_macros[name] = Macro(name, None, value)
         self._file_cache: dict[str, str | None] = {}
 
     # -- public -------------------------------------------------------------------------------
@@ -190,10 +200,14 @@ class Preprocessor:
             self._path_index[path] = idx
         return idx
 
-    def _find_include(self, name: str, current: str) -> str | None:
+    def _search_dirs(self, current: str, quoted: bool) -> list[str]:
+        """Where `#include "x"` (the including file's folder, then the -I folders) or
+        `#include <x>` (the -I folders only) looks, as the C preprocessor and omniidl do."""
+        return [os.path.dirname(current), *self.include_dirs] if quoted else self.include_dirs
+
+    def _find_include(self, name: str, dirs: list[str]) -> str | None:
         if os.path.isabs(name):
             return name if os.path.isfile(name) else None
-        dirs = [os.path.dirname(current), *self.include_dirs]
         for d in dirs:
             candidate = os.path.normpath(os.path.join(d, name)) if d else os.path.normpath(name)
             if os.path.isfile(candidate):
@@ -395,13 +409,16 @@ class Preprocessor:
         if not m:
             self.diag.error(pos, '#include expects "FILE" or <FILE>')
             return
+        quoted = m.group(1) is not None
         name = m.group(1) or m.group(2)
-        found = self._find_include(name, current)
+        dirs = self._search_dirs(current, quoted)
+        found = self._find_include(name, dirs)
         if found is None:
-            searched = [os.path.dirname(current) or ".", *self.include_dirs]
-            self.diag.error(
-                pos, f"cannot find include file '{name}' (searched: {', '.join(searched)})"
-            )
+            searched = ", ".join(d or "." for d in dirs) or "no -I folders given"
+            hint = ""
+            if not quoted and self._find_include(name, self._search_dirs(current, True)):
+                hint = f'; it is beside the including file: write #include "{name}" or add -I'
+            self.diag.error(pos, f"cannot find include file '{name}' (searched: {searched}{hint})")
             return
         incs = self._includes.setdefault(current, [])
         if found not in incs:

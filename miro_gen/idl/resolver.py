@@ -72,6 +72,9 @@ KNOWN_ANNOTATIONS = frozenset(
 )
 # Integer-valued annotations and their ranges (DDS-XTypes 1.3: member ids have 28 bits).
 _ANNOTATION_LIMITS = {"id": 0x0FFFFFFF, "position": 0xFFFF, "bit_bound": 64}
+# CORBA's pseudo-objects in the built-in module CORBA, as base types of the same names.
+BUILTIN_TYPES = ("TypeCode", "Principal", "Object", "ValueBase")
+BUILTIN_POS = SourcePos("<built in>", 1, 0)
 _CONTEXT_ID = re.compile(r"[A-Za-z][A-Za-z0-9._]*\*?$")
 _DISCRIMINATOR_BASES = frozenset([*INT_RANGES, "char", "wchar", "boolean"])
 
@@ -147,6 +150,20 @@ class Resolver:
         self._decl_scopes: dict[int, Scope] = {}  # id(interface/valuetype) -> its scope
         self._scope_owners: dict[int, Any] = {}  # id(scope) -> interface/valuetype
         self._inherited: dict[int, dict[str, tuple[str, Any, ast.Decl]]] = {}
+        self._declare_builtins()
+
+    def _declare_builtins(self) -> None:
+        """Module CORBA and its pseudo-objects, known without any include (as omniidl knows
+        `CORBA::TypeCode` and `CORBA::Principal`); `CORBA::Object` and `CORBA::ValueBase` are
+        the keywords `Object` and `ValueBase`. Files that open `module CORBA` (the ORB's
+        orb.idl, ir.idl) reopen this module."""
+        corba = Entry("CORBA", "module", BUILTIN_POS, None)
+        corba.scope = self._new_scope("module", "CORBA", self.global_scope)
+        self.global_scope.entries["corba"] = corba
+        for name in BUILTIN_TYPES:
+            corba.scope.entries[name.lower()] = Entry(
+                name, "built-in type", BUILTIN_POS, ast.BaseType(name)
+            )
 
     # =========================================================================================
     # entry point
@@ -452,6 +469,10 @@ class Resolver:
         }[f.of]
         if existing is not None:
             node = existing.node
+            if isinstance(node, ast.BaseType) and f.of == "interface" and existing.name == f.name:
+                # TAO's ORB IDL forward-declares the pseudo-objects it uses (`interface
+                # TypeCode;` in module CORBA): that names the built-in, which stays as it is.
+                return
             compatible = (
                 (isinstance(node, ast.Forward) and node.of == f.of)
                 or (f.of == "interface" and isinstance(node, ast.Interface))
@@ -580,6 +601,33 @@ class Resolver:
         self._check_inherited_clashes(i)
         sub = self._frame_for(inner, i, frame)
         self._definitions(i.body, inner, sub)
+        if not i.local:
+            self._check_no_local_types(i)
+
+    def _check_no_local_types(self, i: ast.Interface) -> None:
+        """An unconstrained interface's operations cannot pass local types (CORBA 3.0 section
+        3.8.6): they cannot be marshalled."""
+        where = f"in unconstrained interface '{i.name}',"
+        for a in i.attributes:
+            if (local := _local_type(a.type)) is not None:
+                self.diag.error(a.pos, f"{where} attribute '{a.name}' has local type '{local}'")
+        for op in i.operations:
+            if (local := _local_type(op.returns)) is not None:
+                self.diag.error(
+                    op.pos, f"{where} operation '{op.name}' has local return type '{local}'"
+                )
+            for p in op.params:
+                if (local := _local_type(p.type)) is not None:
+                    self.diag.error(
+                        p.pos,
+                        f"{where} parameter '{p.name}' of operation '{op.name}' has local "
+                        f"type '{local}'",
+                    )
+            for e in op.raises:
+                if (local := _local_type(e)) is not None:
+                    self.diag.error(
+                        op.pos, f"{where} operation '{op.name}' raises local exception '{local}'"
+                    )
 
     def _scope_of(self, decl: ast.Decl) -> Scope | None:
         return self._decl_scopes.get(id(decl))
@@ -773,6 +821,8 @@ class Resolver:
                 public=g.public,
             )
             m.dims = self._dims(dims, scope)
+            if (local := _local_type(typ)) is not None:
+                self.diag.error(pos, f"state member '{name}' has local type '{local}'")
             self._declare(scope, name, pos, "state member", m)
             if owner is not None:
                 owner.members.append(m)
@@ -896,6 +946,7 @@ class Resolver:
         self.defining.append(u)
         seen: dict[Any, SourcePos] = {}
         has_default = False
+        default_pos = u.pos
         last_type: Any = None
         resolved: Any = None
         for case in u.cases:
@@ -907,6 +958,7 @@ class Resolver:
                             case.pos, f"union '{u.name}' has more than one default label"
                         )
                     has_default = True
+                    default_pos = case.pos
                     case.labels.append(None)
                     continue
                 if target is None:
@@ -939,7 +991,7 @@ class Resolver:
                 total = 2
             if total is not None and len(seen) >= total:
                 self.diag.error(
-                    u.pos,
+                    default_pos,
                     f"union '{u.name}' has a default label although every value of its "
                     "discriminator has a case",
                 )
@@ -1030,6 +1082,8 @@ class Resolver:
             if entry is None:
                 return t
             node = entry.node
+            if isinstance(node, ast.BaseType):  # CORBA::TypeCode and the other built-ins
+                return node
             if not _is_type(node):
                 self.diag.error(t.name.pos, f"'{t.name}' is {_a(entry.what)}, not a type")
                 self.diag.note(entry.pos, f"'{entry.name}' declared here")
@@ -1222,6 +1276,26 @@ class Resolver:
     # =========================================================================================
     # repository ids
     # =========================================================================================
+    def _check_forward_prefixes(self) -> None:
+        """A definition and its forward declarations must share their repository-id prefix; a
+        `#pragma ID` or `version` given to the forward declaration passes to the definition
+        (a pragma after the definition changes only the definition), as in omniidl."""
+        for fwd in self.forwards:
+            full = fwd.full
+            if full is None or id(full) not in self.repo_parts:
+                continue
+            fwd_path, full_path = self.repo_parts[id(fwd)][0], self.repo_parts[id(full)][0]
+            if fwd_path != full_path:
+                self.diag.error(
+                    full.pos,
+                    f"the repository id of '{full.scoped_name}' ('{full_path}') differs from the "
+                    f"one of its forward declaration ('{fwd_path}'): check #pragma prefix",
+                )
+                self.diag.note(fwd.pos, "forward declaration here")
+            for table in (self.explicit_ids, self.versions):
+                if id(fwd) in table and id(full) not in table:
+                    table[id(full)] = table[id(fwd)]  # type: ignore[index]
+
     def _finish_repo_ids(self) -> None:
         # typeprefix: the innermost scope wins, so apply outer ones first.
         for scope_path, prefix in sorted(self.type_prefixes, key=lambda tp: len(tp[0])):
@@ -1230,6 +1304,7 @@ class Resolver:
                 if d.scope_path[:n] == scope_path:
                     version = self.repo_parts[id(d)][1]
                     self.repo_parts[id(d)] = ("/".join((prefix, *d.scope_path[n - 1 :])), version)
+        self._check_forward_prefixes()
         for d in self.declarations:
             key = id(d)
             explicit = self.explicit_ids.get(key)
@@ -1239,17 +1314,6 @@ class Resolver:
             path, version = self.repo_parts[key]
             v = self.versions.get(key)
             d.repo_id = f"IDL:{path}:{v[0] if v else version}"
-        by_path: dict[tuple[str, ...], str] = {}
-        for d in self.declarations:
-            if isinstance(d, (ast.Forward, ast.Interface, ast.Struct, ast.Union_, ast.ValueType)):
-                prev = by_path.get(d.scope_path)
-                if prev is not None and prev != d.repo_id and not isinstance(d, ast.Module):
-                    self.diag.error(
-                        d.pos,
-                        f"repository id '{d.repo_id}' of '{d.scoped_name}' differs from the "
-                        f"one of its forward declaration ('{prev}')",
-                    )
-                by_path.setdefault(d.scope_path, d.repo_id)
         # Enumerators are not listed, but get ids for code generators.
         for d in self.declarations:
             if isinstance(d, ast.Enum):
@@ -1299,6 +1363,39 @@ def _is_type(node: Any) -> bool:
             ast.ValueBox,
         ),
     )
+
+
+def _local_type(t: Any, seen: set[int] | None = None) -> str | None:
+    """The scoped name of the local interface that `t` is or holds (through typedefs,
+    sequences, maps and members of structs, unions and exceptions), or None."""
+    seen = set() if seen is None else seen
+    if id(t) in seen:
+        return None
+    seen.add(id(t))
+    if isinstance(t, ast.NamedType):
+        return _local_type(t.decl, seen) if t.decl is not None else None
+    if isinstance(t, ast.Forward):
+        if t.full is not None:
+            return _local_type(t.full, seen)
+        return t.scoped_name if t.local else None
+    if isinstance(t, ast.Interface):
+        return t.scoped_name if t.local else None
+    if isinstance(t, ast.Typedef):
+        return _local_type(t.type, seen)
+    if isinstance(t, ast.SequenceType):
+        return _local_type(t.element, seen)
+    if isinstance(t, ast.MapType):
+        return _local_type(t.key, seen) or _local_type(t.value, seen)
+    if isinstance(t, (ast.Struct, ast.Exception_)):
+        members: list[Any] = t.members
+    elif isinstance(t, ast.Union_):
+        members = t.cases
+    else:
+        return None
+    for m in members:
+        if (local := _local_type(m.type, seen)) is not None:
+            return local
+    return None
 
 
 def _incomplete_forward(t: Any, seen: set[int]) -> ast.Forward | None:
