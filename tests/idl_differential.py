@@ -264,7 +264,7 @@ def main(argv: list[str] | None = None) -> int:
     for v in verdicts:
         agree += v.agree
         print(f"{'ok  ' if v.agree else 'DIFF'} {v.path}: {v.summary}")
-        if args.verbose and not v.agree:
+        if args.verbose and (not v.agree or "first error" in v.summary):
             for line in v.problems:
                 print(f"       {line}")
     total = len(verdicts)

@@ -124,14 +124,14 @@ def declaration_json(d: ast.Decl) -> JsonObj:
         out["type"] = type_string(d.type)
         out["value"] = const_json(d.value)
     elif isinstance(d, ast.Interface):
-        out["bases"] = [b.scoped_name for b in d.bases]
+        out["bases"] = [b.scoped_name for b in d.base_refs]
         out["abstract"] = d.abstract
         out["local"] = d.local
         out["operations"] = [_operation(op) for op in d.operations]
         out["attributes"] = [_attribute(a) for a in d.attributes]
     elif isinstance(d, ast.ValueType):
-        out["bases"] = [b.scoped_name for b in d.bases]
-        out["supports"] = [s.scoped_name for s in d.supports]
+        out["bases"] = [b.scoped_name for b in d.base_refs]
+        out["supports"] = [s.scoped_name for s in d.supports_refs]
         out["abstract"] = d.abstract
         out["custom"] = d.custom
         out["truncatable"] = d.truncatable

@@ -528,13 +528,15 @@ class _AstBuilder:
         return out
 
     def struct_type(self, c: _Children) -> ast.Struct:
-        _kw, name, base, *members = c
+        _kw, name, base, *items = c
+        members, pragmas = _members_and_pragmas(items)
         node = ast.Struct(
             self.ident(name),
             self.pos(name),
             base_name=base.name if base is not None else None,
-            members=[m for group in members for m in group],
+            members=members,
             instance=self.instance(name),
+            pragmas=pragmas,
         )
         return self.declared(name, node)  # type: ignore[no-any-return]
 
@@ -547,14 +549,15 @@ class _AstBuilder:
         i = 0
         while isinstance(rest[i], ast.Annotation):
             i += 1
-        switch_anns, switch_type, cases = rest[:i], rest[i], rest[i + 1 :]
+        switch_anns, switch_type, items = rest[:i], rest[i], rest[i + 1 :]
         node = ast.Union_(
             self.ident(name),
             self.pos(name),
             switch_type=switch_type,
-            cases=cases,
+            cases=[x for x in items if not isinstance(x, ast.Pragma)],
             switch_annotations=switch_anns,
             instance=self.instance(name),
+            pragmas=[x for x in items if isinstance(x, ast.Pragma)],
         )
         return self.declared(name, node)  # type: ignore[no-any-return]
 
@@ -581,9 +584,14 @@ class _AstBuilder:
         return _Label(c[1] if c[0].type == "CASE" else None, self.pos(c[0]))
 
     def enum_type(self, c: _Children) -> ast.Enum:
-        _kw, name, *enumerators = c
+        _kw, name, *items = c
+        enumerators = [x for x in items if not isinstance(x, ast.Pragma)]
         node = ast.Enum(
-            self.ident(name), self.pos(name), enumerators=enumerators, instance=self.instance(name)
+            self.ident(name),
+            self.pos(name),
+            enumerators=enumerators,
+            instance=self.instance(name),
+            pragmas=[x for x in items if isinstance(x, ast.Pragma)],
         )
         for i, e in enumerate(enumerators):
             e.enum = node
@@ -598,12 +606,14 @@ class _AstBuilder:
         return self.declared(name, node)  # type: ignore[no-any-return]
 
     def except_dcl(self, c: _Children) -> ast.Exception_:
-        _kw, name, *members = c
+        _kw, name, *items = c
+        members, pragmas = _members_and_pragmas(items)
         node = ast.Exception_(
             self.ident(name),
             self.pos(name),
-            members=[m for group in members for m in group],
+            members=members,
             instance=self.instance(name),
+            pragmas=pragmas,
         )
         return self.declared(name, node)  # type: ignore[no-any-return]
 
@@ -658,6 +668,12 @@ class _AstBuilder:
 
 
 _PRECEDENCE = {"|": 1, "^": 2, "&": 3, ">>": 4, "<<": 4, "+": 5, "-": 5, "*": 6, "/": 6, "%": 6}
+
+
+def _members_and_pragmas(items: _Children) -> tuple[list[ast.Member], list[ast.Pragma]]:
+    """A struct or exception body: member groups (one list per line) and `#pragma` lines."""
+    members = [m for x in items if not isinstance(x, ast.Pragma) for m in x]
+    return members, [x for x in items if isinstance(x, ast.Pragma)]
 
 
 def _split_annotations(c: _Children) -> tuple[list[Any], list[Any]]:

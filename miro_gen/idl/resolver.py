@@ -399,10 +399,16 @@ class Resolver:
                 self.diag.error(p.pos, f"conflicting #pragma version for '{decl.scoped_name}'")
                 self.diag.note(old[1], "earlier version set here")
                 return
-            if id(decl) in self.explicit_ids:
-                self.diag.error(
-                    p.pos, f"'{decl.scoped_name}' already has a repository id from #pragma ID"
-                )
+            explicit = self.explicit_ids.get(id(decl))
+            if explicit is not None:
+                # Allowed when the id already carries that version (omniidl, CORBA 3.0 10.7.5).
+                if not explicit[0].startswith("IDL:") or explicit[0].rsplit(":", 1)[1] != version:
+                    self.diag.error(
+                        p.pos,
+                        f"cannot set the version of '{decl.scoped_name}' to {version}: "
+                        f"#pragma ID gave it the repository id '{explicit[0]}'",
+                    )
+                    self.diag.note(explicit[1], "#pragma ID here")
                 return
             self.versions[id(decl)] = (version, p.pos)
             return
@@ -432,8 +438,16 @@ class Resolver:
             self.diag.error(pos, f"conflicting repository ids for '{decl.scoped_name}'")
             self.diag.note(old[1], f"'{old[0]}' set here")
             return
-        if id(decl) in self.versions:
-            self.diag.error(pos, f"'{decl.scoped_name}' already has a #pragma version")
+        version = self.versions.get(id(decl))
+        if version is not None:
+            implied = f"IDL:{self.repo_parts[id(decl)][0]}:{version[0]}"
+            if repo_id != implied:
+                self.diag.error(
+                    pos,
+                    f"cannot set the repository id of '{decl.scoped_name}' to '{repo_id}': "
+                    f"#pragma version made it '{implied}'",
+                )
+                self.diag.note(version[1], "#pragma version here")
             return
         self.explicit_ids[id(decl)] = (repo_id, pos)
 
@@ -558,7 +572,7 @@ class Resolver:
             b = self.lookup(bname, scope)
             if b is None:
                 continue
-            node = b.node
+            node = self._aliased(b.node)
             if isinstance(node, ast.Forward) and node.of == "interface":
                 if node.full is None:
                     self.diag.error(
@@ -593,6 +607,7 @@ class Resolver:
                     f"local interface '{bname}'",
                 )
             i.bases.append(node)
+            i.base_refs.append(b.node)
             base_scope = self._scope_of(node)
             if base_scope is not None:
                 inner.bases.append(base_scope)
@@ -628,6 +643,15 @@ class Resolver:
                     self.diag.error(
                         op.pos, f"{where} operation '{op.name}' raises local exception '{local}'"
                     )
+
+    def _aliased(self, node: Any) -> Any:
+        """What a base or `supports` name denotes through typedefs (`typedef I J;
+        interface K : J {};` inherits I, as omniidl accepts)."""
+        if isinstance(node, ast.Typedef) and not node.dims:
+            target = self._unalias(node)
+            if isinstance(target, (ast.Interface, ast.ValueType, ast.Forward)):
+                return target
+        return node
 
     def _scope_of(self, decl: ast.Decl) -> Scope | None:
         return self._decl_scopes.get(id(decl))
@@ -760,7 +784,7 @@ class Resolver:
             b = self.lookup(bname, scope)
             if b is None:
                 continue
-            node = _completed(b.node)
+            node = _completed(self._aliased(b.node))
             if not isinstance(node, ast.ValueType):
                 self.diag.error(bname.pos, f"'{bname}' is {_a(b.what)}, not a value type")
                 continue
@@ -774,6 +798,7 @@ class Resolver:
                     f"abstract value type '{v.name}' can only inherit abstract value types",
                 )
             v.bases.append(node)
+            v.base_refs.append(b.node)
             s = self._scope_of(node)
             if s is not None:
                 inner.bases.append(s)
@@ -783,7 +808,7 @@ class Resolver:
             s_entry = self.lookup(sname, scope)
             if s_entry is None:
                 continue
-            node = _completed(s_entry.node)
+            node = _completed(self._aliased(s_entry.node))
             if not isinstance(node, ast.Interface):
                 self.diag.error(sname.pos, f"'{sname}' is {_a(s_entry.what)}, not an interface")
                 continue
@@ -797,6 +822,7 @@ class Resolver:
                 )
                 continue
             v.supports.append(node)
+            v.supports_refs.append(s_entry.node)
             s = self._scope_of(node)
             if s is not None:
                 inner.bases.append(s)
@@ -871,6 +897,7 @@ class Resolver:
         self.defining.append(s)
         self._members(s.members, inner, sub, "member")
         self.defining.pop()
+        self._body_pragmas(s, inner, sub)
         if s.base is not None:
             inherited = {m.name.lower(): m for m in _all_struct_members(s.base)}
             for m in s.members:
@@ -880,6 +907,11 @@ class Resolver:
                         f"member '{m.name}' clashes with a member of base struct "
                         f"'{s.base.scoped_name}'",
                     )
+
+    def _body_pragmas(self, d: ast.Decl, scope: Scope, frame: Frame) -> None:
+        """`#pragma` lines inside a struct, exception, union or enum body, after its members."""
+        for p in d.pragmas:
+            self._pragma(p, scope, frame)
 
     def _members(self, members: list[ast.Member], scope: Scope, frame: Frame, what: str) -> None:
         last_type: Any = None
@@ -903,6 +935,7 @@ class Resolver:
             entry.scope = inner
         sub = self._frame_for(inner, e, frame)
         self._members(e.members, inner, sub, "member")
+        self._body_pragmas(e, inner, sub)
 
     def _enum(self, en: ast.Enum, scope: Scope, frame: Frame) -> None:
         self._annotations(en.annotations, scope)
@@ -915,8 +948,7 @@ class Resolver:
             self._declare(scope, e.name, e.pos, "enumerator", e)
             e.scope_path = (*scope.path, e.name)
             self.repo_parts[id(e)] = (_join(prefix, e.name), "1.0")
-        if len(en.enumerators) > 2**32:  # pragma: no cover - unreachable in practice
-            self.diag.error(en.pos, "too many enumerators")
+        self._body_pragmas(en, scope, frame)
 
     def _union(self, u: ast.Union_, scope: Scope, frame: Frame) -> None:
         self._annotations(u.annotations, scope)
@@ -983,6 +1015,7 @@ class Resolver:
             case.dims = self._dims(case.dims_expr, inner)
             self._declare(inner, case.name, case.pos, "union member", case)
         self.defining.pop()
+        self._body_pragmas(u, inner, sub)
         if has_default and target is not None:
             total = None
             if target.kind == "enum" and target.enum is not None:
