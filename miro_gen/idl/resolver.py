@@ -804,6 +804,16 @@ class Resolver:
                 inner.bases.append(s)
         if v.truncatable and (not v.bases or v.bases[0].abstract):
             self.diag.error(v.pos, f"'{v.name}' is truncatable but has no concrete base value type")
+        if v.truncatable and v.custom:
+            self.diag.error(v.pos, f"custom value type '{v.name}' cannot be truncatable")
+        if not v.custom and not v.abstract:
+            for b in v.bases:
+                if b.custom:
+                    self.diag.error(
+                        v.pos,
+                        f"value type '{v.name}' is not custom but inherits custom value type "
+                        f"'{b.scoped_name}'",
+                    )
         for sname in v.supports_names:
             s_entry = self.lookup(sname, scope)
             if s_entry is None:
@@ -812,15 +822,15 @@ class Resolver:
             if not isinstance(node, ast.Interface):
                 self.diag.error(sname.pos, f"'{sname}' is {_a(s_entry.what)}, not an interface")
                 continue
-            concrete = [x for x in v.supports if not x.abstract]
-            if not node.abstract and concrete:
+            if not node.abstract and v.supports:
                 self.diag.error(
                     sname.pos,
-                    f"value type '{v.name}' cannot support '{sname}': it already supports "
-                    f"'{concrete[0].scoped_name}', and a value type may support only one "
-                    "non-abstract interface",
+                    f"value type '{v.name}' cannot support '{sname}' here: a value type supports "
+                    "at most one non-abstract interface, and it comes first",
                 )
                 continue
+            if not node.abstract:
+                self._check_supported_derives(v, node, sname.pos)
             v.supports.append(node)
             v.supports_refs.append(s_entry.node)
             s = self._scope_of(node)
@@ -831,6 +841,26 @@ class Resolver:
         self._check_inherited_clashes(v)
         sub = self._frame_for(inner, v, frame)
         self._definitions(v.body, inner, sub)
+
+    def _check_supported_derives(
+        self, v: ast.ValueType, iface: ast.Interface, pos: SourcePos
+    ) -> None:
+        """The non-abstract interface a value type supports must derive from the one its base
+        value types support (CORBA 3.0 section 3.9.1.4), as omniidl checks."""
+        for base in v.bases:
+            b: ast.ValueType | None = base
+            while b is not None and not b.supports:
+                b = b.bases[0] if b.bases else None
+            if b is None or b.supports[0].abstract:
+                continue
+            inherited = b.supports[0]
+            if inherited is not iface and inherited not in _all_bases(iface):
+                self.diag.error(
+                    pos,
+                    f"value type '{v.name}' supports '{iface.scoped_name}', which does not "
+                    f"derive from '{inherited.scoped_name}', supported by its base "
+                    f"'{base.scoped_name}'",
+                )
 
     def _state_members(self, g: ast.StateMemberGroup, scope: Scope, frame: Frame) -> None:
         owner = self._owner(scope)
@@ -1368,6 +1398,18 @@ def _completed(node: Any) -> Any:
 def _a(word: str) -> str:
     """`word` with its indefinite article: "an interface", "a struct"."""
     return f"{'an' if word[:1] in 'aeiou' else 'a'} {word}"
+
+
+def _all_bases(i: ast.Interface) -> list[ast.Interface]:
+    """Every interface `i` inherits from, directly or not."""
+    out: list[ast.Interface] = []
+    todo = list(i.bases)
+    while todo:
+        b = todo.pop()
+        if b not in out:
+            out.append(b)
+            todo.extend(b.bases)
+    return out
 
 
 def _all_struct_members(s: ast.Struct) -> list[ast.Member]:
