@@ -221,7 +221,7 @@ def compare_file(path: str, include_dirs: list[str], omni: dict[str, Any]) -> Ve
         mine_at = f"{os.path.basename(first.pos.path)}:{first.pos.line}" if first else "?"
         theirs_at = {f"{e['file']}:{e['line']}" for e in omni["errors"]}
         where = "" if mine_at in theirs_at else f" (miro-idl's first error at {mine_at})"
-        return Verdict(path, True, "both reject" + where, errors[:3] + [errors_text(omni)])
+        return Verdict(path, True, "both reject" + where, [*errors[:3], errors_text(omni)])
     if omni["ok"]:
         return Verdict(path, False, "only omniidl accepts", errors[:10])
     return Verdict(path, False, "only miro-idl accepts", errors_text(omni).splitlines()[:10])

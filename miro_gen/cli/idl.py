@@ -114,7 +114,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return internal_error("miro-idl", e)
 
 
-def _run(args: argparse.Namespace, defines: dict[str, str], diag: Diagnostics) -> int:
+def _run(args: argparse.Namespace, defines: dict[str, str | None], diag: Diagnostics) -> int:
     from miro_gen.idl.frontend import compile_idl
 
     specs = []

@@ -807,12 +807,12 @@ class Resolver:
         if v.truncatable and v.custom:
             self.diag.error(v.pos, f"custom value type '{v.name}' cannot be truncatable")
         if not v.custom and not v.abstract:
-            for b in v.bases:
-                if b.custom:
+            for base in v.bases:
+                if base.custom:
                     self.diag.error(
                         v.pos,
                         f"value type '{v.name}' is not custom but inherits custom value type "
-                        f"'{b.scoped_name}'",
+                        f"'{base.scoped_name}'",
                     )
         for sname in v.supports_names:
             s_entry = self.lookup(sname, scope)
@@ -1357,7 +1357,7 @@ class Resolver:
                 self.diag.note(fwd.pos, "forward declaration here")
             for table in (self.explicit_ids, self.versions):
                 if id(fwd) in table and id(full) not in table:
-                    table[id(full)] = table[id(fwd)]  # type: ignore[index]
+                    table[id(full)] = table[id(fwd)]
 
     def _finish_repo_ids(self) -> None:
         # typeprefix: the innermost scope wins, so apply outer ones first.
