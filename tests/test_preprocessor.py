@@ -14,7 +14,8 @@ from typing import Any
 import pytest
 from miro_cli import run_miro_idl
 
-from miro_gen.diagnostics import CompileError, Diagnostic, Diagnostics
+from miro_gen.diagnostics import CompileError, Diagnostic, Diagnostics, SourcePos
+from miro_gen.idl import preprocessor
 from miro_gen.idl.ast_json import specifications_json
 from miro_gen.idl.frontend import compile_idl
 from miro_gen.idl.preprocessor import Preprocessor, SourceText
@@ -850,3 +851,77 @@ def test_malformed_line_directive_is_an_error(tmp_path: Path, directive: str) ->
     main = write(tmp_path / "m.idl", directive + "\nconst long c = 1;\n")
     errors = compile_errors(main)
     assert errors[0].pos is not None and errors[0].pos.line == 1
+
+
+# -- include cycles, nesting and counts ---------------------------------------------------------
+def test_include_cycle_without_guards_is_named(tmp_path: Path) -> None:
+    write(tmp_path / "b.idl", '#include "a.idl"\nmodule B {};\n')
+    main = write(tmp_path / "a.idl", '#include "b.idl"\nmodule A {};\n')
+    errors = compile_errors(main)
+    assert len(errors) == 1, [str(e) for e in errors]
+    (error,) = errors
+    assert error.pos is not None
+    assert (Path(error.pos.path).name, error.pos.line) == ("b.idl", 1)
+    a, b = str(main), str(tmp_path / "b.idl")
+    assert f"#include cycle: {a} -> {b} -> {a};" in error.message
+    assert "include guards" in error.message
+
+
+def test_include_cycle_with_guards_is_fine(tmp_path: Path) -> None:
+    for name, other in (("a", "b"), ("b", "a")):
+        guard = f"{name.upper()}_IDL"
+        write(
+            tmp_path / f"{name}.idl",
+            f'#ifndef {guard}\n#define {guard}\n#include "{other}.idl"\n'
+            f"module {name.upper()} {{ const long C = 1; }};\n#endif\n",
+        )
+    main = tmp_path / "a.idl"
+    assert list(decls(main)) == ["B", "B::C", "A", "A::C"]
+
+
+def test_include_cycle_that_redefines_a_macro_each_round_is_caught(tmp_path: Path) -> None:
+    """The macro table stops changing after the first round: the second round repeats forever."""
+    write(tmp_path / "b.idl", '#include "a.idl"\n')
+    main = write(tmp_path / "a.idl", '#define X 1\n#include "b.idl"\nmodule A {};\n')
+    (error,) = compile_errors(main)
+    assert "#include cycle:" in error.message
+
+
+def test_include_nesting_beyond_the_limit_is_one_error(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(preprocessor, "MAX_INCLUDE_DEPTH", 5)
+    for i in range(10):
+        write(tmp_path / f"f{i}.idl", f'#include "f{i + 1}.idl"\n')
+    write(tmp_path / "f10.idl", "module M {};\n")
+    (error,) = compile_errors(tmp_path / "f0.idl")
+    assert error.message == "#include nested more than 5 deep"
+
+
+def test_include_count_is_capped(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Files that each include the next one twice, without guards, double the work with each
+    level (2^17 inclusions took 12 s): the count is capped, with one error saying why."""
+    monkeypatch.setattr(preprocessor, "MAX_INCLUSIONS", 100)
+    for i in range(10):
+        write(tmp_path / f"f{i}.idl", f'#include "f{i + 1}.idl"\n#include "f{i + 1}.idl"\n')
+    write(tmp_path / "f10.idl", "// nothing\n")
+    _, diag = preprocess(tmp_path / "f0.idl")
+    errors = [d for d in diag.items if d.severity == "error"]
+    assert len(errors) == 1, [str(e) for e in errors]
+    assert errors[0].message.startswith("more than 100 inclusions: files are included again")
+
+
+def test_file_declaring_nothing_is_warned_about(tmp_path: Path) -> None:
+    diag = Diagnostics()
+    main = write(tmp_path / "e.idl", "// only a comment\n#if 0\nmodule M {};\n#endif\n")
+    compile_idl(str(main), [], None, diag)
+    (warning,) = [d for d in diag.items if d.severity == "warning"]
+    assert warning.pos == SourcePos(str(main), 1, 1)
+    assert warning.message.startswith("the file declares nothing")
+
+
+def test_file_that_only_includes_is_not_warned_about(tmp_path: Path) -> None:
+    write(tmp_path / "x.idl", "module X { const long C = 1; };\n")
+    diag = Diagnostics()
+    compile_idl(str(write(tmp_path / "all.idl", '#include "x.idl"\n')), [], None, diag)
+    assert not diag.items

@@ -67,4 +67,10 @@ def _compile(
     declarations = resolver.resolve(definitions)
     if diag.error_count > before:
         raise CompileError(diag.items)
+    if not declarations:
+        diag.warning(
+            SourcePos(path, 1, 1),
+            "the file declares nothing (it is empty, all comments, or its declarations are "
+            "left out by #if/#ifdef)",
+        )
     return ast.Specification(path, definitions, declarations, src.includes)

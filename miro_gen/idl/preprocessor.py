@@ -22,6 +22,10 @@ from miro_gen.diagnostics import Diagnostics, SourcePos
 from miro_gen.idl.literals import LiteralError, decode_char, decode_integer
 
 MAX_INCLUDE_DEPTH = 200
+# Inclusions per translation unit (each #include of a guarded file counts). Real trees stay far
+# below (TAO's files: at most about 100); include chains without guards double with
+# each level and would otherwise run for minutes.
+MAX_INCLUSIONS = 10_000
 MAX_EXPANSION_DEPTH = 200
 MAX_EXPANDED_LINE = 1_000_000
 MAX_CONDITION_DEPTH = 2_000
@@ -150,6 +154,7 @@ class Preprocessor:
             else:
                 self._initial_macros[name] = Macro(name, None, value)
         self._file_cache: dict[str, str | None] = {}
+        self._realpaths: dict[str, str] = {}
 
     # -- public -------------------------------------------------------------------------------
     def run(self, path: str) -> SourceText:
@@ -164,6 +169,12 @@ class Preprocessor:
         self._once: set[str] = set()
         self._instances = 0
         self._depth = 0
+        self._inclusions = 0
+        # The files being included, outermost first: (real path, shown path, macro generation
+        # on entry). The generation counts changes to the macro table: a file included again
+        # while the table is as it was on its first entry would repeat itself forever.
+        self._chain: list[tuple[str, str, int]] = [(os.path.realpath(path), path, 0)]
+        self._macro_gen = 0
         text = self._read(path)
         if text is None:
             self.diag.error(None, f"cannot read '{path}'")
@@ -363,7 +374,8 @@ class Preprocessor:
         if name == "undef":
             ident = _IDENT.match(rest)
             if ident:
-                self.macros.pop(ident.group(0), None)
+                if self.macros.pop(ident.group(0), None) is not None:
+                    self._macro_gen += 1
                 self._macro_re = None
             else:
                 self.diag.error(pos, "#undef needs a macro name")
@@ -423,20 +435,57 @@ class Preprocessor:
         incs = self._includes.setdefault(current, [])
         if found not in incs:
             incs.append(found)
-        if os.path.realpath(found) in self._once:
+        real = self._realpath(found)
+        if real in self._once:
             return
         text = self._read(found)
         if text is None:
             self.diag.error(pos, f"cannot read include file '{found}'")
             return
-        if self._depth >= MAX_INCLUDE_DEPTH:
-            self.diag.error(pos, f"#include nested too deeply (more than {MAX_INCLUDE_DEPTH})")
+        if not self._may_include(real, found, pos):
             return
         self._depth += 1
+        self._chain.append((real, found, self._macro_gen))
         try:
             self._process(found, text)
         finally:
             self._depth -= 1
+            self._chain.pop()
+
+    def _realpath(self, path: str) -> str:
+        real = self._realpaths.get(path)
+        if real is None:
+            real = self._realpaths[path] = os.path.realpath(path)
+        return real
+
+    def _may_include(self, real: str, shown: str, pos: SourcePos) -> bool:
+        """Report an include cycle that never ends, too deep nesting or too many inclusions."""
+        self._inclusions += 1
+        if self._inclusions > MAX_INCLUSIONS:
+            if self._inclusions == MAX_INCLUSIONS + 1:  # once
+                self.diag.error(
+                    pos,
+                    f"more than {MAX_INCLUSIONS} inclusions: files are included again and "
+                    "again; protect them with include guards (#ifndef X_IDL / #define X_IDL / "
+                    "... / #endif) or #pragma once",
+                )
+            return False
+        earlier = [i for i, (r, _, _) in enumerate(self._chain) if r == real]
+        forever = any(self._chain[i][2] == self._macro_gen for i in earlier)
+        if forever or self._depth >= MAX_INCLUDE_DEPTH:
+            cycle = ""
+            if earlier:
+                names = [p for _, p, _ in self._chain[earlier[-1] :]]
+                cycle = ": " + " -> ".join([*names, shown])
+            what = (
+                "#include cycle" + cycle + "; without include guards it never ends "
+                "(#ifndef X_IDL / #define X_IDL / ... / #endif, or #pragma once)"
+                if forever
+                else f"#include nested more than {MAX_INCLUDE_DEPTH} deep{cycle}"
+            )
+            self.diag.error(pos, what)
+            return False
+        return True
 
     def _define(self, rest: str, pos: SourcePos) -> None:
         m = re.match(r"([A-Za-z_]\w*)(\(([^)]*)\))?\s*(.*)$", rest, re.S)
@@ -451,8 +500,11 @@ class Preprocessor:
                 self.diag.error(pos, f"malformed parameter list in #define {name}")
                 return
             params = tuple(plist)
-        self.macros[name] = Macro(name, params, m.group(4).strip())
-        self._macro_re = None
+        macro = Macro(name, params, m.group(4).strip())
+        if self.macros.get(name) != macro:
+            self.macros[name] = macro
+            self._macro_gen += 1
+            self._macro_re = None
 
     # -- macro expansion ----------------------------------------------------------------------
     def _macro_pattern(self) -> re.Pattern[str]:
