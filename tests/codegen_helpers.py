@@ -190,8 +190,31 @@ def specification() -> dict[str, Any]:
     return _compiled()[0]
 
 
+# Declarations of other test IDL (tests/codegen/dds/, compiled with --case-sensitive), whose
+# generated packages a test puts on sys.path itself: see add_specifications().
+_other_decls: dict[str, Any] = {}
+_other_modules: set[tuple[str, ...]] = set()
+
+
+def add_specifications(specs: list[ast.Specification]) -> list[Any]:
+    """Make the helpers (classes, values, the Cyclone oracle) know other compiled IDL; returns
+    its structs, unions and exceptions by name."""
+    kinds = (ast.Struct, ast.Union_, ast.Exception_)
+    found: dict[str, Any] = {}
+    for spec in specs:
+        for d in spec.declarations:
+            if isinstance(d, ast.Module):
+                _other_modules.add(d.scope_path)
+            elif not isinstance(d, ast.Forward):
+                _other_decls.setdefault(d.scoped_name, d)
+                if isinstance(d, kinds):
+                    found.setdefault(d.scoped_name, d)
+    _enum_decls.cache_clear()
+    return [found[name] for name in sorted(found)]
+
+
 def module_paths() -> frozenset[tuple[str, ...]]:
-    return _compiled()[1]
+    return _compiled()[1] | _other_modules
 
 
 def data_types() -> list[Any]:
@@ -534,7 +557,8 @@ class Cyclone:
 
 @cache
 def _enum_decls() -> dict[Any, Any]:
-    return {pyclass(d): d for d in specification().values() if isinstance(d, ast.Enum)}
+    decls = [*specification().values(), *_other_decls.values()]
+    return {pyclass(d): d for d in decls if isinstance(d, ast.Enum)}
 
 
 @cache

@@ -67,6 +67,12 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="OUTDIR",
         help="folder for the generated Python packages (default: generated)",
     )
+    p.add_argument(
+        "--case-sensitive",
+        action="store_true",
+        help="identifiers that differ only in case are distinct (DDS and ROS 2 files, as idlc's "
+        "-f case-sensitive): `Header header;` is a member named like its type",
+    )
     mode = p.add_mutually_exclusive_group()
     mode.add_argument(
         "--check",
@@ -190,7 +196,11 @@ def _run(args: argparse.Namespace, defines: dict[str, str | None], diag: Diagnos
     failed = False
     for path in args.files:
         try:
-            specs.append(compile_idl(path, args.include_dirs, defines, diag))
+            specs.append(
+                compile_idl(
+                    path, args.include_dirs, defines, diag, case_sensitive=args.case_sensitive
+                )
+            )
         except CompileError:
             failed = True  # keep going: report the problems of every file
     diag.print()

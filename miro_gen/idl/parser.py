@@ -55,11 +55,13 @@ class _AstBuilder:
         self.src: SourceText = SourceText("", [], [])
         self.diag = Diagnostics()
         self.named: list[tuple[int, Any]] = []
+        self.case_sensitive = False
 
-    def begin(self, src: SourceText, diag: Diagnostics) -> None:
+    def begin(self, src: SourceText, diag: Diagnostics, case_sensitive: bool = False) -> None:
         self.src = src
         self.diag = diag
         self.named = []
+        self.case_sensitive = case_sensitive
 
     # -- helpers ------------------------------------------------------------------------------
     def pos(self, tok: Token) -> SourcePos:
@@ -72,6 +74,11 @@ class _AstBuilder:
             if len(v) == 1 or not v[1].isalpha():
                 self.diag.error(self.pos(tok), f"invalid identifier '{v}'")
             return v[1:]
+        if self.case_sensitive:
+            # DDS and ROS 2 files: only the exact spelling of a keyword is one (idlc -f
+            # case-sensitive), and a keyword where only a name can stand is that name, as
+            # rosidl's parser reads it (`sequence<int32> sequence;` in the Fibonacci action).
+            return v
         if v in RESERVED:
             self.diag.error(
                 self.pos(tok),
@@ -108,7 +115,7 @@ class _AstBuilder:
             if len(v) == 1 or not v[1].isalpha():
                 self.diag.error(self.pos(tok), f"invalid identifier '{v}'")
             return v[1:]
-        if v in RESERVED and tok.type == "IDENT":
+        if v in RESERVED and tok.type == "IDENT" and not self.case_sensitive:
             self.diag.error(
                 self.pos(tok),
                 f"'{v}' is a keyword and cannot be used as a name here "
@@ -808,16 +815,17 @@ def get_engine() -> Engine:
     return _engine
 
 
-def parse(src: SourceText, diag: Diagnostics) -> list[Any] | None:
+def parse(src: SourceText, diag: Diagnostics, case_sensitive: bool = False) -> list[Any] | None:
     """Parse preprocessed IDL into its top-level definitions; None after a syntax error.
 
     Problems found in well-formed syntax (a bad literal, a keyword used as a name) are reported
-    but do not stop the parse, so the resolver can report its own problems too.
+    but do not stop the parse, so the resolver can report its own problems too. With
+    `case_sensitive`, an identifier clashes only with a keyword spelled exactly alike.
     """
     engine = get_engine()
     comments: list[tuple[int, str]] = []
     with _lock:
-        _builder.begin(src, diag)
+        _builder.begin(src, diag, case_sensitive)
         try:
             result = engine.parse(src.text, comments)
         except ParseFailure as e:

@@ -132,8 +132,13 @@ def _join(prefix: str, name: str) -> str:
 
 
 class Resolver:
-    def __init__(self, diag: Diagnostics) -> None:
+    def __init__(self, diag: Diagnostics, case_sensitive: bool = False) -> None:
         self.diag = diag
+        # The key of a name in a scope: CORBA folds case (identifiers that differ only in case
+        # collide); under --case-sensitive (DDS and ROS 2 files, like idlc -f case-sensitive)
+        # they are distinct, and a use does not reserve its name.
+        self.case_sensitive = case_sensitive
+        self._fold: Any = str if case_sensitive else str.lower
         self.global_scope = Scope("global", "", None, ())
         self.declarations: list[ast.Decl] = []
         self.defining: list[ast.Decl] = []  # structs/unions whose bodies are being resolved
@@ -159,9 +164,9 @@ class Resolver:
         orb.idl, ir.idl) reopen this module."""
         corba = Entry("CORBA", "module", BUILTIN_POS, None)
         corba.scope = self._new_scope("module", "CORBA", self.global_scope)
-        self.global_scope.entries["corba"] = corba
+        self.global_scope.entries[self._fold("CORBA")] = corba
         for name in BUILTIN_TYPES:
-            corba.scope.entries[name.lower()] = Entry(
+            corba.scope.entries[self._fold(name)] = Entry(
                 name, "built-in type", BUILTIN_POS, ast.BaseType(name)
             )
 
@@ -188,8 +193,8 @@ class Resolver:
         self, scope: Scope, name: str, pos: SourcePos, what: str, node: Any
     ) -> Entry | None:
         """Enter `name` into `scope`, reporting clashes; returns the entry (None on a clash)."""
-        key = name.lower()
-        if scope.kind not in ("global", "operation") and key == scope.name.lower():
+        key = self._fold(name)
+        if scope.kind not in ("global", "operation") and key == self._fold(scope.name):
             self.diag.error(
                 pos, f"{what} '{name}' clashes with the name of its enclosing scope '{scope.name}'"
             )
@@ -259,7 +264,7 @@ class Resolver:
         """Resolve a scoped name from `scope`; reports and returns None when it fails."""
         parts = name.parts
         first = parts[0]
-        key = first.lower()
+        key = self._fold(first)
         hits: list[tuple[Entry, Scope]] = []
         if name.absolute:
             hits = self._find_in(self.global_scope, key)
@@ -289,7 +294,7 @@ class Resolver:
                     f"'{entry.name}' is {_a(entry.what)}, not a scope; cannot find '{part}' in it",
                 )
                 return None
-            hits = self._find_in(inner, part.lower())
+            hits = self._find_in(inner, self._fold(part))
             if not hits:
                 self.diag.error(
                     name.pos, f"'{name}' is not declared: no '{part}' in '{entry.name}'"
@@ -318,6 +323,8 @@ class Resolver:
             self.diag.note(entry.pos, f"'{entry.name}' declared here")
 
     def _mark_used(self, ident: str, pos: SourcePos, scope: Scope, found_in: Scope) -> None:
+        if self.case_sensitive:
+            return
         key = ident.lower()
         s: Scope | None = scope
         while s is not None and s is not found_in:
@@ -349,7 +356,7 @@ class Resolver:
     # -- modules ------------------------------------------------------------------------------
     def _module(self, m: ast.Module, scope: Scope, frame: Frame) -> None:
         self._annotations(m.annotations, scope)
-        key = m.name.lower()
+        key = self._fold(m.name)
         existing = scope.entries.get(key)
         if existing is not None and existing.what == "module" and existing.scope is not None:
             if existing.name != m.name:
@@ -473,7 +480,7 @@ class Resolver:
     # -- interfaces ---------------------------------------------------------------------------
     def _forward(self, f: ast.Forward, scope: Scope, frame: Frame) -> None:
         self._annotations(f.annotations, scope)
-        key = f.name.lower()
+        key = self._fold(f.name)
         existing = scope.entries.get(key)
         kind_word = {
             "interface": "interface",
@@ -528,7 +535,7 @@ class Resolver:
 
     def _complete_forwards(self, scope: Scope, decl: ast.Decl, of: str) -> Entry | None:
         """Declare a full definition, completing earlier forward declarations of it."""
-        key = decl.name.lower()
+        key = self._fold(decl.name)
         existing = scope.entries.get(key)
         what = {
             "interface": "interface",
@@ -681,7 +688,7 @@ class Resolver:
         names: dict[str, tuple[str, Any, ast.Decl]] = {}
         for b in [*i.bases, *(i.supports if isinstance(i, ast.ValueType) else [])]:
             for name, node, owner in self._all_callables(b):
-                key = name.lower()
+                key = self._fold(name)
                 prev = names.get(key)
                 if prev is not None and prev[1] is not node:
                     self.diag.error(
@@ -696,7 +703,7 @@ class Resolver:
 
     def _check_not_inherited(self, owner: Any, name: str, pos: SourcePos, what: str) -> None:
         inherited = self._inherited.get(id(owner), {})
-        prev = inherited.get(name.lower())
+        prev = inherited.get(self._fold(name))
         if prev is not None:
             self.diag.error(
                 pos,
@@ -929,9 +936,9 @@ class Resolver:
         self.defining.pop()
         self._body_pragmas(s, inner, sub)
         if s.base is not None:
-            inherited = {m.name.lower(): m for m in _all_struct_members(s.base)}
+            inherited = {self._fold(m.name): m for m in _all_struct_members(s.base)}
             for m in s.members:
-                if m.name.lower() in inherited:
+                if self._fold(m.name) in inherited:
                     self.diag.error(
                         m.pos,
                         f"member '{m.name}' clashes with a member of base struct "
@@ -1326,7 +1333,7 @@ class Resolver:
     def _annotation_arg(self, expr: ast.Expr) -> ast.ConstValue | None:
         # A bare identifier that names nothing is an enumerator-like word (FINAL, SEQUENTIAL, ...).
         if isinstance(expr, ast.NameRef) and len(expr.name.parts) == 1 and not expr.name.absolute:
-            key = expr.name.parts[0].lower()
+            key = self._fold(expr.name.parts[0])
             s: Scope | None = self._scope
             found = False
             while s is not None and not found:
