@@ -7,7 +7,7 @@ import gc
 import os
 import sys
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, NoReturn
 
 from miro_gen.cli.common import VersionAction, internal_error, parse_defines
 from miro_gen.diagnostics import CompileError, Diagnostics
@@ -255,5 +255,18 @@ def _generate(args: argparse.Namespace, specs: list[Any], diag: Diagnostics) -> 
     return 0
 
 
+def run() -> NoReturn:
+    """The `miro-idl` command: `main()`, then an exit that skips freeing the AST object by
+    object (a tenth of the run time on large files; there is nothing else to clean up, and
+    the output is flushed first)."""
+    code = main()
+    try:
+        sys.stdout.flush()
+        sys.stderr.flush()
+    except OSError:  # a closed pipe (`miro-idl --ast-json ... | head`)
+        code = code or 1
+    os._exit(code)
+
+
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    run()

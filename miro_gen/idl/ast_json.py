@@ -9,6 +9,7 @@ from typing import Any
 from miro_gen.idl import ast
 
 JsonObj = dict[str, Any]
+_ENCODER = json.JSONEncoder(ensure_ascii=False)
 
 
 def type_string(t: Any) -> str:
@@ -176,7 +177,8 @@ def dumps(doc: JsonObj) -> str:
     One line per declaration keeps the output greppable and diffable while letting the C encoder
     do the work (an indented dump is several times slower on large files).
     """
-    head = json.dumps(doc["files"], ensure_ascii=False)
-    decls = ",\n".join(json.dumps(d, ensure_ascii=False) for d in doc["declarations"])
+    encode = _ENCODER.encode  # one encoder: json.dumps with options makes one per call
+    head = encode(doc["files"])
+    decls = ",\n".join(map(encode, doc["declarations"]))
     body = f"\n{decls}\n" if decls else ""
     return f'{{"files": {head}, "declarations": [{body}]}}\n'

@@ -95,9 +95,15 @@ class SourceText:
         return SourcePos(self.paths[0] if self.paths else "<input>", 1, col)
 
     def pos_at(self, offset: int) -> SourcePos:
-        """Source position of character `offset` of `text`."""
-        starts = self._line_starts()
+        """Source position of character `offset` of `text` (called for every declaration and
+        name the parser builds: the common case, a line macros left alone, is inlined)."""
+        starts = self._starts
+        if starts is None:
+            starts = self._line_starts()
         line = bisect_right(starts, offset)
+        if line <= len(self.line_map) and (line - 1) not in self.col_maps:
+            p, src_line, _ = self.line_map[line - 1]
+            return SourcePos(self.paths[p], src_line, offset - starts[line - 1] + 1)
         return self.pos(line, offset - starts[line - 1] + 1)
 
     def instance_at(self, offset: int) -> int:

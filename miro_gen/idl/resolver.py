@@ -155,6 +155,7 @@ class Resolver:
         self._decl_scopes: dict[int, Scope] = {}  # id(interface/valuetype) -> its scope
         self._scope_owners: dict[int, Any] = {}  # id(scope) -> interface/valuetype
         self._inherited: dict[int, dict[str, tuple[str, Any, ast.Decl]]] = {}
+        self.saw_local = False  # a local interface was declared (forward declarations too)
         self._declare_builtins()
 
     def _declare_builtins(self) -> None:
@@ -480,6 +481,7 @@ class Resolver:
     # -- interfaces ---------------------------------------------------------------------------
     def _forward(self, f: ast.Forward, scope: Scope, frame: Frame) -> None:
         self._annotations(f.annotations, scope)
+        self.saw_local |= f.local
         key = self._fold(f.name)
         existing = scope.entries.get(key)
         kind_word = {
@@ -623,7 +625,9 @@ class Resolver:
         self._check_inherited_clashes(i)
         sub = self._frame_for(inner, i, frame)
         self._definitions(i.body, inner, sub)
-        if not i.local:
+        if i.local:
+            self.saw_local = True
+        elif self.saw_local:  # most files have no local interfaces: nothing to check
             self._check_no_local_types(i)
 
     def _check_no_local_types(self, i: ast.Interface) -> None:
@@ -884,7 +888,7 @@ class Resolver:
                 public=g.public,
             )
             m.dims = self._dims(dims, scope)
-            if (local := _local_type(typ)) is not None:
+            if self.saw_local and (local := _local_type(typ)) is not None:
                 self.diag.error(pos, f"state member '{name}' has local type '{local}'")
             self._declare(scope, name, pos, "state member", m)
             if owner is not None:
