@@ -9,6 +9,7 @@ import sys
 from collections.abc import Sequence
 from typing import Any, NoReturn
 
+from miro_gen.cli import idl_checks as checks
 from miro_gen.cli.common import VersionAction, internal_error, parse_defines
 from miro_gen.diagnostics import CompileError, Diagnostics
 
@@ -99,11 +100,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     diag = Diagnostics()
     defines = parse_defines(args.defines, diag)
     for f in args.files:
-        problem = _unreadable(f)
+        problem = checks.unreadable(f)
         if problem:
             diag.error(None, f"cannot read '{f}': {problem}")
     if not args.ast_json:
-        problem = _unusable_outdir(args.outdir)
+        problem = checks.unusable_outdir(args.outdir)
         if problem:
             diag.error(None, f"-o {args.outdir}: {problem}")
     if diag.has_errors:
@@ -123,70 +124,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     except Exception as e:  # a bug in miro-idl, not in the input
         diag.print()
         return internal_error("miro-idl", e)
-
-
-def _unreadable(path: str) -> str | None:
-    """Why an input file cannot be read, or None."""
-    if os.path.isdir(path):
-        return "it is a folder, not an IDL file"
-    if not os.path.exists(path):
-        return "no such file"
-    if not os.access(path, os.R_OK):
-        return "permission denied"
-    return None
-
-
-def _unusable_outdir(outdir: str) -> str | None:
-    """Why generated packages cannot go into `outdir` (a folder, made if missing), or None."""
-    path = os.path.abspath(outdir)
-    while not os.path.exists(path):
-        parent = os.path.dirname(path)
-        if parent == path:
-            break
-        path = parent
-    if not os.path.isdir(path):
-        what = "is a file" if path == os.path.abspath(outdir) else f"is inside file '{path}'"
-        return f"the output folder {what}; give a folder (it is made if missing)"
-    if not os.access(path, os.W_OK | os.X_OK):
-        return f"cannot write into '{path}': permission denied"
-    return None
-
-
-def _too_long(paths: list[str], outdir: Any) -> list[str]:
-    """Generated paths the file system cannot hold (deeply nested or very long module names),
-    each as a message naming the IDL module, so that nothing is written at all."""
-    base = os.path.abspath(str(outdir))
-    try:
-        name_max = os.pathconf(_existing(base), "PC_NAME_MAX")
-        path_max = os.pathconf(_existing(base), "PC_PATH_MAX")
-    except (OSError, ValueError):
-        name_max, path_max = 255, 4096
-    out: dict[str, str] = {}  # IDL module -> why
-    for rel in sorted({*paths, *(f"{os.path.dirname(p)}/__init__.py" for p in paths)}):
-        full = os.path.join(base, rel)
-        parts = rel.split("/")
-        longest = max(len(p.encode()) for p in parts)
-        if longest <= name_max and len(full.encode()) < path_max:
-            continue
-        module = "::".join(parts[:-1]) or parts[-1]
-        why = (
-            f"a name is {longest} bytes long (the file system allows {name_max})"
-            if longest > name_max
-            else f"its path is {len(full.encode())} bytes long (the file system allows "
-            f"{path_max - 1}); nest fewer modules"
-        )
-        out.setdefault(module, f"cannot generate IDL module {_shorten(module)}: {why}")
-    return list(out.values())
-
-
-def _existing(path: str) -> str:
-    while not os.path.exists(path) and os.path.dirname(path) != path:
-        path = os.path.dirname(path)
-    return path
-
-
-def _shorten(name: str, keep: int = 60) -> str:
-    return name if len(name) <= 2 * keep else f"{name[:keep]}...{name[-keep:]}"
 
 
 def _run(args: argparse.Namespace, defines: dict[str, str | None], diag: Diagnostics) -> int:
@@ -212,26 +149,44 @@ def _run(args: argparse.Namespace, defines: dict[str, str | None], diag: Diagnos
         sys.stdout.write(dumps(specifications_json(list(args.files), specs)))
         sys.stdout.flush()
         return 0
-    return _generate(args, specs, diag)
+    return _generate(args, specs, defines)
 
 
-def _generate(args: argparse.Namespace, specs: list[Any], diag: Diagnostics) -> int:
+def _generate(args: argparse.Namespace, specs: list[Any], defines: dict[str, str | None]) -> int:
     from pathlib import Path
 
     from miro_gen.codegen import generate
+    from miro_gen.idl.frontend import compile_idl
 
     outdir = Path(args.outdir)
-    modules = generate.build_modules(zip(specs, args.files, strict=True), diag)
-    if diag.has_errors:
-        diag.print()
+    refusals = Diagnostics()  # the compile diagnostics are printed already
+    checks.clashing_declarations(specs, refusals)
+    if refusals.has_errors:
+        refusals.print()
         return 1
-    too_long = _too_long([m.path for m in modules], outdir)
+    modules = generate.build_modules(zip(specs, args.files, strict=True), refusals)
+    if refusals.has_errors:
+        refusals.print()
+        return 1
+    too_long = checks.too_long_paths([m.path for m in modules], outdir)
     for message in too_long:
         print(f"miro-idl: error: {message}", file=sys.stderr)
     if too_long:
         return 1
     files = generate.generated_files(modules, outdir)
-    for module in generate.missing_imports(modules, files, outdir):
+    missing = generate.missing_imports(modules, files, outdir)
+    if missing:
+
+        def compile_dependency(path: str, into: Diagnostics) -> Any:
+            return compile_idl(
+                path, args.include_dirs, defines, into, case_sensitive=args.case_sensitive
+            )
+
+        checks.refused_dependencies(specs, modules, missing, compile_dependency, refusals)
+        if refusals.has_errors:
+            refusals.print()
+            return 1
+    for module in missing:
         print(
             f"miro-idl: warning: the generated code imports {module}, which is not generated: "
             f"compile the IDL file it comes from too",
@@ -245,7 +200,7 @@ def _generate(args: argparse.Namespace, specs: list[Any], diag: Diagnostics) -> 
     try:
         generate.write_files(files, changed, outdir)
     except OSError as e:
-        where = _shorten(str(e.filename or outdir))
+        where = checks.shorten(str(e.filename or outdir))
         print(f"miro-idl: error: cannot write '{where}': {e.strerror or e}", file=sys.stderr)
         return 1
     for rel in changed:

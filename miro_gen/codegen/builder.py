@@ -25,6 +25,7 @@ from miro_gen.codegen.model import (
     shape_of,
     type_hash,
 )
+from miro_gen.codegen.python_limits import python_bases
 from miro_gen.diagnostics import SourcePos
 from miro_gen.idl import ast
 from miro_gen.runtime.cdr import default_discriminator
@@ -242,9 +243,9 @@ class Builder:
             return "= _dc.field(default_factory=list)"
         if k == "array":
             return f"= _dc.field(default_factory=lambda: {self._array_value(shape)})"
-        if k == "object":
+        if k == "object":  # a field, not a call in the class body (ruff's RUF009)
             self.m.uses.add("cdr")
-            return "= _cdr.ObjectRef()"
+            return "= _dc.field(default_factory=_cdr.ObjectRef)"
         raise AssertionError(k)  # pragma: no cover
 
     def _array_value(self, shape: Shape) -> str:
@@ -255,7 +256,10 @@ class Builder:
             return f"[{self._array_value(inner)} for _ in range({shape.dims[0]})]"
         if elem.kind == "prim":
             return f"[{elem.prim.default}] * {shape.dims[0]}"  # type: ignore[union-attr]
-        if elem.kind in ("string", "octets", "enum", "object"):
+        if elem.kind == "object":
+            self.m.uses.add("cdr")
+            return f"[_cdr.ObjectRef()] * {shape.dims[0]}"
+        if elem.kind in ("string", "octets", "enum"):
             return f"[{self.default(elem)[2:]}] * {shape.dims[0]}"
         if elem.kind == "seq":
             return f"[[] for _ in range({shape.dims[0]})]"
@@ -283,6 +287,7 @@ class Builder:
         # attributes of the enclosing interface/struct.
         place = self.places[id(d)]
         container = self.by_path.get(d.scope_path[:-1]) if place.nesting else None
+        item.module_constants = not place.nesting
         for name, _, _ in item.enumerators:
             if container is not None:
                 self.nested.setdefault(id(container), []).append((name, f"{item.name}.{name}"))
@@ -549,7 +554,7 @@ class Builder:
             doc=d.doc,
             repo_id=d.repo_id,
             scoped_name=d.scoped_name,
-            bases=[self.ref(b) for b in d.bases] or ["_rpc.Stub"],
+            bases=[self.ref(b) for b in python_bases(d.bases)] or ["_rpc.Stub"],
         )
         stub.operations = self._operations(d, in_stub=True)
         self._add(stub)
@@ -566,7 +571,7 @@ class Builder:
             doc=d.doc,
             repo_id=d.repo_id,
             scoped_name=d.scoped_name,
-            bases=[self.ref(b, poa=True) for b in d.bases] or ["_rpc.Servant"],
+            bases=[self.ref(b, poa=True) for b in python_bases(d.bases)] or ["_rpc.Servant"],
         )
         skel.operations = self._operations(d, in_stub=False)
         self._add(skel)

@@ -14,9 +14,9 @@ import os
 from collections.abc import Iterable
 from pathlib import Path
 
-from miro_gen.codegen import names
+from miro_gen.codegen import names, python_limits
 from miro_gen.codegen.builder import Builder
-from miro_gen.codegen.model import PyModule, Unsupported
+from miro_gen.codegen.model import PyModule, Unsupported, isort_key
 from miro_gen.codegen.render import render_module, render_package_init
 from miro_gen.diagnostics import Diagnostics
 from miro_gen.idl import ast
@@ -42,9 +42,14 @@ def build_modules(
     modules: list[PyModule] = []
     for spec, path in specs:
         try:
+            mine = [d for d in spec.declarations if d.pos.path == path]
+            python_limits.check_inheritance(mine)
+            python_limits.check_nested_names(mine, spec.declarations)
             modules += Builder(spec, path, display_source(path)).build()
         except Unsupported as e:
             diag.error(e.pos, e.message)
+    for pos, message in python_limits.base_class_cycles(modules):
+        diag.error(pos, message)
     return modules
 
 
@@ -96,7 +101,7 @@ def generated_files(modules: list[PyModule], outdir: Path) -> dict[str, str]:
         files[f"{folder}/__init__.py"] = render_package_init(
             doc,
             [f"{package}.{s}" for s in sorted(siblings, key=str.lower)],
-            [(package, c) for c in sorted(children, key=str.lower)],
+            [(package, c) for c in sorted(children, key=isort_key)],
             sorted(exports.items()),
             sorted(siblings | children),
             sorted((h, name) for h, name in hashes.items() if name in exports),

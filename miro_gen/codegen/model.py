@@ -257,6 +257,9 @@ class Item:
     union: dict[str, Any] = field(default_factory=dict)
     operations: list[Operation] = field(default_factory=list)
     quoted: bool = False  # typedef of a type defined later (recursion): a string alias
+    # An enum's enumerators are module constants only when the enum is declared in a module;
+    # nested in an interface, struct or union they are attributes of that class (CORBA scoping).
+    module_constants: bool = True
 
 
 @dataclass

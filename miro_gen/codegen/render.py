@@ -37,12 +37,11 @@ def docstring(text: str | None, indent: int, fallback: str | None = None) -> str
     """A docstring literal for IDL doc text, wrapped to the line length and escaped."""
     body = (text or fallback or "").strip()
     body = body.replace("\\", "\\\\").replace('"""', '\\"\\"\\"')
-    if body.endswith('"'):
-        body += " "
     width = LINE - indent - 6
     lines = [line for p in body.split("\n") for line in _wrap_block(p, width)]
     if len(lines) == 1:
-        return f'"""{lines[0]}"""'
+        end = " " if lines[0].endswith('"') else ""  # not four quotes in a row
+        return f'"""{lines[0]}{end}"""'
     pad = " " * indent
     rest = "\n".join(pad + line if line else "" for line in lines[1:])
     return f'"""{lines[0]}\n{rest}\n{pad}"""'
@@ -93,20 +92,22 @@ def render_package_init(
     submodules: list[str],
     hashes: list[tuple[str, str]],
 ) -> str:
-    """A package `__init__` that imports its modules' names lazily (see the template)."""
+    """A package `__init__` that imports its modules' names lazily (see the template); like a
+    module, it exempts itself from the line-length rule only when it must."""
     public = sorted(
         {name for name, _ in exports} | {name for _, name in subpackages}, key=isort_key
     )
-    return (
-        environment()
-        .get_template("idl/package_init.py.j2")
-        .render(
-            doc=doc,
-            modules=modules,
-            subpackages=subpackages,
-            exports=exports,
-            submodules=submodules,
-            public=public,
-            hashes=hashes,
-        )
-    )
+    template = environment().get_template("idl/package_init.py.j2")
+    context = {
+        "doc": doc,
+        "modules": modules,
+        "subpackages": subpackages,
+        "exports": exports,
+        "submodules": submodules,
+        "public": public,
+        "hashes": hashes,
+    }
+    text = template.render(long_lines=False, **context)
+    if any(len(line) > LINE for line in text.split("\n")):
+        text = template.render(long_lines=True, **context)
+    return text
