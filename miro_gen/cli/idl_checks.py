@@ -121,11 +121,13 @@ def refused_dependencies(
 
     for spec in specs:
         learn(spec)
+    reported: set[int] = set()
     for imported in missing:
         users = ", ".join(sorted({m.source for m in modules if imported in m.imports}))
         for path in sources(imported):
             found = refusal(path)
-            if found is not None:
+            if found is not None and id(found) not in reported:
+                reported.add(id(found))
                 diag.error(
                     found.pos,
                     f"{found.message}; {users} uses declarations of {os.path.basename(path)}, "

@@ -109,8 +109,8 @@ def base_class_cycles(modules: list[PyModule]) -> list[tuple[Any, str]]:
 def _ancestors(i: ast.Interface) -> list[ast.Interface]:
     out: list[ast.Interface] = []
     todo = list(i.bases)
-    while todo:
-        b = todo.pop()
+    while todo:  # breadth first, in the order the bases are listed
+        b = todo.pop(0)
         if all(b is not a for a in out):
             out.append(b)
             todo.extend(b.bases)
