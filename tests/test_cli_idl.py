@@ -26,7 +26,8 @@ def write(path: Path, text: str) -> Path:
 def test_help_documents_every_flag() -> None:
     out = run_miro_idl("--help")
     assert out.returncode == 0
-    for flag in ("-I DIR", "-D NAME[=VALUE]", "-o OUTDIR", "--check", "--ast-json", "--version"):
+    flags = ("-I DIR", "-D NAME[=VALUE]", "-U NAME", "-o OUTDIR", "--check", "--ast-json")
+    for flag in (*flags, "--case-sensitive", "--version"):
         assert flag in out.stdout, flag
     assert "FILE" in out.stdout
 
