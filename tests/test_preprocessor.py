@@ -925,3 +925,22 @@ def test_file_that_only_includes_is_not_warned_about(tmp_path: Path) -> None:
     diag = Diagnostics()
     compile_idl(str(write(tmp_path / "all.idl", '#include "x.idl"\n')), [], None, diag)
     assert not diag.items
+
+
+def test_omniidl_is_predefined_and_can_be_undefined(tmp_path: Path) -> None:
+    """ORB trees pick their workarounds by __OMNIIDL__ (omniORB's CosLifeCycle.idl declares
+    `_Factory` under it); -U removes a predefined macro, in command-line order with -D."""
+    main = write(
+        tmp_path / "o.idl",
+        "#ifdef __OMNIIDL__\nconst long OMNI = __OMNIIDL__;\n"
+        "#else\nconst long OTHER = 1;\n#endif\n",
+    )
+    assert decls(main)["OMNI"]["value"] == 0x2630
+    out = run_miro_idl("-U", "__OMNIIDL__", "--ast-json", str(main))
+    assert out.returncode == 0, out.stderr
+    assert [d["name"] for d in json.loads(out.stdout)["declarations"]] == ["OTHER"]
+    out = run_miro_idl(
+        "-D", "__OMNIIDL__=5", "-U", "__OMNIIDL__", "-D", "X", "--ast-json", str(main)
+    )
+    assert [d["name"] for d in json.loads(out.stdout)["declarations"]] == ["OTHER"]
+    assert run_miro_idl("-U", "1bad", "--ast-json", str(main)).returncode == 1
