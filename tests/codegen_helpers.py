@@ -13,6 +13,7 @@ The generated packages (CodecTest, CodecUnions, CodecOther) are imported from th
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import enum
 import importlib
@@ -191,26 +192,35 @@ def specification() -> dict[str, Any]:
 
 
 # Declarations of other test IDL (tests/codegen/dds/, compiled with --case-sensitive), whose
-# generated packages a test puts on sys.path itself: see add_specifications().
+# generated packages a test puts on sys.path itself, for as long as it registers them.
 _other_decls: dict[str, Any] = {}
 _other_modules: set[tuple[str, ...]] = set()
 
 
-def add_specifications(specs: list[ast.Specification]) -> list[Any]:
-    """Make the helpers (classes, values, the Cyclone oracle) know other compiled IDL; returns
-    its structs, unions and exceptions by name."""
+def data_types_of(specs: list[ast.Specification]) -> list[Any]:
+    """The structs, unions and exceptions of other compiled IDL, by name."""
     kinds = (ast.Struct, ast.Union_, ast.Exception_)
-    found: dict[str, Any] = {}
+    found = {d.scoped_name: d for spec in specs for d in spec.declarations if isinstance(d, kinds)}
+    return [found[name] for name in sorted(found)]
+
+
+@contextlib.contextmanager
+def registered(specs: list[ast.Specification]) -> Iterator[None]:
+    """Make the helpers (classes, values, the Cyclone oracle) know other compiled IDL while its
+    generated packages are importable."""
     for spec in specs:
         for d in spec.declarations:
             if isinstance(d, ast.Module):
                 _other_modules.add(d.scope_path)
             elif not isinstance(d, ast.Forward):
                 _other_decls.setdefault(d.scoped_name, d)
-                if isinstance(d, kinds):
-                    found.setdefault(d.scoped_name, d)
     _enum_decls.cache_clear()
-    return [found[name] for name in sorted(found)]
+    try:
+        yield
+    finally:
+        _other_decls.clear()
+        _other_modules.clear()
+        _enum_decls.cache_clear()
 
 
 def module_paths() -> frozenset[tuple[str, ...]]:

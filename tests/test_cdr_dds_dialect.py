@@ -29,7 +29,8 @@ from miro_gen.idl import compile_idl
 DDS = H.CODEGEN / "dds"
 ROS2 = DDS / "ros2"
 FILES = sorted(DDS.rglob("*.idl"))
-TYPES = H.add_specifications([compile_idl(str(f), [str(ROS2)], case_sensitive=True) for f in FILES])
+SPECS = [compile_idl(str(f), [str(ROS2)], case_sensitive=True) for f in FILES]
+TYPES = H.data_types_of(SPECS)
 IDS = [d.scoped_name for d in TYPES]
 SETTINGS = settings(H.SETTINGS, max_examples=25)
 
@@ -42,7 +43,8 @@ def generated(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
     assert r.returncode == 0, r.stderr
     sys.path.insert(0, str(out))
     try:
-        yield out
+        with H.registered(SPECS):
+            yield out
     finally:
         sys.path.remove(str(out))
 

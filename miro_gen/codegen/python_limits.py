@@ -15,8 +15,12 @@ from __future__ import annotations
 from collections.abc import Iterable
 from typing import Any
 
-from miro_gen.codegen.model import PyModule, Unsupported
+from miro_gen.codegen.contexts import ModuleContext
+from miro_gen.codegen.shapes import Unsupported
 from miro_gen.idl import ast
+
+# Nested declarations that become classes: redeclared, they would differ in type.
+_CLASS_KINDS = (ast.Struct, ast.Union_, ast.Exception_, ast.Enum)
 
 
 def python_bases(bases: list[ast.Interface]) -> list[ast.Interface]:
@@ -42,13 +46,14 @@ def check_inheritance(declarations: Iterable[ast.Decl]) -> None:
 
 
 def check_nested_names(mine: Iterable[ast.Decl], everything: list[ast.Decl]) -> None:
-    """Raise `Unsupported` for an interface whose class would get two different values for one
-    class attribute: a type or constant declared in it that a base declares too (IDL lets a
-    derived interface redeclare it), or one declared in two unrelated bases."""
+    """Raise `Unsupported` for an interface whose class would get two different classes for one
+    class attribute: a struct, union, exception or enum (or an enumerator) declared in it that a
+    base declares too (IDL lets a derived interface redeclare it), or one declared in two
+    unrelated bases."""
     nested: dict[tuple[str, ...], dict[str, ast.Decl]] = {}
     for d in everything:
-        if isinstance(d, (ast.Module, ast.Forward)) or len(d.scope_path) < 2:
-            continue
+        if not isinstance(d, _CLASS_KINDS) or len(d.scope_path) < 2:
+            continue  # typedefs and constants may be redeclared: attributes of compatible types
         names = nested.setdefault(d.scope_path[:-1], {})
         names[d.name] = d
         if isinstance(d, ast.Enum):
@@ -82,22 +87,28 @@ def check_nested_names(mine: Iterable[ast.Decl], everything: list[ast.Decl]) -> 
                     )
 
 
-def base_class_cycles(modules: list[PyModule]) -> list[tuple[Any, str]]:
+def base_class_cycles(
+    modules: list[ModuleContext], declarations: dict[str, ast.Decl]
+) -> list[tuple[Any, str]]:
     """(position, message) for each class whose base comes from a module that imports, directly
-    or not, the module of the class: importing one of them first fails."""
+    or not, the module of the class: importing one of them first fails. `declarations` gives
+    each item's declaration by scoped name (for its position)."""
     imports = {m.name: set(m.imports) for m in modules}
     out: list[tuple[Any, str]] = []
     for m in modules:
         alias_to_module = {alias: module for module, alias in m.imports.items()}
         for item in m.items:
-            for base in item.bases:
+            for base in getattr(item, "bases", ()):
                 alias = base.split(".", 1)[0]
                 other = alias_to_module.get(alias)
-                if other is not None and other in imports and _reaches(other, m.name, imports):
+                decl = declarations.get(item.scoped_name)
+                if decl is None or other is None or other not in imports:
+                    continue
+                if _reaches(other, m.name, imports):
                     out.append(
                         (
-                            item.decl.pos,
-                            f"'{item.decl.scoped_name}' cannot be generated for Python: its base "
+                            decl.pos,
+                            f"'{item.scoped_name}' cannot be generated for Python: its base "
                             f"comes from the generated module {other}, which imports {m.name} in "
                             "turn (IDL modules that use each other's interfaces and inherit "
                             "across them); declare the two interfaces in one IDL module",
