@@ -576,6 +576,17 @@ def cyclone() -> Cyclone:
     return Cyclone()
 
 
+def check_against_cyclone(decl: Any, value: Any) -> None:
+    """Our bytes for `value` equal Cyclone's, and each side decodes the other's to the value."""
+    ty = resolve(decl)
+    ours = value.serialize()
+    cyclone_value = cyclone().value(ty, value)
+    theirs = cyclone_value.serialize()
+    assert ours == theirs, f"\nours   {ours.hex(' ')}\ntheirs {theirs.hex(' ')}"
+    assert plain(pyclass(decl).deserialize(theirs)) == plain(value)
+    assert cyclone().cls(decl).deserialize(ours) == cyclone_value
+
+
 # =============================================================================================
 # running miro-idl, hypothesis settings
 # =============================================================================================

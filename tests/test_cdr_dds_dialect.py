@@ -75,26 +75,16 @@ def test_generated_code_imports_and_passes_ruff_and_mypy_strict(generated: Path)
     assert not G.mypy_problems(generated, generated.parent / "mypy-cache")
 
 
-def _check(decl: Any, value: Any) -> None:
-    ty = H.resolve(decl)
-    ours = value.serialize()
-    cyclone_value = H.cyclone().value(ty, value)
-    theirs = cyclone_value.serialize()
-    assert ours == theirs, f"\nours   {ours.hex(' ')}\ntheirs {theirs.hex(' ')}"
-    assert H.plain(H.pyclass(decl).deserialize(theirs)) == H.plain(value)
-    assert H.cyclone().cls(decl).deserialize(ours) == cyclone_value
-
-
 @pytest.mark.parametrize("decl", TYPES, ids=IDS)
 def test_default_values_match_cyclone(decl: Any) -> None:
-    _check(decl, H.pyclass(decl)())
+    H.check_against_cyclone(decl, H.pyclass(decl)())
 
 
 @pytest.mark.parametrize("decl", TYPES, ids=IDS)
 @SETTINGS
 @given(data=st.data())
 def test_values_match_cyclone(decl: Any, data: st.DataObject) -> None:
-    _check(decl, data.draw(H.values(H.resolve(decl), oracle=True)))
+    H.check_against_cyclone(decl, data.draw(H.values(H.resolve(decl), oracle=True)))
 
 
 def test_ros2_names_and_constants() -> None:

@@ -28,6 +28,14 @@ def refused(tmp_path: Path, *args: str) -> list[str]:
     return [line for line in out.stderr.splitlines() if ": error: " in line]
 
 
+def generated(tmp_path: Path, idl: Path) -> Path:
+    """The output folder of a run that must succeed."""
+    out_dir = tmp_path / "out"
+    out = run_miro_idl("-o", str(out_dir), str(idl))
+    assert out.returncode == 0, out.stderr
+    return out_dir
+
+
 def test_included_file_that_cannot_be_generated(tmp_path: Path) -> None:
     """The code of b.idl would import a.idl's module, which `any` keeps from being generated,
     also through a file in between."""
@@ -60,9 +68,7 @@ def test_redundant_bases_are_left_out_of_the_class_statement(tmp_path: Path) -> 
         "  interface five : four, three, two { void op_five(); };\n"
         "};\n",
     )
-    out_dir = tmp_path / "out"
-    out = run_miro_idl("-o", str(out_dir), str(idl))
-    assert out.returncode == 0, out.stderr
+    out_dir = generated(tmp_path, idl)
     assert "class five(four):" in (out_dir / "I" / "inherit_idl.py").read_text()
     assert not G.import_problems(out_dir)
 
@@ -127,9 +133,7 @@ def test_constructs_found_in_real_trees_generate_clean_code(tmp_path: Path) -> N
         "  interface Manager {};\n"
         "};\n",
     )
-    out_dir = tmp_path / "out"
-    out = run_miro_idl("-o", str(out_dir), str(idl))
-    assert out.returncode == 0, out.stderr
+    out_dir = generated(tmp_path, idl)
     assert not G.import_problems(out_dir)
     assert not G.ruff_problems(out_dir)
     assert not G.mypy_problems(out_dir, tmp_path / "mypy-cache")
