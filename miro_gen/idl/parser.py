@@ -68,23 +68,17 @@ class _AstBuilder:
         return self.src.pos_at(tok.start_pos)
 
     def ident(self, tok: Token) -> str:
+        """A declared identifier, checked against the keywords."""
         v = str(tok)
         if v[0] == "_":
-            # Escaped identifier: the underscore is dropped and keywords are allowed.
-            if len(v) == 1 or not v[1].isalpha():
-                self.diag.error(self.pos(tok), f"invalid identifier '{v}'")
-            return v[1:]
+            return self._unescaped(tok, v)
         if self.case_sensitive:
             # DDS and ROS 2 files: only the exact spelling of a keyword is one (idlc -f
             # case-sensitive), and a keyword where only a name can stand is that name, as
             # rosidl's parser reads it (`sequence<int32> sequence;` in the Fibonacci action).
             return v
         if v in RESERVED:
-            self.diag.error(
-                self.pos(tok),
-                f"'{v}' is a keyword and cannot be used as a name here "
-                f"(write '_{v}' to use it as an identifier)",
-            )
+            self._keyword_error(tok, v)
             return v
         lv = v.lower()
         kw = RESERVED_FOLDED.get(lv)
@@ -98,11 +92,6 @@ class _AstBuilder:
                 )
         return v
 
-    def declared(self, tok: Token, node: Any) -> Any:
-        """Record a node named by `tok`, for doc-comment attachment."""
-        self.named.append((tok.start_pos or 0, node))
-        return node
-
     def use_ident(self, tok: Token) -> str:
         """An identifier in a scoped name (a use, not a declaration).
 
@@ -112,16 +101,28 @@ class _AstBuilder:
         """
         v = str(tok)
         if v[0] == "_":
-            if len(v) == 1 or not v[1].isalpha():
-                self.diag.error(self.pos(tok), f"invalid identifier '{v}'")
-            return v[1:]
+            return self._unescaped(tok, v)
         if v in RESERVED and tok.type == "IDENT" and not self.case_sensitive:
-            self.diag.error(
-                self.pos(tok),
-                f"'{v}' is a keyword and cannot be used as a name here "
-                f"(write '_{v}' to use it as an identifier)",
-            )
+            self._keyword_error(tok, v)
         return v
+
+    def _unescaped(self, tok: Token, v: str) -> str:
+        """An escaped identifier: the underscore is dropped and keywords are allowed."""
+        if len(v) == 1 or not v[1].isalpha():
+            self.diag.error(self.pos(tok), f"invalid identifier '{v}'")
+        return v[1:]
+
+    def _keyword_error(self, tok: Token, v: str) -> None:
+        self.diag.error(
+            self.pos(tok),
+            f"'{v}' is a keyword and cannot be used as a name here "
+            f"(write '_{v}' to use it as an identifier)",
+        )
+
+    def declared(self, tok: Token, node: Any) -> Any:
+        """Record a node named by `tok`, for doc-comment attachment."""
+        self.named.append((tok.start_pos or 0, node))
+        return node
 
     def scoped(self, toks: _Children, absolute: bool) -> ast.ScopedName:
         return ast.ScopedName(tuple(self.use_ident(t) for t in toks), absolute, self.pos(toks[0]))
