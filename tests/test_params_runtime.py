@@ -17,8 +17,8 @@ from hypothesis import strategies as st
 from lxml import etree
 from params_helpers import PARAMS, SETTINGS, all_types, write
 
-from miro_gen.params.document import ConfigDocument
 from miro_gen.params.runtime import InetAddr, ParamsError
+from miro_gen.params.runtime.document import ConfigDocument
 
 
 @pytest.fixture(scope="module")
@@ -86,8 +86,8 @@ def test_defaults_of_every_type(types_module: ModuleType) -> None:
     assert (a.mode, a.modes, a.numbers) == ("Run", [], [1, 2, 3])
     assert (a.tags, a.ids, a.matrix, a.path) == (set(), set(), [], [])
     assert a.origin.x == 1.5 and a.tty.device == "/dev/ttyS0"
-    assert type(a).version == 3  # static_const: a class constant, not a field
-    assert "version" not in type(a).model_fields
+    assert type(a).VERSION == 3  # static_const: a class constant (makeParams: upper case)
+    assert "VERSION" not in type(a).model_fields and "version" not in type(a).model_fields
     point3 = types_module.Point3Parameters()
     assert (point3.x, point3.y, point3.z) == (2.5, 0.0, 0.0)  # inherited: X's default overridden
     assert isinstance(point3, types_module.PointParameters)

@@ -41,7 +41,10 @@ SECTIONS: dict[str, tuple[str, ...]] = {
 
 
 class DevParameters(_rt.Config):
-    """A device driver: the device file it opens."""
+    """A device driver: the device file it opens.
+
+    Abstract (final="false"): a base of other parameter classes.
+    """
 
     device: str = _pd.Field(
         default="/dev/null",
@@ -54,7 +57,10 @@ class DevParameters(_rt.Config):
 
 
 class TtyParameters(DevParameters):
-    """A device on a serial line."""
+    """A device on a serial line.
+
+    Abstract (final="false"): a base of other parameter classes.
+    """
 
     device: str = _pd.Field(
         default="/dev/ttyS0",
@@ -71,7 +77,10 @@ class TtyParameters(DevParameters):
 
 
 class SockParameters(_rt.Config):
-    """A device or service reached over a socket."""
+    """A device or service reached over a socket.
+
+    Abstract (final="false"): a base of other parameter classes.
+    """
 
     address: _rt.InetAddr = _pd.Field(
         default=_rt.InetAddr("localhost", 5000),
@@ -88,7 +97,10 @@ class SockParameters(_rt.Config):
 
 
 class ThreadParameters(_rt.Config):
-    """A service thread's scheduling."""
+    """A service thread's scheduling.
+
+    Abstract (final="false"): a base of other parameter classes.
+    """
 
     schedParams: _rt.SchedParams = _pd.Field(
         default_factory=_rt.SchedParams,
@@ -100,7 +112,10 @@ class ThreadParameters(_rt.Config):
 
 
 class MotionParameters(_rt.Config):
-    """Velocity limits of a motion service."""
+    """Velocity limits of a motion service.
+
+    Abstract (final="false"): a base of other parameter classes.
+    """
 
     minTranslation: int = _pd.Field(
         default=-1000,
@@ -111,11 +126,11 @@ class MotionParameters(_rt.Config):
         description="[mm/s]",
     )
     minRotation: float = _pd.Field(
-        default=_rt.deg2rad(-90),
+        default=_rt.deg2rad(-90.0),
         description="[°/s]",
     )
     maxRotation: float = _pd.Field(
-        default=_rt.deg2rad(90),
+        default=_rt.deg2rad(90.0),
         description="[°/s]",
     )
     maxAcceleration: float = _pd.Field(
@@ -133,7 +148,10 @@ class MotionParameters(_rt.Config):
 
 
 class DifferentialMotionParameters(MotionParameters):
-    """A differential drive: two wheels on one axis."""
+    """A differential drive: two wheels on one axis.
+
+    Abstract (final="false"): a base of other parameter classes.
+    """
 
     minLTranslation: int = _pd.Field(
         default=-1000,
@@ -212,7 +230,10 @@ ScanDescriptionIDL_xml: _rt.Layout = _rt.Layout(
 
 
 class RangeSensorParameters(_rt.Config):
-    """A range sensor (sonar ring, laser scanner): its layout."""
+    """A range sensor (sonar ring, laser scanner): its layout.
+
+    Abstract (final="false"): a base of other parameter classes.
+    """
 
     scanDescription: _m_Miro_ScanDescription_idl.ScanDescriptionIDL = _pd.Field(
         default_factory=_m_Miro_ScanDescription_idl.ScanDescriptionIDL,

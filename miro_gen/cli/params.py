@@ -104,8 +104,8 @@ def compile_files(
     paths: list[str], include_dirs: list[str], name: str | None, diag: Diagnostics
 ) -> list[object]:
     """The template contexts of `paths` (errors in `diag`)."""
-    from miro_gen.params.build import build_modules
-    from miro_gen.params.loader import Loader
+    from miro_gen.params.compiler.build import build_modules
+    from miro_gen.params.compiler.loader import Loader
 
     loader = Loader(include_dirs, diag)
     targets = []
@@ -121,8 +121,8 @@ def _run(args: argparse.Namespace, diag: Diagnostics) -> int:
     if args.xsd:
         return _xsd(args, diag)
     from miro_gen.codegen.generate import changed_files, write_files
-    from miro_gen.params import generate
-    from miro_gen.params.pymodel import PyParamsModule
+    from miro_gen.params.compiler import generate
+    from miro_gen.params.compiler.pymodel import PyParamsModule
 
     modules = [
         m
@@ -148,8 +148,8 @@ def _run(args: argparse.Namespace, diag: Diagnostics) -> int:
 
 
 def _xsd(args: argparse.Namespace, diag: Diagnostics) -> int:
-    from miro_gen.params import dynamic
-    from miro_gen.params.xsd import render_xsd
+    from miro_gen.params.compiler import dynamic
+    from miro_gen.params.compiler.xsd import render_xsd
 
     classes = dynamic.load(args.files, args.include_dirs, diag)
     diag.print()

@@ -19,7 +19,7 @@ from miro_gen.cli.common import internal_error
 from miro_gen.diagnostics import CompileError, Diagnostic, Diagnostics, SourcePos
 
 if TYPE_CHECKING:
-    from miro_gen.params.dynamic import ParamClass
+    from miro_gen.params.compiler.dynamic import ParamClass
 
 DESCRIPTION = """\
 Check or print run-time parameter documents (<config><section><parameter name=...>) against the
@@ -89,7 +89,7 @@ def _compile_time_files(folder: Path) -> list[str]:
 
 
 def _run(args: argparse.Namespace, diag: Diagnostics) -> int:
-    from miro_gen.params import dynamic
+    from miro_gen.params.compiler import dynamic
 
     params = args.params or _compile_time_files(Path("params"))
     if not params:
@@ -111,8 +111,8 @@ def _check(
     doc_path: str, typed: list[ParamClass], args: argparse.Namespace, show: bool
 ) -> list[Diagnostic]:
     """The problems of one document (and its values printed, for show)."""
-    from miro_gen.params.document import ConfigDocument
     from miro_gen.params.runtime import ParamsError
+    from miro_gen.params.runtime.document import ConfigDocument
 
     try:
         doc = ConfigDocument(path=doc_path)

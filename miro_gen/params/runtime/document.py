@@ -22,8 +22,8 @@ from typing import Any, NamedTuple
 from lxml import etree
 
 from miro_gen.diagnostics import Diagnostic, SourcePos
-from miro_gen.params.runtime import Config, ParamsError
-from miro_gen.params.xmlsafe import XmlError, parse_xml, read_xml
+from miro_gen.params.runtime.config import Config, ParamsError
+from miro_gen.params.runtime.xmlsafe import XmlError, parse_xml, read_xml
 
 ROOT_TAG = "config"
 

@@ -15,11 +15,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from miro_gen.diagnostics import CompileError, Diagnostics
-from miro_gen.params.build import build_modules
-from miro_gen.params.generate import render_module
-from miro_gen.params.loader import Loader
-from miro_gen.params.model import ItemDecl, ParamsFile
-from miro_gen.params.pymodel import PyParamsModule
+from miro_gen.params.compiler.build import build_modules
+from miro_gen.params.compiler.generate import render_module
+from miro_gen.params.compiler.loader import Loader
+from miro_gen.params.compiler.model import ItemDecl, ParamsFile
+from miro_gen.params.compiler.pymodel import PyParamsModule
 from miro_gen.params.runtime import Config
 
 

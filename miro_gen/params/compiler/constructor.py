@@ -10,21 +10,30 @@ error naming the file, the line and the construct.
 
 from __future__ import annotations
 
-import importlib
+import math
 import re
 from dataclasses import dataclass
-from functools import cache
-from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import lark
 
 from miro_gen.diagnostics import Diagnostics, SourcePos
-from miro_gen.params.model import ItemDecl
-from miro_gen.params.pymodel import CONFIG_BASES, PyType, TypeMapper, attr_name
+from miro_gen.params.compiler.expressions import CONSTANTS, parse_number, parser
+from miro_gen.params.compiler.model import ItemDecl
+from miro_gen.params.compiler.pymodel import PyParamsModule, PyType, idl_constant, pyrepr
 
-if TYPE_CHECKING:
-    from miro_gen.params.build import ModuleBuilder
+
+class Members(Protocol):
+    """What the translator asks the module builder: members through parents, and imports."""
+
+    module: PyParamsModule
+
+    def member(self, item: ItemDecl, name: str) -> tuple[str, PyType] | None:
+        """(Python attribute, type) of a member of an item or of its parents."""
+
+    def import_module(self, module: str) -> str:
+        """The alias this module imports `module` under."""
+
 
 _MATH_FUNCTIONS = frozenset(
     [
@@ -54,7 +63,7 @@ _RUNTIME_STRUCT_FIELDS: dict[str, dict[str, str]] = {
         "readmincharacters": "int",
         "readtimeoutmsec": "int",
         "parityenb": "bool",
-        "paritymode": "str",
+        "paritymode": "parity",  # a C string in ACE: 0 (NULL) is no parity
         "ctsenb": "bool",
         "rtsenb": "int",
         "xinenb": "bool",
@@ -100,22 +109,12 @@ class Val:
     struct: str | None = None  # runtime structs: "_rt.SerialParams"
 
 
-@cache
-def _parser() -> lark.Lark:
-    return lark.Lark.open(
-        str(Path(__file__).with_name("constructor.lark")),
-        parser="lalr",
-        propagate_positions=True,
-        maybe_placeholders=False,
-    )
-
-
-def compile_constructor(item: ItemDecl, builder: ModuleBuilder, diag: Diagnostics) -> list[str]:
+def compile_constructor(item: ItemDecl, builder: Members, diag: Diagnostics) -> list[str]:
     """The Python statements of an item's `<constructor>` (errors in `diag`)."""
     assert item.constructor is not None
     block = item.constructor
     try:
-        tree = _parser().parse(block.text)
+        tree = parser().parse(block.text, start="start")
     except lark.exceptions.UnexpectedInput as e:
         got = _describe(e)
         diag.error(_pos(block.pos, e.line, e.column), f"constructor: unexpected {got}")
@@ -142,7 +141,7 @@ class Translator:
     """Translates the statements of one block; `scopes` hold locals (C++ name -> Val)."""
 
     def __init__(
-        self, item: ItemDecl, builder: ModuleBuilder, start: SourcePos, diag: Diagnostics
+        self, item: ItemDecl, builder: Members, start: SourcePos, diag: Diagnostics
     ) -> None:
         self.item = item
         self.builder = builder
@@ -204,11 +203,18 @@ class Translator:
         size_tokens = [c for c in rest[1:] if isinstance(c, lark.Token) and c.type == "NUMBER"]
         values = [self.expr(c) for c in rest[1:] if isinstance(c, lark.Tree)]
         kind = self.ctype(ctype)
-        if size_tokens and int(size_tokens[0].rstrip("uUlL"), 0) != len(values):
-            raise ConstructorError(
-                node.meta, f"{name}[{size_tokens[0]}] is given {len(values)} values"
-            )
         codes = [self.convert(v, kind, node.meta, f"an element of {name}") for v in values]
+        if size_tokens:
+            size = parse_number(str(size_tokens[0]))
+            if not isinstance(size, int) or size < len(values):
+                raise ConstructorError(
+                    node.meta, f"{name}[{size_tokens[0]}] is given {len(values)} values"
+                )
+            if size > 100_000:
+                raise ConstructorError(node.meta, f"{name}[{size}] is too large")
+            # C++ value-initialises the elements not given
+            zero = {"int": "0", "float": "0.0", "bool": "False", "str": '""'}.get(kind, "0")
+            codes += [zero] * (size - len(codes))
         local = self._local_name(name, node.meta)
         self.scopes[-1][name] = Val(local, "array", element=kind)
         if not codes:
@@ -241,7 +247,7 @@ class Translator:
         op = str(op)
         if target.kind == "array":
             raise ConstructorError(node.meta, "a local array cannot be assigned to")
-        if target.type is None and target.kind not in ("int", "float", "bool", "str"):
+        if target.type is None and target.kind not in ("int", "float", "bool", "str", "parity"):
             raise ConstructorError(node.meta, f"cannot assign to {_src(path_node)}")
         if op == "=":
             code = self.convert(value, target.kind, node.meta, _src(path_node), target.type)
@@ -369,7 +375,7 @@ class Translator:
             local = self.lookup_local(name)
             if local is not None:
                 current = local
-            elif "::" not in name and self.find_member(self.item, name) is not None:
+            elif "::" not in name and self.builder.member(self.item, name) is not None:
                 current = self.member_of_item(self.item, name, "self", node.meta)
             else:
                 current = self.constant(name, node.meta)
@@ -380,26 +386,8 @@ class Translator:
                 current = self.index(current, self.expr(seg.children[0]), seg.meta)
         return current
 
-    def find_member(self, item: ItemDecl, name: str) -> tuple[str, PyType] | None:
-        """(Python attribute, type) of a member of an item or of its parents."""
-        want = name[:1].lower() + name[1:]
-        current: ItemDecl | None = item
-        while current is not None:
-            for p in current.params:
-                if p.attr == want and not p.static_const:
-                    t = self.builder.field_type(current, p.attr)
-                    if t is None:
-                        return None
-                    return (p.attr if current.dummy else attr_name(p.name)), t
-            if not current.parent or current.parent in CONFIG_BASES:
-                return None
-            current = TypeMapper(
-                current.file, self.builder.mapper.items, self.module, self.builder.mapper.modules
-            ).lookup_parent(current.parent)
-        return None
-
     def member_of_item(self, item: ItemDecl, name: str, code: str, meta: Any) -> Val:
-        found = self.find_member(item, name)
+        found = self.builder.member(item, name)
         if found is None:
             raise ConstructorError(meta, f"{item.class_name} has no member {name!r}")
         attr, t = found
@@ -426,36 +414,26 @@ class Translator:
         return Val(f"{owner.code}[{idx.code}]", _kind(e), e, struct=e.annotation)
 
     def constant(self, name: str, meta: Any) -> Val:
-        """`M_PI`, or an IDL constant (`Miro::RangeSensor::GROUPWISE`), checked by importing
-        its generated package."""
-        if name in ("M_PI", "std::M_PI"):
-            self.module.uses_math = True
-            return Val("_math.pi", "float")
-        parts = name.lstrip(":").split("::")
-        if len(parts) < 2:
+        """`M_PI` and the other <cmath>/<climits> constants, or an IDL constant
+        (`Miro::RangeSensor::GROUPWISE`), checked by importing its generated module."""
+        builtin = CONSTANTS.get(name.lstrip(":").removeprefix("std::"))
+        if builtin is not None:
+            code = repr(builtin) if math.isfinite(builtin) else f'float("{builtin}")'
+            kind = "int" if isinstance(builtin, int) else "float"
+            return Val(code, kind, constant=builtin)
+        if "::" not in name.lstrip(":"):
             raise ConstructorError(meta, f"unknown name {name!r}")
-        try:
-            obj: object = importlib.import_module(parts[0])
-            for part in parts[1:]:
-                obj = getattr(obj, part)
-        except (ImportError, AttributeError):
+        found = idl_constant(name)
+        if found is None:
             raise ConstructorError(
                 meta,
-                f"unknown constant {name!r} (IDL constants come from the generated package "
-                f"{parts[0]}; is it generated and importable?)",
-            ) from None
-        if isinstance(obj, bool):
-            kind = "bool"
-        elif isinstance(obj, int):
-            kind = "int"
-        elif isinstance(obj, float):
-            kind = "float"
-        elif isinstance(obj, str):
-            kind = "str"
-        else:
-            raise ConstructorError(meta, f"{name} is not a constant")
-        alias = self.builder.mapper._import(parts[0])
-        return Val(".".join([alias, *parts[1:]]), kind, constant=obj)
+                f"unknown constant {name!r} (IDL constants come from the generated IDL "
+                "package; is it generated and importable?)",
+            )
+        module, attrs, value = found
+        kind = {bool: "bool", int: "int", float: "float", str: "str"}[type(value)]
+        alias = self.builder.import_module(module)
+        return Val(".".join([alias, *attrs]), kind, constant=value)
 
     def factory(self, t: PyType) -> str:
         """A zero-argument callable making a default element (for resize)."""
@@ -484,18 +462,10 @@ class Translator:
         return result
 
     def e_number(self, node: lark.Tree[Any]) -> Val:
-        text = str(node.children[0])
-        is_hex = text.lower().startswith("0x")
-        body = text.rstrip("uUlL") if is_hex else text.rstrip("uUlLfF")
-        if is_hex:
-            return Val(str(int(body, 16)), "int", constant=int(body, 16))
-        if re.fullmatch(r"[0-9]+", body):
-            if len(body) > 1 and body.startswith("0"):  # C++ octal
-                value = int(body, 8)
-                return Val(str(value), "int", constant=value)
-            return Val(str(int(body)), "int", constant=int(body))
-        number = float(body)
-        return Val(repr(number), "float", constant=number)
+        value = parse_number(str(node.children[0]))
+        if isinstance(value, float):
+            return Val(repr(value), "float", constant=value)
+        return Val(str(value), "int", constant=value)
 
     def e_string(self, node: lark.Tree[Any]) -> Val:
         raw = str(node.children[0])[1:-1]
@@ -635,6 +605,11 @@ class Translator:
             return value.code
         if kind == value.kind:
             return value.code
+        if kind == "parity":
+            if value.kind == "str":
+                return value.code
+            if value.kind == "int" and value.constant == 0:
+                return '"none"'
         if kind == "float" and value.kind == "int":
             return value.code
         if kind == "bool" and value.kind == "int":
@@ -668,8 +643,6 @@ def _annotation(kind: str) -> str:
 
 
 def _literal(value: str) -> str:
-    from miro_gen.codegen.render import pyrepr
-
     return pyrepr(value)
 
 
