@@ -313,7 +313,7 @@ class ModuleBuilder:
             if cls.abstract:
                 cls.doc += '\n\nAbstract (final="false"): a base of other parameter classes.'
         self._members(item, cls, base[1])
-        if item.constructor is not None and not stand_in:
+        if item.constructors and not stand_in:
             cls.construct = compile_constructor(item, self, self.diag)
         return cls
 

@@ -110,17 +110,22 @@ class Val:
 
 
 def compile_constructor(item: ItemDecl, builder: Members, diag: Diagnostics) -> list[str]:
-    """The Python statements of an item's `<constructor>` (errors in `diag`)."""
-    assert item.constructor is not None
-    block = item.constructor
-    try:
-        tree = parser().parse(block.text, start="start")
-    except lark.exceptions.UnexpectedInput as e:
-        got = _describe(e)
-        diag.error(_pos(block.pos, e.line, e.column), f"constructor: unexpected {got}")
-        return []
-    translator = Translator(item, builder, block.pos, diag)
-    return translator.statements(tree.children, 0)
+    """The Python statements of an item's `<constructor>` blocks (errors in `diag`): one
+    C++ constructor body, so a block sees the locals of the blocks before it."""
+    translator: Translator | None = None
+    out: list[str] = []
+    for block in item.constructors:
+        try:
+            tree = parser().parse(block.text, start="start")
+        except lark.exceptions.UnexpectedInput as e:
+            got = _describe(e)
+            diag.error(_pos(block.pos, e.line, e.column), f"constructor: unexpected {got}")
+            continue
+        if translator is None:
+            translator = Translator(item, builder, block.pos, diag)
+        translator.start = block.pos
+        out += translator.statements(tree.children, 0)
+    return out
 
 
 def _describe(e: lark.exceptions.UnexpectedInput) -> str:

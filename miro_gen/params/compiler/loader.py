@@ -281,7 +281,7 @@ class Loader:
             elif child.tag == "constructor":
                 text = child.text or ""
                 # the statements start where the text starts: on the <constructor> line
-                item.constructor = Constructor(text, f.pos(child.sourceline, 1))
+                item.constructors.append(Constructor(text, f.pos(child.sourceline, 1)))
             else:
                 self._unexpected(f, child, "config_item")
         f.items.append(item)

@@ -63,7 +63,8 @@ class ItemDecl:
     instance: bool = False
     group: str | None = None  # the config_group: the run-time section
     params: list[ParamDecl] = field(default_factory=list)
-    constructor: Constructor | None = None
+    # `<constructor>` blocks, run one after the other (makeParams appended them)
+    constructors: list[Constructor] = field(default_factory=list)
     doc: str | None = None
 
     @property
