@@ -60,6 +60,11 @@ def build_parser() -> argparse.ArgumentParser:
         )
         if name == "show":
             s.add_argument("--section", metavar="S", help="only this section")
+            s.add_argument(
+                "--all",
+                action="store_true",
+                help='also list abstract classes (final="false") among the known ones',
+            )
     return p
 
 
@@ -134,7 +139,9 @@ def _check(
                 matches = [c for c in typed if label in c.names] or [
                     c
                     for c in typed
-                    if c.item.file.namespace == label and c.item.group in (name, None)
+                    if c.item.file.namespace == label
+                    and c.item.group in (name, None)
+                    and not c.abstract
                 ]
             elif elem.tag == "instance":
                 label = elem.get("type", "")
@@ -143,7 +150,8 @@ def _check(
                 problems.append(Diagnostic("error", pos, f"unexpected element <{elem.tag!s}>"))
                 continue
             if len(matches) != 1:
-                known = ", ".join(sorted({c.item.class_name for c in typed})) or "none"
+                listed = [c for c in typed if not c.abstract or getattr(args, "all", False)]
+                known = ", ".join(sorted({c.item.class_name for c in listed})) or "none"
                 why = "no" if not matches else "more than one"
                 problems.append(
                     Diagnostic(

@@ -220,7 +220,7 @@ class ModuleBuilder:
         name = item.scoped_name
         if name in RUNTIME_STRUCTS:
             return DummyKind("runtime", cls=RUNTIME_STRUCTS[name])
-        named = self.scope.python_classes.get(name)
+        named = None if self.tools else self.scope.python_classes.get(name)
         if named is not None:
             module, _, cls = named.partition(":")
             return DummyKind("python", module, cls or item.hand_written_name)
@@ -549,5 +549,17 @@ def build_modules(
         f.path.resolve(): (package_for(f), module_for(f, names.get(f.path.resolve())))
         for f in files
     }
+    first: dict[tuple[str, str], ParamsFile] = {}
+    for f in files:
+        key = modules[f.path.resolve()]
+        other = first.setdefault(key, f)
+        if other is not f:
+            a, b = (other.display, f.display) if other.display != f.display else (other.path, f.path)
+            diag.error(
+                None,
+                f"{a} and {b} would both be the module {'.'.join(key)} "
+                "(its namespace and file name); rename one, or give it another name with -n",
+            )
+    diag.check()
     scope = Scope(files, python_classes or {})
     return [ModuleBuilder(f, scope, modules, diag, tools).build() for f in targets]
