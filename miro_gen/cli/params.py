@@ -159,9 +159,7 @@ def _run(args: argparse.Namespace, diag: Diagnostics) -> int:
 
     modules = [
         m
-        for m in compile_files(
-            args.files, args.include_dirs, args.name, diag, args.python_classes
-        )
+        for m in compile_files(args.files, args.include_dirs, args.name, diag, args.python_classes)
         if isinstance(m, PyParamsModule)
     ]
     diag.print()

@@ -554,7 +554,8 @@ def build_modules(
         key = modules[f.path.resolve()]
         other = first.setdefault(key, f)
         if other is not f:
-            a, b = (other.display, f.display) if other.display != f.display else (other.path, f.path)
+            same = other.display == f.display
+            a, b = (other.path, f.path) if same else (other.display, f.display)
             diag.error(
                 None,
                 f"{a} and {b} would both be the module {'.'.join(key)} "
