@@ -123,6 +123,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 1
     except KeyboardInterrupt:
         return 130
+    except RecursionError:  # classes deriving from each other thousands deep, ...
+        diag.print()
+        print("miro-params: error: the input is nested too deeply to compile", file=sys.stderr)
+        return 1
     except Exception as e:  # a bug in miro-params, not in the input
         diag.print()
         return internal_error("miro-params", e)

@@ -117,14 +117,15 @@ def compile_constructor(item: ItemDecl, builder: Members, diag: Diagnostics) -> 
     for block in item.constructors:
         try:
             tree = parser().parse(block.text, start="start")
+            if translator is None:
+                translator = Translator(item, builder, block.pos, diag)
+            translator.start = block.pos
+            out += translator.statements(tree.children, 0)
         except lark.exceptions.UnexpectedInput as e:
             got = _describe(e)
             diag.error(_pos(block.pos, e.line, e.column), f"constructor: unexpected {got}")
-            continue
-        if translator is None:
-            translator = Translator(item, builder, block.pos, diag)
-        translator.start = block.pos
-        out += translator.statements(tree.children, 0)
+        except RecursionError:
+            diag.error(block.pos, "constructor: the block is nested too deeply")
     return out
 
 
@@ -529,6 +530,34 @@ class Translator:
                 raise ConstructorError(node.meta, "% needs integers (use fmod for doubles)")
             return Val(f"_rt.cxx_mod({a.code}, {b.code})", "int")
         return Val(f"({a.code} {op} {b.code})", kind)
+
+    def e_invert(self, node: lark.Tree[Any]) -> Val:
+        v = self._integer(self.expr(node.children[0]), node.meta, "~")
+        return Val(f"~{_paren(v.code)}", "int")
+
+    def e_shift_(self, node: lark.Tree[Any]) -> Val:
+        left, op, right = node.children
+        a = self._integer(self.expr(left), node.meta, str(op))
+        b = self._integer(self.expr(right), node.meta, str(op))
+        return Val(f"({a.code} {op} {b.code})", "int")
+
+    def _bits(self, node: lark.Tree[Any], op: str) -> Val:
+        a, b = (self._integer(self.expr(c), node.meta, op) for c in node.children)
+        return Val(f"({a.code} {op} {b.code})", "int")
+
+    def e_bit_or_(self, node: lark.Tree[Any]) -> Val:
+        return self._bits(node, "|")
+
+    def e_bit_xor_(self, node: lark.Tree[Any]) -> Val:
+        return self._bits(node, "^")
+
+    def e_bit_and_(self, node: lark.Tree[Any]) -> Val:
+        return self._bits(node, "&")
+
+    def _integer(self, v: Val, meta: Any, op: str) -> Val:
+        if v.kind not in ("int", "bool"):
+            raise ConstructorError(meta, f"{op} needs integers (got a {v.kind})")
+        return v
 
     def e_compare(self, node: lark.Tree[Any]) -> Val:
         left, op, right = node.children

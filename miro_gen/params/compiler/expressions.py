@@ -186,14 +186,16 @@ def evaluate_args(text: str, lookup: Lookup | None = None) -> list[Value]:
     """The values of `text`: one expression, or several separated by commas."""
     try:
         tree = parser().parse(text, start="default_args")
+        evaluator = Evaluator(lookup)
+        return [evaluator.eval(c) for c in tree.children if isinstance(c, lark.Tree)]
     except lark.exceptions.UnexpectedInput as e:
         token = getattr(e, "token", None)
         if token is not None and token.type == "$END":
             raise ExprError("the expression ends too early") from None
         got = str(token) if token is not None else getattr(e, "char", "") or "input"
         raise ExprError(f"{got!r} is not part of a C++ constant expression") from None
-    evaluator = Evaluator(lookup)
-    return [evaluator.eval(c) for c in tree.children if isinstance(c, lark.Tree)]
+    except RecursionError:
+        raise ExprError("the expression is nested too deeply") from None
 
 
 def is_number(v: Value) -> bool:
@@ -371,6 +373,34 @@ class Evaluator:
         q = abs(int(x)) // abs(int(y))
         q = q if (x >= 0) == (y >= 0) else -q
         return int(x) - q * int(y)
+
+    def e_invert(self, node: lark.Tree[Any]) -> Value:
+        return ~self._integer(self.eval(node.children[0]), "~")
+
+    def e_shift_(self, node: lark.Tree[Any]) -> Value:
+        left, op, right = node.children
+        a = self._integer(self.eval(left), str(op))
+        b = self._integer(self.eval(right), str(op))
+        if not 0 <= b < 64:
+            raise ExprError(f"a shift by {b} is undefined in C++")
+        return a << b if str(op) == "<<" else a >> b
+
+    def e_bit_or_(self, node: lark.Tree[Any]) -> Value:
+        a, b = (self._integer(self.eval(c), "|") for c in node.children)
+        return a | b
+
+    def e_bit_xor_(self, node: lark.Tree[Any]) -> Value:
+        a, b = (self._integer(self.eval(c), "^") for c in node.children)
+        return a ^ b
+
+    def e_bit_and_(self, node: lark.Tree[Any]) -> Value:
+        a, b = (self._integer(self.eval(c), "&") for c in node.children)
+        return a & b
+
+    def _integer(self, v: Value, op: str) -> int:
+        if isinstance(v, (bool, int)):
+            return int(v)
+        raise ExprError(f"{op} needs integers, not {describe(v)}")
 
     def e_compare(self, node: lark.Tree[Any]) -> Value:
         left, op_token, right = node.children

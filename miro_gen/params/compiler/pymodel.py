@@ -293,11 +293,13 @@ class TypeMapper:
     def map(self, text: str, p: ParamDecl) -> PyType:
         try:
             tree = _type_parser().parse(text)
+            node = tree.children[0]
+            assert isinstance(node, lark.Tree)
+            return self._type(node, p)
         except lark.exceptions.LarkError:
             raise UnsupportedType(f"cannot read the type {text!r}") from None
-        node = tree.children[0]
-        assert isinstance(node, lark.Tree)
-        return self._type(node, p)
+        except RecursionError:
+            raise UnsupportedType(f"the type {text[:40]!r}... is nested too deeply") from None
 
     def _type(self, node: lark.Tree[lark.Token], p: ParamDecl) -> PyType:
         subtrees = [c for c in node.children if isinstance(c, lark.Tree)]
