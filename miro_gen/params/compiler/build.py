@@ -19,6 +19,7 @@ item's declared parameters, private to the module that needs it.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -318,14 +319,21 @@ class ModuleBuilder:
         return cls
 
     def _members(self, item: ItemDecl, cls: PyClass, parent: ItemDecl | None) -> None:
-        defaults = DefaultCompiler(self.diag, self._constant_lookup(item))
         for p in item.params:
+            defaults = DefaultCompiler(self.diag, ConstantLookup(self, item, p))
             if p.name.startswith("_"):
                 self.diag.error(p.pos, f"parameter name {p.name!r} starts with an underscore")
                 continue
             t = self._param_type(item, p, parent)
             if t is None:
                 continue
+            if p.inherited:  # the parent's unit and description, unless given again
+                declared = self._declared_in(parent, p.attr)
+                if declared is not None:
+                    original = next(q for q in declared[0].params if q.attr == p.attr)
+                    p = dataclasses.replace(
+                        p, measure=p.measure or original.measure, doc=p.doc or original.doc
+                    )
             if p.values is not None and not t.choices and not (t.element and t.element.choices):
                 self.diag.warning(p.pos, f"values= is read for Enumeration types only ({p.name})")
             f = self._field(p, t, defaults)
@@ -502,37 +510,50 @@ def hand_written_headers(f: ParamsFile) -> list[str]:
 
 
 class ConstantLookup:
-    """Names a `default=` may use beyond the built-in constants: the item's `static_const`
-    parameters (and its parents'), as C++ member initialisers saw them."""
+    """Names a `default=` may use beyond the built-in constants, as C++ member initialisers
+    saw them: the item's `static_const` parameters and its parents', the numbers and bools
+    declared before it (and its parents'), and IDL constants (`Miro::RangeSensor::GROUPWISE`)."""
 
-    def __init__(self, builder: ModuleBuilder, item: ItemDecl) -> None:
+    _NUMERIC = frozenset(
+        ["bool", "short", "unsigned short", "int", "unsigned int", "unsigned", "long",
+         "unsigned long", "long long", "unsigned long long", "float", "double"]
+    )  # fmt: skip
+
+    def __init__(self, builder: ModuleBuilder, item: ItemDecl, before: ParamDecl | None = None):
         self.builder = builder
         self.item = item
+        self.before = before  # members declared before this one are initialised already
         self._busy: set[str] = set()
 
     def __call__(self, name: str) -> Value | None:
-        from miro_gen.params.compiler.expressions import ExprError, evaluate_args
-
         item: ItemDecl | None = self.item
         seen: set[int] = set()
         while item is not None and id(item) not in seen:
             seen.add(id(item))
             for p in item.params:
-                if p.static_const and p.attr == name and p.default and name not in self._busy:
-                    self._busy.add(name)
-                    try:
-                        values = evaluate_args(p.default, self)
-                    except ExprError:
-                        return None
-                    finally:
-                        self._busy.discard(name)
-                    return values[0] if len(values) == 1 else None
+                if item is self.item and p is self.before:
+                    break  # not yet initialised
+                usable = p.static_const or (p.type in self._NUMERIC and not p.inherited)
+                if p.attr == name and p.default and name not in self._busy and usable:
+                    return self._value(p)
             item = self.builder.scope.parent_of(item)
         if "::" in name:  # an IDL constant: Miro::RangeSensor::GROUPWISE
             found = idl_constant(name)
             if found is not None and isinstance(found[2], (bool, int, float, str)):
                 return found[2]
         return None
+
+    def _value(self, p: ParamDecl) -> Value | None:
+        from miro_gen.params.compiler.expressions import ExprError, evaluate_args
+
+        self._busy.add(p.attr)
+        try:
+            values = evaluate_args(p.default or "", self)
+        except ExprError:
+            return None
+        finally:
+            self._busy.discard(p.attr)
+        return values[0] if len(values) == 1 else None
 
 
 def build_modules(

@@ -12,6 +12,7 @@ raises `ExprError` naming the construct.
 from __future__ import annotations
 
 import math
+import struct
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cache
@@ -35,6 +36,11 @@ __all__ = [
 
 class ExprError(Exception):
     """An expression outside the subset, or one C++ would refuse (division by zero)."""
+
+
+class ExprValueError(ExprError):
+    """A well-formed expression without a value (division by zero): harmless in the branch
+    of `&&`, `||` or `?:` that C++ does not evaluate."""
 
 
 @dataclass(frozen=True)
@@ -211,8 +217,8 @@ def to_float(v: Value) -> float:
 def to_int(v: Value) -> tuple[int, bool]:
     """An integer and whether it was truncated from a double (as C++ converts)."""
     if isinstance(v, float):
-        if not math.isfinite(v):
-            raise ExprError(f"{v} cannot be stored in an integer")
+        if not math.isfinite(v) or abs(v) >= 2.0**64:
+            raise ExprValueError(f"{v} cannot be stored in an integer")
         return math.trunc(v), v != math.trunc(v)
     if isinstance(v, (bool, int)):
         return int(v), False
@@ -235,6 +241,52 @@ def describe(v: Value) -> str:
     return repr(v)
 
 
+@dataclass(frozen=True)
+class IntType:
+    """A C++ integral type after promotion: int, unsigned int, long, unsigned long (LP64)."""
+
+    bits: int
+    signed: bool
+
+    def wrap(self, value: int) -> int:
+        """Unsigned arithmetic is modular in C++ (signed overflow is undefined: kept)."""
+        return value if self.signed else value % (1 << self.bits)
+
+
+INT = IntType(32, True)
+UINT = IntType(32, False)
+LONG = IntType(64, True)
+ULONG = IntType(64, False)
+
+
+class Integral(int):
+    """An integer with its C++ type (plain Python ints are `int`)."""
+
+    ctype: IntType
+
+    def __new__(cls, value: int, ctype: IntType) -> Integral:
+        obj = super().__new__(cls, ctype.wrap(value))
+        obj.ctype = ctype
+        return obj
+
+
+def int_type(v: bool | int) -> IntType:
+    """The promoted type of an integer value (bool, char and short promote to int)."""
+    return v.ctype if isinstance(v, Integral) else INT
+
+
+def common_type(a: IntType, b: IntType) -> IntType:
+    """C++'s usual arithmetic conversions of two promoted integral types (LP64)."""
+    if a == b:
+        return a
+    if a.signed == b.signed:
+        return a if a.bits > b.bits else b
+    signed, unsigned = (a, b) if a.signed else (b, a)
+    if unsigned.bits >= signed.bits:
+        return unsigned
+    return signed  # long holds every unsigned int
+
+
 def _wrap(value: int, bits: int, signed: bool) -> int:
     value &= (1 << bits) - 1
     if signed and value >= 1 << (bits - 1):
@@ -242,18 +294,65 @@ def _wrap(value: int, bits: int, signed: bool) -> int:
     return value
 
 
+class Float32(float):
+    """A C++ `float` (a `1.5f` literal, a `(float)` cast): a double rounded to single
+    precision. Arithmetic of floats (and integers) stays single; with a double it is double."""
+
+    def __new__(cls, value: float) -> Float32:
+        try:
+            rounded = struct.unpack("f", struct.pack("f", value))[0]
+        except OverflowError:
+            raise ExprValueError(f"{value} does not fit in a float") from None
+        return super().__new__(cls, rounded)
+
+
+def _floating_result(value: float, *operands: object) -> float:
+    """Single precision when no operand is a double."""
+    if any(isinstance(o, float) and not isinstance(o, Float32) for o in operands):
+        return value
+    return Float32(value) if math.isfinite(value) else value
+
+
+def _cast_int(value: int, bits: int, signed: bool) -> int:
+    """A conversion to an integral type: wraps modulo 2^bits, typed when 32 bits or more."""
+    wrapped = _wrap(value, bits, signed)
+    if bits < 32:
+        return wrapped  # promotes to int
+    return Integral(wrapped, IntType(bits, signed))
+
+
 def parse_number(text: str) -> int | float:
-    """A C++ number literal: suffixes, hexadecimal, octal (`010` is 8)."""
+    """A C++ number literal: suffixes, hexadecimal, octal (`010` is 8); an integer gets the
+    first of C++'s types that holds it (`3u` is unsigned, `0xFFFFFFFF` unsigned int)."""
     t = text
+    suffix = ""
+    while t and t[-1] in "uUlL" and not (t.lower().startswith("0x") and t[-1] in "fF"):
+        suffix, t = t[-1].lower() + suffix, t[:-1]
     if t.lower().startswith("0x"):
-        return int(t.rstrip("uUlL"), 16)
-    body = t.rstrip("uUlLfF")
+        return _typed_literal(int(t, 16), suffix, decimal=False)
+    body = t.rstrip("fF") if "." in t or "e" in t.lower() else t
     if body.isdigit():
-        return int(body, 8) if len(body) > 1 and body[0] == "0" else int(body)
+        octal = len(body) > 1 and body[0] == "0"
+        return _typed_literal(int(body, 8 if octal else 10), suffix, decimal=not octal)
     try:
-        return float(body)
+        value = float(body)
     except ValueError:
         raise ExprError(f"{text!r} is not a number") from None
+    return Float32(value) if body != t else value
+
+
+def _typed_literal(value: int, suffix: str, decimal: bool) -> int:
+    unsigned = "u" in suffix
+    long_ = "l" in suffix
+    choices = [LONG, ULONG] if long_ else [INT, UINT, LONG, ULONG]
+    if unsigned:
+        choices = [c for c in choices if not c.signed]
+    elif decimal:
+        choices = [c for c in choices if c.signed]  # a decimal literal is never unsigned
+    for c in choices:
+        if value < (1 << (c.bits - 1) if c.signed else 1 << c.bits):
+            return value if c == INT else Integral(value, c)
+    raise ExprError(f"{value} is too large for any C++ integer type")
 
 
 def _unescape(raw: str) -> str:
@@ -272,6 +371,10 @@ def _unescape(raw: str) -> str:
         out.append(c)
         i += 1
     return "".join(out)
+
+
+def _typed(value: int, ctype: IntType) -> int:
+    return value if ctype == INT else Integral(value, ctype)
 
 
 class Evaluator:
@@ -323,7 +426,9 @@ class Evaluator:
 
     def e_neg(self, node: lark.Tree[Any]) -> Value:
         v = self._number(self.eval(node.children[0]), "-")
-        return -v
+        if isinstance(v, float):
+            return Float32(-v) if isinstance(v, Float32) else -v
+        return _typed(-v, int_type(v))
 
     def e_not_(self, node: lark.Tree[Any]) -> Value:
         return not to_bool(self.eval(node.children[0]))
@@ -335,12 +440,17 @@ class Evaluator:
 
     def cast(self, ctype: str, v: Value) -> Value:
         if ctype in _FLOAT_CASTS:
-            return to_float(v)
+            value = to_float(v)
+            return Float32(value) if "Float" in ctype or ctype == "float" else value
         if ctype in _BOOL_CASTS:
             return to_bool(v)
         if ctype in _INT_CASTS:
             bits, signed = _INT_CASTS[ctype]
-            return _wrap(to_int(v)[0], bits, signed)
+            n = to_int(v)[0]
+            lo, hi = (-(1 << (bits - 1)), (1 << (bits - 1)) - 1) if signed else (0, (1 << bits) - 1)
+            if isinstance(v, float) and not lo <= n <= hi:
+                raise ExprValueError(f"{v} does not fit in {ctype} (undefined in C++)")
+            return _cast_int(n, bits, signed)
         raise ExprError(f"a cast to {ctype} is not supported")
 
     def e_binop(self, node: lark.Tree[Any]) -> Value:
@@ -350,56 +460,71 @@ class Evaluator:
         if op == "+" and isinstance(a, str) and isinstance(b, str):
             raise ExprError("adding two string literals is not C++")
         x, y = self._number(a, op), self._number(b, op)
-        integers = not isinstance(x, float) and not isinstance(y, float)
+        if isinstance(x, float) or isinstance(y, float):
+            return _floating_result(self._floating(op, float(x), float(y)), x, y)
+        ctype = common_type(int_type(x), int_type(y))
+        i, j = ctype.wrap(int(x)), ctype.wrap(int(y))
+        if op == "+":
+            return _typed(i + j, ctype)
+        if op == "-":
+            return _typed(i - j, ctype)
+        if op == "*":
+            return _typed(i * j, ctype)
+        if j == 0:
+            raise ExprValueError(f"integer {'division' if op == '/' else 'remainder'} by zero")
+        q = abs(i) // abs(j)
+        q = q if (i >= 0) == (j >= 0) else -q  # C++ truncates towards zero
+        return _typed(q if op == "/" else i - q * j, ctype)
+
+    def _floating(self, op: str, x: float, y: float) -> float:
         if op == "+":
             return x + y
         if op == "-":
             return x - y
         if op == "*":
             return x * y
-        if y == 0 and integers:
-            raise ExprError(f"integer {'division' if op == '/' else 'remainder'} by zero")
-        if op == "/":
-            if integers:
-                q = abs(int(x)) // abs(int(y))
-                return q if (x >= 0) == (y >= 0) else -q
-            if y == 0:
-                if x == 0 or math.isnan(x):
-                    return math.nan
-                return math.copysign(math.inf, x) * math.copysign(1.0, y)
-            return x / y
-        if not integers:
+        if op == "%":
             raise ExprError("% needs integers (C++ has fmod for doubles)")
-        q = abs(int(x)) // abs(int(y))
-        q = q if (x >= 0) == (y >= 0) else -q
-        return int(x) - q * int(y)
+        if y == 0:
+            if x == 0 or math.isnan(x):
+                return math.nan
+            return math.copysign(math.inf, x) * math.copysign(1.0, y)
+        return x / y
 
     def e_invert(self, node: lark.Tree[Any]) -> Value:
-        return ~self._integer(self.eval(node.children[0]), "~")
+        v = self._integer(self.eval(node.children[0]), "~")
+        return _typed(~v, int_type(v))
 
     def e_shift_(self, node: lark.Tree[Any]) -> Value:
         left, op, right = node.children
         a = self._integer(self.eval(left), str(op))
         b = self._integer(self.eval(right), str(op))
-        if not 0 <= b < 64:
-            raise ExprError(f"a shift by {b} is undefined in C++")
-        return a << b if str(op) == "<<" else a >> b
+        ctype = int_type(a)  # the promoted left operand's type
+        if not 0 <= b < ctype.bits:
+            raise ExprValueError(f"a shift by {b} is undefined in C++")
+        value = ctype.wrap(int(a))
+        return _typed(value << b if str(op) == "<<" else value >> b, ctype)
+
+    def _bits(self, node: lark.Tree[Any], op: str) -> Value:
+        a, b = (self._integer(self.eval(c), op) for c in node.children)
+        ctype = common_type(int_type(a), int_type(b))
+        i, j = ctype.wrap(int(a)), ctype.wrap(int(b))
+        return _typed({"|": i | j, "^": i ^ j, "&": i & j}[op], ctype)
 
     def e_bit_or_(self, node: lark.Tree[Any]) -> Value:
-        a, b = (self._integer(self.eval(c), "|") for c in node.children)
-        return a | b
+        return self._bits(node, "|")
 
     def e_bit_xor_(self, node: lark.Tree[Any]) -> Value:
-        a, b = (self._integer(self.eval(c), "^") for c in node.children)
-        return a ^ b
+        return self._bits(node, "^")
 
     def e_bit_and_(self, node: lark.Tree[Any]) -> Value:
-        a, b = (self._integer(self.eval(c), "&") for c in node.children)
-        return a & b
+        return self._bits(node, "&")
 
     def _integer(self, v: Value, op: str) -> int:
-        if isinstance(v, (bool, int)):
+        if isinstance(v, bool):
             return int(v)
+        if isinstance(v, int):
+            return v
         raise ExprError(f"{op} needs integers, not {describe(v)}")
 
     def e_compare(self, node: lark.Tree[Any]) -> Value:
@@ -408,7 +533,13 @@ class Evaluator:
         op = str(op_token)
         if isinstance(a, str) or isinstance(b, str) or not (is_number(a) and is_number(b)):
             raise ExprError(f"{op} compares numbers")
-        x, y = float(a), float(b)  # type: ignore[arg-type]
+        x: int | float
+        y: int | float
+        if isinstance(a, float) or isinstance(b, float):
+            x, y = float(a), float(b)  # type: ignore[arg-type]
+        else:  # -1 < 0u is false in C++: both are converted to unsigned
+            ctype = common_type(int_type(a), int_type(b))  # type: ignore[arg-type]
+            x, y = ctype.wrap(int(a)), ctype.wrap(int(b))  # type: ignore[arg-type]
         return {
             "<": x < y,
             ">": x > y,
@@ -418,18 +549,36 @@ class Evaluator:
             "!=": x != y,
         }[op]
 
+    def _branch(self, node: Any, taken: bool) -> Value | None:
+        """A branch C++ type-checks, evaluated only when taken (None when not, and it has
+        no value)."""
+        try:
+            return self.eval(node)
+        except ExprValueError:
+            if taken:
+                raise
+            return None
+
     def e_and_(self, node: lark.Tree[Any]) -> Value:
-        return to_bool(self.eval(node.children[0])) and to_bool(self.eval(node.children[1]))
+        a = to_bool(self.eval(node.children[0]))
+        b = self._branch(node.children[1], a)
+        return a and to_bool(b) if b is not None else False
 
     def e_or_(self, node: lark.Tree[Any]) -> Value:
-        return to_bool(self.eval(node.children[0])) or to_bool(self.eval(node.children[1]))
+        a = to_bool(self.eval(node.children[0]))
+        b = self._branch(node.children[1], not a)
+        return a or (to_bool(b) if b is not None else False)
 
     def e_cond(self, node: lark.Tree[Any]) -> Value:
-        c, a, b = node.children
-        x, y = self.eval(a), self.eval(b)
-        chosen = x if to_bool(self.eval(c)) else y
-        if isinstance(x, float) != isinstance(y, float) and is_number(x) and is_number(y):
-            return float(chosen)  # type: ignore[arg-type]  # C++'s usual arithmetic conversions
+        # both branches must have values: the result's type depends on both
+        c, x, y = (self.eval(n) for n in node.children)
+        chosen = x if to_bool(c) else y
+        if isinstance(x, float) or isinstance(y, float):
+            if is_number(x) and is_number(y):  # C++'s usual arithmetic conversions
+                return _floating_result(float(chosen), x, y)  # type: ignore[arg-type]
+        elif isinstance(x, int) and isinstance(y, int) and isinstance(chosen, int):
+            ctype = common_type(int_type(x), int_type(y))
+            return _typed(ctype.wrap(chosen), ctype)
         return chosen
 
     def e_call(self, node: lark.Tree[Any]) -> Value:
@@ -470,7 +619,7 @@ class Evaluator:
                     return float(_MATH_2[base](to_float(x), to_float(y)))
             except (ValueError, OverflowError, ZeroDivisionError):
                 # C's functions return NaN or infinity; a default that is one is a mistake
-                raise ExprError(f"{name}() is not defined for these arguments") from None
+                raise ExprValueError(f"{name}() is not defined for these arguments") from None
         raise ExprError(f"the function {name}() is not supported")
 
     def _args(self, args: list[Value], n: int, name: str) -> list[Value]:
