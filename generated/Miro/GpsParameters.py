@@ -35,6 +35,7 @@ class GpsParameters(_m_Miro_SvcParameters.TtyParameters):
 
     device: str = _pd.Field(
         default="/dev/ttyUSB0",
+        description="The device file.",
     )
     objectName: str = _pd.Field(
         default="Gps",

@@ -64,6 +64,7 @@ class TtyParameters(DevParameters):
 
     device: str = _pd.Field(
         default="/dev/ttyS0",
+        description="The device file.",
     )
     ttyParams: _rt.SerialParams = _pd.Field(
         default_factory=_rt.SerialParams,

@@ -571,10 +571,12 @@ def build_modules(
         for f in files
     }
     first: dict[tuple[str, str], ParamsFile] = {}
+    clash = False
     for f in files:
         key = modules[f.path.resolve()]
         other = first.setdefault(key, f)
         if other is not f:
+            clash = True
             same = other.display == f.display
             a, b = (other.path, f.path) if same else (other.display, f.display)
             diag.error(
@@ -582,6 +584,7 @@ def build_modules(
                 f"{a} and {b} would both be the module {'.'.join(key)} "
                 "(its namespace and file name); rename one, or give it another name with -n",
             )
-    diag.check()
+    if clash:
+        diag.check()
     scope = Scope(files, python_classes or {})
     return [ModuleBuilder(f, scope, modules, diag, tools).build() for f in targets]

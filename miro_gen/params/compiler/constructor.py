@@ -295,7 +295,7 @@ class Translator:
             return f"_rt.resize({owner.code}, {args[0].code}, {self.factory(t.element)})"
         if method in ("push_back", "insert") and len(args) == 1:
             code = self.convert(args[0], _kind(t.element), node.meta, method, t.element)
-            return f"{owner.code}.{'add' if t.unique else 'append'}({code})"
+            return f"{owner.code}.{'add' if t.unique else 'append'}({_arg(code)})"
         if method == "clear" and not args:
             return f"{owner.code}.clear()"
         raise ConstructorError(node.meta, f"{method}() is not supported on {t.spelling}")
@@ -512,7 +512,7 @@ class Translator:
         v = self.expr(node.children[1])
         if kind == "str" or v.kind == "str":
             raise ConstructorError(node.meta, "casts between strings and numbers are not supported")
-        return Val(f"{_annotation(kind)}({v.code})", kind)
+        return Val(f"{_annotation(kind)}({_arg(v.code)})", kind)
 
     def e_binop(self, node: lark.Tree[Any]) -> Val:
         left, op_token, right = node.children
@@ -592,19 +592,19 @@ class Translator:
         if name in ("Miro::deg2Rad", "deg2Rad", "Miro::rad2Deg", "rad2Deg"):
             (arg,) = self._args(args, 1, name, node.meta)
             fn = "_rt.deg2rad" if base == "deg2Rad" else "_rt.rad2deg"
-            return Val(f"{fn}({self._number(arg, node.meta, name).code})", "float")
+            return Val(f"{fn}({_arg(self._number(arg, node.meta, name).code)})", "float")
         if base in _MATH_FUNCTIONS and name in (base, f"std::{base}"):
             self.module.uses_math = True
             codes = [self._number(a, node.meta, name).code for a in args]
-            return Val(f"_math.{base}({', '.join(codes)})", "float")
+            return Val(f"_math.{base}({', '.join(map(_arg, codes))})", "float")
         if name in ("abs", "std::abs"):
             (arg,) = self._args(args, 1, name, node.meta)
-            return Val(f"abs({arg.code})", self._number(arg, node.meta, name).kind)
+            return Val(f"abs({_arg(arg.code)})", self._number(arg, node.meta, name).kind)
         if name == "ACE_Time_Value":
             if not 1 <= len(args) <= 2 or any(a.kind != "int" for a in args):
                 raise ConstructorError(node.meta, "ACE_Time_Value(sec, usec) takes integers")
             self.module.uses_datetime = True
-            return Val(f"_rt.time_value({', '.join(a.code for a in args)})", "time")
+            return Val(f"_rt.time_value({', '.join(_arg(a.code) for a in args)})", "time")
         if name in ("std::string", "string"):
             (arg,) = self._args(args, 1, name, node.meta)
             if arg.kind != "str":
@@ -647,7 +647,7 @@ class Translator:
         if kind == "float" and value.kind == "int":
             return value.code
         if kind == "bool" and value.kind == "int":
-            return f"bool({value.code})"
+            return f"bool({_arg(value.code)})"
         if kind in ("struct", "vector", "set"):
             raise ConstructorError(
                 meta, f"assigning a whole structure or vector to {what} is not supported"
@@ -678,6 +678,18 @@ def _annotation(kind: str) -> str:
 
 def _literal(value: str) -> str:
     return pyrepr(value)
+
+
+def _arg(code: str) -> str:
+    """An argument without the parentheses around all of it (ruff's UP034)."""
+    if code.startswith("(") and code.endswith(")"):
+        depth = 0
+        for i, c in enumerate(code):
+            depth += {"(": 1, ")": -1}.get(c, 0)
+            if depth == 0 and i < len(code) - 1:
+                return code  # `(a) + (b)`: the first parenthesis closes early
+        return code[1:-1]
+    return code
 
 
 def _paren(code: str) -> str:

@@ -217,6 +217,8 @@ def _time_literal(args: list[Value]) -> str:
                     'an ACE_Time_Value takes "sec, usec" (makeParams refused a dot here)'
                 )
         elif len(args) == 2:
+            if any(isinstance(a, float) for a in args):
+                raise DefaultError('an ACE_Time_Value takes whole "sec, usec" (no dot)')
             tv = TimeValue(to_int(args[0])[0], to_int(args[1])[0])
         else:
             raise DefaultError('an ACE_Time_Value takes "sec, usec"')
