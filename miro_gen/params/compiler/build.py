@@ -22,6 +22,7 @@ import contextlib
 import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Literal
 
 from miro_gen.diagnostics import Diagnostics
 from miro_gen.params.compiler.constructor import compile_constructor
@@ -96,9 +97,7 @@ class Scope:
         f = item.file
         name = item.parent.removesuffix("::").lstrip(":")
         short = name.rsplit("::", 1)[-1].removesuffix("Parameters")
-        if f"{short}Parameters" not in [
-            h.rsplit("/", 1)[-1].split(".")[0] for h in hand_written_headers(f)
-        ]:
+        if f"{short}Parameters" not in hand_written_headers(f):
             return None
         ns = "" if item.parent.startswith("::") or "::" in name else f.namespace
         key = f"{ns}::{name}" if ns else name
@@ -115,7 +114,7 @@ class Scope:
 class DummyKind:
     """What a dummy item stands for (see the module docstring)."""
 
-    kind: str  # "runtime", "python", "idl" or "stand-in"
+    kind: Literal["runtime", "python", "idl", "stand-in"]
     module: str = ""  # python: the module; idl: the dataclass's module
     cls: str = ""  # the class's name in that module
 
@@ -251,11 +250,13 @@ class ModuleBuilder:
         parent = self.scope.parent_of(item)
         if parent is None:
             if item.parent and item.parent.lstrip(":") not in CONFIG_BASES:
-                self.diag.error(item.pos, self._unknown_parent(item))
+                self.diag.error(
+                    item.pos,
+                    f"parent {item.parent!r} of {item.class_name} is not a parameter class "
+                    "declared in this file or an included one",
+                )
                 return None
             return "_rt.Config", None
-        if parent.extern:
-            return self.class_ref(parent), parent
         if not parent.dummy:
             return self.class_ref(parent), parent
         if parent in self.scope.implicit.values() and id(parent) not in self._kinds:
@@ -273,12 +274,6 @@ class ModuleBuilder:
             )
             return None
         return ref, parent
-
-    def _unknown_parent(self, item: ItemDecl) -> str:
-        return (
-            f"parent {item.parent!r} of {item.class_name} is not a parameter class declared in "
-            "this file or an included one"
-        )
 
     # -- classes ------------------------------------------------------------------------------
 
@@ -497,15 +492,13 @@ class ModuleBuilder:
 
 
 def hand_written_headers(f: ParamsFile) -> list[str]:
-    """The headers a file includes that are neither compile-time files nor IDL headers, nor
-    the C++ and ACE library's: where hand-written classes come from."""
+    """The stems of the headers a file includes that stand for no compile-time or IDL file:
+    where classes written by hand come from (`ArbiterParameters` for
+    `botsvcs/BAP/ArbiterParameters.h`)."""
     return [
-        i.value
+        i.value.rsplit("/", 1)[-1].split(".")[0]
         for i in f.includes
-        if i.params_file is None
-        and i.idl_stem is None
-        and i.value.endswith((".h", ".hh", ".hpp"))
-        and not i.value.startswith(("ace/", "tao/", "orbsvcs/", "qt", "Q"))
+        if i.params_file is None and i.idl_stem is None
     ]
 
 
