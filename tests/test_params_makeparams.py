@@ -75,7 +75,8 @@ READ_DEFAULTS = """
                  math.degrees(scan.group[0].sensor[360].alpha), scan.group[0].sensor[0].masked,
                  scan.group[0].sensor[1].masked, scan.group[0].sensor[90].masked],
         "base": [base.motion.minTranslation, base.motion.wheelBase, base.motion.maxLTranslation,
-                 math.degrees(base.motion.maxRotation), base.irHeight, base.scheduling.policy],
+                 math.degrees(base.motion.maxRotation), base.irHeight, base.scheduling.policy,
+                 base.robotName],
         "fused": [F.FusedParameters().maxRange, F.FusedParameters().beams,
                   F.FusedParameters().delay.total_seconds(),
                   F.FusedParameters().base.motion.wheelBase],
@@ -122,7 +123,7 @@ def test_a_miro_tree_compiles_and_every_default_is_what_cxx_made(
     assert got["scan"][6] == pytest.approx(90.0)
     assert got["scan"][7:] == [True, False, True]  # i % 90 == 0
     # height[4] = {400, 120, 120}: the fourth is 0; scale 360/24 = 15, 360/8 = 45
-    assert got["base"] == [-950, 425, 1000, 90.0, [415, 135, 165, 45], "SCHED_OTHER"]
+    assert got["base"] == [-950, 425, 1000, 90.0, [415, 135, 165, 45], "SCHED_OTHER", "Miro"]
     assert got["fused"] == [4000, 360, 1.0, 425]
     assert got["svc"] == [2**20, 64 * 2**20, "inf", "none", False, "/dev/ttyS0", 390]
     assert got["robot"][:3] == ["Miro", 3, 0.0005]

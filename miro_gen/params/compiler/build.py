@@ -490,6 +490,17 @@ class ModuleBuilder:
     def import_module(self, module: str) -> str:
         return self.mapper(self.f).import_module(module)
 
+    def singleton(self, item: ItemDecl, name: str) -> tuple[str, ItemDecl] | None:
+        """A parameter class with `instance()`, as `item`'s file names it."""
+        found = self.scope.lookup(item.file, name) or self.scope.lookup(
+            item.file, name + "Parameters"
+        )
+        if found is None or found.dummy or not found.instance or not found.final:
+            return None
+        if found is item:
+            return None  # its own instance() is being made
+        return self.class_ref(found), found
+
 
 def hand_written_headers(f: ParamsFile) -> list[str]:
     """The stems of the headers a file includes that stand for no compile-time or IDL file:

@@ -34,6 +34,10 @@ class Members(Protocol):
     def import_module(self, module: str) -> str:
         """The alias this module imports `module` under."""
 
+    def singleton(self, item: ItemDecl, name: str) -> tuple[str, ItemDecl] | None:
+        """(class expression, item) of the parameter class `name` as `item`'s file names it,
+        when it has `instance()`."""
+
 
 _MATH_FUNCTIONS = frozenset(
     [
@@ -581,6 +585,30 @@ class Translator:
         else:
             raise ConstructorError(node.meta, f"the branches of ?: differ ({a.kind}, {b.kind})")
         return Val(f"({a.code} if {c.code} else {b.code})", kind)
+
+    def e_instance_member(self, node: lark.Tree[Any]) -> Val:
+        """`Miro::RobotParameters::instance()->name`: another singleton's value."""
+        path_node, *segments = node.children
+        name = str(path_node.children[0]) if len(path_node.children) == 1 else ""
+        cls, _, method = name.rpartition("::")
+        found = self.builder.singleton(self.item, cls) if method == "instance" else None
+        if found is None:
+            raise ConstructorError(
+                node.meta, f"{_src(path_node)}() is not the instance() of a parameter class"
+            )
+        code, item = found
+        first, *rest = segments
+        if first.data != "member":
+            raise ConstructorError(node.meta, f"{name}() is not an array")
+        current = self.member_of_item(item, str(first.children[0]), f"{code}.instance()", node.meta)
+        for seg in rest:
+            if seg.data == "member":
+                current = self.member(current, str(seg.children[0]), seg.meta)
+            else:
+                current = self.index(current, self.expr(seg.children[0]), seg.meta)
+        if current.kind in ("struct", "vector", "set", "array"):
+            raise ConstructorError(node.meta, "structures and vectors cannot be used as values")
+        return current
 
     def e_call(self, node: lark.Tree[Any]) -> Val:
         path_node = node.children[0]
