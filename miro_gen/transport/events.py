@@ -268,7 +268,11 @@ class StructuredPushSupplier:
         context = self.reactor.context
         self.max_event = sockets.policy(context).max_message_size - _BATCH.size
         self.socket = sockets.connecting_socket(context, zmq.XPUB)
-        self.socket.setsockopt(zmq.SNDHWM, min(HWM, sockets.queue_limit(context)))
+        # A turn's events leave in a burst of frames (100,000 small events: about 30), which the
+        # socket must hold until the channel reads them: room for a full queue of batches
+        # (QUEUE_BYTES), more only when the supplier's own events are larger than a batch.
+        burst = QUEUE_BYTES // MAX_BATCH_BYTES
+        self.socket.setsockopt(zmq.SNDHWM, min(HWM, max(burst, sockets.queue_limit(context))))
         self.socket.setsockopt(zmq.XPUB_VERBOSER, 1)
         # At the high-water mark an XPUB drops silently; with NODROP a non-blocking send fails
         # instead, so that the supplier counts what it drops. It never blocks either way.
