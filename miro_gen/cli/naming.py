@@ -18,7 +18,7 @@ from miro_gen import log
 from miro_gen.exceptions import SystemException
 from miro_gen.transport import sockets
 from miro_gen.transport.addresses import server_addresses
-from miro_gen.transport.events import CHANNEL_REPO_ID, ChannelHost
+from miro_gen.transport.channels import CHANNEL_REPO_ID, ChannelHost
 from miro_gen.transport.invoker import ZmqInvoker
 from miro_gen.transport.naming import (
     DEFAULT_MAX_NAMES,

@@ -181,7 +181,7 @@ class Server(Client):
 
     def resolve_channel(self, name: str = "EventChannel") -> Any:
         """The event channel bound as `name` (see EventChannelFactory.create_channel)."""
-        from miro_gen.transport.events import resolve_channel
+        from miro_gen.transport.channels import resolve_channel
 
         return resolve_channel(self, name)
 
