@@ -10,6 +10,7 @@ import typing as _t
 
 import Miro.Exception_idl as _m_Miro_Exception_idl
 import Miro.Time_idl as _m_Miro_Time_idl
+import miro_gen.runtime.arrays as _arrays
 import miro_gen.runtime.cdr as _cdr
 import miro_gen.runtime.rpc as _rpc
 
@@ -115,7 +116,7 @@ GPS_MODE_2D: _t.Final = GpsFixModeIDL.GPS_MODE_2D
 GPS_MODE_3D: _t.Final = GpsFixModeIDL.GPS_MODE_3D
 
 
-GpsSatelliteSeqIDL: _t.TypeAlias = list[int]
+GpsSatelliteSeqIDL: _t.TypeAlias = _arrays.Array[int]
 """PRN numbers of satellites."""
 
 
@@ -160,7 +161,7 @@ class GpsDataIDL(_cdr.IdlType):
     """
     satellitesUsed: int = 0
     """Number of satellites used in the fix (GGA)."""
-    satellites: GpsSatelliteSeqIDL = _dc.field(default_factory=list)
+    satellites: GpsSatelliteSeqIDL = _dc.field(default_factory=lambda: _arrays.zeros("H"))
     """PRN numbers of the satellites used in the fix (GSA); empty when unknown."""
     hdop: float = 0.0
     """Horizontal dilution of precision, dimensionless (GSA, or GGA)."""
@@ -307,7 +308,7 @@ def _enc_GpsDataIDL(_buf: bytearray, _v: GpsDataIDL) -> None:
             ("Miro::GpsDataIDL.geoidSeparation", "f", lambda: (_v.geoidSeparation,)),
             ("Miro::GpsDataIDL.satellitesUsed", "H", lambda: (_v.satellitesUsed,)),
         ) from None
-    _cdr.put_primitives(
+    _arrays.put_sequence(
         _buf,
         _v.satellites,
         "H",
@@ -352,7 +353,7 @@ def _dec_GpsDataIDL(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[GpsDataIDL,
     _off += (4 - _off) & 7
     _t4 = _U2[_e](_data, _off)
     _off += 30
-    _f5, _off = _cdr.get_primitives(
+    _f5, _off = _arrays.get_sequence(
         _data,
         _off,
         _e,

@@ -10,6 +10,7 @@ import typing as _t
 
 import Miro.Exception_idl as _m_Miro_Exception_idl
 import Miro.Time_idl as _m_Miro_Time_idl
+import miro_gen.runtime.arrays as _arrays
 import miro_gen.runtime.cdr as _cdr
 import miro_gen.runtime.rpc as _rpc
 
@@ -111,7 +112,7 @@ Range3dPointSeqIDL: _t.TypeAlias = list[Range3dPointIDL]
 """The points of one scan."""
 
 
-Range3dIntensitySeqIDL: _t.TypeAlias = list[float]
+Range3dIntensitySeqIDL: _t.TypeAlias = _arrays.Array[float]
 """Return strengths of the points of one scan."""
 
 
@@ -340,7 +341,7 @@ class Range3dScanEventIDL(_cdr.IdlType):
     """Time the scan was acquired (completed)."""
     point: Range3dPointSeqIDL = _dc.field(default_factory=list)
     """The measured points, in millimetres, in the sensor's frame."""
-    intensity: Range3dIntensitySeqIDL = _dc.field(default_factory=list)
+    intensity: Range3dIntensitySeqIDL = _dc.field(default_factory=lambda: _arrays.zeros("f"))
     """Return strength of each point, in the device's own units.
 
     Either empty (the device does not measure it) or as long as point,
@@ -413,7 +414,7 @@ def _enc_Range3dScanEventIDL(_buf: bytearray, _v: Range3dScanEventIDL) -> None:
         None,
         "Miro::Range3dScanEventIDL.point",
     )
-    _cdr.put_primitives(
+    _arrays.put_sequence(
         _buf,
         _v.intensity,
         "f",
@@ -438,7 +439,7 @@ def _dec_Range3dScanEventIDL(
         None,
         "Miro::Range3dScanEventIDL.point",
     )
-    _f2, _off = _cdr.get_primitives(
+    _f2, _off = _arrays.get_sequence(
         _data,
         _off,
         _e,

@@ -1,9 +1,10 @@
 """Support for the CDR codecs that `miro-idl` generates (OMG CDR, XCDR1, as Cyclone DDS writes it).
 
 Generated code does the fixed-layout work itself with precompiled `struct.Struct`s; this module
-holds what is shared: the encapsulation header, strings, bulk sequences of primitives, unions,
-object references, and the checks that make decoding of malformed input fail at once with
-`MARSHAL` (every length is compared with the bytes that remain before anything is allocated).
+holds what is shared: the encapsulation header, strings, sequences, unions, object references,
+and the checks that make decoding of malformed input fail at once with `MARSHAL` (every length
+is compared with the bytes that remain before anything is allocated). Sequences and arrays of
+numbers, which are `array.array`s, are in `arrays.py`.
 
 Offsets count from the start of the buffer, which begins with the 4-byte encapsulation header;
 alignment is relative to the end of that header, so the padding before a value of alignment `a`
@@ -192,24 +193,6 @@ def get_octets(
     return bytes(data[off : off + n]), off + n
 
 
-def put_primitives(
-    buf: bytearray, values: Sequence[Any], code: str, size: int, bound: int | None, what: str
-) -> None:
-    """A sequence of one primitive type (`code`: a struct format letter), in bulk."""
-    try:
-        n = len(values)
-        packed = struct_pack(f"<{n}{code}", *values)
-    except EncodeErrors as exc:
-        raise encode_error(what, exc) from None
-    if bound is not None and n > bound:
-        raise BAD_PARAM(f"{what}: {n} elements is more than the bound {bound}")
-    buf += ZEROS[-len(buf) & 3]
-    buf += _U32_LE.pack(n)
-    if n:
-        buf += ZEROS[(4 - len(buf)) & (size - 1)]
-        buf += packed
-
-
 def put_enums(
     buf: bytearray, values: Sequence[Any], wire: dict[int, int], bound: int | None, what: str
 ) -> None:
@@ -218,26 +201,23 @@ def put_enums(
         ordinals = [wire[v] for v in values]
     except (KeyError, TypeError) as exc:
         raise encode_error(what, exc) from None
-    put_primitives(buf, ordinals, "I", 4, bound, what)
+    put_length(buf, len(ordinals), bound, what)
+    if ordinals:
+        buf += struct_pack(f"<{len(ordinals)}I", *ordinals)
 
 
-def get_primitives(
+def get_enums(
     data: bytes | bytearray | memoryview,
     off: int,
     e: int,
-    code: str,
-    size: int,
+    table: tuple[Any, ...],
     bound: int | None,
     what: str,
 ) -> tuple[list[Any], int]:
-    n, off = get_length(data, off, e, bound, size, what)
-    if not n:
-        return [], off
-    off += (4 - off) & (size - 1)
-    end = off + n * size
-    if end > len(data):
-        raise MARSHAL(f"{what}: {n} elements cannot fit in the {len(data) - off} bytes left")
-    return _values(data, off, end, e, code), end
+    """A sequence of enumerators (`table`: the enum's members by ordinal)."""
+    n, off = get_length(data, off, e, bound, 4, what)  # checks that the n ulongs are there
+    end = off + 4 * n
+    return enums(table, _values(data, off, end, e, "I"), what), end
 
 
 def _values(
