@@ -13,7 +13,7 @@ element, with the same range checks as every other field.
 from __future__ import annotations
 
 import sys
-import types
+import typing
 from array import array
 from collections.abc import Sequence
 from struct import pack as struct_pack
@@ -50,7 +50,8 @@ __all__ = [
 
 # `Array[int]` is what generated code annotates numeric sequences with: `array.array[int]` to a
 # type checker, and at run time something Python 3.11 can subscript too (its array.array cannot),
-# so that typedef aliases and typing.get_type_hints() evaluate.
+# so that typedef aliases and typing.get_type_hints() evaluate. (typing's own generic alias:
+# get_type_hints() subscripts the origin of a types.GenericAlias again.)
 if TYPE_CHECKING or sys.version_info >= (3, 12):
     Array = array
 else:
@@ -59,13 +60,12 @@ else:
         """`array.array` in annotations on Python 3.11."""
 
         def __getitem__(self, item: Any) -> Any:
-            return types.GenericAlias(array, item)
+            return typing._GenericAlias(array, item if isinstance(item, tuple) else (item,))
 
         def __repr__(self) -> str:
             return "array.array"
 
     Array = _ArrayHint()
-
 
 class HasArrayInterface(Protocol):
     """numpy arrays to a type checker that targets Python 3.11, where numpy's stubs do not say
