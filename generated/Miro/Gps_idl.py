@@ -248,12 +248,12 @@ class GpsDataIDL(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_GpsDataIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::GpsDataIDL", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> GpsDataIDL:
@@ -424,12 +424,12 @@ class GpsSentenceEventIDL(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_GpsSentenceEventIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::GpsSentenceEventIDL", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> GpsSentenceEventIDL:
@@ -484,8 +484,8 @@ class Gps(_rpc.Stub):
 
         Fields not received yet are NaN or 0 (see GpsDataIDL).
         """
-        _buf = bytearray(_cdr.HEADER_LE)
-        _data = self._call("getData", bytes(_buf), ())
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        _data = self._call("getData", _buf.value(), ())
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
@@ -501,8 +501,8 @@ class Gps(_rpc.Stub):
         @throw ETimeOut No new reading arrived within the server's timeout
         (a few seconds; receivers report at about 1 Hz).
         """
-        _buf = bytearray(_cdr.HEADER_LE)
-        _data = self._call("getWaitData", bytes(_buf), (_m_Miro_Exception_idl.ETimeOut,))
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        _data = self._call("getWaitData", _buf.value(), (_m_Miro_Exception_idl.ETimeOut,))
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4

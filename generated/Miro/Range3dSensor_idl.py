@@ -71,12 +71,12 @@ class Range3dPointIDL(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_Range3dPointIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::Range3dPointIDL", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Range3dPointIDL:
@@ -157,12 +157,12 @@ class Range3dMountingIDL(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_Range3dMountingIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::Range3dMountingIDL", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Range3dMountingIDL:
@@ -252,12 +252,12 @@ class Range3dDescriptionIDL(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_Range3dDescriptionIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::Range3dDescriptionIDL", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Range3dDescriptionIDL:
@@ -382,12 +382,12 @@ class Range3dScanEventIDL(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_Range3dScanEventIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::Range3dScanEventIDL", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Range3dScanEventIDL:
@@ -459,8 +459,8 @@ class Range3dSensor(_rpc.Stub):
 
     def getDescription(self) -> Range3dDescriptionIDL:
         """Return the properties and mounting of the sensor."""
-        _buf = bytearray(_cdr.HEADER_LE)
-        _data = self._call("getDescription", bytes(_buf), ())
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        _data = self._call("getDescription", _buf.value(), ())
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
@@ -472,8 +472,8 @@ class Range3dSensor(_rpc.Stub):
 
     def getScan(self) -> Range3dScanEventIDL:
         """Return the latest scan."""
-        _buf = bytearray(_cdr.HEADER_LE)
-        _data = self._call("getScan", bytes(_buf), ())
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        _data = self._call("getScan", _buf.value(), ())
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
@@ -488,8 +488,8 @@ class Range3dSensor(_rpc.Stub):
 
         @throw ETimeOut No new scan arrived within about five scan periods.
         """
-        _buf = bytearray(_cdr.HEADER_LE)
-        _data = self._call("getWaitScan", bytes(_buf), (_m_Miro_Exception_idl.ETimeOut,))
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        _data = self._call("getWaitScan", _buf.value(), (_m_Miro_Exception_idl.ETimeOut,))
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4

@@ -81,12 +81,12 @@ class RangeScanEventIDL(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_RangeScanEventIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::RangeScanEventIDL", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> RangeScanEventIDL:
@@ -177,12 +177,12 @@ class RangeGroupEventIDL(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_RangeGroupEventIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::RangeGroupEventIDL", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> RangeGroupEventIDL:
@@ -262,12 +262,12 @@ class RangeSensorIDL(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_RangeSensorIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::RangeSensorIDL", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> RangeSensorIDL:
@@ -354,12 +354,12 @@ class RangeBunchEventIDL(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_RangeBunchEventIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::RangeBunchEventIDL", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> RangeBunchEventIDL:

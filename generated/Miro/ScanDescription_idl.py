@@ -66,12 +66,12 @@ class SensorDescriptionIDL(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_SensorDescriptionIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::SensorDescriptionIDL", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> SensorDescriptionIDL:
@@ -163,12 +163,12 @@ class SensorPositionIDL(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_SensorPositionIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::SensorPositionIDL", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> SensorPositionIDL:
@@ -264,12 +264,12 @@ class SensorGroupIDL(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_SensorGroupIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::SensorGroupIDL", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> SensorGroupIDL:
@@ -379,12 +379,12 @@ class ScanDescriptionIDL(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_ScanDescriptionIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::ScanDescriptionIDL", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ScanDescriptionIDL:

@@ -28,6 +28,7 @@ from miro_gen.runtime.cdr import (
     EncodeErrors,
     encode_error,
     get_length,
+    put_bulk,
     put_length,
 )
 
@@ -66,6 +67,7 @@ else:
             return "array.array"
 
     Array = _ArrayHint()
+
 
 class HasArrayInterface(Protocol):
     """numpy arrays to a type checker that targets Python 3.11, where numpy's stubs do not say
@@ -141,7 +143,7 @@ def put_sequence(
     put_length(buf, n, bound, what)
     if n:
         buf += ZEROS[(4 - len(buf)) & (size - 1)]
-        buf += data
+        put_bulk(buf, data, n * size)
 
 
 def put_array(buf: bytearray, values: Any, code: str, size: int, count: int, what: str) -> None:
@@ -150,7 +152,7 @@ def put_array(buf: bytearray, values: Any, code: str, size: int, count: int, wha
     if n != count:
         raise BAD_PARAM(f"{what}: array needs exactly {count} elements, got {n}")
     buf += ZEROS[(4 - len(buf)) & (size - 1)]
-    buf += data
+    put_bulk(buf, data, n * size)
 
 
 def _numbers(data: Buffer, off: int, n: int, e: int, code: str, size: int, what: str) -> array[Any]:

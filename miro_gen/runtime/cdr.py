@@ -68,6 +68,43 @@ _XCDR2_KINDS: Final = {6, 7, 8, 9, 10, 11}
 _ARRAY_CODES: Final = {"?": "B"}
 
 
+class Encoder(bytearray):
+    """What generated encoders append to: a bytearray that starts with the encapsulation header
+    (alignment counts from its length), and keeps large payloads (sequences of numbers or
+    octets, `put_bulk`) aside rather than copy them in, so that `value()` copies each byte of
+    the encoded value once."""
+
+    parts: list[Any] | None = None  # what came before the last payload set aside, and payloads
+    skip = 0  # bytes at the start that only keep the alignment of what follows a payload
+
+    def set_aside(self, data: Any, nbytes: int) -> None:
+        """Append `data` (`nbytes` bytes, any buffer) without copying it yet."""
+        if self.parts is None:
+            self.parts = []
+        self.parts += (self[self.skip :], data)
+        # Only the length modulo 8 matters to what follows: keep that many placeholder bytes.
+        self.skip = (len(self) + nbytes) & 7
+        self[:] = ZEROS[self.skip]
+
+    def value(self) -> bytes:
+        """The encoded value."""
+        if self.parts is None:
+            return bytes(self)
+        return b"".join((*self.parts, memoryview(self)[self.skip :]))
+
+
+# Payloads from this size on are set aside by an Encoder; smaller ones are cheaper to copy in.
+LARGE: Final = 1 << 16
+
+
+def put_bulk(buf: bytearray, data: Any, nbytes: int) -> None:
+    """Append `data` (`nbytes` bytes, any buffer): set aside when large, else copied in."""
+    if nbytes >= LARGE and type(buf) is Encoder:
+        buf.set_aside(data, nbytes)
+    else:
+        buf += data
+
+
 def pair(fmt: str) -> tuple[Struct, Struct]:
     """Little- and big-endian `Struct`s for `fmt` (no byte-order prefix)."""
     return Struct("<" + fmt), Struct(">" + fmt)
@@ -180,10 +217,17 @@ def put_count(buf: bytearray, values: Sequence[Any], bound: int | None, what: st
 
 
 def put_octets(buf: bytearray, value: bytes | bytearray, bound: int | None, what: str) -> None:
-    if not isinstance(value, bytes | bytearray | memoryview):
-        raise BAD_PARAM(f"{what}: expected bytes, got {type(value).__name__}")
-    put_length(buf, len(value), bound, what)
-    buf += value
+    """Octets: `bytes`, or any other buffer (a bytearray, a memoryview, a numpy image), as
+    the bytes it holds in row order."""
+    data: Any = value
+    if not isinstance(value, bytes):
+        try:
+            view = memoryview(value)
+        except TypeError:
+            raise BAD_PARAM(f"{what}: expected bytes, got {type(value).__name__}") from None
+        data = view.cast("B") if view.c_contiguous else view.tobytes()
+    put_length(buf, len(data), bound, what)
+    put_bulk(buf, data, len(data))
 
 
 def get_octets(
@@ -603,7 +647,7 @@ def put_flat(
         except EncodeErrors as exc:
             raise encode_error(what, exc) from None
         buf += ZEROS[(4 - len(buf)) & (size - 1)]
-        buf += packed
+        put_bulk(buf, packed, len(packed))
 
 
 def get_flat(

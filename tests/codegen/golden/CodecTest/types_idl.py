@@ -277,12 +277,12 @@ class Primitives(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_Primitives(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Primitives", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Primitives:
@@ -433,12 +433,12 @@ class Enums(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_Enums(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Enums", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Enums:
@@ -514,12 +514,12 @@ class Strings(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_Strings(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Strings", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Strings:
@@ -599,12 +599,12 @@ class Mixed(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_Mixed(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Mixed", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Mixed:
@@ -666,12 +666,12 @@ class Point3(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_Point3(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Point3", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Point3:
@@ -798,12 +798,12 @@ class Sequences(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_Sequences(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Sequences", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Sequences:
@@ -1423,12 +1423,12 @@ class Arrays(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_Arrays(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Arrays", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Arrays:
@@ -1657,12 +1657,12 @@ class Point3D(_m_CodecTest_base_idl.Point):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_Point3D(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Point3D", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Point3D:
@@ -1715,12 +1715,12 @@ class Bytes2(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_Bytes2(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Bytes2", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Bytes2:
@@ -1772,12 +1772,12 @@ class Shorts3(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_Shorts3(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Shorts3", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Shorts3:
@@ -1864,12 +1864,12 @@ class FlatSeqs(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_FlatSeqs(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::FlatSeqs", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> FlatSeqs:
@@ -2024,12 +2024,12 @@ class Line(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_Line(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Line", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Line:
@@ -2132,12 +2132,12 @@ class Deep(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_Deep(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Deep", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Deep:
@@ -2213,12 +2213,12 @@ class Base3(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_Base3(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Base3", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Base3:
@@ -2272,12 +2272,12 @@ class Derived(Base3):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_Derived(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Derived", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Derived:
@@ -2346,12 +2346,12 @@ class Derived2(Derived):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_Derived2(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Derived2", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Derived2:
@@ -2437,12 +2437,12 @@ class Empty(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_Empty(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Empty", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Empty:
@@ -2491,12 +2491,12 @@ class HasEmpty(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_HasEmpty(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::HasEmpty", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> HasEmpty:
@@ -2580,12 +2580,12 @@ class EmptyRows(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_EmptyRows(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::EmptyRows", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> EmptyRows:
@@ -2667,12 +2667,12 @@ class Failure(_exc.UserException, _cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_Failure(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Failure", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Failure:
@@ -2750,12 +2750,12 @@ class Nothing(_exc.UserException, _cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_Nothing(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Nothing", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Nothing:
@@ -2884,12 +2884,12 @@ class Typedefs(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_Typedefs(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Typedefs", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Typedefs:
@@ -3073,12 +3073,12 @@ class Node(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_Node(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Node", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Node:
@@ -3188,12 +3188,12 @@ class Expr(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_Expr(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Expr", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Expr:
@@ -3285,12 +3285,12 @@ class Holder_Inner(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_Holder_Inner(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Holder::Inner", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Holder_Inner:
@@ -3404,12 +3404,12 @@ class Holder_Choice(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_Holder_Choice(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Holder::Choice", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Holder_Choice:
@@ -3491,12 +3491,12 @@ class Holder_Oops(_exc.UserException, _cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_Holder_Oops(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Holder::Oops", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Holder_Oops:
@@ -3538,7 +3538,7 @@ class Holder(_rpc.Stub):
 
     def get(self, m: Holder_Mode) -> Holder_Inner:
         """CodecTest::Holder::get"""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
             try:
@@ -3550,7 +3550,7 @@ class Holder(_rpc.Stub):
                 ) from None
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Holder::get", _x) from None
-        _data = self._call("get", bytes(_buf), (Holder_Oops,))
+        _data = self._call("get", _buf.value(), (Holder_Oops,))
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
@@ -3582,12 +3582,12 @@ class Outer_Nested(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_Outer_Nested(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Outer::Nested", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Outer_Nested:
@@ -3700,12 +3700,12 @@ class Outer(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_Outer(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Outer", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Outer:
@@ -3833,12 +3833,12 @@ class Keywords(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_Keywords(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Keywords", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Keywords:
@@ -4068,12 +4068,12 @@ class KeywordUnion(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_KeywordUnion(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::KeywordUnion", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> KeywordUnion:
@@ -4220,12 +4220,12 @@ class Numbers(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_Numbers(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Numbers", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Numbers:
@@ -4539,12 +4539,12 @@ class NumberTypedefs(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_NumberTypedefs(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::NumberTypedefs", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> NumberTypedefs:
@@ -4731,12 +4731,12 @@ class BoolDouble(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_BoolDouble(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::BoolDouble", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> BoolDouble:
@@ -4796,12 +4796,12 @@ class OctetLongLong(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_OctetLongLong(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::OctetLongLong", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> OctetLongLong:
@@ -4861,12 +4861,12 @@ class EndsInChar(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_EndsInChar(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::EndsInChar", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> EndsInChar:
@@ -4924,12 +4924,12 @@ class SeqEndsInChar(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_SeqEndsInChar(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::SeqEndsInChar", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> SeqEndsInChar:
@@ -5024,12 +5024,12 @@ class EmptySeqs(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_EmptySeqs(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::EmptySeqs", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> EmptySeqs:
@@ -5233,12 +5233,12 @@ class Traps(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_Traps(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Traps", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Traps:

@@ -156,12 +156,12 @@ class ByEnum(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_ByEnum(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByEnum", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByEnum:
@@ -281,12 +281,12 @@ class ByEnumDefault(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_ByEnumDefault(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByEnumDefault", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByEnumDefault:
@@ -407,12 +407,12 @@ class ByEnumPartial(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_ByEnumPartial(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByEnumPartial", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByEnumPartial:
@@ -541,12 +541,12 @@ class ByChar(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_ByChar(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByChar", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByChar:
@@ -681,12 +681,12 @@ class ByCharNul(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_ByCharNul(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByCharNul", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByCharNul:
@@ -810,12 +810,12 @@ class ByBool(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_ByBool(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByBool", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByBool:
@@ -926,12 +926,12 @@ class ByBoolDefault(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_ByBoolDefault(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByBoolDefault", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByBoolDefault:
@@ -1029,12 +1029,12 @@ class ByBoolTrue(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_ByBoolTrue(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByBoolTrue", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByBoolTrue:
@@ -1153,12 +1153,12 @@ class ByShort(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_ByShort(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByShort", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByShort:
@@ -1295,12 +1295,12 @@ class ByUShort(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_ByUShort(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByUShort", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByUShort:
@@ -1437,12 +1437,12 @@ class ByLong(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_ByLong(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByLong", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByLong:
@@ -1573,12 +1573,12 @@ class ByULong(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_ByULong(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByULong", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByULong:
@@ -1705,12 +1705,12 @@ class ByLongLong(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_ByLongLong(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByLongLong", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByLongLong:
@@ -1851,12 +1851,12 @@ class ByULongLong(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_ByULongLong(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByULongLong", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByULongLong:
@@ -2000,12 +2000,12 @@ class ByOctet(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_ByOctet(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByOctet", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByOctet:
@@ -2146,12 +2146,12 @@ class ByInt8(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_ByInt8(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByInt8", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByInt8:
@@ -2286,12 +2286,12 @@ class ByUInt8(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_ByUInt8(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByUInt8", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByUInt8:
@@ -2440,12 +2440,12 @@ class ByTypedef(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_ByTypedef(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByTypedef", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByTypedef:
@@ -2584,12 +2584,12 @@ class ByTypedefEnum(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_ByTypedefEnum(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByTypedefEnum", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByTypedefEnum:
@@ -3027,12 +3027,12 @@ class Branches(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_Branches(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::Branches", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Branches:
@@ -3500,12 +3500,12 @@ class Holder(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _enc_Holder(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::Holder", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Holder:
