@@ -12,9 +12,11 @@ name, the type hash of its payload, a sequence number per supplier and type (so 
 what they missed), the source time stamp and the publish time. Events pushed within one reactor
 turn leave in one frame per topic (split at MAX_BATCH_EVENTS / MAX_BATCH_BYTES), so throughput
 is not capped at one ZeroMQ message per event; at low rates that is one event per frame, as fast
-as a single message. Slow consumers never block suppliers: the supplier's queue and ZeroMQ's are
+as a single message; an event of LARGE_EVENT bytes or more travels alone, copied once into its
+frame and decoded in place from the consumer's. Slow consumers never block suppliers: the supplier's queue and ZeroMQ's are
 bounded, what overflows is dropped and counted (`StructuredPushSupplier.dropped`), and the
-sequence numbers make the drops visible (`StructuredPushConsumer.missed`).
+sequence numbers make the drops visible (`StructuredPushConsumer.missed`). Queues hold fewer
+frames once frames are large (`_hwm`), so that megabyte events cannot fill anybody's memory.
 """
 
 from __future__ import annotations
@@ -42,9 +44,13 @@ _log = logger("MIRO")
 CHANNEL_REPO_ID = "IDL:miro-gen/EventChannel:1.0"
 DEFAULT_CHANNEL = "EventChannel"
 EVENT_VERSION = 1
-HWM = 10_000  # events a socket queues for one peer before dropping
+HWM = 10_000  # frames a socket queues for one peer before dropping, at most (see _hwm)
 QUEUE_EVENTS = 100_000  # events a supplier holds for its reactor's next turn, at most
-QUEUE_BYTES = 64 << 20  # and bytes
+QUEUE_BYTES = 64 << 20  # and bytes; also about what a socket queues for one peer (see _hwm)
+PROXY_HWM = 1_000  # frames a channel host queues for one peer, until it sees large ones
+# Events from this size on travel alone, in a frame put together with one copy and handed to
+# ZeroMQ without another (copy=False); consumers decode them from ZeroMQ's buffer, in place.
+LARGE_EVENT = 64 * 1024
 # Events in one frame, at most. The count is 16 bits, and a high-water mark counts frames: HWM
 # frames must stay a bounded amount of memory. Yet frames must not be small: each send lets the
 # pushing thread take the GIL back for up to a switch interval, so a flush in many frames falls
@@ -87,6 +93,16 @@ def subscription_prefix(domain: str, type_name: str) -> bytes:
     return topic(domain, type_name)
 
 
+def _hwm(frame_bytes: int) -> int:
+    """The high-water mark for frames of this size: HWM, fewer for large frames, so that a
+    socket queues about QUEUE_BYTES for a peer (a camera must not fill a slow peer's memory)."""
+    return max(4, min(HWM, QUEUE_BYTES // max(frame_bytes, 1)))
+
+
+class _Lone(list[bytes]):
+    """A large event, its header and its payload: it travels alone, in a frame of its own."""
+
+
 def _close_on(reactor: Reactor, socket: zmq.Socket[Any]) -> None:
     """Close a socket of the reactor's thread, on that thread."""
 
@@ -112,42 +128,82 @@ class EventChannel:
     domain_name: str = ""  # the default domain of suppliers (the process's naming context)
     _host: ChannelHost | None = field(default=None, repr=False)
 
+    def endpoints(self, context: zmq.Context[Any]) -> tuple[str, str]:
+        """(supplier, consumer) endpoints for sockets of `context`: in the process that hosts
+        the channel, in-process ones (ZeroMQ hands frames over without copying them)."""
+        host = self._host
+        if host is not None and host.context is context:
+            return host.local_endpoints
+        return self.supplier_endpoint, self.consumer_endpoint
+
 
 class ChannelHost:
     """Runs a channel's XSUB/XPUB proxy in a thread (libzmq's, without the GIL) until closed:
-    in the process that creates the channel, or in `miro naming --channel`."""
+    in the process that creates the channel, or in `miro naming --channel`.
+
+    Besides its TCP endpoints it binds in-process ones, for the suppliers and consumers of its
+    own process. Its queues hold PROXY_HWM frames per peer, fewer once a supplier of its
+    process sends large frames (`expect`): a camera's channel must not fill its memory with the
+    images a slow consumer has not taken yet."""
 
     def __init__(self, context: zmq.Context[Any], bind_host: str, advertise: str) -> None:
+        self.context = context
+        self.hwm = PROXY_HWM
         self.xsub = context.socket(zmq.XSUB)
         self.xpub = context.socket(zmq.XPUB)
         for s in (self.xsub, self.xpub):
             s.setsockopt(zmq.LINGER, 0)
-            s.setsockopt(zmq.SNDHWM, HWM)
-            s.setsockopt(zmq.RCVHWM, HWM)
+            s.setsockopt(zmq.SNDHWM, self.hwm)
+            s.setsockopt(zmq.RCVHWM, self.hwm)
         self.xpub.setsockopt(zmq.XPUB_VERBOSER, 1)  # every (un)subscription reaches suppliers
         port_in = self.xsub.bind_to_random_port(f"tcp://{bind_host}")
         port_out = self.xpub.bind_to_random_port(f"tcp://{bind_host}")
         self.supplier_endpoint = f"tcp://{advertise}:{port_in}"
         self.consumer_endpoint = f"tcp://{advertise}:{port_out}"
-        control_name = f"inproc://miro-channel-{os.getpid()}-{id(self)}"
+        name = f"inproc://miro-channel-{os.getpid()}-{id(self)}"
+        self.local_endpoints = (f"{name}-suppliers", f"{name}-consumers")
+        self.xsub.bind(self.local_endpoints[0])
+        self.xpub.bind(self.local_endpoints[1])
         self.control = context.socket(zmq.PAIR)
-        self.control.bind(control_name)
+        self.control.bind(name)
         self._peer = context.socket(zmq.PAIR)
-        self._peer.connect(control_name)
+        self._peer.connect(name)
+        self._control_lock = threading.Lock()
+        self._wanted_hwm = self.hwm
+        self._closing = False
         self.thread = threading.Thread(target=self._run, name="miro-channel", daemon=True)
         self.thread.start()
 
     def _run(self) -> None:
         try:
-            zmq.proxy_steerable(self.xsub, self.xpub, None, self._peer)
+            while True:
+                zmq.proxy_steerable(self.xsub, self.xpub, None, self._peer)
+                if self._closing:
+                    break
+                # Stopped to lower the high-water marks (the sockets are this thread's).
+                self.hwm = self._wanted_hwm
+                for s in (self.xsub, self.xpub):
+                    s.setsockopt(zmq.SNDHWM, self.hwm)
+                    s.setsockopt(zmq.RCVHWM, self.hwm)
         except zmq.ZMQError as e:  # the context is terminating
             _log.debug("event channel proxy ended: %s", e)
         finally:
             for s in (self.xsub, self.xpub, self._peer):
                 s.close(0)
 
+    def expect(self, frame_bytes: int) -> None:
+        """A supplier of this process sends frames this large: queue fewer of them."""
+        hwm = min(PROXY_HWM, _hwm(frame_bytes))
+        with self._control_lock:
+            if hwm >= self._wanted_hwm or self._closing:
+                return
+            self._wanted_hwm = hwm
+            self.control.send(b"TERMINATE")  # the proxy stops, sets the marks, starts again
+
     def close(self) -> None:
-        self.control.send(b"TERMINATE")
+        with self._control_lock:
+            self._closing = True
+            self.control.send(b"TERMINATE")
         self.thread.join(5)
         self.control.close(0)
 
@@ -253,6 +309,7 @@ class StructuredPushSupplier:
         self._subscriptions: dict[bytes, int] = {}
         self._generation = 0  # bumped whenever _subscriptions changes
         self._raw_hashes: dict[str, bytes] = {}
+        self._largest = 0  # bytes of the largest frame sent so far (for the high-water mark)
         self.sent = 0
         self.dropped = 0  # events pushed while someone subscribed that were never sent
         self.socket = self.reactor.context.socket(zmq.XPUB)
@@ -262,7 +319,7 @@ class StructuredPushSupplier:
         # At the high-water mark an XPUB drops silently; with NODROP a non-blocking send fails
         # instead, so that the supplier counts what it drops. It never blocks either way.
         self.socket.setsockopt(zmq.XPUB_NODROP, 1)
-        self.socket.connect(channel.supplier_endpoint)
+        self.socket.connect(channel.endpoints(self.reactor.context)[0])
         self.reactor.call_soon(self.reactor.register, self.socket, self._subscription_changed)
 
     def _topic(self, type_name: str) -> _Topic:
@@ -294,21 +351,26 @@ class StructuredPushSupplier:
         now = clock.current().time_ns()  # log time under --clock log, else the wall clock
         data = payload.serialize()
         packed = _EVENT.pack(seq, now if stamp is None else int(stamp * 1e9), now, len(data))
-        packed += data
+        size = len(packed) + len(data)
         with self._lock:
-            if self._queued >= QUEUE_EVENTS or self._queued_bytes + len(packed) > QUEUE_BYTES:
+            if self._queued >= QUEUE_EVENTS or self._queued_bytes + size > QUEUE_BYTES:
                 self.dropped += 1
                 return True
             type_hash = payload._type_hash
-            if type_hash == t.last_hash and t.pending:
-                t.last.append(packed)
+            if size >= LARGE_EVENT:  # alone, not copied until its frame is put together
+                if not t.pending:
+                    self._dirty.append(t)
+                t.pending.append((type_hash, _Lone((packed, data))))
+                t.last, t.last_hash = [], ""
+            elif type_hash == t.last_hash and t.pending:
+                t.last.append(packed + data)
             else:
                 if not t.pending:
                     self._dirty.append(t)
-                t.last, t.last_hash = [packed], type_hash
+                t.last, t.last_hash = [packed + data], type_hash
                 t.pending.append((type_hash, t.last))
             self._queued += 1
-            self._queued_bytes += len(packed)
+            self._queued_bytes += size
             if self._flush_pending:
                 return True
             self._flush_pending = True
@@ -326,6 +388,9 @@ class StructuredPushSupplier:
             self._flush_pending = False
         for frame, runs in queues:
             for type_hash, events in runs:
+                if type(events) is _Lone:
+                    self._send(frame, type_hash, events, 1)
+                    continue
                 if len(events) <= MAX_BATCH_EVENTS and sum(map(len, events)) <= MAX_BATCH_BYTES:
                     self._send(frame, type_hash, events)
                     continue
@@ -341,17 +406,24 @@ class StructuredPushSupplier:
                     size += len(packed)
                 self._send(frame, type_hash, batch)
 
-    def _send(self, frame: bytes, type_hash: str, packed: list[bytes]) -> None:
+    def _send(self, frame: bytes, type_hash: str, packed: list[bytes], count: int = 0) -> None:
+        """One frame of `count` events (default: one per item of `packed`)."""
+        count = count or len(packed)
         raw = self._raw_hashes.get(type_hash)
         if raw is None:
             raw = self._raw_hashes[type_hash] = bytes.fromhex(type_hash)
-        head = _BATCH.pack(EVENT_VERSION, 0, len(packed), self.supplier_id, raw)
+        body = b"".join([_BATCH.pack(EVENT_VERSION, 0, count, self.supplier_id, raw), *packed])
+        if len(body) > self._largest:
+            self._largest = len(body)
+            self.socket.setsockopt(zmq.SNDHWM, _hwm(len(body)))
+            if self.channel._host is not None:
+                self.channel._host.expect(len(body))
         try:
-            self.socket.send_multipart([frame, head + b"".join(packed)], zmq.NOBLOCK)
-            self.sent += len(packed)
+            self.socket.send_multipart([frame, body], zmq.NOBLOCK, copy=len(body) < LARGE_EVENT)
+            self.sent += count
         except zmq.Again:  # at the high-water mark: dropped, visible as a gap
             with self._lock:
-                self.dropped += len(packed)
+                self.dropped += count
 
     def _subscription_changed(self) -> None:
         changed = False
@@ -389,13 +461,14 @@ class StructuredPushConsumer:
         self.socket = self.reactor.context.socket(zmq.SUB)
         self.socket.setsockopt(zmq.LINGER, 0)
         self.socket.setsockopt(zmq.RCVHWM, HWM)
-        self.socket.connect(channel.consumer_endpoint)
+        self.socket.connect(channel.endpoints(self.reactor.context)[1])
         self._filters: list[tuple[str, str]] = []
         self._prefixes: set[bytes] = set()
         self._next_seq: dict[tuple[int, str], int] = {}  # per (supplier, type name)
         self._topics: dict[bytes, tuple[str, str, bool]] = {}
         self._classes: dict[bytes, type[Any]] = {}
         self._unknown: set[tuple[str, str]] = set()
+        self._largest = 0  # bytes of the largest frame received so far (for the high-water mark)
         self.received = 0
         self.missed = 0  # events lost between suppliers and this consumer
         self.undecodable = 0  # events whose type hash matches no imported generated type
@@ -429,10 +502,14 @@ class StructuredPushConsumer:
         delivered = 0
         while delivered < TURN_EVENTS:  # the poller reports the rest in the next turn
             try:
-                parts = recv(zmq.NOBLOCK)
+                parts = recv(zmq.NOBLOCK, copy=False)  # payloads are decoded in place
             except zmq.Again:
                 return
             delivered += 1  # a frame counts, even one that is dropped
+            size = len(parts[-1])
+            if size > self._largest:
+                self._largest = size
+                self.socket.setsockopt(zmq.RCVHWM, _hwm(size))
             try:
                 events = self._parse(parts)
             except (ValueError, StructError, UnicodeDecodeError) as e:
@@ -485,12 +562,12 @@ class StructuredPushConsumer:
                 )
         return cls
 
-    def _parse(self, parts: list[bytes]) -> list[StructuredEvent]:
+    def _parse(self, parts: list[zmq.Frame]) -> list[StructuredEvent]:
         """The events of one message, decoded; raises if the frame does not parse (then none
         of its events count, and the sequence numbers stay as they were)."""
         if len(parts) != 2:
             raise ValueError(f"{len(parts)} frames, expected 2")
-        head, body = parts
+        head, body = parts[0].bytes, parts[1].buffer  # the body is not copied
         domain, type_name, wanted = self._topic(head)
         if not wanted:
             return []
