@@ -132,10 +132,7 @@ def test_a_slow_consumer_does_not_slow_the_supplier(servers: Callable[[str], Ser
     for n in range(total):
         supplier.push("ExampleEvent", event(n))
     pushing = time.monotonic() - start
-    try:
-        eventually(lambda: len(fast.events) >= total * 0.99, 30)
-    except AssertionError:
-        raise AssertionError(f"fast {len(fast.events)} missed {fast.missed} dropped {supplier.dropped} sent {supplier.sent}")
+    eventually(lambda: len(fast.events) >= total * 0.99, 30)
     assert pushing < 10  # a slow consumer 10 ms per event would need 300 s
     time.sleep(1)
     # The slow one got some and knows how many it missed (within what is still queued).
