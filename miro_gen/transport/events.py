@@ -13,10 +13,11 @@ what they missed), the source time stamp and the publish time. Events pushed wit
 turn leave in one frame per topic (split at MAX_BATCH_EVENTS / MAX_BATCH_BYTES), so throughput
 is not capped at one ZeroMQ message per event; at low rates that is one event per frame, as fast
 as a single message; an event of LARGE_EVENT bytes or more travels alone, copied once into its
-frame and decoded in place from the consumer's. Slow consumers never block suppliers: the supplier's queue and ZeroMQ's are
-bounded, what overflows is dropped and counted (`StructuredPushSupplier.dropped`), and the
-sequence numbers make the drops visible (`StructuredPushConsumer.missed`). Queues hold fewer
-frames once frames are large (`_hwm`), so that megabyte events cannot fill anybody's memory.
+frame and decoded in place from the consumer's. Slow consumers never block suppliers: the
+supplier's queue and ZeroMQ's are bounded, what overflows is dropped and counted
+(`StructuredPushSupplier.dropped`), and the sequence numbers make the drops visible
+(`StructuredPushConsumer.missed`). Queues hold fewer frames once frames are large (`_hwm`), so
+that megabyte events cannot fill anybody's memory.
 """
 
 from __future__ import annotations
