@@ -43,5 +43,9 @@ def laser_main(argv: Sequence[str]) -> int:
         flush=True,
     )
     server.run()
-    print(f"published {publisher.published} scans", flush=True)
+    unheard = publisher.taken - publisher.published
+    print(
+        f"published {publisher.published} scans ({unheard} taken while nobody subscribed)",
+        flush=True,
+    )
     return 0

@@ -56,17 +56,20 @@ def time_idl(seconds: float) -> Miro.TimeIDL:
 
 
 class LaserPublisher:
-    """Pushes one scan per run of a reactor timer (`handle_timeout`), stamped with the time it
-    is taken, as event type `type_name`."""
+    """Takes one scan per run of a reactor timer (`handle_timeout`) and pushes it, stamped with
+    the time it is taken, as event type `type_name`. `taken` counts the scans, `published`
+    those pushed while someone subscribed."""
 
     def __init__(self, supplier: StructuredPushSupplier, scans: LaserScans, type_name: str):
         self.supplier = supplier
         self.scans = scans
         self.type_name = type_name
+        self.taken = 0
         self.published = 0
 
     def handle_timeout(self, _arg: Any = None) -> None:
         now = clock.current().now()
-        event = Miro.RangeScanEventIDL(time_idl(now), [self.scans.scan(self.published)])
-        self.supplier.push(self.type_name, event, stamp=now)
-        self.published += 1
+        event = Miro.RangeScanEventIDL(time_idl(now), [self.scans.scan(self.taken)])
+        self.taken += 1
+        if self.supplier.push(self.type_name, event, stamp=now):
+            self.published += 1

@@ -414,6 +414,15 @@ class StructuredPushSupplier:
         if raw is None:
             raw = self._raw_hashes[type_hash] = bytes.fromhex(type_hash)
         body = b"".join([_BATCH.pack(EVENT_VERSION, 0, count, self.supplier_id, raw), *packed])
+        if self._send_frame(frame, body):
+            self.sent += count
+        else:  # at the high-water mark: dropped, visible as a gap
+            with self._lock:
+                self.dropped += count
+
+    def _send_frame(self, frame: bytes, body: bytes) -> bool:
+        """Send a topic frame and a batch frame (large ones without a copy); False at the
+        high-water mark. Lowers the marks when the frames get larger (reactor thread)."""
         if len(body) > self._largest:
             self._largest = len(body)
             self.socket.setsockopt(zmq.SNDHWM, _hwm(len(body)))
@@ -421,10 +430,9 @@ class StructuredPushSupplier:
                 self.channel._host.expect(len(body))
         try:
             self.socket.send_multipart([frame, body], zmq.NOBLOCK, copy=len(body) < LARGE_EVENT)
-            self.sent += count
-        except zmq.Again:  # at the high-water mark: dropped, visible as a gap
-            with self._lock:
-                self.dropped += count
+        except zmq.Again:
+            return False
+        return True
 
     def _subscription_changed(self) -> None:
         changed = False
