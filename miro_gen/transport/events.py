@@ -16,8 +16,7 @@ as a single message; an event of LARGE_EVENT bytes or more travels alone, copied
 frame and decoded in place from the consumer's. Slow consumers never block suppliers: the
 supplier's queue and ZeroMQ's are bounded, what overflows is dropped and counted
 (`StructuredPushSupplier.dropped`), and the sequence numbers make the drops visible
-(`StructuredPushConsumer.missed`). Queues hold fewer frames once frames are large (`_hwm`), so
-that megabyte events cannot fill anybody's memory.
+(`StructuredPushConsumer.missed`).
 """
 
 from __future__ import annotations
@@ -45,10 +44,13 @@ _log = logger("MIRO")
 CHANNEL_REPO_ID = "IDL:miro-gen/EventChannel:1.0"
 DEFAULT_CHANNEL = "EventChannel"
 EVENT_VERSION = 1
-HWM = 10_000  # frames a socket queues for one peer before dropping, at most (see _hwm)
+HWM = 10_000  # frames a supplier's or a consumer's socket queues for one peer before dropping
 QUEUE_EVENTS = 100_000  # events a supplier holds for its reactor's next turn, at most
-QUEUE_BYTES = 64 << 20  # and bytes; also about what a socket queues for one peer (see _hwm)
-PROXY_HWM = 1_000  # frames a channel host queues for one peer, until it sees large ones
+QUEUE_BYTES = 64 << 20  # and bytes
+# Frames a channel queues for each of its peers. Fewer than HWM: the queue is the channel
+# host's memory, and frames may be camera images. (High-water marks are set once: libzmq can
+# stall a pipe whose mark is lowered while it carries messages.)
+PROXY_HWM = 1_000
 # Events from this size on travel alone, in a frame put together with one copy and handed to
 # ZeroMQ without another (copy=False); consumers decode them from ZeroMQ's buffer, in place.
 LARGE_EVENT = 64 * 1024
@@ -94,12 +96,6 @@ def subscription_prefix(domain: str, type_name: str) -> bytes:
     return topic(domain, type_name)
 
 
-def _hwm(frame_bytes: int) -> int:
-    """The high-water mark for frames of this size: HWM, fewer for large frames, so that a
-    socket queues about QUEUE_BYTES for a peer (a camera must not fill a slow peer's memory)."""
-    return max(4, min(HWM, QUEUE_BYTES // max(frame_bytes, 1)))
-
-
 class _Lone(list[bytes]):
     """A large event, its header and its payload: it travels alone, in a frame of its own."""
 
@@ -143,19 +139,16 @@ class ChannelHost:
     in the process that creates the channel, or in `miro naming --channel`.
 
     Besides its TCP endpoints it binds in-process ones, for the suppliers and consumers of its
-    own process. Its queues hold PROXY_HWM frames per peer, fewer once a supplier of its
-    process sends large frames (`expect`): a camera's channel must not fill its memory with the
-    images a slow consumer has not taken yet."""
+    own process (ZeroMQ hands their frames over without copying them)."""
 
     def __init__(self, context: zmq.Context[Any], bind_host: str, advertise: str) -> None:
         self.context = context
-        self.hwm = PROXY_HWM
         self.xsub = context.socket(zmq.XSUB)
         self.xpub = context.socket(zmq.XPUB)
         for s in (self.xsub, self.xpub):
             s.setsockopt(zmq.LINGER, 0)
-            s.setsockopt(zmq.SNDHWM, self.hwm)
-            s.setsockopt(zmq.RCVHWM, self.hwm)
+            s.setsockopt(zmq.SNDHWM, PROXY_HWM)
+            s.setsockopt(zmq.RCVHWM, PROXY_HWM)
         self.xpub.setsockopt(zmq.XPUB_VERBOSER, 1)  # every (un)subscription reaches suppliers
         port_in = self.xsub.bind_to_random_port(f"tcp://{bind_host}")
         port_out = self.xpub.bind_to_random_port(f"tcp://{bind_host}")
@@ -169,42 +162,20 @@ class ChannelHost:
         self.control.bind(name)
         self._peer = context.socket(zmq.PAIR)
         self._peer.connect(name)
-        self._control_lock = threading.Lock()
-        self._wanted_hwm = self.hwm
-        self._closing = False
         self.thread = threading.Thread(target=self._run, name="miro-channel", daemon=True)
         self.thread.start()
 
     def _run(self) -> None:
         try:
-            while True:
-                zmq.proxy_steerable(self.xsub, self.xpub, None, self._peer)
-                if self._closing:
-                    break
-                # Stopped to lower the high-water marks (the sockets are this thread's).
-                self.hwm = self._wanted_hwm
-                for s in (self.xsub, self.xpub):
-                    s.setsockopt(zmq.SNDHWM, self.hwm)
-                    s.setsockopt(zmq.RCVHWM, self.hwm)
+            zmq.proxy_steerable(self.xsub, self.xpub, None, self._peer)
         except zmq.ZMQError as e:  # the context is terminating
             _log.debug("event channel proxy ended: %s", e)
         finally:
             for s in (self.xsub, self.xpub, self._peer):
                 s.close(0)
 
-    def expect(self, frame_bytes: int) -> None:
-        """A supplier of this process sends frames this large: queue fewer of them."""
-        hwm = min(PROXY_HWM, _hwm(frame_bytes))
-        with self._control_lock:
-            if hwm >= self._wanted_hwm or self._closing:
-                return
-            self._wanted_hwm = hwm
-            self.control.send(b"TERMINATE")  # the proxy stops, sets the marks, starts again
-
     def close(self) -> None:
-        with self._control_lock:
-            self._closing = True
-            self.control.send(b"TERMINATE")
+        self.control.send(b"TERMINATE")
         self.thread.join(5)
         self.control.close(0)
 
@@ -310,7 +281,6 @@ class StructuredPushSupplier:
         self._subscriptions: dict[bytes, int] = {}
         self._generation = 0  # bumped whenever _subscriptions changes
         self._raw_hashes: dict[str, bytes] = {}
-        self._largest = 0  # bytes of the largest frame sent so far (for the high-water mark)
         self.sent = 0
         self.dropped = 0  # events pushed while someone subscribed that were never sent
         self.socket = self.reactor.context.socket(zmq.XPUB)
@@ -422,12 +392,7 @@ class StructuredPushSupplier:
 
     def _send_frame(self, frame: bytes, body: bytes) -> bool:
         """Send a topic frame and a batch frame (large ones without a copy); False at the
-        high-water mark. Lowers the marks when the frames get larger (reactor thread)."""
-        if len(body) > self._largest:
-            self._largest = len(body)
-            self.socket.setsockopt(zmq.SNDHWM, _hwm(len(body)))
-            if self.channel._host is not None:
-                self.channel._host.expect(len(body))
+        high-water mark."""
         try:
             self.socket.send_multipart([frame, body], zmq.NOBLOCK, copy=len(body) < LARGE_EVENT)
         except zmq.Again:
@@ -477,7 +442,6 @@ class StructuredPushConsumer:
         self._topics: dict[bytes, tuple[str, str, bool]] = {}
         self._classes: dict[bytes, type[Any]] = {}
         self._unknown: set[tuple[str, str]] = set()
-        self._largest = 0  # bytes of the largest frame received so far (for the high-water mark)
         self.received = 0
         self.missed = 0  # events lost between suppliers and this consumer
         self.undecodable = 0  # events whose type hash matches no imported generated type
@@ -515,10 +479,6 @@ class StructuredPushConsumer:
             except zmq.Again:
                 return
             delivered += 1  # a frame counts, even one that is dropped
-            size = len(parts[-1])
-            if size > self._largest:
-                self._largest = size
-                self.socket.setsockopt(zmq.RCVHWM, _hwm(size))
             try:
                 events = self._parse(parts)
             except (ValueError, StructError, UnicodeDecodeError) as e:
