@@ -266,3 +266,17 @@ def test_large_payloads_set_aside_keep_the_alignment_of_what_follows() -> None:
         theirs = H.cyclone().value(H.resolve(decl), value).serialize()
         assert value.serialize() == theirs
         assert H.plain(type(value).deserialize(theirs)) == H.plain(value)
+
+
+def test_a_value_encoded_after_a_head_is_aligned_as_alone() -> None:
+    """What the transport puts a large event's frame together with (cdr.encode_after)."""
+    from miro_gen.runtime.cdr import encode_after
+
+    for value in (numbers(), T.Numbers(i8s=bytes(70001), floats=array("f", [1.0] * 20001))):
+        head = b"H" * 72
+        buf = encode_after(head, value)
+        assert buf.size == 72 + len(value.serialize())
+        buf.overwrite(3, b"xy")
+        assert buf.value() == b"HHHxy" + head[5:] + value.serialize()
+    with pytest.raises(ValueError, match="misalign"):
+        encode_after(b"12345", numbers())

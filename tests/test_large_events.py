@@ -51,7 +51,8 @@ def test_megabyte_events_arrive_whole_and_in_order_among_small_ones(
         c.set_subscriptions([("*", "*")])
     eventually(lambda: len(supplier._subscriptions) >= 1)
     time.sleep(0.3)
-    sizes = [10, 1 << 18, 5, 3 << 18, 1, 1, 1 << 16, 2]  # floats: 40 B ... 3 MB
+    # floats: 40 B ... 3 MB; large after large is encoded into its frame directly
+    sizes = [10, 1 << 18, 5, 3 << 18, 1, 1, 1 << 16, 1 << 17, 1 << 14, 2]
     for n, floats in enumerate(sizes):
         supplier.push("Cloud", cloud(n, floats))
     for c in (remote, local):

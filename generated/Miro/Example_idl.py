@@ -54,11 +54,15 @@ class ExampleStructIDL(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ExampleStructIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::ExampleStructIDL", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ExampleStructIDL:
@@ -124,11 +128,15 @@ class ExampleGroupIDL(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ExampleGroupIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::ExampleGroupIDL", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ExampleGroupIDL:
@@ -209,11 +217,15 @@ class ExampleEventIDL(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ExampleEventIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::ExampleEventIDL", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ExampleEventIDL:

@@ -72,11 +72,15 @@ class Range3dPointIDL(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Range3dPointIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::Range3dPointIDL", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Range3dPointIDL:
@@ -158,11 +162,15 @@ class Range3dMountingIDL(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Range3dMountingIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::Range3dMountingIDL", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Range3dMountingIDL:
@@ -253,11 +261,15 @@ class Range3dDescriptionIDL(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Range3dDescriptionIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::Range3dDescriptionIDL", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Range3dDescriptionIDL:
@@ -383,11 +395,15 @@ class Range3dScanEventIDL(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Range3dScanEventIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::Range3dScanEventIDL", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Range3dScanEventIDL:

@@ -82,11 +82,15 @@ class RangeScanEventIDL(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_RangeScanEventIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::RangeScanEventIDL", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> RangeScanEventIDL:
@@ -178,11 +182,15 @@ class RangeGroupEventIDL(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_RangeGroupEventIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::RangeGroupEventIDL", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> RangeGroupEventIDL:
@@ -263,11 +271,15 @@ class RangeSensorIDL(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_RangeSensorIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::RangeSensorIDL", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> RangeSensorIDL:
@@ -355,11 +367,15 @@ class RangeBunchEventIDL(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_RangeBunchEventIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::RangeBunchEventIDL", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> RangeBunchEventIDL:

@@ -92,6 +92,27 @@ class Encoder(bytearray):
             return bytes(self)
         return b"".join((*self.parts, memoryview(self)[self.skip :]))
 
+    @property
+    def size(self) -> int:
+        """Bytes encoded so far."""
+        kept = sum(memoryview(p).nbytes for p in self.parts) if self.parts is not None else 0
+        return kept + len(self) - self.skip
+
+    def overwrite(self, at: int, data: bytes) -> None:
+        """Replace bytes at offset `at`, before the first payload set aside (a header's)."""
+        first = self if self.parts is None else self.parts[0]
+        first[at : at + len(data)] = data
+
+
+def encode_after(head: bytes, value: IdlType) -> Encoder:
+    """`value` encoded after `head` and the encapsulation header: a frame put together in one
+    copy. `head` must be a multiple of 8 bytes long, so that the CDR is aligned as usual."""
+    if len(head) & 7:
+        raise ValueError(f"a head of {len(head)} bytes would misalign the CDR after it")
+    buf = Encoder(head + HEADER_LE)
+    value._encode(buf)
+    return buf
+
 
 # Payloads from this size on are set aside by an Encoder; smaller ones are cheaper to copy in.
 LARGE: Final = 1 << 16
@@ -351,6 +372,9 @@ class IdlType:
             _TYPES_BY_HASH[type_hash] = cls
 
     def serialize(self) -> bytes:
+        raise NotImplementedError  # pragma: no cover - generated classes implement it
+
+    def _encode(self, buf: Encoder) -> None:
         raise NotImplementedError  # pragma: no cover - generated classes implement it
 
 

@@ -36,7 +36,7 @@ import zmq
 
 from miro_gen import clock
 from miro_gen.log import logger
-from miro_gen.runtime.cdr import type_for_hash
+from miro_gen.runtime.cdr import encode_after, type_for_hash
 from miro_gen.transport.reactor import Reactor
 
 _log = logger("MIRO")
@@ -64,6 +64,8 @@ TURN_EVENTS = 4096  # events a consumer delivers per reactor turn, so other hand
 _BATCH = Struct("<BBHQ32s")  # version, flags, count, supplier id, type hash
 _EVENT = Struct("<QqqI")  # sequence number, stamp ns, publish ns, payload length
 _EVENT_SIZE = _EVENT.size
+_LENGTH_AT = _BATCH.size + _EVENT_SIZE - 4  # the payload length of a frame's one event
+_U32 = Struct("<I")
 ANY = "*"
 
 
@@ -96,8 +98,8 @@ def subscription_prefix(domain: str, type_name: str) -> bytes:
     return topic(domain, type_name)
 
 
-class _Lone(list[bytes]):
-    """A large event, its header and its payload: it travels alone, in a frame of its own."""
+class _Framed(list[bytes]):
+    """A large event's whole batch frame: it travels alone."""
 
 
 def _close_on(reactor: Reactor, socket: zmq.Socket[Any]) -> None:
@@ -243,12 +245,23 @@ def resolve_channel(server: Any, name: str = DEFAULT_CHANNEL) -> EventChannel:
 
 class _Topic:
     """What a supplier keeps per type name: the topic frame, the sequence numbers, whether
-    anyone subscribes (recomputed when the subscriptions change), the events not yet sent."""
+    anyone subscribes (recomputed when the subscriptions change), the events not yet sent,
+    whether the last event was large."""
 
-    __slots__ = ("frame", "generation", "last", "last_hash", "pending", "seq", "subscribed")
+    __slots__ = (
+        "frame",
+        "generation",
+        "large",
+        "last",
+        "last_hash",
+        "pending",
+        "seq",
+        "subscribed",
+    )
 
     def __init__(self, frame: bytes) -> None:
         self.frame = frame
+        self.large = False
         self.seq = itertools.count()
         self.generation = -1  # of the supplier's subscriptions that `subscribed` reflects
         self.subscribed = False
@@ -320,25 +333,25 @@ class StructuredPushSupplier:
         if not (t.subscribed if t.generation == self._generation else self._subscribed(t)):
             return False
         now = clock.current().time_ns()  # log time under --clock log, else the wall clock
-        data = payload.serialize()
-        packed = _EVENT.pack(seq, now if stamp is None else int(stamp * 1e9), now, len(data))
-        size = len(packed) + len(data)
+        type_hash = payload._type_hash
+        stamp_ns = now if stamp is None else int(stamp * 1e9)
+        packed, framed = self._encode(t, type_hash, (seq, stamp_ns, now), payload)
+        size = len(framed or packed)
         with self._lock:
             if self._queued >= QUEUE_EVENTS or self._queued_bytes + size > QUEUE_BYTES:
                 self.dropped += 1
                 return True
-            type_hash = payload._type_hash
-            if size >= LARGE_EVENT:  # alone, not copied until its frame is put together
+            if framed:  # alone, as it is
                 if not t.pending:
                     self._dirty.append(t)
-                t.pending.append((type_hash, _Lone((packed, data))))
+                t.pending.append((type_hash, _Framed((framed,))))
                 t.last, t.last_hash = [], ""
             elif type_hash == t.last_hash and t.pending:
-                t.last.append(packed + data)
+                t.last.append(packed)
             else:
                 if not t.pending:
                     self._dirty.append(t)
-                t.last, t.last_hash = [packed + data], type_hash
+                t.last, t.last_hash = [packed], type_hash
                 t.pending.append((type_hash, t.last))
             self._queued += 1
             self._queued_bytes += size
@@ -347,6 +360,35 @@ class StructuredPushSupplier:
             self._flush_pending = True
         self.reactor.call_soon(self._flush)
         return True
+
+    def _encode(
+        self, t: _Topic, type_hash: str, head: tuple[int, int, int], payload: Any
+    ) -> tuple[bytes, bytes]:
+        """(event, b"") for a small event, to be batched; (b"", its whole frame) for a large
+        one. Once a type's events are large, the next is encoded into its frame directly (its
+        payload copied once); the payload length is filled in after."""
+        if t.large:
+            prefix = self._batch_head(type_hash, 1) + _EVENT.pack(*head, 0)
+            buf = encode_after(prefix, payload)
+            n = buf.size - len(prefix)
+            buf.overwrite(_LENGTH_AT, _U32.pack(n))
+            frame = buf.value()
+            if n + _EVENT_SIZE >= LARGE_EVENT:
+                return b"", frame
+            t.large = False
+            return frame[_BATCH.size :], b""
+        data = payload.serialize()
+        packed = _EVENT.pack(*head, len(data))
+        if len(packed) + len(data) < LARGE_EVENT:
+            return packed + data, b""
+        t.large = True
+        return b"", b"".join((self._batch_head(type_hash, 1), packed, data))
+
+    def _batch_head(self, type_hash: str, count: int) -> bytes:
+        raw = self._raw_hashes.get(type_hash)
+        if raw is None:
+            raw = self._raw_hashes[type_hash] = bytes.fromhex(type_hash)
+        return _BATCH.pack(EVENT_VERSION, 0, count, self.supplier_id, raw)
 
     def _flush(self) -> None:
         with self._lock:
@@ -359,8 +401,8 @@ class StructuredPushSupplier:
             self._flush_pending = False
         for frame, runs in queues:
             for type_hash, events in runs:
-                if type(events) is _Lone:
-                    self._send(frame, type_hash, events, 1)
+                if type(events) is _Framed:
+                    self._send_body(frame, events[0], 1)
                     continue
                 if len(events) <= MAX_BATCH_EVENTS and sum(map(len, events)) <= MAX_BATCH_BYTES:
                     self._send(frame, type_hash, events)
@@ -377,13 +419,12 @@ class StructuredPushSupplier:
                     size += len(packed)
                 self._send(frame, type_hash, batch)
 
-    def _send(self, frame: bytes, type_hash: str, packed: list[bytes], count: int = 0) -> None:
-        """One frame of `count` events (default: one per item of `packed`)."""
-        count = count or len(packed)
-        raw = self._raw_hashes.get(type_hash)
-        if raw is None:
-            raw = self._raw_hashes[type_hash] = bytes.fromhex(type_hash)
-        body = b"".join([_BATCH.pack(EVENT_VERSION, 0, count, self.supplier_id, raw), *packed])
+    def _send(self, frame: bytes, type_hash: str, packed: list[bytes]) -> None:
+        """One frame of the events `packed`."""
+        body = b"".join([self._batch_head(type_hash, len(packed)), *packed])
+        self._send_body(frame, body, len(packed))
+
+    def _send_body(self, frame: bytes, body: bytes, count: int) -> None:
         if self._send_frame(frame, body):
             self.sent += count
         else:  # at the high-water mark: dropped, visible as a gap

@@ -278,11 +278,15 @@ class Primitives(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Primitives(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Primitives", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Primitives:
@@ -434,11 +438,15 @@ class Enums(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Enums(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Enums", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Enums:
@@ -515,11 +523,15 @@ class Strings(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Strings(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Strings", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Strings:
@@ -600,11 +612,15 @@ class Mixed(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Mixed(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Mixed", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Mixed:
@@ -667,11 +683,15 @@ class Point3(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Point3(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Point3", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Point3:
@@ -799,11 +819,15 @@ class Sequences(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Sequences(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Sequences", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Sequences:
@@ -1424,11 +1448,15 @@ class Arrays(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Arrays(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Arrays", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Arrays:
@@ -1658,11 +1686,15 @@ class Point3D(_m_CodecTest_base_idl.Point):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Point3D(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Point3D", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Point3D:
@@ -1716,11 +1748,15 @@ class Bytes2(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Bytes2(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Bytes2", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Bytes2:
@@ -1773,11 +1809,15 @@ class Shorts3(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Shorts3(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Shorts3", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Shorts3:
@@ -1865,11 +1905,15 @@ class FlatSeqs(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_FlatSeqs(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::FlatSeqs", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> FlatSeqs:
@@ -2025,11 +2069,15 @@ class Line(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Line(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Line", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Line:
@@ -2133,11 +2181,15 @@ class Deep(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Deep(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Deep", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Deep:
@@ -2214,11 +2266,15 @@ class Base3(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Base3(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Base3", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Base3:
@@ -2273,11 +2329,15 @@ class Derived(Base3):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Derived(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Derived", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Derived:
@@ -2347,11 +2407,15 @@ class Derived2(Derived):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Derived2(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Derived2", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Derived2:
@@ -2438,11 +2502,15 @@ class Empty(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Empty(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Empty", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Empty:
@@ -2492,11 +2560,15 @@ class HasEmpty(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_HasEmpty(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::HasEmpty", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> HasEmpty:
@@ -2581,11 +2653,15 @@ class EmptyRows(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_EmptyRows(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::EmptyRows", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> EmptyRows:
@@ -2668,11 +2744,15 @@ class Failure(_exc.UserException, _cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Failure(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Failure", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Failure:
@@ -2751,11 +2831,15 @@ class Nothing(_exc.UserException, _cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Nothing(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Nothing", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Nothing:
@@ -2885,11 +2969,15 @@ class Typedefs(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Typedefs(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Typedefs", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Typedefs:
@@ -3074,11 +3162,15 @@ class Node(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Node(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Node", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Node:
@@ -3189,11 +3281,15 @@ class Expr(_cdr.IdlUnion):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Expr(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Expr", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Expr:
@@ -3286,11 +3382,15 @@ class Holder_Inner(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Holder_Inner(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Holder::Inner", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Holder_Inner:
@@ -3405,11 +3505,15 @@ class Holder_Choice(_cdr.IdlUnion):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Holder_Choice(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Holder::Choice", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Holder_Choice:
@@ -3492,11 +3596,15 @@ class Holder_Oops(_exc.UserException, _cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Holder_Oops(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Holder::Oops", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Holder_Oops:
@@ -3583,11 +3691,15 @@ class Outer_Nested(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Outer_Nested(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Outer::Nested", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Outer_Nested:
@@ -3701,11 +3813,15 @@ class Outer(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Outer(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Outer", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Outer:
@@ -3834,11 +3950,15 @@ class Keywords(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Keywords(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Keywords", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Keywords:
@@ -4069,11 +4189,15 @@ class KeywordUnion(_cdr.IdlUnion):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_KeywordUnion(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::KeywordUnion", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> KeywordUnion:
@@ -4221,11 +4345,15 @@ class Numbers(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Numbers(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Numbers", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Numbers:
@@ -4540,11 +4668,15 @@ class NumberTypedefs(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_NumberTypedefs(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::NumberTypedefs", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> NumberTypedefs:
@@ -4732,11 +4864,15 @@ class BoolDouble(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_BoolDouble(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::BoolDouble", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> BoolDouble:
@@ -4797,11 +4933,15 @@ class OctetLongLong(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_OctetLongLong(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::OctetLongLong", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> OctetLongLong:
@@ -4862,11 +5002,15 @@ class EndsInChar(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_EndsInChar(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::EndsInChar", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> EndsInChar:
@@ -4925,11 +5069,15 @@ class SeqEndsInChar(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_SeqEndsInChar(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::SeqEndsInChar", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> SeqEndsInChar:
@@ -5025,11 +5173,15 @@ class EmptySeqs(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_EmptySeqs(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::EmptySeqs", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> EmptySeqs:
@@ -5234,11 +5386,15 @@ class Traps(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Traps(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Traps", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Traps:

@@ -157,11 +157,15 @@ class ByEnum(_cdr.IdlUnion):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ByEnum(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByEnum", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByEnum:
@@ -282,11 +286,15 @@ class ByEnumDefault(_cdr.IdlUnion):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ByEnumDefault(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByEnumDefault", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByEnumDefault:
@@ -408,11 +416,15 @@ class ByEnumPartial(_cdr.IdlUnion):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ByEnumPartial(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByEnumPartial", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByEnumPartial:
@@ -542,11 +554,15 @@ class ByChar(_cdr.IdlUnion):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ByChar(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByChar", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByChar:
@@ -682,11 +698,15 @@ class ByCharNul(_cdr.IdlUnion):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ByCharNul(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByCharNul", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByCharNul:
@@ -811,11 +831,15 @@ class ByBool(_cdr.IdlUnion):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ByBool(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByBool", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByBool:
@@ -927,11 +951,15 @@ class ByBoolDefault(_cdr.IdlUnion):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ByBoolDefault(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByBoolDefault", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByBoolDefault:
@@ -1030,11 +1058,15 @@ class ByBoolTrue(_cdr.IdlUnion):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ByBoolTrue(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByBoolTrue", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByBoolTrue:
@@ -1154,11 +1186,15 @@ class ByShort(_cdr.IdlUnion):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ByShort(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByShort", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByShort:
@@ -1296,11 +1332,15 @@ class ByUShort(_cdr.IdlUnion):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ByUShort(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByUShort", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByUShort:
@@ -1438,11 +1478,15 @@ class ByLong(_cdr.IdlUnion):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ByLong(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByLong", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByLong:
@@ -1574,11 +1618,15 @@ class ByULong(_cdr.IdlUnion):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ByULong(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByULong", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByULong:
@@ -1706,11 +1754,15 @@ class ByLongLong(_cdr.IdlUnion):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ByLongLong(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByLongLong", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByLongLong:
@@ -1852,11 +1904,15 @@ class ByULongLong(_cdr.IdlUnion):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ByULongLong(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByULongLong", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByULongLong:
@@ -2001,11 +2057,15 @@ class ByOctet(_cdr.IdlUnion):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ByOctet(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByOctet", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByOctet:
@@ -2147,11 +2207,15 @@ class ByInt8(_cdr.IdlUnion):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ByInt8(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByInt8", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByInt8:
@@ -2287,11 +2351,15 @@ class ByUInt8(_cdr.IdlUnion):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ByUInt8(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByUInt8", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByUInt8:
@@ -2441,11 +2509,15 @@ class ByTypedef(_cdr.IdlUnion):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ByTypedef(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByTypedef", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByTypedef:
@@ -2585,11 +2657,15 @@ class ByTypedefEnum(_cdr.IdlUnion):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ByTypedefEnum(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByTypedefEnum", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByTypedefEnum:
@@ -3028,11 +3104,15 @@ class Branches(_cdr.IdlUnion):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Branches(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::Branches", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Branches:
@@ -3501,11 +3581,15 @@ class Holder(_cdr.IdlType):
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Holder(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::Holder", _x) from None
-        return _buf.value()
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Holder:
