@@ -130,9 +130,9 @@ class TypeHints:
                 return Default(factory="list")
             case "array":
                 return Default(factory=f"lambda: {self._array_value(shape, m)}")
-            case "object":
+            case "object":  # a factory, not a call in the class body (ruff's RUF009)
                 m.use("cdr")
-                return Default("_cdr.ObjectRef()")
+                return Default(factory="_cdr.ObjectRef")
         raise AssertionError(shape.kind)  # pragma: no cover
 
     def _array_value(self, shape: Shape, m: ModuleContext) -> str:
@@ -143,7 +143,10 @@ class TypeHints:
             return self._zeros(shape, m)
         if shape.row.kind == "array":
             return f"[{self._array_value(shape.row, m)} for _ in range({n})]"
-        if elem.kind in ("prim", "string", "octets", "enum", "object"):
+        if elem.kind == "object":
+            m.use("cdr")
+            return f"[_cdr.ObjectRef()] * {n}"
+        if elem.kind in ("prim", "string", "octets", "enum"):
             return f"[{self.default(elem, m).value}] * {n}"
         if elem.kind == "seq":
             fresh = self._zeros(elem, m) if elem.numbers is not None else "[]"
