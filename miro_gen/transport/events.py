@@ -37,6 +37,7 @@ import zmq
 from miro_gen import clock
 from miro_gen.log import logger
 from miro_gen.runtime.cdr import encode_after, type_for_hash
+from miro_gen.transport.local import bind_twin, nearest
 from miro_gen.transport.reactor import Reactor
 
 _log = logger("MIRO")
@@ -129,11 +130,12 @@ class EventChannel:
 
     def endpoints(self, context: zmq.Context[Any]) -> tuple[str, str]:
         """(supplier, consumer) endpoints for sockets of `context`: in the process that hosts
-        the channel, in-process ones (ZeroMQ hands frames over without copying them)."""
+        the channel, in-process ones (ZeroMQ hands frames over without copying them); on its
+        host, its ipc:// twins (miro_gen.transport.local); elsewhere the advertised ones."""
         host = self._host
         if host is not None and host.context is context:
             return host.local_endpoints
-        return self.supplier_endpoint, self.consumer_endpoint
+        return nearest(self.supplier_endpoint), nearest(self.consumer_endpoint)
 
 
 class ChannelHost:
@@ -141,7 +143,8 @@ class ChannelHost:
     in the process that creates the channel, or in `miro naming --channel`.
 
     Besides its TCP endpoints it binds in-process ones, for the suppliers and consumers of its
-    own process (ZeroMQ hands their frames over without copying them)."""
+    own process (ZeroMQ hands their frames over without copying them), and their ipc://
+    twins, for those of other processes on its host."""
 
     def __init__(self, context: zmq.Context[Any], bind_host: str, advertise: str) -> None:
         self.context = context
@@ -156,6 +159,8 @@ class ChannelHost:
         port_out = self.xpub.bind_to_random_port(f"tcp://{bind_host}")
         self.supplier_endpoint = f"tcp://{advertise}:{port_in}"
         self.consumer_endpoint = f"tcp://{advertise}:{port_out}"
+        bind_twin(self.xsub, self.supplier_endpoint)
+        bind_twin(self.xpub, self.consumer_endpoint)
         name = f"inproc://miro-channel-{os.getpid()}-{id(self)}"
         self.local_endpoints = (f"{name}-suppliers", f"{name}-consumers")
         self.xsub.bind(self.local_endpoints[0])
