@@ -6,29 +6,14 @@ from __future__ import annotations
 
 import time
 from array import array
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 
 import Miro
-import pytest
 import zmq
-from loopback import Recorder, RunningServer, eventually
+from loopback import Recorder, eventually
 
 from miro_gen import EventChannelFactory, Server, StructuredPushSupplier
 from miro_gen.transport.local import nearest
-
-
-@pytest.fixture
-def servers(naming: str) -> Iterator[Callable[[str], Server]]:
-    started: list[RunningServer] = []
-
-    def make(context: str) -> Server:
-        r = RunningServer(naming, context)
-        started.append(r)
-        return r.server
-
-    yield make
-    for r in reversed(started):
-        r.stop()
 
 
 def cloud(n: int, floats: int) -> Miro.Range3dScanEventIDL:
