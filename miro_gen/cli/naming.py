@@ -78,7 +78,7 @@ def naming_main(argv: Sequence[str]) -> int:
     channels = [_host_channel(service, name) for name in ns.channel]
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: reactor.stop())
-    bound = service.adapter.socket.getsockopt_string(zmq.LAST_ENDPOINT)
+    bound = service.adapter.bound
     every = "://0.0.0.0:" in bound
     note = " (every interface: other hosts use this machine's address)" if every else ""
     print(f"naming service at {bound}{note}", flush=True)
@@ -94,7 +94,7 @@ def naming_main(argv: Sequence[str]) -> int:
 
 def _host_channel(service: NamingService, name: str) -> ChannelHost:
     """Host the event channel `name` in this process and bind it, lease-free, in `service`."""
-    bound = service.adapter.socket.getsockopt_string(zmq.LAST_ENDPOINT)
+    bound = service.adapter.bound
     bind_host = bound.split("://", 1)[1].rsplit(":", 1)[0]
     advertise = service.endpoint.split("://", 1)[1].rsplit(":", 1)[0]
     host = ChannelHost(service.adapter.reactor.context, bind_host, advertise)
