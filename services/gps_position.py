@@ -12,13 +12,16 @@ needs no mutex (the manual's C++ version needed one).
 
 from __future__ import annotations
 
-import argparse
 import math
 import sys
 import time
 from pathlib import Path
 from typing import Any
 
+from miro_gen.lifecycle import defer_signals, run_main
+
+if __name__ == "__main__":
+    defer_signals()  # first: a Ctrl-C while it starts ends it quietly (status 130)
 if __package__ in (None, ""):  # run as a script from a checkout: the generated code beside it
     sys.path[:0] = [str(Path(__file__).resolve().parents[1] / "generated")]
 
@@ -33,7 +36,7 @@ from miro_gen import (
     SystemException,
 )
 from miro_gen.transport.events import EventChannel
-from miro_gen.transport.options import UsageError
+from miro_gen.transport.options import service_parser
 
 EARTH_RADIUS = 6_371_000.0  # metres
 STALE = 2.0  # seconds after which a fix is too old to publish
@@ -85,12 +88,8 @@ class GpsToPosition(StructuredPushConsumer):
 
 
 def main(argv: list[str] | None = None) -> int:
-    try:
-        server = Server(sys.argv if argv is None else argv)
-    except UsageError as e:
-        print(f"gps_position: {e}", file=sys.stderr)
-        return 2
-    p = argparse.ArgumentParser(prog="gps_position", description=__doc__.split("\n\n")[0])
+    server = Server(sys.argv if argv is None else argv)  # takes the common options out
+    p = service_parser("gps_position", __doc__.split("\n\n")[0])
     p.add_argument("--rate", type=float, default=10.0, help="positions per second (default 10)")
     p.add_argument("--domain", default="*", help="the GPS's naming context (default: any)")
     p.add_argument("--channel", default="EventChannel", help="event channel (default EventChannel)")
@@ -112,4 +111,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run_main(main, "gps_position")

@@ -23,6 +23,7 @@ from miro_gen.exceptions import (
     NO_IMPLEMENT,
     OBJECT_NOT_EXIST,
     SYSTEM_EXCEPTIONS,
+    TRANSIENT,
     UNKNOWN,
     CompletionStatus,
     SystemException,
@@ -122,10 +123,14 @@ def raise_user_exception(reply: Reply, declared: tuple[type[UserException], ...]
 # ---- stubs --------------------------------------------------------------------------------------
 
 
-class Stub:
-    """Base of generated client proxies: holds the object reference and the invoker."""
+Rebind = Callable[[], ObjectRef]  # looks the object up again (in the naming service)
 
-    __slots__ = ("_invoker", "_ref", "_timeout")
+
+class Stub:
+    """Base of generated client proxies: holds the object reference and the invoker, and for a
+    stub found by name, how to look that name up again (`_set_rebind`)."""
+
+    __slots__ = ("_invoker", "_rebind", "_ref", "_timeout")
 
     _repo_id: ClassVar[str] = "IDL:omg.org/CORBA/Object:1.0"
 
@@ -133,12 +138,60 @@ class Stub:
         self._ref = ref
         self._invoker = invoker
         self._timeout = DEFAULT_TIMEOUT if timeout is None else timeout
+        self._rebind: Rebind | None = None
+
+    def _set_rebind(self, rebind: Rebind | None) -> None:
+        """Follow the object when its server moves (`rebind` looks it up again), or not (None).
+
+        A call that fails before its request was delivered (TRANSIENT or OBJECT_NOT_EXIST,
+        completed NO: the server's old endpoint is gone, or it restarted and the object's key
+        is new) looks the object up again and, if it is elsewhere now, is sent once more.
+        Never after delivery (COMM_FAILURE, TIMEOUT): at most once stays at most once.
+        `Client.resolve_name` sets this for the stubs it returns."""
+        self._rebind = rebind
+
+    def _exchange(self, operation: str, body: bytes, oneway: bool = False) -> Reply | None:
+        """Invoke; once more at the object's new address if it moved before delivery."""
+        try:
+            reply = self._invoker.invoke(
+                self._ref, operation, body, oneway=oneway, timeout=self._timeout
+            )
+        except (TRANSIENT, OBJECT_NOT_EXIST) as exc:
+            if self._rebind is None or exc.completed != CompletionStatus.NO or not self._moved():
+                raise
+            return self._invoker.invoke(
+                self._ref, operation, body, oneway=oneway, timeout=self._timeout
+            )
+        if (
+            reply is not None
+            and reply.status == ReplyStatus.SYSTEM_EXCEPTION
+            and reply.repo_id in _UNDELIVERED
+            and self._rebind is not None
+            and _not_completed(reply)
+            and self._moved()
+        ):
+            return self._invoker.invoke(
+                self._ref, operation, body, oneway=oneway, timeout=self._timeout
+            )
+        return reply
+
+    def _moved(self) -> bool:
+        """Look the object up again; whether its reference changed (then it is used)."""
+        assert self._rebind is not None
+        try:
+            ref = self._rebind()
+        except Exception:  # not bound (yet), naming unreachable: the first failure stands
+            return False
+        if ref == self._ref:
+            return False
+        self._ref = ref
+        return True
 
     def _call(
         self, operation: str, body: bytes, declared: tuple[type[UserException], ...] = ()
     ) -> bytes:
         """Invoke and return the reply body; raise what the server raised."""
-        reply = self._invoker.invoke(self._ref, operation, body, timeout=self._timeout)
+        reply = self._exchange(operation, body)
         if reply is None:
             raise MARSHAL(f"no reply to {operation}", completed=CompletionStatus.MAYBE)
         if reply.status == ReplyStatus.OK:
@@ -150,12 +203,14 @@ class Stub:
 
     def _send(self, operation: str, body: bytes) -> None:
         """Invoke a oneway operation: no reply is awaited."""
-        self._invoker.invoke(self._ref, operation, body, oneway=True, timeout=self._timeout)
+        self._exchange(operation, body, oneway=True)
 
     def _narrow(self, cls: type[StubT]) -> StubT:
         """This reference as a stub of `cls` (e.g. an `Object` received, as the interface it
         is known to be). Not checked here: a wrong guess fails with BAD_OPERATION on use."""
-        return cls(self._ref, self._invoker, self._timeout)
+        stub = cls(self._ref, self._invoker, self._timeout)
+        stub._rebind = self._rebind
+        return stub
 
     def __repr__(self) -> str:
         return f"<{type(self).__name__} stub for {self._ref.endpoint or '?'} key={self._ref.key!r}>"
@@ -165,6 +220,18 @@ class Stub:
 
     def __hash__(self) -> int:
         return hash(self._ref)
+
+
+_UNDELIVERED = frozenset((TRANSIENT._repo_id, OBJECT_NOT_EXIST._repo_id))
+
+
+def _not_completed(reply: Reply) -> bool:
+    """Whether a system exception reply says the operation did not run (completed NO)."""
+    try:
+        e = header_endianness(reply.body)
+        return bool(_SYSTEM_BODY[e].unpack_from(reply.body, 4)[1] == CompletionStatus.NO)
+    except Exception:
+        return False
 
 
 def make_stub(cls: type[Any], ref: ObjectRef, invoker: Invoker) -> Any:
