@@ -34,7 +34,6 @@ from __future__ import annotations
 import os
 import signal
 import sys
-import traceback
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from types import FrameType
@@ -157,12 +156,11 @@ def run_main(main: Callable[[], int | None], prog: str) -> NoReturn:
         message, code = known
         print(f"{prog}: {message}", file=sys.stderr)
         if os.environ.get("MIRO_DEBUG"):
+            import traceback
+
             traceback.print_exc()
     sys.stdout.flush()
     sys.exit(code or 0)
-
-
-NAMING_HINT = "is `miro naming` running? see --naming / MIRO_NAMING"
 
 
 def describe(exc: BaseException) -> tuple[str, int] | None:

@@ -33,7 +33,6 @@ from miro_gen import (
     StructuredEvent,
     StructuredPushConsumer,
     StructuredPushSupplier,
-    SystemException,
 )
 from miro_gen.transport.events import EventChannel
 from miro_gen.transport.options import service_parser
@@ -96,11 +95,7 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(server.argv[1:])
     if args.rate <= 0:
         p.error("--rate must be more than 0")
-    try:
-        channel = EventChannelFactory(server).find_or_create_channel(args.channel)
-    except SystemException as e:
-        print(f"gps_position: {e}", file=sys.stderr)
-        return 1
+    channel = EventChannelFactory(server).find_or_create_channel(args.channel)
     filter_ = GpsToPosition(channel, StructuredPushSupplier(channel))
     filter_.set_subscriptions([(args.domain, "Gps")])
     server.reactor().schedule_timer(1 / args.rate, 1 / args.rate, filter_)

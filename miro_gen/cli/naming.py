@@ -18,7 +18,7 @@ from miro_gen.exceptions import SystemException
 from miro_gen.transport.addresses import server_addresses
 from miro_gen.transport.events import CHANNEL_REPO_ID, ChannelHost
 from miro_gen.transport.invoker import ZmqInvoker
-from miro_gen.transport.naming import NamingService, check_name
+from miro_gen.transport.naming import NamingService, check_name, naming_errors
 from miro_gen.transport.options import DEFAULT_NAMING, UsageError, naming_endpoint
 from miro_gen.transport.reactor import Reactor
 
@@ -121,9 +121,10 @@ def nslist_main(argv: Sequence[str]) -> int:
         p.error(str(e))
     ns = p.parse_args(client.argv[1:])
     try:
-        entries = client.naming.registry._list(ns.prefix)
+        with naming_errors(client.options.naming, "list names"):
+            entries = client.naming.registry._list(ns.prefix)
     except SystemException as e:
-        print(f"miro nslist: {client.options.naming}: {e}", file=sys.stderr)
+        print(f"miro nslist: {e.message}", file=sys.stderr)
         return 1
     finally:
         client.close()

@@ -5,8 +5,6 @@ from __future__ import annotations
 
 import importlib
 import importlib.util
-import keyword
-import re
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -15,10 +13,8 @@ import jinja2
 
 from miro_gen.codegen.render import template_dir
 from miro_gen.scaffold.interface import Interface, InterfaceError, load_interface
+from miro_gen.scaffold.names import name_problem
 from miro_gen.scaffold.patterns import PATTERNS, Parameter
-
-NAME = re.compile(r"^[a-z][a-z0-9]*(_[a-z0-9]+)*$")
-MAX_NAME = 20  # characters: the files made from the templates then fit in 100 columns
 
 
 class ScaffoldError(ValueError):
@@ -38,11 +34,9 @@ def camel_case(name: str) -> str:
 
 def check_name(name: str, target: Path) -> str:
     """The service's class name, after checking that `name` can be one and is free."""
-    if not NAME.match(name) or keyword.iskeyword(name) or len(name) > MAX_NAME:
-        raise ScaffoldError(
-            f"{name!r} is not a service name: use lower-case letters, digits and single "
-            f"underscores, starting with a letter, at most {MAX_NAME} characters (gps_logger)"
-        )
+    problem = name_problem(name)
+    if problem is not None:
+        raise ScaffoldError(problem)
     if target.exists():
         raise ScaffoldError(f"{target} exists already: nothing was written")
     camel = camel_case(name)

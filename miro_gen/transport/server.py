@@ -23,20 +23,20 @@ import sys
 import threading
 import time
 import uuid
-from collections.abc import Callable, Iterator, MutableSequence, Sequence
+from collections.abc import Callable, MutableSequence, Sequence
 from typing import Any, TypeVar
 
 import MiroNaming
 import zmq
 
 from miro_gen import lifecycle, log
-from miro_gen.exceptions import COMM_FAILURE, TIMEOUT, TRANSIENT, SystemException
+from miro_gen.exceptions import TRANSIENT, SystemException
 from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.runtime.rpc import Servant, Stub
 from miro_gen.transport.adapter import ObjectAdapter
 from miro_gen.transport.addresses import server_addresses
 from miro_gen.transport.invoker import ZmqInvoker
-from miro_gen.transport.naming import DEFAULT_LEASE, NamingClient
+from miro_gen.transport.naming import DEFAULT_LEASE, NamingClient, naming_errors
 from miro_gen.transport.options import CommonOptions, parse_common_options
 from miro_gen.transport.reactor import Reactor
 
@@ -91,8 +91,7 @@ class Client:
         said = False
         while True:
             try:
-                with naming_errors(self.options.naming, f"resolve {name}"):
-                    return self.naming.resolve(name)
+                return self.naming.resolve(name)
             except (MiroNaming.NotFound, TRANSIENT) as e:
                 left = deadline - time.monotonic()
                 if left <= 0:
@@ -249,17 +248,3 @@ class Server(Client):
         if entries:
             _log.notice("bound %d names again in a restarted naming service", len(entries))
 
-
-@contextlib.contextmanager
-def naming_errors(endpoint: str, what: str) -> Iterator[None]:
-    """Failures to reach the naming service, said as such, with what to do about them."""
-    try:
-        yield
-    except (TRANSIENT, COMM_FAILURE, TIMEOUT) as e:
-        reason = e.message.rsplit(": ", 1)[-1] if ": " in e.message else e.message
-        raise TRANSIENT(
-            f"cannot {what}: the naming service at {endpoint} cannot be reached ({reason}): "
-            f"{lifecycle.NAMING_HINT}",
-            e.minor,
-            e.completed,
-        ) from None
