@@ -27,18 +27,16 @@ if __package__ in (None, ""):  # run as a script from a checkout: the generated 
 
 import Miro  # noqa: F401 - the project's event types, for decoding
 import MiroNaming
-
 from miro_gen import Server, StructuredEvent, SystemException
 from miro_gen.transport.options import service_parser
 
 try:
-    from PySide6.QtCore import QTimer, Signal
-    from PySide6.QtWidgets import QLabel, QMainWindow, QSplitter, QVBoxLayout, QWidget
-
     from miro_gen.qt import QtEventBridge, Subscription
     from miro_gen.qt.app import application, no_display
     from miro_gen.qt.fields import FieldError, get_field, is_number, leaves
     from miro_gen.qt.widgets import FieldsView, PlotWidget
+    from PySide6.QtCore import QTimer, Signal
+    from PySide6.QtWidgets import QLabel, QMainWindow, QSplitter, QVBoxLayout, QWidget
 except ImportError as e:  # PySide6 missing (or a system library Qt needs)
     hint = "" if "miro-gen[qt]" in str(e) else ": pip install miro-gen[qt]"
     print(f"event_viewer: {e}{hint}", file=sys.stderr)

@@ -21,7 +21,6 @@ if __package__ in (None, ""):  # run as a script from a checkout: the generated 
 
 import Miro
 import Miro__POA
-
 from miro_gen import Server, log, nonblocking
 from miro_gen.transport.options import service_parser
 

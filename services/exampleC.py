@@ -18,7 +18,6 @@ if __package__ in (None, ""):  # run as a script from a checkout: the generated 
     sys.path[:0] = [str(Path(__file__).resolve().parents[1] / "generated")]
 
 import Miro
-
 from miro_gen import EventChannelFactory, Server, StructuredPushSupplier
 from miro_gen.transport.options import service_parser
 

@@ -23,16 +23,14 @@ if __package__ in (None, ""):  # run as a script from a checkout: the generated 
 
 import Miro  # noqa: F401 - the project's types and stubs, for decoding and calling
 import MiroNaming
-
 from miro_gen import Server, SystemException
 from miro_gen.transport.options import service_parser
 
 try:
-    from PySide6.QtCore import QTimer
-
     from miro_gen.qt import QtEventBridge
     from miro_gen.qt.app import application, no_display
     from miro_gen.qt.designer import FormBinding, UiError, load_ui
+    from PySide6.QtCore import QTimer
 except ImportError as e:  # PySide6 missing (or a system library Qt needs)
     hint = "" if "miro-gen[qt]" in str(e) else ": pip install miro-gen[qt]"
     print(f"qt_panel: {e}{hint}", file=sys.stderr)

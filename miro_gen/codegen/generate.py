@@ -101,6 +101,8 @@ def generated_files(modules: list[PyModule], outdir: Path) -> dict[str, str]:
             sorted(siblings | children),
             sorted((h, name) for h, name in hashes.items() if name in exports),
         )
+        if "." not in package:  # PEP 561: mypy checks against it where it is installed
+            files[f"{folder}/py.typed"] = ""
     return files
 
 

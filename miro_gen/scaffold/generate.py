@@ -12,7 +12,7 @@ from pathlib import Path
 import jinja2
 
 from miro_gen.codegen.render import template_dir
-from miro_gen.scaffold.interface import Interface, InterfaceError, load_interface
+from miro_gen.scaffold.interface import WIDTH, Interface, InterfaceError, load_interface
 from miro_gen.scaffold.names import name_problem
 from miro_gen.scaffold.patterns import PATTERNS, Parameter
 
@@ -68,7 +68,7 @@ def from_import(module: str, names: list[str]) -> str:
 
     ordered = sorted(set(names), key=key)
     line = f"from {module} import {', '.join(ordered)}"
-    if len(line) <= 100:
+    if len(line) <= WIDTH:
         return line
     return f"from {module} import (\n" + "".join(f"    {n},\n" for n in ordered) + ")"
 
@@ -153,8 +153,6 @@ def scaffold(
         "default_server": fill["server"],
         "default_channel": "EventChannel",
         "rate": f"{rate:g}",
-        "rate_low": int(rate * 0.7),
-        "rate_high": int(rate * 1.3) + 1,
     }
     env = _environment()
     outputs = {"__init__.py": "common/__init__.py.j2", "__main__.py": f"{pattern}/__main__.py.j2"}

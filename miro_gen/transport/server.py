@@ -97,7 +97,8 @@ class Client:
                 if left <= 0:
                     raise
                 if not said:
-                    _log.notice("waiting for %s: %s", name, getattr(e, "message", e))
+                    why = e.message if isinstance(e, TRANSIENT) else f"{e.name} is not bound yet"
+                    _log.notice("waiting for %s: %s", name, why)
                     said = True
                 time.sleep(min(step, left))
                 step = min(step * 2, WAIT_STEP)

@@ -35,8 +35,6 @@ if __package__ in (None, ""):  # run as a script: the generated code and this fo
 import Miro
 import Miro__POA
 from Miro.GpsParameters import GpsParameters
-from nmea import NmeaParser
-
 from miro_gen import (
     EventChannelFactory,
     Implementation,
@@ -55,6 +53,7 @@ from miro_gen.devices import (
 )
 from miro_gen.params import ParamsError, read_parameters
 from miro_gen.transport.options import UsageError
+from nmea import NmeaParser
 
 _log = log.logger("GPS")
 
