@@ -258,8 +258,9 @@ F = TypeVar("F", bound=Callable[..., Any])
 def nonblocking(method: F) -> F:
     """Mark a servant method that returns at once: it never waits for data, never sleeps and
     never calls another object. A server runs such methods on the thread that receives the
-    request instead of its worker pool, which saves two thread hand-offs per call. A marked
-    method that blocks stops its whole process from serving meanwhile: mark only what is quick."""
+    request and never hands the socket to another thread meanwhile (which it does for other
+    methods that take long). A marked method that blocks stops its process from serving calls
+    meanwhile: mark only what is quick."""
     method._miro_nonblocking = True  # type: ignore[attr-defined]
     return method
 

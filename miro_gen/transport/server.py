@@ -248,4 +248,3 @@ class Server(Client):
             self._registry_for_renewal.rebind(entry, self.owner, int(self.lease * 1000))
         if entries:
             _log.notice("bound %d names again in a restarted naming service", len(entries))
-
