@@ -49,6 +49,9 @@ class ReplyStatus(enum.IntEnum):
     SYSTEM_EXCEPTION = 2
 
 
+_OK = ReplyStatus.OK
+
+
 class Reply(NamedTuple):
     """What a call returns: a status, a CDR body, and for exceptions their repository id."""
 
@@ -150,30 +153,56 @@ class Stub:
         `Client.resolve_name` sets this for the stubs it returns."""
         self._rebind = rebind
 
-    def _exchange(self, operation: str, body: bytes, oneway: bool = False) -> Reply | None:
-        """Invoke; once more at the object's new address if it moved before delivery."""
+    def _call(
+        self, operation: str, body: bytes, declared: tuple[type[UserException], ...] = ()
+    ) -> bytes:
+        """Invoke and return the reply body; raise what the server raised."""
         try:
-            reply = self._invoker.invoke(
-                self._ref, operation, body, oneway=oneway, timeout=self._timeout
-            )
+            reply = self._invoker.invoke(self._ref, operation, body, timeout=self._timeout)
         except (TRANSIENT, OBJECT_NOT_EXIST) as exc:
-            if self._rebind is None or exc.completed != CompletionStatus.NO or not self._moved():
-                raise
-            return self._invoker.invoke(
-                self._ref, operation, body, oneway=oneway, timeout=self._timeout
-            )
-        if (
-            reply is not None
-            and reply.status == ReplyStatus.SYSTEM_EXCEPTION
+            reply = self._again(exc, operation, body)
+        if reply is None:
+            raise MARSHAL(f"no reply to {operation}", completed=CompletionStatus.MAYBE)
+        if reply.status is _OK:
+            return reply.body
+        if reply.status == ReplyStatus.SYSTEM_EXCEPTION and self._undelivered(reply):
+            reply = self._invoker.invoke(self._ref, operation, body, timeout=self._timeout)
+            if reply is None:  # pragma: no cover - only oneway calls have no reply
+                raise MARSHAL(f"no reply to {operation}", completed=CompletionStatus.MAYBE)
+            if reply.status is _OK:
+                return reply.body
+        if reply.status == ReplyStatus.USER_EXCEPTION:
+            raise_user_exception(reply, declared)
+        raise_system_exception(reply)
+        raise AssertionError("unreachable")  # pragma: no cover
+
+    def _send(self, operation: str, body: bytes) -> None:
+        """Invoke a oneway operation: no reply is awaited."""
+        try:
+            self._invoker.invoke(self._ref, operation, body, oneway=True, timeout=self._timeout)
+        except (TRANSIENT, OBJECT_NOT_EXIST) as exc:
+            self._again(exc, operation, body, oneway=True)
+
+    def _again(
+        self, exc: SystemException, operation: str, body: bytes, oneway: bool = False
+    ) -> Reply | None:
+        """After `exc` (raised by the invoker): once more at the object's new address if it
+        was not delivered and the object has moved; else `exc` stands."""
+        if self._rebind is None or exc.completed != CompletionStatus.NO or not self._moved():
+            raise exc
+        return self._invoker.invoke(
+            self._ref, operation, body, oneway=oneway, timeout=self._timeout
+        )
+
+    def _undelivered(self, reply: Reply) -> bool:
+        """Whether a system exception reply says the request ran nowhere (OBJECT_NOT_EXIST or
+        TRANSIENT, completed NO) and, for a stub that follows its name, the object moved."""
+        return (
+            self._rebind is not None
             and reply.repo_id in _UNDELIVERED
-            and self._rebind is not None
             and _not_completed(reply)
             and self._moved()
-        ):
-            return self._invoker.invoke(
-                self._ref, operation, body, oneway=oneway, timeout=self._timeout
-            )
-        return reply
+        )
 
     def _moved(self) -> bool:
         """Look the object up again; whether its reference changed (then it is used)."""
@@ -186,24 +215,6 @@ class Stub:
             return False
         self._ref = ref
         return True
-
-    def _call(
-        self, operation: str, body: bytes, declared: tuple[type[UserException], ...] = ()
-    ) -> bytes:
-        """Invoke and return the reply body; raise what the server raised."""
-        reply = self._exchange(operation, body)
-        if reply is None:
-            raise MARSHAL(f"no reply to {operation}", completed=CompletionStatus.MAYBE)
-        if reply.status == ReplyStatus.OK:
-            return reply.body
-        if reply.status == ReplyStatus.USER_EXCEPTION:
-            raise_user_exception(reply, declared)
-        raise_system_exception(reply)
-        raise AssertionError("unreachable")  # pragma: no cover
-
-    def _send(self, operation: str, body: bytes) -> None:
-        """Invoke a oneway operation: no reply is awaited."""
-        self._exchange(operation, body, oneway=True)
 
     def _narrow(self, cls: type[StubT]) -> StubT:
         """This reference as a stub of `cls` (e.g. an `Object` received, as the interface it

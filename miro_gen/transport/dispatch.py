@@ -300,7 +300,7 @@ class Dispatcher:
         link = me.link if me is not None else None
         if link is None:
             link = self.socket.context.socket(zmq.DEALER)
-            link.setsockopt(zmq.LINGER, 0)
+            link.setsockopt(zmq.LINGER, 0 if me is not None else 1000)  # a one-off: delivered
             link.connect(self._inproc)
             if me is not None:
                 me.link = link

@@ -37,6 +37,7 @@ _REQUEST_PREFIX: Final = Struct("<BBBBIQ")  # the part that changes from call to
 _REPLY: Final = Struct("<BBBBIQH")
 _U16: Final = Struct("<H")
 _OK: Final = Status.OK
+_OK_REPLY: Final = bytes((VERSION, Kind.REPLY, Status.OK, 0))  # version, kind, status, reserved
 _REQUEST_KIND: Final = int(Kind.REQUEST)
 _ONEWAY_KIND: Final = int(Kind.ONEWAY)
 
@@ -70,7 +71,7 @@ def request_tail(key: bytes, operation: str) -> bytes:
 
 def request_header(tail: bytes, request_id: int, timeout_ms: int, oneway: bool = False) -> bytes:
     """A request header: `encode_request` with the tail built beforehand."""
-    kind = Kind.ONEWAY if oneway else Kind.REQUEST
+    kind = _ONEWAY_KIND if oneway else _REQUEST_KIND
     return _REQUEST_PREFIX.pack(VERSION, kind, 0, 0, timeout_ms, request_id) + tail
 
 
@@ -124,6 +125,14 @@ def reply_header(request_id: int, status: int, repo_id: str = "") -> bytes:
     if len(repo) > MAX_NAME:
         raise ValueError("repository ids are limited to 65535 bytes")
     return _REPLY.pack(VERSION, Kind.REPLY, status, 0, 0, request_id, len(repo)) + repo
+
+
+def ok_reply_id(frame: bytes) -> int:
+    """The request id of a reply that says ok and carries no repository id (the common case,
+    checked with the least work); -1 for any other frame, which `decode_reply` then reads."""
+    if len(frame) == _REPLY.size and frame[:4] == _OK_REPLY and frame[16:] == b"\0\0":
+        return int.from_bytes(frame[8:16], "little")
+    return -1
 
 
 def decode_reply(frame: bytes) -> Reply:

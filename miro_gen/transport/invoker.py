@@ -45,7 +45,7 @@ MAX_TAILS = 4096  # request header tails kept (objects x operations); then start
 
 _send, _recv, _set = _Socket.send, _Socket.recv, _Socket.set  # without pyzmq's Python wrappers
 _NOBLOCK = int(zmq.NOBLOCK)
-_SNDMORE = int(zmq.SNDMORE)
+_MORE = int(zmq.SNDMORE) | _NOBLOCK
 _RCVTIMEO = int(zmq.RCVTIMEO)
 _CONNECTED = int(zmq.EVENT_HANDSHAKE_SUCCEEDED)
 _REFUSED = int(zmq.EVENT_CONNECT_RETRIED)  # before a first connection: nobody listens there
@@ -141,31 +141,38 @@ class ZmqInvoker:
             raise TRANSIENT("the invoker is closed")
         if not endpoint:
             raise TRANSIENT("the object reference has no endpoint (nil reference?)")
-        wait = 0.0 if timeout is None or timeout <= 0 else timeout
-        now = time.monotonic()
-        deadline = now + wait if wait else float("inf")
+        wait = timeout if timeout is not None and timeout > 0 else 0.0
+        start = time.monotonic()
         try:
             conn: _Connection = self._local.conns[endpoint]
         except (AttributeError, KeyError):
             conn = self._connection(endpoint)
-        if not conn.connected and not conn.wait_connected(min(deadline, now + CONNECT_TIMEOUT)):
-            self._drop(conn)
-            why = "connection refused" if conn.refused else "no connection in time"
-            raise TRANSIENT(f"cannot reach {endpoint} for {operation}: {why}")
+        if not conn.connected:
+            self._connect(conn, operation, start + wait if wait else start + CONNECT_TIMEOUT)
         tail = self._tails.get((ref.key, operation))
         if tail is None:
             tail = self._tail(ref.key, operation)
         request_id = next(self._ids)
-        header = frames.request_header(tail, request_id, int(wait * 1000), oneway)
+        sock = conn.socket
         try:
-            _send(conn.socket, header, _SNDMORE | _NOBLOCK)
-            _send(conn.socket, body, _NOBLOCK)
+            _send(sock, frames.request_header(tail, request_id, int(wait * 1000), oneway), _MORE)
+            _send(sock, body, _NOBLOCK)
         except zmq.ZMQError:
             self._drop(conn)
             raise TRANSIENT(f"cannot send {operation} to {endpoint}") from None
         if oneway:
             return None
-        return self._await(conn, request_id, operation, deadline)
+        if wait and wait * 1000 < conn.rcvtimeo:
+            conn.set_rcvtimeo(int(wait * 1000) + 1)
+        return self._await(conn, request_id, operation, start + wait if wait else float("inf"))
+
+    def _connect(self, conn: _Connection, operation: str, deadline: float) -> None:
+        """Wait for the connection's handshake until `deadline` (or the connect timeout);
+        TRANSIENT (completed NO: nothing was sent) when it is refused or does not come."""
+        if not conn.wait_connected(min(deadline, time.monotonic() + CONNECT_TIMEOUT)):
+            self._drop(conn)
+            why = "connection refused" if conn.refused else "no connection in time"
+            raise TRANSIENT(f"cannot reach {conn.endpoint} for {operation}: {why}")
 
     def reference_for(self, servant: Servant) -> ObjectRef:
         if self.adapter is None:
@@ -187,37 +194,50 @@ class ZmqInvoker:
                     frame = _recv(sock, _NOBLOCK, False)
                     parts.append(frame.bytes)
             except zmq.Again:
-                conn.read_monitor()
-                if conn.lost:
-                    self._drop(conn)
-                    raise COMM_FAILURE(
-                        f"{operation}: lost the connection to {conn.endpoint}",
-                        completed=CompletionStatus.MAYBE,
-                    ) from None
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    self._drop(conn)
-                    raise TIMEOUT(
-                        f"{operation}: no reply from {conn.endpoint} in time",
-                        completed=CompletionStatus.MAYBE,
-                    ) from None
-                conn.set_rcvtimeo(min(CHECK_INTERVAL_MS, int(left * 1000) + 1))
+                self._check(conn, operation, deadline)
                 continue
-            if len(parts) != 2:
-                _log.warning("dropped a reply of %d frames from %s", len(parts), conn.endpoint)
-                continue
-            try:
-                head = frames.decode_reply(parts[0])
-            except frames.FrameError as e:
-                _log.warning("dropped a reply from %s: %s", conn.endpoint, e)
-                continue
-            if head.request_id != request_id:  # a late reply to an earlier call
-                continue
-            if conn.rcvtimeo != CHECK_INTERVAL_MS:
-                conn.set_rcvtimeo(CHECK_INTERVAL_MS)
-            if head.status is _OK:
-                return Reply(_OK, parts[1])
-            return Reply(ReplyStatus(head.status), parts[1], head.repo_id)
+            if len(parts) == 2 and frames.ok_reply_id(parts[0]) == request_id:
+                if conn.rcvtimeo != CHECK_INTERVAL_MS:
+                    conn.set_rcvtimeo(CHECK_INTERVAL_MS)
+                return Reply(_OK, parts[1])  # the common case
+            reply = self._other_reply(conn, parts, request_id)
+            if reply is not None:
+                if conn.rcvtimeo != CHECK_INTERVAL_MS:
+                    conn.set_rcvtimeo(CHECK_INTERVAL_MS)
+                return reply
+
+    def _check(self, conn: _Connection, operation: str, deadline: float) -> None:
+        """No reply yet: COMM_FAILURE if the connection is lost, TIMEOUT past `deadline`."""
+        conn.read_monitor()
+        if conn.lost:
+            self._drop(conn)
+            raise COMM_FAILURE(
+                f"{operation}: lost the connection to {conn.endpoint}",
+                completed=CompletionStatus.MAYBE,
+            )
+        left = deadline - time.monotonic()
+        if left <= 0:
+            self._drop(conn)
+            raise TIMEOUT(
+                f"{operation}: no reply from {conn.endpoint} in time",
+                completed=CompletionStatus.MAYBE,
+            )
+        conn.set_rcvtimeo(min(CHECK_INTERVAL_MS, int(left * 1000) + 1))
+
+    def _other_reply(self, conn: _Connection, parts: list[bytes], request_id: int) -> Reply | None:
+        """A message that is not an ok reply to `request_id`: an exception reply to it, or
+        None (a late reply to an earlier call, or a malformed one: logged and dropped)."""
+        if len(parts) != 2:
+            _log.warning("dropped a reply of %d frames from %s", len(parts), conn.endpoint)
+            return None
+        try:
+            head = frames.decode_reply(parts[0])
+        except frames.FrameError as e:
+            _log.warning("dropped a reply from %s: %s", conn.endpoint, e)
+            return None
+        if head.request_id != request_id:  # a late reply to an earlier call
+            return None
+        return Reply(ReplyStatus(head.status), parts[1], head.repo_id)
 
     def _tail(self, key: bytes, operation: str) -> bytes:
         if len(self._tails) >= MAX_TAILS:
