@@ -217,6 +217,7 @@ def test_requests_wait_for_a_free_worker_and_late_ones_are_not_run() -> None:
         impatient = Miro.Example(stub._ref, stub._invoker, timeout=0.3)
         with pytest.raises(TIMEOUT):
             impatient.setData(0.0, 0.0)  # queued behind the first
+        time.sleep(0.2)  # the server counts from a little later than the caller: be sure
         servant.release.set()
         first.join(10)
         assert stub.getData() == Miro.ExampleStructIDL(1.0, 0.0)  # the late one did not run

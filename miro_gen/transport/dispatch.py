@@ -310,7 +310,7 @@ class Dispatcher:
             _log.warning("could not hand a reply to the leader: %s", e)
         finally:
             if me is None:
-                link.close(0)
+                link.close()  # with its linger: the wake-up is still delivered
 
     @staticmethod
     def _run(task: Task) -> Frames | None:
