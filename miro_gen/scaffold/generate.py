@@ -12,6 +12,7 @@ from pathlib import Path
 import jinja2
 
 from miro_gen.codegen.render import template_dir
+from miro_gen.diagnostics import CompileError, Diagnostics
 from miro_gen.scaffold.interface import WIDTH, Interface, InterfaceError, load_interface
 from miro_gen.scaffold.names import name_problem
 from miro_gen.scaffold.patterns import PATTERNS, Parameter
@@ -86,15 +87,58 @@ def _environment() -> jinja2.Environment:
 
 
 def compile_idl(idl: Path, project: Path, include_dirs: list[str]) -> None:
-    """`miro-idl -o generated IDL` into the project, so the interface can be imported."""
-    from miro_gen.cli import idl as idl_cli
+    """Compile `idl` into `project/generated` (as `miro-idl -o generated` would), so that the
+    interface can be imported; its problems are printed, and make a ScaffoldError."""
+    from miro_gen.codegen import generate
+    from miro_gen.idl.frontend import compile_idl as front_end
 
     out = project / "generated"
-    if idl_cli.main(["-o", str(out), *(f"-I{d}" for d in include_dirs), str(idl)]) != 0:
-        raise ScaffoldError(f"{idl} does not compile (see above): nothing was written")
+    diag = Diagnostics()
+    try:
+        spec = front_end(str(idl), include_dirs, {}, diag)
+        modules = generate.build_modules([(spec, str(idl))], diag)
+        diag.check()
+    except CompileError:
+        diag.print()
+        raise ScaffoldError(f"{idl} does not compile (see above): nothing was written") from None
+    diag.print()  # warnings
+    files = generate.generated_files(modules, out)
+    _write(files, out)
     if str(out) not in sys.path:
         sys.path.insert(0, str(out))
     importlib.invalidate_caches()
+
+
+def compile_parameters(xml: Path, project: Path) -> list[Path]:
+    """Compile a service's Parameters.xml into `project/generated` (as `miro-params -o
+    generated` would)."""
+    from miro_gen.params import generate
+    from miro_gen.params.build import build_modules
+    from miro_gen.params.loader import Loader
+    from miro_gen.params.pymodel import PyParamsModule
+
+    diag = Diagnostics()
+    try:
+        loader = Loader([], diag)
+        target = loader.load(xml)
+        targets = [target] if target is not None else []
+        built = build_modules(list(loader.files.values()), targets, {}, diag)
+        modules = [m for m in built if isinstance(m, PyParamsModule)]
+        diag.check()
+    except CompileError:
+        diag.print()
+        raise ScaffoldError(f"{xml} does not compile (see above)") from None
+    out = project / "generated"
+    return _write(generate.generated_files(modules, out), out)
+
+
+def _write(files: dict[str, str], out: Path) -> list[Path]:
+    """Write what changed of `files` under `out`; the paths written."""
+    from miro_gen.codegen.generate import changed_files, write_files
+
+    changed = changed_files(files, out)
+    write_files(files, changed, out)
+    return [out / rel for rel in changed]
 
 
 def scaffold(
@@ -167,8 +211,4 @@ def scaffold(
         path = target / out
         path.write_text(text)
         written.append(path)
-    from miro_gen.cli import params as params_cli
-
-    if params_cli.main(["-o", str(project / "generated"), str(target / "Parameters.xml")]) != 0:
-        raise ScaffoldError(f"{target / 'Parameters.xml'} does not compile (see above)")
-    return written
+    return written + compile_parameters(target / "Parameters.xml", project)
