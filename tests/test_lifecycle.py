@@ -7,12 +7,11 @@ from __future__ import annotations
 import signal
 import subprocess
 import sys
-import time
 from collections.abc import Callable
 from pathlib import Path
 
 import pytest
-from loopback import free_port, run_miro, service_env
+from loopback import eventually, free_port, run_miro, service_env
 
 SERVICES = Path(__file__).resolve().parents[1] / "services"
 HINT = "is `miro naming` running? see --naming / MIRO_NAMING"
@@ -57,14 +56,6 @@ def catches_sigterm(pid: int) -> bool:
         if line.startswith("SigCgt:"):
             return bool(int(line.split()[1], 16) & (1 << (signal.SIGTERM - 1)))
     return False
-
-
-def wait_for(condition: Callable[[], bool]) -> None:
-    for _ in range(3000):
-        if condition():
-            return
-        time.sleep(0.01)
-    raise AssertionError("never happened")
 
 
 def one_line(stderr: str) -> str:
@@ -122,7 +113,7 @@ def test_ctrl_c_while_a_service_starts_ends_it_quietly(background: bool) -> None
     """From its first line on, SIGINT ends a service with status 130 and no traceback; also a
     background job of a shell script, which inherits SIGINT ignored, is not left running."""
     client = start("exampleB.py", "--naming", nobody(), "--wait", "600", ignore_sigint=background)
-    wait_for(lambda: catches_sigterm(client.pid))
+    eventually(lambda: catches_sigterm(client.pid))
     client.send_signal(signal.SIGINT)
     out, err = client.communicate(timeout=60)
     assert client.returncode == 130, err
@@ -131,7 +122,7 @@ def test_ctrl_c_while_a_service_starts_ends_it_quietly(background: bool) -> None
 
 def test_sigterm_while_a_service_waits_is_status_143() -> None:
     client = start("exampleB.py", "--naming", nobody(), "--wait", "600")
-    wait_for(lambda: catches_sigterm(client.pid))
+    eventually(lambda: catches_sigterm(client.pid))
     client.send_signal(signal.SIGTERM)
     _, err = client.communicate(timeout=60)
     assert client.returncode == 143 and err == ""
@@ -156,7 +147,7 @@ def test_a_server_interrupted_while_it_imports_binds_nothing(naming: str) -> Non
     from miro_gen import Client
 
     server = start("exampleA.py", "--naming", naming, "-MNC", "early", ignore_sigint=True)
-    wait_for(lambda: catches_sigterm(server.pid))
+    eventually(lambda: catches_sigterm(server.pid))
     server.send_signal(signal.SIGINT)
     _, err = server.communicate(timeout=60)
     assert server.returncode == 130 and err == ""

@@ -7,14 +7,14 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 
 import Miro
 import Miro__POA
 import pytest
 import zmq
-from loopback import free_port
+from loopback import eventually, free_port
 
 from miro_gen.exceptions import COMM_FAILURE, OBJECT_NOT_EXIST, TIMEOUT, TRANSIENT, CompletionStatus
 from miro_gen.runtime.cdr import ObjectRef
@@ -197,7 +197,7 @@ def test_a_servant_that_blocks_does_not_stop_the_server() -> None:
             servant.release.clear()
             blocked = threading.Thread(target=stub.setData, args=(0.0, 0.0))
             blocked.start()
-            wait_until(lambda: servant.ran == round_)  # noqa: B023 - waited for at once
+            eventually(lambda: servant.ran == round_)  # noqa: B023 - waited for at once
             for _ in range(3):
                 assert stub.getData() == Miro.ExampleStructIDL(float(round_), 0.0)
             assert blocked.is_alive()
@@ -213,7 +213,7 @@ def test_requests_wait_for_a_free_worker_and_late_ones_are_not_run() -> None:
     with in_process_server(servant, workers=1) as stub:
         first = threading.Thread(target=stub.setData, args=(0.0, 0.0))
         first.start()
-        wait_until(lambda: servant.ran == 1)
+        eventually(lambda: servant.ran == 1)
         impatient = Miro.Example(stub._ref, stub._invoker, timeout=0.3)
         with pytest.raises(TIMEOUT):
             impatient.setData(0.0, 0.0)  # queued behind the first
@@ -221,14 +221,6 @@ def test_requests_wait_for_a_free_worker_and_late_ones_are_not_run() -> None:
         servant.release.set()
         first.join(10)
         assert stub.getData() == Miro.ExampleStructIDL(1.0, 0.0)  # the late one did not run
-
-
-def wait_until(condition: Callable[[], bool]) -> None:
-    for _ in range(1000):
-        if condition():
-            return
-        time.sleep(0.01)
-    raise AssertionError("the condition did not come true")
 
 
 def test_a_nonblocking_method_of_the_server_process(server: Server, invoker: ZmqInvoker) -> None:
