@@ -106,7 +106,7 @@ class Client:
     def _lookup_again(self, name: str) -> ObjectRef:
         entry = self.naming.resolve(name)
         ref = ObjectRef(entry.repo_id, entry.endpoint, entry.key)
-        _log.notice("%s is now at %s", entry.name, entry.endpoint)
+        _log.debug("%s looked up again: %s", entry.name, entry.endpoint)
         return ref
 
     def close(self) -> None:

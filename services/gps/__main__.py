@@ -28,6 +28,10 @@ import argparse
 import sys
 from pathlib import Path
 
+from miro_gen.lifecycle import defer_signals, run_main
+
+if __name__ == "__main__":
+    defer_signals()  # first: a Ctrl-C while it starts ends it quietly (status 130)
 if __package__ in (None, ""):  # run as a script: the generated code and this folder beside it
     here = Path(__file__).resolve().parent
     sys.path[:0] = [str(here.parents[1] / "generated"), str(here)]
@@ -148,4 +152,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run_main(main, "gps")
