@@ -27,6 +27,7 @@ from typing import IO
 import zmq
 
 from miro_gen import log
+from miro_gen.cli.run import services_dir
 from miro_gen.transport.invoker import ZmqInvoker
 from miro_gen.transport.naming import NamingService
 from miro_gen.transport.options import DEFAULT_NAMING, UsageError, naming_endpoint
@@ -35,13 +36,6 @@ from miro_gen.transport.reactor import Reactor
 READY_TIMEOUT = 30.0  # seconds an example may take to start
 STOP_TIMEOUT = 10.0  # seconds an example may take to stop after SIGINT
 COLOURS = {"naming": 37, "exampleA": 36, "exampleB": 32, "exampleC": 35, "exampleD": 33}
-
-
-def services_dir() -> Path | None:
-    """The folder of the manual's examples: `miro_gen/services`, shipped in the package (in a
-    checkout, a link to the top-level `services/`)."""
-    folder = (Path(__file__).parents[1] / "services").resolve()
-    return folder if (folder / "exampleA.py").is_file() else None
 
 
 class Output:

@@ -33,6 +33,13 @@ generated code on the path. ARGS are the service's own and the common options (-
 -MNC, -MLL, -MCF ...); `miro run NAME --help` lists them."""
 
 
+def services_dir() -> Path | None:
+    """The folder of the manual's examples: `miro_gen/services`, shipped in the package (in a
+    checkout, a link to the top-level `services/`)."""
+    folder = (Path(__file__).parents[1] / "services").resolve()
+    return folder if (folder / "exampleA.py").is_file() else None
+
+
 @dataclass
 class Service:
     path: Path  # the package folder, the folder with __main__.py, or the file
@@ -42,8 +49,6 @@ class Service:
 
 def find(name: str, project: Path, folder: str) -> Service | None:
     """The service called `name`: the project's first, then the shipped ones."""
-    from miro_gen.cli.demo import services_dir
-
     places = [(project, project / folder)]
     shipped = services_dir()
     if shipped is not None:
@@ -60,8 +65,6 @@ def find(name: str, project: Path, folder: str) -> Service | None:
 
 
 def available(project: Path, folder: str) -> list[str]:
-    from miro_gen.cli.demo import services_dir
-
     names: set[str] = set()
     for services in (project / folder, services_dir()):
         if services is None or not services.is_dir():
