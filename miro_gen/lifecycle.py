@@ -93,6 +93,20 @@ def exit_status() -> int:
     return 128 + int(_State.last)
 
 
+_cleanups: list[Callable[[], object]] = []  # what a signal before Server.run() must undo
+
+
+def at_interrupt(fn: Callable[[], object]) -> None:
+    """Have `run_main` call `fn()` when a signal ends `main` (a server that bound its names and
+    was interrupted before it ran unbinds them); `forget(fn)` takes it back."""
+    _cleanups.append(fn)
+
+
+def forget(fn: Callable[[], object]) -> None:
+    if fn in _cleanups:
+        _cleanups.remove(fn)
+
+
 class Stopping:
     """What `signals_stop` yields: whether a signal came before, and the switch to clean-up."""
 
@@ -147,6 +161,7 @@ def run_main(main: Callable[[], int | None], prog: str) -> NoReturn:
         code = main()
     except KeyboardInterrupt:
         code = exit_status()
+        _clean_up()
     except SystemExit:
         raise
     except Exception as exc:
@@ -161,6 +176,18 @@ def run_main(main: Callable[[], int | None], prog: str) -> NoReturn:
             traceback.print_exc()
     sys.stdout.flush()
     sys.exit(code or 0)
+
+
+def _clean_up() -> None:
+    """Run what `at_interrupt` registered, newest first, with signals ignored meanwhile."""
+    if _install():
+        _State.mode = "defer"
+    while _cleanups:
+        fn = _cleanups.pop()
+        try:
+            fn()
+        except Exception as exc:  # the process is ending: say so, go on with the others
+            print(f"clean-up failed: {exc}", file=sys.stderr)
 
 
 def describe(exc: BaseException) -> tuple[str, int] | None:

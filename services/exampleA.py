@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import sys
 import threading
+from functools import partial
 from pathlib import Path
 
 from miro_gen.lifecycle import defer_signals, run_main
@@ -55,7 +56,7 @@ def main(argv: list[str] | None = None) -> int:
     server = Server(sys.argv if argv is None else argv)  # takes the common options out
     service_parser("exampleA", __doc__.split("\n\n")[0]).parse_args(server.argv[1:])
     server.add_to_name_service(ExampleImpl(), "ExampleA")
-    print("ExampleA is ready", flush=True)
+    server.reactor().call_soon(partial(print, flush=True), "ExampleA is ready")  # once it runs
     server.run()
     return 0
 

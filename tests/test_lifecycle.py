@@ -183,3 +183,41 @@ def test_miro_nslist_without_a_naming_service_is_one_line() -> None:
     done = run_miro("nslist", "--naming", nobody())
     assert done.returncode == 1
     assert one_line(done.stderr).endswith(HINT)
+
+
+def test_a_server_interrupted_between_binding_and_running_unbinds(naming: str) -> None:
+    """Interrupted after add_to_name_service and before run(): status 130, and its names go at
+    once (not when their lease runs out)."""
+    from miro_gen import Client
+
+    script = (
+        "import sys, time, Miro__POA\n"
+        "from miro_gen import Server\n"
+        "from miro_gen.lifecycle import run_main\n"
+        "class E(Miro__POA.Example):\n"
+        "    def setData(self, a, b): pass\n"
+        "    def getData(self): return None\n"
+        "def main():\n"
+        "    server = Server(sys.argv)\n"
+        "    server.add_to_name_service(E(), 'Between')\n"
+        "    print('bound', flush=True)\n"
+        "    time.sleep(600)\n"
+        "    server.run()\n"
+        "run_main(main, 'between')\n"
+    )
+    proc = subprocess.Popen(
+        [sys.executable, "-c", script, "--naming", naming, "-MNC", "between"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=service_env(),
+    )
+    assert proc.stdout is not None and proc.stdout.readline().strip() == "bound"
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130 and err == ""
+    client = Client(["t", "--naming", naming])
+    try:
+        assert client.naming.registry._list("between/") == []
+    finally:
+        client.close()

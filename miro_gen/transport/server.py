@@ -149,6 +149,7 @@ class Server(Client):
         self._names_lock = threading.Lock()
         self._stop = threading.Event()
         self._renewer: threading.Thread | None = None
+        self._cleaned = False
         self._on_shutdown: list[Callable[[], object]] = []
         self.hosted_channels: dict[str, Any] = {}  # event channels hosted here, by full name
         if clock is not None:
@@ -203,6 +204,10 @@ class Server(Client):
         self._reactor.stop()
 
     def _cleanup(self) -> None:
+        if self._cleaned:
+            return
+        self._cleaned = True
+        lifecycle.forget(self._cleanup)
         self._stop.set()
         if self._renewer is not None:  # its socket must be closed by no one else while in use
             self._renewer.join(RENEW_TIMEOUT + 1)
@@ -224,6 +229,7 @@ class Server(Client):
 
     def _start_renewing(self) -> None:
         if self._renewer is None:
+            lifecycle.at_interrupt(self._cleanup)  # unbind if interrupted before run()
             self._registry_for_renewal = MiroNaming.Registry(
                 self.naming.registry._ref, self.invoker, timeout=RENEW_TIMEOUT
             )
