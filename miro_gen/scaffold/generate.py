@@ -112,10 +112,10 @@ def compile_idl(idl: Path, project: Path, include_dirs: list[str]) -> None:
 def compile_parameters(xml: Path, project: Path) -> list[Path]:
     """Compile a service's Parameters.xml into `project/generated` (as `miro-params -o
     generated` would)."""
-    from miro_gen.params import generate
-    from miro_gen.params.build import build_modules
-    from miro_gen.params.loader import Loader
-    from miro_gen.params.pymodel import PyParamsModule
+    from miro_gen.params.compiler import generate
+    from miro_gen.params.compiler.build import build_modules
+    from miro_gen.params.compiler.loader import Loader
+    from miro_gen.params.compiler.pymodel import PyParamsModule
 
     diag = Diagnostics()
     try:
