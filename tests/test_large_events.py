@@ -50,3 +50,36 @@ def test_megabyte_events_arrive_whole_and_in_order_among_small_ones(
         assert all(p.intensity[1:] == array("f", range(1, len(p.intensity))) for p in got)
         assert [e.seq for e in c.events] == list(range(len(sizes))) and c.missed == 0
     assert supplier.dropped == 0
+
+
+def test_a_camera_image_as_a_call_result(naming: str, servers: Callable[[str], Server]) -> None:
+    """6 MB through the ROUTER: a servant's result, sent without a copy."""
+    import Miro__POA
+
+    from miro_gen import Client
+
+    image = Miro.ImageEventIDL(
+        Miro.TimeIDL(1, 2),
+        3,
+        Miro.ImageFormatIDL(1280, 1600, Miro.IMAGE_RGB8, 3840),
+        bytes(range(256)) * (3840 * 1600 // 256),
+    )
+
+    class Camera(Miro__POA.Camera):
+        def getFormat(self) -> Miro.ImageFormatIDL:
+            return image.format
+
+        def getImage(self) -> Miro.ImageEventIDL:
+            return image
+
+        def getWaitImage(self) -> Miro.ImageEventIDL:
+            return image
+
+    servers("r").add_to_name_service(Camera(), "Camera")
+    client = Client(["t", "--naming", naming])
+    try:
+        camera = client.resolve_name("r/Camera", Miro.Camera)
+        assert camera.getImage() == image
+        assert camera.getWaitImage().data == image.data
+    finally:
+        client.close()
