@@ -1,5 +1,6 @@
 """The event viewer (the manual's qtEventImu, for any event type): subscribes to one type of
-event and shows its fields live, with a plot of one numeric field over time.
+event and shows its fields live, with a plot of one numeric field over time, and the image
+when the events hold one (a camera's: see miro_gen.qt.images).
 
     python services/event_viewer.py TYPE [--domain D] [--channel NAME] [--field PATH]
         [--span S] [--import MODULE]... [--screenshot FILE [--after N]] [--duration S]
@@ -13,29 +14,31 @@ QT_QPA_PLATFORM=offscreen it needs no display); --duration quits after S seconds
 
 from __future__ import annotations
 
-import argparse
 import importlib
 import sys
 import time
 from pathlib import Path
 
+from miro_gen.lifecycle import defer_signals, run_main
+
+if __name__ == "__main__":
+    defer_signals()  # first: a Ctrl-C while it starts ends it quietly (status 130)
 if __package__ in (None, ""):  # run as a script from a checkout: the generated code beside it
     sys.path[:0] = [str(Path(__file__).resolve().parents[1] / "generated")]
 
 import Miro  # noqa: F401 - the project's event types, for decoding
 import MiroNaming
-
 from miro_gen import Server, StructuredEvent, SystemException
-from miro_gen.transport.options import UsageError
+from miro_gen.transport.options import service_parser
 
 try:
-    from PySide6.QtCore import QTimer, Signal
-    from PySide6.QtWidgets import QLabel, QMainWindow, QSplitter, QVBoxLayout, QWidget
-
     from miro_gen.qt import QtEventBridge, Subscription
     from miro_gen.qt.app import application, no_display
     from miro_gen.qt.fields import FieldError, get_field, is_number, leaves
-    from miro_gen.qt.widgets import FieldsView, PlotWidget
+    from miro_gen.qt.images import find_image, to_qimage
+    from miro_gen.qt.widgets import FieldsView, ImageView, PlotWidget
+    from PySide6.QtCore import QTimer, Signal
+    from PySide6.QtWidgets import QLabel, QMainWindow, QSplitter, QVBoxLayout, QWidget
 except ImportError as e:  # PySide6 missing (or a system library Qt needs)
     hint = "" if "miro-gen[qt]" in str(e) else ": pip install miro-gen[qt]"
     print(f"event_viewer: {e}{hint}", file=sys.stderr)
@@ -72,11 +75,14 @@ class ViewerWindow(QMainWindow):
         self.status = QLabel("starting")
         self.fields = FieldsView()
         self.plot = PlotWidget(span=span)
+        self.image = ImageView()
+        self.image.hide()  # until an event holds an image
         self.fields.field_chosen.connect(self.choose_field)
         split = QSplitter()
         split.addWidget(self.fields)
         split.addWidget(self.plot)
-        split.setSizes([300, 400])
+        split.addWidget(self.image)
+        split.setSizes([300, 400, 400])
         body = QWidget()
         layout = QVBoxLayout(body)
         layout.addWidget(self.status)
@@ -111,6 +117,12 @@ class ViewerWindow(QMainWindow):
         self.last_event = event
         self.shown += 1
         self.fields.show_payload(payload)
+        image = find_image(payload)
+        if image is not None:
+            shown = to_qimage(image)
+            caption = f"{image.path}: {image.width}x{image.height} {image.encoding or '?'}"
+            self.image.show_image(shown, caption if shown else f"{caption}: cannot show it")
+            self.image.show()
         if self.field is None:  # the first numeric field, until the user picks another
             self.field = next((p for p, v in leaves(payload) if is_number(v)), None)
             self.plot.title = self.field or "(no numeric field)"
@@ -152,12 +164,8 @@ class ViewerWindow(QMainWindow):
 
 
 def main(argv: list[str] | None = None) -> int:
-    try:
-        server = Server(sys.argv if argv is None else argv)
-    except UsageError as e:
-        print(f"event_viewer: {e}", file=sys.stderr)
-        return 2
-    p = argparse.ArgumentParser(prog="event_viewer", description=__doc__.split("\n\n")[0])
+    server = Server(sys.argv if argv is None else argv)  # takes the common options out
+    p = service_parser("event_viewer", __doc__.split("\n\n")[0])
     p.add_argument("type", help="the event type name (ExampleEvent, Gps, Position, Imu, ...)")
     p.add_argument("--domain", default="*", help="the supplier's naming context (default any)")
     p.add_argument("--channel", default="EventChannel", help="event channel (EventChannel)")
@@ -213,4 +221,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run_main(main, "event_viewer")

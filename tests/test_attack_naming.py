@@ -203,7 +203,7 @@ def test_the_adapter_caches_only_operations_that_exist(naming: NamingProcess) ->
             assert reply is not None and reply.repo_id == BAD_OPERATION._repo_id
         stub = server.server.resolve_name("r/A", Miro.Example)
         assert stub.getData() == Miro.ExampleStructIDL(1.0, 2.0)
-        assert {op for _, op in server.server.adapter._inline} == {"getData"}
+        assert {op for _, op in server.server.adapter._quick} == {"getData"}
     finally:
         server.stop()
 

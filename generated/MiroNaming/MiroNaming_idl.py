@@ -58,12 +58,16 @@ class Entry(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Entry(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroNaming::Entry", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Entry:
@@ -153,12 +157,16 @@ class NotFound(_exc.UserException, _cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_NotFound(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroNaming::NotFound", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> NotFound:
@@ -208,12 +216,16 @@ class AlreadyBound(_exc.UserException, _cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_AlreadyBound(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroNaming::AlreadyBound", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> AlreadyBound:
@@ -263,12 +275,16 @@ class InvalidName(_exc.UserException, _cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_InvalidName(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroNaming::InvalidName", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> InvalidName:
@@ -308,7 +324,7 @@ class Registry(_rpc.Stub):
         @param owner The binding server's unique id; its leases are renewed together.
         @param lease_ms How long the entry lives unless renewed.
         """
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _enc_Entry(_buf, binding)
@@ -325,13 +341,13 @@ class Registry(_rpc.Stub):
                 ) from None
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroNaming::Registry::bind", _x) from None
-        self._call("bind", bytes(_buf), (AlreadyBound, InvalidName))
+        self._call("bind", _buf.value(), (AlreadyBound, InvalidName))
 
     def rebind(self, binding: Entry, owner: str, lease_ms: int) -> None:
         """Bind a name, replacing what the same owner bound before (Miro's addToNameService);
         a name that another owner holds live is refused.
         """
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _enc_Entry(_buf, binding)
@@ -353,16 +369,16 @@ class Registry(_rpc.Stub):
                 ) from None
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroNaming::Registry::rebind", _x) from None
-        self._call("rebind", bytes(_buf), (AlreadyBound, InvalidName))
+        self._call("rebind", _buf.value(), (AlreadyBound, InvalidName))
 
     def resolve(self, name: str) -> Entry:
         """The entry bound to a full name."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _cdr.put_string(_buf, name, None, "MiroNaming::Registry::resolve(name)")
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroNaming::Registry::resolve", _x) from None
-        _data = self._call("resolve", bytes(_buf), (NotFound, InvalidName))
+        _data = self._call("resolve", _buf.value(), (NotFound, InvalidName))
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
@@ -374,7 +390,7 @@ class Registry(_rpc.Stub):
 
     def unbind(self, name: str, owner: str) -> None:
         """Remove a name that `owner` bound (NotFound if `owner` holds no such live entry)."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _cdr.put_string(_buf, name, None, "MiroNaming::Registry::unbind(name)")
             _cdr.put_string(
@@ -385,11 +401,11 @@ class Registry(_rpc.Stub):
             )
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroNaming::Registry::unbind", _x) from None
-        self._call("unbind", bytes(_buf), (NotFound, InvalidName))
+        self._call("unbind", _buf.value(), (NotFound, InvalidName))
 
     def _list(self, prefix: str) -> EntrySeq:
         """The entries whose names start with `prefix` (all for an empty prefix), in name order."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _cdr.put_string(
                 _buf,
@@ -399,7 +415,7 @@ class Registry(_rpc.Stub):
             )
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroNaming::Registry::list", _x) from None
-        _data = self._call("list", bytes(_buf), ())
+        _data = self._call("list", _buf.value(), ())
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
@@ -427,7 +443,7 @@ class Registry(_rpc.Stub):
         restarted, a lease ran out, another owner holds the name now): the owner binds them
         again.
         """
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _cdr.put_string(_buf, owner, None, "MiroNaming::Registry::renew(owner)")
             _cdr.put_count(_buf, names, None, "MiroNaming::Registry::renew(names)")
@@ -443,7 +459,7 @@ class Registry(_rpc.Stub):
                 ) from None
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroNaming::Registry::renew", _x) from None
-        _data = self._call("renew", bytes(_buf), ())
+        _data = self._call("renew", _buf.value(), ())
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4

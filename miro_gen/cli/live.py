@@ -76,14 +76,15 @@ def hz_main(argv: Sequence[str]) -> int:
         prog,
         "Print, every second, the rate at which the events of TOPIC arrive, the min, max and "
         "standard deviation of the period, their lag (how long after their push they arrive: "
-        "a consumer that falls behind sees it grow) and the events missed (sequence gaps: "
-        "dropped on the way, or by a supplier while its channel was gone).",
+        "a consumer that falls behind sees it grow), the events missed (sequence gaps: "
+        "dropped on the way, or by a supplier while its channel was gone) and the bandwidth "
+        "(payload bytes a second).",
     )
     p.add_argument("-w", "--window", type=int, default=100, help="periods averaged (default 100)")
     ns = p.parse_args(split_common(p, argv))
     if ns.window < 1:
         p.error("--window must be 1 or more")
-    from miro_gen.eventlog.rates import RateWindow
+    from miro_gen.eventlog.rates import RateWindow, data_rate
     from miro_gen.eventlog.wire import RawEvent
     from miro_gen.transport.gaps import GapCounter
 
@@ -104,7 +105,7 @@ def hz_main(argv: Sequence[str]) -> int:
                     continue
                 window = windows[topic] = RateWindow(ns.window)
                 gaps[topic] = GapCounter()
-            window.add(t, (received_ns - e.publish_ns) / 1e9)
+            window.add(t, len(e.data), (received_ns - e.publish_ns) / 1e9)
             gaps[topic].observe(e.supplier, e.type_name, e.seq)
 
     def report(_: object = None) -> None:
@@ -119,10 +120,12 @@ def hz_main(argv: Sequence[str]) -> int:
                 continue
             rate, low, high, std = stats
             lag_mean, lag_max = windows[topic].lag() or (0.0, 0.0)
+            bandwidth = data_rate(windows[topic].bandwidth() or 0.0)
             print(
                 f"{topic}: {rate:.2f} Hz  min {low:.4f} s  max {high:.4f} s  "
                 f"std {std:.4f} s  window {len(windows[topic].periods)}  "
-                f"lag {lag_mean * 1000:.1f} ms (max {lag_max * 1000:.1f})  missed {missed}",
+                f"lag {lag_mean * 1000:.1f} ms (max {lag_max * 1000:.1f})  missed {missed}  "
+                f"{bandwidth}",
                 flush=True,
             )
 

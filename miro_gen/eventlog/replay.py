@@ -13,9 +13,7 @@ from __future__ import annotations
 import threading
 from typing import NamedTuple
 
-import zmq
-
-from miro_gen.eventlog.wire import EVENT_HEADER, MAX_EVENTS, pack_batch
+from miro_gen.eventlog.wire import BATCH_HEADER, EVENT_HEADER, MAX_EVENTS, pack_batch
 from miro_gen.transport.events import (
     MAX_BATCH_BYTES,
     EventChannel,
@@ -73,7 +71,7 @@ class ReplaySupplier(StructuredPushSupplier):
         run: list[_Encoded] = []
         size = 0
         for e in pending:
-            if EVENT_HEADER + len(e.data) > self.max_event:  # more than a frame may hold
+            if BATCH_HEADER + EVENT_HEADER + len(e.data) > self.max_frame:  # too large to send
                 self.replay_dropped += 1
                 continue
             if run and (
@@ -90,17 +88,13 @@ class ReplaySupplier(StructuredPushSupplier):
             self._send_run(run)
 
     def _send_run(self, run: list[_Encoded]) -> None:
-        if not self._connected:  # the channel is gone: lost, as a live supplier's would be
-            self.replay_dropped += len(run)
-            return
         first = run[0]
         body = pack_batch(
             first.supplier,
             first.type_hash,
             [(e.seq, e.stamp_ns, e.publish_ns, e.data) for e in run],
         )
-        try:
-            self.socket.send_multipart([topic(first.domain, first.type_name), body], zmq.NOBLOCK)
+        if self._send_frame(topic(first.domain, first.type_name), body):
             self.replayed += len(run)
-        except zmq.Again:  # at the high-water mark: dropped, as a live supplier's would be
+        else:  # at the high-water mark: dropped, as a live supplier's would be
             self.replay_dropped += len(run)

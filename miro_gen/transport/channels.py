@@ -1,6 +1,10 @@
 """Event channels: where suppliers and consumers of a channel connect, the process that hosts
 one (an XSUB/XPUB proxy run by libzmq in a thread), and finding one in the naming service
 (docs/PROTOCOL.md, "Event channels"). Suppliers and consumers are in transport.events.
+
+A host's sockets are listening sockets of transport.sockets (limits, CURVE, admission); its
+queues hold at most PROXY_HWM frames per peer, fewer when the largest message allowed is large
+(`sockets.queue_limit`): the queue is the host's memory, and frames may be camera images.
 """
 
 from __future__ import annotations
@@ -16,13 +20,16 @@ import zmq
 
 from miro_gen.log import logger
 from miro_gen.transport import sockets
+from miro_gen.transport.local import bind_twin, nearest
 from miro_gen.transport.reactor import Reactor
 
 _log = logger("MIRO")
 
 CHANNEL_REPO_ID = "IDL:miro-gen/EventChannel:1.0"
 DEFAULT_CHANNEL = "EventChannel"
-HWM = 10_000  # frames a socket queues for one peer before dropping, at most (see queue_limit)
+# Frames a channel queues for each of its peers, at most (high-water marks are set once: libzmq
+# can stall a pipe whose mark is lowered while it carries messages).
+PROXY_HWM = 1_000
 
 
 @dataclass
@@ -40,15 +47,29 @@ class EventChannel:
     # channel at fixed endpoints (one hosted here, or made by hand).
     resolve: Callable[[], EventChannel] | None = field(default=None, repr=False)
 
+    def endpoints(self, context: zmq.Context[Any]) -> tuple[str, str]:
+        """(supplier, consumer) endpoints for sockets of `context`: in the process that hosts
+        the channel, in-process ones (ZeroMQ hands frames over without copying them); on its
+        host, its ipc:// twins (miro_gen.transport.local); elsewhere the advertised ones."""
+        host = self._host
+        if host is not None and host.context is context:
+            return host.local_endpoints
+        return nearest(self.supplier_endpoint), nearest(self.consumer_endpoint)
+
 
 class ChannelHost:
     """Runs a channel's XSUB/XPUB proxy in a thread (libzmq's, without the GIL) until closed:
-    in the process that creates the channel, or in `miro naming --channel`."""
+    in the process that creates the channel, or in `miro naming --channel`.
+
+    Besides its TCP endpoints it binds in-process ones, for the suppliers and consumers of its
+    own process (ZeroMQ hands their frames over without copying them), and their ipc://
+    twins, for those of other processes on its host."""
 
     def __init__(self, context: zmq.Context[Any], bind_host: str, advertise: str) -> None:
+        self.context = context
         self.xsub = sockets.listening_socket(context, zmq.XSUB)
         self.xpub = sockets.listening_socket(context, zmq.XPUB)
-        hwm = min(HWM, sockets.queue_limit(context))  # frames of up to the maximum size
+        hwm = min(PROXY_HWM, sockets.queue_limit(context))  # frames of up to the maximum size
         for s in (self.xsub, self.xpub):
             s.setsockopt(zmq.SNDHWM, hwm)
             s.setsockopt(zmq.RCVHWM, hwm)
@@ -57,11 +78,16 @@ class ChannelHost:
         port_out = self.xpub.bind_to_random_port(f"tcp://{bind_host}")
         self.supplier_endpoint = f"tcp://{advertise}:{port_in}"
         self.consumer_endpoint = f"tcp://{advertise}:{port_out}"
-        control_name = f"inproc://miro-channel-{os.getpid()}-{id(self)}"
+        bind_twin(self.xsub, self.supplier_endpoint)
+        bind_twin(self.xpub, self.consumer_endpoint)
+        name = f"inproc://miro-channel-{os.getpid()}-{id(self)}"
+        self.local_endpoints = (f"{name}-suppliers", f"{name}-consumers")
+        self.xsub.bind(self.local_endpoints[0])
+        self.xpub.bind(self.local_endpoints[1])
         self.control = context.socket(zmq.PAIR)
-        self.control.bind(control_name)
+        self.control.bind(name)
         self._peer = context.socket(zmq.PAIR)
-        self._peer.connect(control_name)
+        self._peer.connect(name)
         self.thread = threading.Thread(target=self._run, name="miro-channel", daemon=True)
         self.thread.start()
 

@@ -12,13 +12,14 @@ name, the type hash of its payload, a sequence number per supplier and type (so 
 what they missed), the source time stamp and the publish time. Events pushed within one reactor
 turn leave in one frame per topic (split at MAX_BATCH_EVENTS / MAX_BATCH_BYTES), so throughput
 is not capped at one ZeroMQ message per event; at low rates that is one event per frame, as fast
-as a single message. Slow consumers never block suppliers: the supplier's queue and ZeroMQ's are
-bounded (in bytes: transport.sockets), what overflows is dropped and counted
-(`StructuredPushSupplier.dropped`), and the sequence numbers make the drops visible
-(`StructuredPushConsumer.missed`). A consumer keeps the events waiting for its handler as its
-quality of service says (keep-last depth, latest-only: transport.event_queue), so a slow one
-gets recent events and counts what it skipped (`dropped`, `lag`). Suppliers and consumers find
-their channel again when its host restarts elsewhere (transport.channel_link).
+as a single message; an event of LARGE_EVENT bytes or more travels alone, copied once into its
+frame and decoded in place from the consumer's. Slow consumers never block suppliers: the
+supplier's queue and ZeroMQ's are bounded (in bytes: transport.sockets), what overflows is
+dropped and counted (`StructuredPushSupplier.dropped`), and the sequence numbers make the drops
+visible (`StructuredPushConsumer.missed`). A consumer keeps the events waiting for its handler
+as its quality of service says (keep-last depth, latest-only: transport.event_queue), so a slow
+one gets recent events and counts what it skipped (`dropped`, `lag`). Suppliers and consumers
+find their channel again when its host restarts elsewhere (transport.channel_link).
 """
 
 from __future__ import annotations
@@ -37,14 +38,14 @@ import zmq
 
 from miro_gen import clock
 from miro_gen.log import logger
-from miro_gen.runtime.cdr import type_for_hash
+from miro_gen.runtime.cdr import encode_after, type_for_hash
 from miro_gen.transport import sockets
 from miro_gen.transport.channel_link import ChannelLink
-from miro_gen.transport.channels import (  # re-exported: the public names of event channels
+from miro_gen.transport.channels import (  # the channels' names, importable from here as before
     CHANNEL_REPO_ID as CHANNEL_REPO_ID,
 )
 from miro_gen.transport.channels import DEFAULT_CHANNEL as DEFAULT_CHANNEL
-from miro_gen.transport.channels import HWM as HWM
+from miro_gen.transport.channels import PROXY_HWM as PROXY_HWM
 from miro_gen.transport.channels import ChannelHost as ChannelHost
 from miro_gen.transport.channels import EventChannel as EventChannel
 from miro_gen.transport.channels import EventChannelFactory as EventChannelFactory
@@ -56,10 +57,14 @@ from miro_gen.transport.gaps import GapCounter, gap
 _log = logger("MIRO")
 
 EVENT_VERSION = 1
+HWM = 10_000  # frames a supplier's or a consumer's socket queues for one peer, at most
 MAX_SUBSCRIPTIONS = 10_000  # prefixes a supplier tracks; beyond, it sends every topic
 MAX_PREFIX = 4096  # bytes of a subscription prefix a supplier tracks
 QUEUE_EVENTS = 100_000  # events a supplier holds for its reactor's next turn, at most
 QUEUE_BYTES = 64 << 20  # and bytes
+# Events from this size on travel alone, in a frame put together with one copy and handed to
+# ZeroMQ without another (copy=False); consumers decode them from ZeroMQ's buffer, in place.
+LARGE_EVENT = 64 * 1024
 # Events in one frame, at most. The count is 16 bits, and a high-water mark counts frames: HWM
 # frames must stay a bounded amount of memory. Yet frames must not be small: each send lets the
 # pushing thread take the GIL back for up to a switch interval, so a flush in many frames falls
@@ -71,6 +76,8 @@ TURN_FRAMES = 256  # frames a consumer reads per reactor turn
 _BATCH = Struct("<BBHQ32s")  # version, flags, count, supplier id, type hash
 _EVENT = Struct("<QqqI")  # sequence number, stamp ns, publish ns, payload length
 _EVENT_SIZE = _EVENT.size
+_LENGTH_AT = _BATCH.size + _EVENT_SIZE - 4  # the payload length of a frame's one event
+_U32 = Struct("<I")
 ANY = "*"
 
 
@@ -103,17 +110,32 @@ def subscription_prefix(domain: str, type_name: str) -> bytes:
     return topic(domain, type_name)
 
 
+class _Framed(list[bytes]):
+    """A large event's whole batch frame: it travels alone."""
+
+
 # ---- suppliers ------------------------------------------------------------------------------
 
 
 class _Topic:
     """What a supplier keeps per type name: the topic frame, the sequence numbers, whether
-    anyone subscribes (recomputed when the subscriptions change), the events not yet sent."""
+    anyone subscribes (recomputed when the subscriptions change), the events not yet sent,
+    whether the last event was large."""
 
-    __slots__ = ("frame", "generation", "last", "last_hash", "pending", "seq", "subscribed")
+    __slots__ = (
+        "frame",
+        "generation",
+        "large",
+        "last",
+        "last_hash",
+        "pending",
+        "seq",
+        "subscribed",
+    )
 
     def __init__(self, frame: bytes) -> None:
         self.frame = frame
+        self.large = False
         self.seq = itertools.count()
         self.generation = -1  # of the supplier's subscriptions that `subscribed` reflects
         self.subscribed = False
@@ -152,7 +174,7 @@ class StructuredPushSupplier:
         self.dropped = 0  # events pushed while someone subscribed that were never sent
         self._too_large: set[str] = set()  # types with an event too large to send (said once)
         context = self.reactor.context
-        self.max_event = sockets.policy(context).max_message_size - _BATCH.size
+        self.max_frame = sockets.policy(context).max_message_size
         self.socket = sockets.connecting_socket(context, zmq.XPUB)
         # A turn's events leave in a burst of frames (100,000 small events: about 30), which the
         # socket must hold until the channel reads them: room for a full queue of batches
@@ -172,8 +194,8 @@ class StructuredPushSupplier:
         self.link = ChannelLink(
             self.reactor,
             self.socket,
-            channel.supplier_endpoint,
-            None if resolve is None else lambda: resolve().supplier_endpoint,
+            channel.endpoints(context)[0],
+            None if resolve is None else lambda: resolve().endpoints(context)[0],
             self._connection_changed,
         )
         self.reactor.call_soon(self.reactor.register, self.socket, self._subscription_changed)
@@ -209,18 +231,23 @@ class StructuredPushSupplier:
                 return True
             return False
         now = clock.current().time_ns()  # log time under --clock log, else the wall clock
-        data = payload.serialize()
-        packed = _EVENT.pack(seq, now if stamp is None else int(stamp * 1e9), now, len(data))
-        packed += data
-        if len(packed) > self.max_event:
-            self._refuse_large(type_name, len(packed))
+        type_hash = payload._type_hash
+        stamp_ns = now if stamp is None else int(stamp * 1e9)
+        packed, framed = self._encode(t, type_hash, (seq, stamp_ns, now), payload)
+        size = len(framed or packed)
+        if (size if framed else size + _BATCH.size) > self.max_frame:
+            self._refuse_large(type_name, size)
             return True
         with self._lock:
-            if self._queued >= QUEUE_EVENTS or self._queued_bytes + len(packed) > QUEUE_BYTES:
+            if self._queued >= QUEUE_EVENTS or self._queued_bytes + size > QUEUE_BYTES:
                 self.dropped += 1
                 return True
-            type_hash = payload._type_hash
-            if type_hash == t.last_hash and t.pending:
+            if framed:  # alone, as it is
+                if not t.pending:
+                    self._dirty.append(t)
+                t.pending.append((type_hash, _Framed((framed,))))
+                t.last, t.last_hash = [], ""
+            elif type_hash == t.last_hash and t.pending:
                 t.last.append(packed)
             else:
                 if not t.pending:
@@ -228,12 +255,41 @@ class StructuredPushSupplier:
                 t.last, t.last_hash = [packed], type_hash
                 t.pending.append((type_hash, t.last))
             self._queued += 1
-            self._queued_bytes += len(packed)
+            self._queued_bytes += size
             if self._flush_pending:
                 return True
             self._flush_pending = True
         self.reactor.call_soon(self._flush)
         return True
+
+    def _encode(
+        self, t: _Topic, type_hash: str, head: tuple[int, int, int], payload: Any
+    ) -> tuple[bytes, bytes]:
+        """(event, b"") for a small event, to be batched; (b"", its whole frame) for a large
+        one. Once a type's events are large, the next is encoded into its frame directly (its
+        payload copied once); the payload length is filled in after."""
+        if t.large:
+            prefix = self._batch_head(type_hash, 1) + _EVENT.pack(*head, 0)
+            buf = encode_after(prefix, payload)
+            n = buf.size - len(prefix)
+            buf.overwrite(_LENGTH_AT, _U32.pack(n))
+            frame = buf.value()
+            if n + _EVENT_SIZE >= LARGE_EVENT:
+                return b"", frame
+            t.large = False
+            return frame[_BATCH.size :], b""
+        data = payload.serialize()
+        packed = _EVENT.pack(*head, len(data))
+        if len(packed) + len(data) < LARGE_EVENT:
+            return packed + data, b""
+        t.large = True
+        return b"", b"".join((self._batch_head(type_hash, 1), packed, data))
+
+    def _batch_head(self, type_hash: str, count: int) -> bytes:
+        raw = self._raw_hashes.get(type_hash)
+        if raw is None:
+            raw = self._raw_hashes[type_hash] = bytes.fromhex(type_hash)
+        return _BATCH.pack(EVENT_VERSION, 0, count, self.supplier_id, raw)
 
     def _flush(self) -> None:
         with self._lock:
@@ -246,6 +302,9 @@ class StructuredPushSupplier:
             self._flush_pending = False
         for frame, runs in queues:
             for type_hash, events in runs:
+                if type(events) is _Framed:
+                    self._send_body(frame, events[0], 1)
+                    continue
                 if len(events) <= MAX_BATCH_EVENTS and sum(map(len, events)) <= MAX_BATCH_BYTES:
                     self._send(frame, type_hash, events)
                     continue
@@ -261,6 +320,29 @@ class StructuredPushSupplier:
                     size += len(packed)
                 self._send(frame, type_hash, batch)
 
+    def _send(self, frame: bytes, type_hash: str, packed: list[bytes]) -> None:
+        """One frame of the events `packed`."""
+        body = b"".join([self._batch_head(type_hash, len(packed)), *packed])
+        self._send_body(frame, body, len(packed))
+
+    def _send_body(self, frame: bytes, body: bytes, count: int) -> None:
+        if self._send_frame(frame, body):
+            self.sent += count
+        else:  # at the high-water mark: dropped, visible as a gap
+            with self._lock:
+                self.dropped += count
+
+    def _send_frame(self, frame: bytes, body: bytes) -> bool:
+        """Send a topic frame and a batch frame (large ones without a copy); False at the
+        high-water mark, or when the channel is gone (nobody to send to: the events are lost)."""
+        if not self._connected:
+            return False
+        try:
+            self.socket.send_multipart([frame, body], zmq.NOBLOCK, copy=len(body) < LARGE_EVENT)
+        except zmq.Again:
+            return False
+        return True
+
     def _refuse_large(self, type_name: str, size: int) -> None:
         with self._lock:
             self.dropped += 1
@@ -271,7 +353,7 @@ class StructuredPushSupplier:
                 "(%d; --max-message-size)",
                 type_name,
                 size,
-                self.max_event + _BATCH.size,
+                self.max_frame,
             )
 
     def _connection_changed(self, up: bool) -> None:
@@ -282,22 +364,6 @@ class StructuredPushSupplier:
             self._lost = set(self._subscriptions)
             _log.notice("lost the event channel %s; looking for it", self.channel.name)
         self._connected = up
-
-    def _send(self, frame: bytes, type_hash: str, packed: list[bytes]) -> None:
-        if not self._connected:  # nobody to send to: the events are lost
-            with self._lock:
-                self.dropped += len(packed)
-            return
-        raw = self._raw_hashes.get(type_hash)
-        if raw is None:
-            raw = self._raw_hashes[type_hash] = bytes.fromhex(type_hash)
-        head = _BATCH.pack(EVENT_VERSION, 0, len(packed), self.supplier_id, raw)
-        try:
-            self.socket.send_multipart([frame, head + b"".join(packed)], zmq.NOBLOCK)
-            self.sent += len(packed)
-        except zmq.Again:  # at the high-water mark: dropped, visible as a gap
-            with self._lock:
-                self.dropped += len(packed)
 
     def _subscription_changed(self) -> None:
         # A lost connection's subscriptions end with unsubscriptions that ZeroMQ queues after
@@ -354,8 +420,8 @@ class StructuredPushConsumer:
         self.link = ChannelLink(
             self.reactor,
             self.socket,
-            channel.consumer_endpoint,
-            None if resolve is None else lambda: resolve().consumer_endpoint,
+            channel.endpoints(context)[1],
+            None if resolve is None else lambda: resolve().endpoints(context)[1],
             lambda up: None,
         )
         self._filters: list[tuple[str, str]] = []
@@ -408,7 +474,7 @@ class StructuredPushConsumer:
         recv, queue = self.socket.recv_multipart, self.queue
         for _ in range(TURN_FRAMES):
             try:
-                parts = recv(zmq.NOBLOCK)
+                parts = recv(zmq.NOBLOCK, copy=False)  # large payloads are decoded in place
             except zmq.Again:
                 break
             try:
@@ -486,12 +552,12 @@ class StructuredPushConsumer:
                 )
         return cls
 
-    def _parse(self, parts: list[bytes]) -> None:
+    def _parse(self, parts: list[zmq.Frame]) -> None:
         """Queue the events of one message; raises if the frame does not parse (then none of
         its events count, and the sequence numbers stay as they were)."""
         if len(parts) != 2:
             raise ValueError(f"{len(parts)} frames, expected 2")
-        head, body = parts
+        head, body = parts[0].bytes, parts[1].buffer  # the body is not copied
         domain, type_name, wanted = self._topic(head)
         if not wanted:
             return
@@ -515,10 +581,13 @@ class StructuredPushConsumer:
             missed += gap(expected, seq)
             expected = seq + 1
             if cls is not None and i >= keep_from:
+                # Decoded when delivered; a small payload is copied out, so that a batch's
+                # frame is not kept for one event that waits.
+                data = body[at : at + n] if n >= LARGE_EVENT else bytes(body[at : at + n])
                 event = StructuredEvent(
                     domain,
                     type_name,
-                    body[at : at + n],  # decoded when delivered
+                    data,
                     seq,
                     stamp_ns / 1e9,
                     publish_ns / 1e9,

@@ -14,16 +14,18 @@ what the service holds is bounded whatever its peers send (docs/SECURITY.md).
 
 from __future__ import annotations
 
+import contextlib
 import math
 import threading
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
 import MiroNaming
 import MiroNaming__POA
 
-from miro_gen.exceptions import BAD_PARAM, NO_RESOURCES, TRANSIENT
+from miro_gen.exceptions import BAD_PARAM, COMM_FAILURE, NO_RESOURCES, TIMEOUT, TRANSIENT
 from miro_gen.log import logger
 from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.runtime.rpc import nonblocking
@@ -44,6 +46,7 @@ MAX_NAME_BYTES = 1024  # of a name, UTF-8
 MAX_FIELD_BYTES = 1024  # of an entry's repository id, endpoint, key and type hash each
 MAX_OWNER_BYTES = 128
 Entry = MiroNaming.Entry
+NAMING_HINT = "is `miro naming` running? see --naming / MIRO_NAMING"
 
 
 def check_name(name: str) -> str:
@@ -259,6 +262,10 @@ class NamingClient:
     def resolve(self, name: str) -> MiroNaming.Entry:
         """The entry of `name`: a path as it is; a plain name in this process's context first,
         then at the root. NotFound names what was looked for."""
+        with naming_errors(self.registry._ref.endpoint, f"resolve {name}"):
+            return self._resolve(name)
+
+    def _resolve(self, name: str) -> MiroNaming.Entry:
         if "/" in name:
             return self.registry.resolve(name)
         try:
@@ -270,5 +277,16 @@ class NamingClient:
                 raise MiroNaming.NotFound(name=f"{self.context}/{name}") from None
 
 
-def unreachable(endpoint: str, exc: BaseException) -> TRANSIENT:
-    return TRANSIENT(f"the naming service at {endpoint} cannot be reached: {exc}")
+@contextlib.contextmanager
+def naming_errors(endpoint: str, what: str) -> Iterator[None]:
+    """Failures to reach the naming service, said as such, with what to do about them."""
+    try:
+        yield
+    except (TRANSIENT, COMM_FAILURE, TIMEOUT) as e:
+        reason = e.message.rsplit(": ", 1)[-1] if ": " in e.message else e.message
+        raise TRANSIENT(
+            f"cannot {what}: the naming service at {endpoint} cannot be reached ({reason}): "
+            f"{NAMING_HINT}",
+            e.minor,
+            e.completed,
+        ) from None
