@@ -31,7 +31,7 @@ import MiroNaming
 import zmq
 
 from miro_gen import log
-from miro_gen.exceptions import SystemException
+from miro_gen.exceptions import TRANSIENT, SystemException
 from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.runtime.rpc import Servant, Stub
 from miro_gen.transport.adapter import ObjectAdapter
@@ -44,6 +44,17 @@ from miro_gen.transport.reactor import Reactor
 StubT = TypeVar("StubT", bound=Stub)
 RENEW_TIMEOUT = 2.0  # seconds a lease renewal may take
 _log = log.logger("MIRO")
+
+
+def _corba_side(client: Client) -> Any:
+    """The CORBA side of a process whose options name a CORBA naming service or an IIOP
+    endpoint (miro_gen.corba.service), else None; the CORBA code loads only then."""
+    o = client.options
+    if o.naming_url is None and o.iiop_endpoint is None:
+        return None
+    from miro_gen.corba.service import corba_for
+
+    return corba_for(client)
 
 
 def _take_options(argv: Sequence[str] | None) -> tuple[CommonOptions, list[str]]:
@@ -66,17 +77,38 @@ class Client:
         self.options, self.argv = _take_options(argv)
         self.context = context if context is not None else zmq.Context.instance()
         self.invoker = ZmqInvoker(self.context)
-        self.naming = NamingClient(self.invoker, self.options.naming, self.options.naming_context)
+        self.corba = _corba_side(self)  # the CORBA world: a CORBA naming service, IIOP
+        self.naming: Any = (
+            self.corba.naming
+            if self.corba is not None and self.corba.naming is not None
+            else NamingClient(self.invoker, self.options.naming, self.options.naming_context)
+        )
 
     def resolve_name(self, name: str, stub: type[StubT]) -> StubT:
         """A stub of the object bound to `name` (in this process's naming context first, then
         at the root; a path such as `robot1/ExampleA` as it is)."""
-        entry = self.naming.resolve(name)
+        try:
+            entry = self.naming.resolve(name)
+        except TRANSIENT as e:
+            raise self._unreachable(e) from None
         if entry.repo_id != stub._repo_id:
             _log.debug("%s is a %s, used as a %s", entry.name, entry.repo_id, stub._repo_id)
+        if self.corba is not None:
+            corba_stub: StubT = self.corba.stub(entry, stub)
+            return corba_stub
         return stub(ObjectRef(entry.repo_id, entry.endpoint, entry.key), self.invoker)
 
+    def _unreachable(self, error: TRANSIENT) -> TRANSIENT:
+        """The naming service did not answer: say so clearly when it is a CORBA one."""
+        if self.corba is not None:
+            return error
+        from miro_gen.corba.naming import explain_unreachable
+
+        return explain_unreachable(self.options.naming, error)
+
     def close(self) -> None:
+        if self.corba is not None:
+            self.corba.close()
         self.invoker.close()
 
 
@@ -110,6 +142,8 @@ class Server(Client):
             host=self.addresses.advertise,
         )
         self.invoker.adapter = self.adapter
+        if self.corba is not None:
+            self.corba.serve(self.addresses.bind, self.addresses.advertise)
         self.owner = uuid.uuid4().hex
         self.lease = lease
         self._names: dict[str, MiroNaming.Entry] = {}
@@ -130,13 +164,24 @@ class Server(Client):
         """Serve `servant` and bind it as `name` under this server's naming context (or at the
         path given); its reference. Replaces an older binding of the name, as Miro does."""
         full = self.naming.full_name(name)
+        if self.corba is not None:  # served over IIOP (and bound in a CORBA naming service)
+            corba_ref: ObjectRef = self.corba.add(servant, full)
+            if self.corba.naming is not None:
+                return corba_ref
         ref = self.adapter.reference_for(servant)
         self.bind_entry(MiroNaming.Entry(full, ref.repo_id, ref.endpoint, ref.key, ""))
         return ref
 
     def bind_entry(self, entry: MiroNaming.Entry) -> None:
         """Bind a naming entry under this server's lease (objects, event channels)."""
-        self.naming.registry.rebind(entry, self.owner, int(self.lease * 1000))
+        if self.corba is not None and self.corba.naming is not None:
+            self.corba.bind(entry)  # CosNaming: no lease; unbound when the server stops
+            _log.notice("bound %s in the naming service", entry.name)
+            return
+        try:
+            self.naming.registry.rebind(entry, self.owner, int(self.lease * 1000))
+        except TRANSIENT as e:
+            raise self._unreachable(e) from None
         with self._names_lock:
             self._names[entry.name] = entry
         self._start_renewing()
