@@ -128,12 +128,7 @@ class CppPeer:
 
     def readline(self, timeout: float = 20.0) -> str:
         assert self.proc.stdout is not None
-        result: list[str] = []
-        reader = threading.Thread(target=lambda: result.append(self.proc.stdout.readline()))
-        reader.start()
-        reader.join(timeout)
-        assert result, "the C++ peer said nothing in time"
-        return result[0].strip()
+        return readline(self.proc.stdout, timeout, "the C++ peer")
 
     def finish(self, timeout: float = 60.0) -> tuple[int, str]:
         """Close its input, wait for the end; its exit status and output."""
@@ -144,6 +139,16 @@ class CppPeer:
         if self.proc.poll() is None:
             self.proc.kill()
         self.proc.communicate(timeout=10)
+
+
+def readline(stream: Any, timeout: float, who: str) -> str:
+    """The next line of `stream`, stripped; fails when none comes within `timeout`."""
+    result: list[str] = []
+    reader = threading.Thread(target=lambda: result.append(stream.readline()), daemon=True)
+    reader.start()
+    reader.join(timeout)
+    assert result, f"{who} said nothing in time"
+    return result[0].strip()
 
 
 def run_peer(

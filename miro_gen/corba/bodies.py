@@ -11,7 +11,7 @@ other ORBs ignore), and object references are IORs (a `GiopBody` decodes them as
 
 from __future__ import annotations
 
-from typing import Final
+from typing import Any, Final
 
 from miro_gen import exceptions as exc
 from miro_gen.corba import anys
@@ -167,3 +167,28 @@ def reply_out(reply: rpc.Reply) -> tuple[ReplyStatus, bytes | memoryview, Contex
             )
     body, contexts = system_exception_out(reply)
     return ReplyStatus.SYSTEM_EXCEPTION, body, contexts
+
+
+# ---- hand-written stubs -------------------------------------------------------------------------
+
+
+def call(
+    invoker: Any,
+    ref: ObjectRef,
+    operation: str,
+    args: CdrOutput | None = None,
+    *,
+    timeout: float = 10.0,
+    oneway: bool = False,
+) -> tuple[rpc.Reply, CdrInput]:
+    """Invoke `operation` with arguments written on `args` (laid out from a multiple of 8) for
+    the stubs this package writes by hand (CosNaming, CosEvent): the reply, and a stream over
+    its body. System exceptions are raised; a user exception's reply is returned for the
+    caller to decode (its status says so)."""
+    body = _HEADERS[1] + (args.buf if args is not None else b"")
+    reply = invoker.invoke(ref, operation, body, oneway=oneway, timeout=timeout)
+    if reply is None:
+        return rpc.Reply(rpc.ReplyStatus.OK, b""), CdrInput(b"")
+    if reply.status == rpc.ReplyStatus.SYSTEM_EXCEPTION:
+        rpc.raise_system_exception(reply)
+    return reply, CdrInput(bytes(reply.body[4:]), 0, LE if reply.body[1] == 1 else BE)

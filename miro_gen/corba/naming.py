@@ -22,6 +22,7 @@ from typing import Any, NamedTuple
 
 import MiroNaming
 
+from miro_gen.corba.bodies import call
 from miro_gen.corba.connection import is_zmtp
 from miro_gen.corba.ior import (
     IOR,
@@ -35,7 +36,7 @@ from miro_gen.corba.ior import (
 from miro_gen.exceptions import TRANSIENT, CompletionStatus, UserException
 from miro_gen.log import logger
 from miro_gen.runtime import rpc
-from miro_gen.runtime.cdr import HEADER_LE, ObjectRef
+from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.runtime.cdrstream import CdrInput, CdrOutput
 
 _log = logger("MIRO")
@@ -143,14 +144,10 @@ class NamingContext:
         self.timeout = timeout
 
     def _call(self, op: str, out: CdrOutput | None = None) -> CdrInput:
-        body = HEADER_LE + (out.buf if out is not None else b"")
-        reply = self.invoker.invoke(self.ref, op, body, timeout=self.timeout)
-        if reply.status == rpc.ReplyStatus.OK:
-            return CdrInput(bytes(reply.body[4:]), 0, 0 if reply.body[1] == 1 else 1)
+        reply, inp = call(self.invoker, self.ref, op, out, timeout=self.timeout)
         if reply.status == rpc.ReplyStatus.USER_EXCEPTION:
-            raise _user_exception(reply)
-        rpc.raise_system_exception(reply)
-        raise AssertionError("unreachable")  # pragma: no cover
+            raise _user_exception(reply.repo_id, inp)
+        return inp
 
     def _with_name(self, op: str, name: Name, ref: ObjectRef | None = None) -> CdrInput:
         out = CdrOutput()
@@ -219,9 +216,7 @@ def _bindings(inp: CdrInput) -> list[Binding]:
     return [Binding(_get_name(inp), inp.ulong() == 1) for _ in range(inp.length(8, "bindings"))]
 
 
-def _user_exception(reply: rpc.Reply) -> UserException:
-    inp = CdrInput(bytes(reply.body[4:]), 0, 0 if reply.body[1] == 1 else 1)
-    rid = reply.repo_id
+def _user_exception(rid: str, inp: CdrInput) -> UserException:
     if rid == NotFound._repo_id:
         why = inp.ulong()
         return NotFound(
@@ -468,3 +463,15 @@ def explain_unreachable(endpoint: str, error: TRANSIENT) -> TRANSIENT:
         f"use --naming corbaloc:iiop:{host}:{port}/NameService",
         completed=CompletionStatus.NO,
     )
+
+
+def resolve_url(invoker: Any, url: str) -> ObjectRef:
+    """The object an IOR, corbaloc or corbaname URL names (a corbaname is resolved)."""
+    try:
+        parsed = parse_url(url)
+    except UrlError as e:
+        raise TRANSIENT(str(e), completed=CompletionStatus.NO) from None
+    if isinstance(parsed, CorbaName):
+        context = NamingContext(ref_from_ior(parsed.context), invoker)
+        return context.resolve(parse_name(parsed.name))
+    return ref_from_ior(parsed)

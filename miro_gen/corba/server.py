@@ -114,6 +114,11 @@ class IIOPServer:
             if servant is not None and self._keys.get(id(servant)) == key:
                 del self._keys[id(servant)]
 
+    def deactivate_servant(self, servant: rpc.Servant) -> None:
+        key = self._keys.get(id(servant))
+        if key is not None:
+            self.deactivate(key)
+
     def reference(self, key: bytes, repo_id: str) -> CorbaRef:
         ref = ref_from_ior(self.ior(key, repo_id))
         assert isinstance(ref, CorbaRef)
