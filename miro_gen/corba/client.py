@@ -304,7 +304,7 @@ class IIOPInvoker:
                     completed=CompletionStatus.MAYBE,
                 ) from None
             if h.type == MsgType.REPLY:
-                if h.minor == 2:  # the common case, decoded without the general machinery
+                if h.minor == 2 and len(msg) >= 24:  # the common case, decoded directly
                     rid, status, ncontexts = _REPLY12[not h.little].unpack_from(msg, 12)
                     if rid == request_id and status == 0 and ncontexts == 0:
                         body = _OK_HEADER[h.little] + msg[24:]

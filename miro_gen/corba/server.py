@@ -176,6 +176,8 @@ class IIOPServer:
                     h, msg = conn.read_message()
                 except NotGiop as e:
                     _log.warning("IIOP: %s; closing the connection", e)
+                    if not e.zmq:  # a ZeroMQ peer would not understand it
+                        conn.send_quietly(giop.encode_simple(1, MsgType.MESSAGE_ERROR))
                     return
                 except GiopError as e:
                     _log.warning("IIOP: %s: %s; answered with MessageError", conn.peer, e)
@@ -191,6 +193,10 @@ class IIOPServer:
                     conn.send_quietly(giop.encode_simple(h.minor, MsgType.MESSAGE_ERROR))
                     return
                 except OSError:
+                    return
+                except Exception:  # a defect of ours: logged, and this connection only ends
+                    _log.exception("IIOP: cannot handle a %s from %s", h.type.name, conn.peer)
+                    conn.send_quietly(giop.encode_simple(h.minor, MsgType.MESSAGE_ERROR))
                     return
         finally:
             with self._lock:
