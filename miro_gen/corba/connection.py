@@ -92,7 +92,7 @@ class GiopConnection:
             if n >= HEADER_SIZE and chunk[:4] == giop.MAGIC and not chunk[6] & giop.FLAG_MORE:
                 size = _SIZE[not chunk[6] & 1].unpack_from(chunk, 8)[0]
                 if n == HEADER_SIZE + size and chunk[7] != MsgType.FRAGMENT:
-                    return giop.read_header(chunk), chunk
+                    return giop.read_header_cached(chunk, size), chunk
             if is_zmtp(chunk):
                 raise NotGiop(f"{self.peer} speaks ZeroMQ, not GIOP", zmq=True)
             self._buf += chunk

@@ -98,6 +98,22 @@ def read_header(data: bytes) -> Header:
     return Header(minor, bool(little), bool(flags & FLAG_MORE) and minor > 0, _TYPES[kind], size)
 
 
+# Version, flags and type bytes already checked: the header fields they stand for.
+_checked: dict[bytes, tuple[int, bool, bool, MsgType]] = {}
+
+
+def read_header_cached(data: bytes, size: int) -> Header:
+    """`read_header` for a message whose size is known already: the checks of its 4 bytes of
+    version, flags and type are done once for each combination seen."""
+    known = _checked.get(data[4:8])
+    if known is None:
+        h = read_header(data)
+        known = (h.minor, h.little, h.more, h.type)
+        if len(_checked) < 64:
+            _checked[data[4:8]] = known
+    return Header(*known, size)
+
+
 def _start(minor: int, kind: MsgType) -> CdrOutput:
     out = CdrOutput(bytearray(MAGIC))
     out.raw(bytes((1, minor, FLAG_LITTLE, kind)))

@@ -9,7 +9,8 @@
 //   peer push CHANNEL N [ORB options]   push N anys (Peer::Point {i, 2i}) into the event channel
 //                                       bound as CHANNEL, then a Peer::Nested
 //   peer consume CHANNEL N [ORB opts]   receive N events from CHANNEL, print "EVENT ..." each
-//   peer bench NAME N [ORB options]     N calls of nothing() and text(); prints "P50 <us> <us>"
+//   peer bench NAME N [ORB options]     N calls of nothing() and echo_text(); prints
+//                                       "P50 <us> <us>" (NAME may be an IOR or a URL too)
 
 #include <Peer.hh>
 #include <omniORB4/Naming.hh>
@@ -220,8 +221,13 @@ static bool same(const Peer::Nested& a, const Peer::Nested& b)
 
 static Peer::Echo_ptr resolve_echo(CORBA::ORB_ptr orb, const std::string& name)
 {
-  CosNaming::NamingContext_var ctx = root(orb);
-  CORBA::Object_var obj = ctx->resolve(to_name(name));
+  CORBA::Object_var obj;
+  if (name.find(':') != std::string::npos)  // an IOR or a corbaloc/corbaname URL
+    obj = orb->string_to_object(name.c_str());
+  else {
+    CosNaming::NamingContext_var ctx = root(orb);
+    obj = ctx->resolve(to_name(name));
+  }
   return Peer::Echo::_narrow(obj);
 }
 
