@@ -64,7 +64,7 @@ def bridge_main(argv: Sequence[str]) -> int:
         "repository id, or *) as events named EVENT (default: the type's name)",
     )
     ns = p.parse_args(split_common(p, argv))
-    from miro_gen.corba.bridge import Bridge, Routes
+    from miro_gen.bridges.corba import Bridge, Routes
 
     routes = Routes(ns.to_corba, dict(ns.from_corba))
     if not routes.to_corba and not routes.from_corba:

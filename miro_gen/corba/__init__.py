@@ -2,9 +2,10 @@
 a CosNaming client, and CosEventComm push suppliers and consumers (docs/CORBA.md).
 
 Generated stubs and skeletons work over IIOP unchanged: `IIOPInvoker` is an `Invoker` for
-CORBA objects, `IIOPServer` serves servants to CORBA clients. `Server` and `Client` use them when
-the naming service is a CORBA one (`--naming corbaloc:iiop:HOST:PORT/NameService`, an IOR, ...)
-or `--iiop-endpoint` is given.
+CORBA objects, `IIOPServer` serves servants to CORBA clients. `Server` and `Client` use them
+(miro_gen.transport.iiop) when the naming service is a CORBA one (`--naming
+corbaloc:iiop:HOST:PORT/NameService`, an IOR, ...) or `--iiop-endpoint` is given. This package
+sits below the transport: it imports the run time and the foundations only.
 """
 
 from miro_gen.corba.anys import Any_, read_any, typecode_for, write_any

@@ -12,8 +12,6 @@ structs as dicts, unions as (discriminator, value), enums as enumerator names.
 from __future__ import annotations
 
 import importlib
-import os
-import tempfile
 import threading
 from array import array
 from collections.abc import Callable
@@ -21,7 +19,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from miro_gen.corba import typecode as tcm
-from miro_gen.corba.ior import IOR, ior_from_ref, ref_from_ior
+from miro_gen.corba.ior import IOR, GiopBody, ior_from_ref, ref_from_ior
+from miro_gen.corba.schema import SchemaReader
 from miro_gen.corba.typecode import PRIMITIVES, K, TypeCode
 from miro_gen.exceptions import BAD_PARAM, MARSHAL, UserException
 from miro_gen.runtime import cdr
@@ -63,107 +62,15 @@ def _build(cls: type) -> TypeCode:
     name = getattr(cls, "_type_name", "")
     if not schema or not name:
         raise BAD_PARAM(f"{cls.__name__} is not a generated IDL type (it has no data schema)")
-    from miro_gen.diagnostics import CompileError
-    from miro_gen.idl.frontend import compile_idl
-
-    fd, path = tempfile.mkstemp(suffix=".idl", text=True)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(schema)
-        spec = compile_idl(path)
-    except CompileError as e:  # pragma: no cover - schemas are generated, valid IDL
-        raise BAD_PARAM(f"the data schema of {name} does not compile: {e}") from None
-    finally:
-        os.unlink(path)
-    decl = next((d for d in spec.declarations if d.scoped_name == name), None)
-    if decl is None:  # pragma: no cover - a schema always declares its type
+    # Schemas drop #pragma prefix: the generated classes know the real repository ids.
+    repo_ids = {c._type_name: c._repo_id for c in cdr.imported_types()}
+    tc = SchemaReader(schema, repo_ids).types.get(name)
+    if tc is None:  # pragma: no cover - a schema always declares its type
         raise BAD_PARAM(f"the data schema of {name} does not declare it")
-    tc = _SchemaTypes().named(decl)
     if issubclass(cls, UserException):
         tc.kind = K.tk_except
-    tc.id = getattr(cls, "_repo_id", tc.id) or tc.id
+    tc.id = getattr(cls, "_repo_id", "") or tc.id
     return tc
-
-
-class _SchemaTypes:
-    """TypeCodes for the declarations of a compiled data schema."""
-
-    def __init__(self) -> None:
-        self.done: dict[int, TypeCode] = {}
-        by_name = {c._type_name: c._repo_id for c in cdr.imported_types()}
-        self.repo_ids = by_name  # schemas drop #pragma prefix: the classes know the real ids
-
-    def type(self, t: Any, dims: list[int] | tuple[int, ...] = ()) -> TypeCode:
-        from miro_gen.idl import ast
-
-        if dims:
-            inner = self.type(t, dims[1:])
-            return TypeCode(K.tk_array, content=inner, length=dims[0])
-        if isinstance(t, ast.BaseType):
-            kind = _BASE.get(t.name)
-            if kind is None:
-                raise BAD_PARAM(f"{t.name} has no TypeCode here")
-            return tcm.simple(kind) if kind != K.tk_objref else tcm.objref_tc(_OBJECT)
-        if isinstance(t, ast.StringType):
-            return tcm.string_tc(t.bound or 0, t.wide)
-        if isinstance(t, ast.SequenceType):
-            return TypeCode(K.tk_sequence, content=self.type(t.element), length=t.bound or 0)
-        if isinstance(t, ast.NamedType):
-            return self.named(t.decl)
-        return self.named(t)
-
-    def named(self, decl: Any) -> TypeCode:
-        from miro_gen.idl import ast
-
-        if isinstance(decl, ast.Forward) and decl.full is not None:
-            decl = decl.full
-        found = self.done.get(id(decl))
-        if found is not None:
-            return found
-        repo_id = self.repo_ids.get(decl.scoped_name, decl.repo_id)
-        tc = TypeCode(K.tk_null, repo_id, decl.name)
-        self.done[id(decl)] = tc
-        if isinstance(decl, ast.Struct | ast.Exception_):
-            tc.kind = K.tk_struct if isinstance(decl, ast.Struct) else K.tk_except
-            chain = []
-            node: Any = decl
-            while node is not None:
-                chain.append(node)
-                node = getattr(node, "base", None)
-            for s in reversed(chain):
-                tc.members += [(m.name, self.type(m.type, m.dims)) for m in s.members]
-        elif isinstance(decl, ast.Enum):
-            tc.kind = K.tk_enum
-            tc.enumerators = [e.name for e in decl.enumerators]
-        elif isinstance(decl, ast.Typedef):
-            tc.kind = K.tk_alias
-            tc.content = self.type(decl.type, decl.dims)
-        elif isinstance(decl, ast.Union_):
-            tc.kind = K.tk_union
-            tc.discriminator = self.type(decl.switch_type)
-            for case in decl.cases:
-                member = self.type(case.type, case.dims)
-                for label in case.labels:
-                    if label is None:
-                        tc.default_index = len(tc.cases)
-                        label = 0
-                    tc.cases.append((getattr(label, "ordinal", label), case.name, member))
-        elif isinstance(decl, ast.Interface | ast.Forward):
-            tc.kind = K.tk_objref
-        else:
-            raise BAD_PARAM(f"{decl.scoped_name}: a {decl.kind} has no TypeCode here")
-        return tc
-
-
-_OBJECT = "IDL:omg.org/CORBA/Object:1.0"
-_BASE = {
-    "short": K.tk_short, "unsigned short": K.tk_ushort, "long": K.tk_long,
-    "unsigned long": K.tk_ulong, "long long": K.tk_longlong,
-    "unsigned long long": K.tk_ulonglong, "float": K.tk_float, "double": K.tk_double,
-    "long double": K.tk_longdouble, "boolean": K.tk_boolean, "char": K.tk_char,
-    "wchar": K.tk_wchar, "octet": K.tk_octet, "int8": K.tk_octet, "uint8": K.tk_octet,
-    "any": K.tk_any, "Object": K.tk_objref,
-}  # fmt: skip
 
 
 _registered: dict[str, TypeCode] = {}
@@ -391,8 +298,6 @@ def read_value(inp: CdrInput, tc: TypeCode) -> Any:
 def giop_body(payload: bytes | bytearray | memoryview, little: bool = True) -> cdr.ForeignBody:
     """`payload` (CDR laid out from a multiple of 8, references as IORs) as the body that
     generated decoders read: the encapsulation header first."""
-    from miro_gen.corba.bodies import GiopBody
-
     return GiopBody((b"\x00\x01\x00\x00" if little else b"\x00\x00\x00\x00") + bytes(payload))
 
 

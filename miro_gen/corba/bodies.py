@@ -16,27 +16,13 @@ from typing import Any, Final
 from miro_gen import exceptions as exc
 from miro_gen.corba import anys
 from miro_gen.corba.giop import SC_MIRO_DETAIL, Contexts, ReplyStatus, context
-from miro_gen.corba.ior import IOR, ref_from_ior
+from miro_gen.corba.ior import GiopBody
 from miro_gen.exceptions import MARSHAL, UNKNOWN, CompletionStatus, SystemException
 from miro_gen.runtime import cdr, rpc
 from miro_gen.runtime.cdr import BE, LE, ObjectRef
 from miro_gen.runtime.cdrstream import CdrInput, CdrOutput, encapsulated, encapsulation_input
 
 _HEADERS: Final = (b"\x00\x00\x00\x00", b"\x00\x01\x00\x00")  # big-, little-endian
-
-
-class GiopBody(cdr.ForeignBody):
-    """A body that came in a GIOP message: its object references are IORs."""
-
-    __slots__ = ()
-
-    def get_object(self, off: int, e: int, what: str) -> tuple[ObjectRef, int]:
-        inp = CdrInput(self, off, e)
-        try:
-            ior = IOR.read(inp)
-        except MARSHAL as x:
-            raise MARSHAL(f"{what}: {x.message}") from None
-        return ref_from_ior(ior), inp.pos
 
 
 def body_in(msg: bytes, offset: int, little: bool) -> GiopBody:

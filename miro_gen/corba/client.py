@@ -30,7 +30,7 @@ from typing import Any
 from miro_gen.corba import bodies, giop
 from miro_gen.corba.connection import DEFAULT_MAX_MESSAGE, GiopConnection, NotGiop
 from miro_gen.corba.giop import GiopError, MsgType, ReplyStatus
-from miro_gen.corba.ior import IOR, OUR_CODE_SETS, ior_from_ref, parse_url, ref_from_ior
+from miro_gen.corba.ior import IOR, OUR_CODE_SETS, GiopBody, ior_from_ref, parse_url, ref_from_ior
 from miro_gen.exceptions import BAD_PARAM, COMM_FAILURE, TIMEOUT, TRANSIENT, CompletionStatus
 from miro_gen.log import logger
 from miro_gen.runtime import rpc
@@ -308,7 +308,7 @@ class IIOPInvoker:
                     rid, status, ncontexts = _REPLY12[not h.little].unpack_from(msg, 12)
                     if rid == request_id and status == 0 and ncontexts == 0:
                         body = _OK_HEADER[h.little] + msg[24:]
-                        return rpc.Reply(rpc.ReplyStatus.OK, bodies.GiopBody(body))
+                        return rpc.Reply(rpc.ReplyStatus.OK, GiopBody(body))
                 result = self._reply(conn, h, msg, request_id, operation)
                 if result is not None:
                     return result

@@ -16,7 +16,7 @@ with its repository id when one is importable, else plain Python data (`anys.to_
 
     printer = Printer(channel)
 
-`miro bridge corba` relays between such a channel and a miro-gen event channel.
+`miro bridge corba` (miro_gen.bridges.corba) relays between such a channel and a miro-gen one.
 """
 
 from __future__ import annotations

@@ -25,7 +25,7 @@ from typing import NamedTuple
 from urllib.parse import quote_from_bytes, unquote_to_bytes
 
 from miro_gen.exceptions import BAD_PARAM, MARSHAL
-from miro_gen.runtime.cdr import ObjectRef
+from miro_gen.runtime.cdr import ForeignBody, ObjectRef
 from miro_gen.runtime.cdrstream import CdrInput, CdrOutput, encapsulated, encapsulation_input
 
 TAG_INTERNET_IOP = 0
@@ -438,3 +438,18 @@ def ior_from_ref(ref: ObjectRef) -> IOR:
     out.string(ref.endpoint)
     out.octets(ref.key)
     return IOR(ref.repo_id, [Profile(TAG_MIRO_ZMQ, out.getvalue())])
+
+
+class GiopBody(ForeignBody):
+    """A request or reply body that came in a GIOP message: its object references are IORs
+    (generated decoders call `get_object` for them)."""
+
+    __slots__ = ()
+
+    def get_object(self, off: int, e: int, what: str) -> tuple[ObjectRef, int]:
+        inp = CdrInput(self, off, e)
+        try:
+            ior = IOR.read(inp)
+        except MARSHAL as x:
+            raise MARSHAL(f"{what}: {x.message}") from None
+        return ref_from_ior(ior), inp.pos

@@ -48,11 +48,11 @@ _log = log.logger("MIRO")
 
 def _corba_side(client: Client) -> Any:
     """The CORBA side of a process whose options name a CORBA naming service or an IIOP
-    endpoint (miro_gen.corba.service), else None; the CORBA code loads only then."""
+    endpoint (miro_gen.transport.iiop), else None; the CORBA code loads only then."""
     o = client.options
     if o.naming_url is None and o.iiop_endpoint is None:
         return None
-    from miro_gen.corba.service import corba_for
+    from miro_gen.transport.iiop import corba_for
 
     return corba_for(client)
 

@@ -1,4 +1,4 @@
-"""What a `Server` or `Client` does differently when it talks to the CORBA world.
+"""What a `Server` or `Client` does differently when it talks to the CORBA world (its IIOP side).
 
 `corba_for(client)` looks at the common options: a naming-service URL that turns out to be a
 CORBA naming service (`miro_gen.corba.naming.decide`), or `--iiop-endpoint`. Then the process
