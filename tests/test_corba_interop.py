@@ -13,6 +13,7 @@ tells apart (ZeroMQ or GIOP).
 from __future__ import annotations
 
 import importlib
+import signal
 import subprocess
 import sys
 import threading
@@ -31,10 +32,12 @@ from corba_peers import (
     echo_servant,
     generate_python,
     missing_tools,
+    readline,
     run_peer,
     wait_giop,
 )
 from loopback import NamingProcess, free_port, service_env
+from miro_cli import REPO
 
 from miro_gen import BAD_PARAM, TRANSIENT, UNKNOWN, Client, CompletionStatus, Server
 from miro_gen.corba import CORBA_SYSTEM_EXCEPTIONS, IIOPInvoker, NamingContext
@@ -394,3 +397,56 @@ def test_giop_is_told_apart_from_nothing(omninames: OmniNames) -> None:
     assert probe("127.0.0.1", omninames.port) == PeerKind.GIOP
     assert probe("127.0.0.1", free_port(), timeout=0.2) == PeerKind.NONE
     wait_giop("127.0.0.1", omninames.port)
+
+
+# ---- the manual's examples, unchanged, in a CORBA robot ----------------------------------------
+
+
+def test_the_manuals_examples_run_against_omninames(omninames: OmniNames) -> None:
+    """ExampleA to D started as the manual starts them, with -ORBInitRef naming omniNames:
+    ExampleA is served over IIOP and bound in omniNames, ExampleB finds and polls it, ExampleC's
+    event channel (ZeroMQ) is bound there too and ExampleD receives its events; `miro nslist`
+    lists them from omniNames."""
+    services = REPO / "services"
+    nsc = ["-ORBInitRef", f"NameService={omninames.url}", "-MNC", "manualbot"]
+    env = service_env()
+    started: list[subprocess.Popen[str]] = []
+
+    def start(script: str, *args: str) -> subprocess.Popen[str]:
+        proc = subprocess.Popen(
+            [sys.executable, str(services / script), *nsc, *args],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+        )  # fmt: skip
+        started.append(proc)
+        return proc
+
+    try:
+        a = start("exampleA.py")
+        assert readline(a.stdout, 30, "ExampleA") == "ExampleA is ready"
+        b = subprocess.run(
+            [sys.executable, str(services / "exampleB.py"), *nsc, "--count", "2", "--period", "0"],
+            capture_output=True, text=True, env=env, timeout=60,
+        )  # fmt: skip
+        assert b.returncode == 0, b.stderr
+        assert "Retrieved variables a and b are: 1 and 11" in b.stdout
+        c = start("exampleC.py", "0.1")
+        assert readline(c.stdout, 30, "ExampleC").startswith("ExampleC publishes")
+        d = start("exampleD.py")
+        assert readline(d.stdout, 30, "ExampleD").startswith("ExampleD listens")
+        assert readline(d.stdout, 30, "ExampleD").startswith("Received ExampleEvent #")
+        listed = subprocess.run(
+            [sys.executable, "-m", "miro_gen.cli.main", "nslist", "--naming", omninames.url,
+             "manualbot"],
+            capture_output=True, text=True, env=env, timeout=60,
+        )  # fmt: skip
+        assert listed.returncode == 0, listed.stderr
+        assert "ExampleA  (IDL:Miro/Example:1.0 at iiop://" in listed.stdout
+        assert "ExampleEventChannel  (" in listed.stdout
+    finally:
+        for proc in started:
+            proc.send_signal(signal.SIGINT)
+        for proc in started:
+            try:
+                proc.wait(10)
+            except subprocess.TimeoutExpired:
+                proc.kill()

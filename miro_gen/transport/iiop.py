@@ -18,7 +18,6 @@ from miro_gen.corba.client import IIOPInvoker
 from miro_gen.corba.ior import CorbaRef
 from miro_gen.corba.naming import CorbaEntry, CorbaNaming, Peer, corba_naming, decide
 from miro_gen.corba.server import IIOPServer
-from miro_gen.exceptions import SystemException
 from miro_gen.log import logger
 from miro_gen.runtime import rpc
 from miro_gen.runtime.cdr import ObjectRef
@@ -92,7 +91,7 @@ class CorbaSide:
             try:
                 assert self.naming is not None
                 self.naming.unbind(name)
-            except (SystemException, Exception) as e:  # the naming service may be gone
+            except Exception as e:  # the naming service may be gone
                 _log.debug("cannot unbind %s: %s", name, e)
         self.iiop.fallback = None
         self.iiop.close()
