@@ -5,7 +5,9 @@ the C++ one does."""
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
+import importlib
 import os
 import shutil
 import subprocess
@@ -13,7 +15,9 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 from loopback import free_port, service_env
@@ -75,6 +79,31 @@ def generate_python(out: Path) -> None:
         cwd=REPO, capture_output=True, text=True, timeout=120,
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr
+
+
+@contextlib.contextmanager
+def peer_types(out: Path) -> Iterator[SimpleNamespace]:
+    """Peer and Peer__POA generated into `out` and imported (`.Peer`, `.POA`, `.path`), for
+    the time of a test module."""
+    generate_python(out)
+    sys.path.insert(0, str(out))
+    try:
+        yield SimpleNamespace(
+            Peer=importlib.import_module("Peer"), POA=importlib.import_module("Peer__POA"), path=out
+        )
+    finally:
+        sys.path.remove(str(out))
+        for name in [m for m in sys.modules if m.split(".")[0] in ("Peer", "Peer__POA")]:
+            del sys.modules[name]
+
+
+@contextlib.contextmanager
+def running_omninames() -> Iterator[OmniNames]:
+    names = OmniNames()
+    try:
+        yield names
+    finally:
+        names.stop()
 
 
 class OmniNames:

@@ -5,7 +5,6 @@ miro-gen channel, so that unchanged StructuredPushSupplier/Consumer code sees th
 
 from __future__ import annotations
 
-import importlib
 import shutil
 import subprocess
 import sys
@@ -23,10 +22,11 @@ from corba_peers import (
     CppPeer,
     OmniNames,
     build_peer,
-    generate_python,
     missing_tools,
+    peer_types,
     readline,
     run_peer,
+    running_omninames,
 )
 from loopback import NamingProcess, free_port, service_env
 from miro_cli import REPO
@@ -56,9 +56,8 @@ def peer_bin() -> Path:
 
 @pytest.fixture(scope="module")
 def omninames() -> Iterator[OmniNames]:
-    names = OmniNames()
-    yield names
-    names.stop()
+    with running_omninames() as names:
+        yield names
 
 
 @pytest.fixture(scope="module")
@@ -88,15 +87,8 @@ def channel_name(omninames: OmniNames) -> Iterator[str]:
 
 @pytest.fixture(scope="module")
 def gen(tmp_path_factory: pytest.TempPathFactory) -> Iterator[SimpleNamespace]:
-    out = tmp_path_factory.mktemp("peer_generated")
-    generate_python(out)
-    sys.path.insert(0, str(out))
-    try:
-        yield SimpleNamespace(Peer=importlib.import_module("Peer"), path=out)
-    finally:
-        sys.path.remove(str(out))
-        for name in [m for m in sys.modules if m.split(".")[0] in ("Peer", "Peer__POA")]:
-            del sys.modules[name]
+    with peer_types(tmp_path_factory.mktemp("peer_generated")) as types:
+        yield types
 
 
 class Collector(CosEventConsumer):

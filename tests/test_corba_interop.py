@@ -12,7 +12,6 @@ tells apart (ZeroMQ or GIOP).
 
 from __future__ import annotations
 
-import importlib
 import signal
 import subprocess
 import sys
@@ -30,10 +29,11 @@ from corba_peers import (
     OmniNames,
     build_peer,
     echo_servant,
-    generate_python,
     missing_tools,
+    peer_types,
     readline,
     run_peer,
+    running_omninames,
     wait_giop,
 )
 from loopback import NamingProcess, free_port, service_env
@@ -57,26 +57,14 @@ def peer_bin() -> Path:
 
 @pytest.fixture(scope="module")
 def omninames() -> Iterator[OmniNames]:
-    names = OmniNames()
-    yield names
-    names.stop()
+    with running_omninames() as names:
+        yield names
 
 
 @pytest.fixture(scope="module")
 def gen(tmp_path_factory: pytest.TempPathFactory) -> Iterator[SimpleNamespace]:
-    out = tmp_path_factory.mktemp("peer_generated")
-    generate_python(out)
-    sys.path.insert(0, str(out))
-    try:
-        yield SimpleNamespace(
-            Peer=importlib.import_module("Peer"),
-            POA=importlib.import_module("Peer__POA"),
-            path=out,
-        )
-    finally:
-        sys.path.remove(str(out))
-        for name in [m for m in sys.modules if m.split(".")[0] in ("Peer", "Peer__POA")]:
-            del sys.modules[name]
+    with peer_types(tmp_path_factory.mktemp("peer_generated")) as types:
+        yield types
 
 
 class ServerThread:
