@@ -21,12 +21,9 @@ import zmq
 from corba_peers import (
     CppPeer,
     OmniNames,
-    build_peer,
     missing_tools,
-    peer_types,
     readline,
     run_peer,
-    running_omninames,
 )
 from loopback import NamingProcess, free_port, service_env
 from miro_cli import REPO
@@ -47,17 +44,6 @@ pytestmark = [
     ),
     pytest.mark.timeout(300),
 ]
-
-
-@pytest.fixture(scope="module")
-def peer_bin() -> Path:
-    return build_peer()
-
-
-@pytest.fixture(scope="module")
-def omninames() -> Iterator[OmniNames]:
-    with running_omninames() as names:
-        yield names
 
 
 @pytest.fixture(scope="module")
@@ -83,12 +69,6 @@ def channel_name(omninames: OmniNames) -> Iterator[str]:
         proc.kill()
         proc.wait(10)
         shutil.rmtree(data, ignore_errors=True)
-
-
-@pytest.fixture(scope="module")
-def gen(tmp_path_factory: pytest.TempPathFactory) -> Iterator[SimpleNamespace]:
-    with peer_types(tmp_path_factory.mktemp("peer_generated")) as types:
-        yield types
 
 
 class Collector(CosEventConsumer):

@@ -17,7 +17,6 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterator
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
@@ -27,13 +26,10 @@ import zmq
 from corba_peers import (
     CppPeer,
     OmniNames,
-    build_peer,
     echo_servant,
     missing_tools,
-    peer_types,
     readline,
     run_peer,
-    running_omninames,
     wait_giop,
 )
 from loopback import NamingProcess, free_port, service_env
@@ -48,23 +44,6 @@ pytestmark = [
     pytest.mark.skipif(bool(missing_tools()), reason=f"needs {', '.join(missing_tools())}"),
     pytest.mark.timeout(300),
 ]
-
-
-@pytest.fixture(scope="module")
-def peer_bin() -> Path:
-    return build_peer()
-
-
-@pytest.fixture(scope="module")
-def omninames() -> Iterator[OmniNames]:
-    with running_omninames() as names:
-        yield names
-
-
-@pytest.fixture(scope="module")
-def gen(tmp_path_factory: pytest.TempPathFactory) -> Iterator[SimpleNamespace]:
-    with peer_types(tmp_path_factory.mktemp("peer_generated")) as types:
-        yield types
 
 
 class ServerThread:
