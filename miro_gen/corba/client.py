@@ -52,6 +52,11 @@ _REPLY12 = (Struct("<III"), Struct(">III"))  # request id, status, context count
 _OK_HEADER = (b"\x00\x00\x00\x00", b"\x00\x01\x00\x00")
 
 
+def _plain_reply(request_id: int, little: bool) -> bytes:
+    """Bytes 12 to 24 of a GIOP 1.2 reply to `request_id` with no exception and no contexts."""
+    return _REPLY12[not little].pack(request_id, 0, 0)
+
+
 class _Closed(Exception):
     """The server closed the connection in order before answering: the call can be retried."""
 
@@ -304,11 +309,9 @@ class IIOPInvoker:
                     completed=CompletionStatus.MAYBE,
                 ) from None
             if h.type == MsgType.REPLY:
-                if h.minor == 2 and len(msg) >= 24:  # the common case, decoded directly
-                    rid, status, ncontexts = _REPLY12[not h.little].unpack_from(msg, 12)
-                    if rid == request_id and status == 0 and ncontexts == 0:
-                        body = _OK_HEADER[h.little] + msg[24:]
-                        return rpc.Reply(rpc.ReplyStatus.OK, GiopBody(body))
+                # The common case: GIOP 1.2, ours, no exception, no service contexts.
+                if h.minor == 2 and msg[12:24] == _plain_reply(request_id, h.little):
+                    return rpc.Reply(rpc.ReplyStatus.OK, GiopBody(_OK_HEADER[h.little] + msg[24:]))
                 result = self._reply(conn, h, msg, request_id, operation)
                 if result is not None:
                     return result

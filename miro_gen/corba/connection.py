@@ -17,8 +17,8 @@ from struct import Struct
 from miro_gen.corba import giop
 from miro_gen.corba.giop import HEADER_SIZE, GiopError, Header, MsgType
 
-DEFAULT_MAX_MESSAGE = 64 << 20  # bytes a message may have, its fragments together
 _SIZE = (Struct("<I"), Struct(">I"))
+DEFAULT_MAX_MESSAGE = 64 << 20  # bytes a message may have, its fragments together
 _RECV = 65536
 
 
@@ -88,11 +88,10 @@ class GiopConnection:
             chunk = self.sock.recv(_RECV)
             if not chunk:
                 raise EOFError(f"{self.peer} closed the connection")
-            n = len(chunk)
-            if n >= HEADER_SIZE and chunk[:4] == giop.MAGIC and not chunk[6] & giop.FLAG_MORE:
-                size = _SIZE[not chunk[6] & 1].unpack_from(chunk, 8)[0]
-                if n == HEADER_SIZE + size and chunk[7] != MsgType.FRAGMENT:
-                    return giop.read_header_cached(chunk, size), chunk
+            if chunk[:4] == giop.MAGIC:
+                h = giop.whole_message_header(chunk)
+                if h is not None:
+                    return h, chunk
             if is_zmtp(chunk):
                 raise NotGiop(f"{self.peer} speaks ZeroMQ, not GIOP", zmq=True)
             self._buf += chunk

@@ -98,20 +98,26 @@ def read_header(data: bytes) -> Header:
     return Header(minor, bool(little), bool(flags & FLAG_MORE) and minor > 0, _TYPES[kind], size)
 
 
-# Version, flags and type bytes already checked: the header fields they stand for.
-_checked: dict[bytes, tuple[int, bool, bool, MsgType]] = {}
+# The headers of whole, unfragmented messages seen lately, by their bytes 4 to 12 (version,
+# flags, type, size): replies to one operation tend to have one size, so most are found here.
+_seen: dict[bytes, Header] = {}
 
 
-def read_header_cached(data: bytes, size: int) -> Header:
-    """`read_header` for a message whose size is known already: the checks of its 4 bytes of
-    version, flags and type are done once for each combination seen."""
-    known = _checked.get(data[4:8])
-    if known is None:
+def whole_message_header(data: bytes) -> Header | None:
+    """The header of `data` when it is one whole GIOP message, not a fragment (else None:
+    to be read the general way); GiopError for a bad header."""
+    key = data[4:12]
+    h = _seen.get(key)
+    if h is None:
+        if len(data) < HEADER_SIZE:
+            return None
         h = read_header(data)
-        known = (h.minor, h.little, h.more, h.type)
-        if len(_checked) < 64:
-            _checked[data[4:8]] = known
-    return Header(*known, size)
+        if h.more or h.type == MsgType.FRAGMENT:
+            return None
+        if len(_seen) >= 1024:
+            _seen.clear()
+        _seen[key] = h
+    return h if len(data) == HEADER_SIZE + h.size else None
 
 
 def _start(minor: int, kind: MsgType) -> CdrOutput:
@@ -209,15 +215,15 @@ def encode_request(
     return _finish(out)
 
 
-_HEAD = (Struct("<4sBBBBI"), Struct(">4sBBBBI"))
 _ULONG = Struct("<I")
+_SIZE_ID = Struct("<II")
 
 
 class RequestTemplate:
     """The bytes of a Request that stay the same from call to call of one operation on one
     object (all but the request id, the size and the body): a call packs only those."""
 
-    __slots__ = ("after", "before", "minor")
+    __slots__ = ("after", "before", "fixed", "head")
 
     def __init__(
         self,
@@ -232,14 +238,18 @@ class RequestTemplate:
             minor, 0, response_expected, key, operation, b"\0" if has_body else b"", contexts
         )
         at = HEADER_SIZE if minor >= 2 else _id_offset(probe)
-        self.minor = minor
+        self.head = probe[:8]  # GIOP, version, flags, type
         self.before = probe[HEADER_SIZE:at]
         self.after = probe[at + 4 : len(probe) - (1 if has_body else 0)]
+        self.fixed = len(self.before) + 4 + len(self.after)
 
     def message(self, request_id: int, body: bytes | bytearray | memoryview) -> bytes:
-        size = len(self.before) + 4 + len(self.after) + len(body)
-        head = _HEAD[0].pack(MAGIC, 1, self.minor, FLAG_LITTLE, MsgType.REQUEST, size)
-        return b"".join((head, self.before, _ULONG.pack(request_id), self.after, body))
+        size = self.fixed + len(body)
+        if not self.before:  # GIOP 1.2: the request id follows the message header
+            return b"".join((self.head, _SIZE_ID.pack(size, request_id), self.after, body))
+        return b"".join(
+            (self.head, _ULONG.pack(size), self.before, _ULONG.pack(request_id), self.after, body)
+        )
 
 
 def _id_offset(msg: bytes) -> int:
