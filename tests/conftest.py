@@ -61,7 +61,7 @@ def omninames() -> Iterator[object]:
 
 
 @pytest.fixture(scope="module")
-def gen(tmp_path_factory: pytest.TempPathFactory) -> Iterator[object]:
+def peer_gen(tmp_path_factory: pytest.TempPathFactory) -> Iterator[object]:
     """The Python types of tests/corba/Peer.idl, generated and imported for a test module."""
     from corba_peers import peer_types
 

@@ -273,6 +273,12 @@ def echo_servant(Peer: Any, Peer__POA: Any) -> Any:
         def echo_object(self, o: Any) -> Any:
             return o
 
+        def echo_callbacks(self, cbs: list[Any]) -> list[Any]:
+            return cbs
+
+        def swap_echo(self, e: Any) -> Any:
+            return self
+
         def _get_counter(self) -> int:
             return self.counter
 

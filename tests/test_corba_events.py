@@ -85,9 +85,9 @@ class Collector(CosEventConsumer):
 
 
 def test_a_python_supplier_and_a_cpp_consumer(
-    peer_bin: Path, omninames: OmniNames, channel_name: str, gen: SimpleNamespace
+    peer_bin: Path, omninames: OmniNames, channel_name: str, peer_gen: SimpleNamespace
 ) -> None:
-    P = gen.Peer
+    P = peer_gen.Peer
     consumer = CppPeer(peer_bin, "consume", channel_name, "5", naming=omninames.url)
     client = Client(["test", "--naming", omninames.url], context=zmq.Context())
     try:
@@ -114,9 +114,9 @@ def test_a_python_supplier_and_a_cpp_consumer(
 
 
 def test_a_cpp_supplier_and_a_python_consumer(
-    peer_bin: Path, omninames: OmniNames, channel_name: str, gen: SimpleNamespace
+    peer_bin: Path, omninames: OmniNames, channel_name: str, peer_gen: SimpleNamespace
 ) -> None:
-    P = gen.Peer
+    P = peer_gen.Peer
     client = Client(["test", "--naming", omninames.url], context=zmq.Context())
     try:
         collector = Collector(EventChannel.resolve(client, channel_name), 4)
@@ -134,9 +134,9 @@ def test_a_cpp_supplier_and_a_python_consumer(
 
 
 def test_the_bridge_relays_both_ways(
-    peer_bin: Path, omninames: OmniNames, channel_name: str, gen: SimpleNamespace
+    peer_bin: Path, omninames: OmniNames, channel_name: str, peer_gen: SimpleNamespace
 ) -> None:
-    P = gen.Peer
+    P = peer_gen.Peer
     naming = NamingProcess()
     server = Server(["test", "--naming", naming.endpoint, "-MNC", "robot"], context=zmq.Context())
     channel = EventChannelFactory(server).create_channel("EventChannel")
@@ -155,7 +155,7 @@ def test_the_bridge_relays_both_ways(
     thread = threading.Thread(target=server.run, daemon=True)
     thread.start()
     env = service_env()
-    env["PYTHONPATH"] += f":{gen.path}"
+    env["PYTHONPATH"] += f":{peer_gen.path}"
     corba = f"corbaname::127.0.0.1:{omninames.port}#{channel_name}"
     bridge = subprocess.Popen(
         [sys.executable, "-m", "miro_gen.cli.main", "bridge", "corba", "--naming",

@@ -63,9 +63,9 @@ class ServerThread:
         assert not self.thread.is_alive()
 
 
-def exercise(echo: Any, gen: SimpleNamespace, cpp: bool) -> None:
+def exercise(echo: Any, peer_gen: SimpleNamespace, cpp: bool) -> None:
     """Call every operation of a Peer::Echo and check what comes back."""
-    P = gen.Peer
+    P = peer_gen.Peer
     prims = P.Prims(
         -32768, 65535, -(2**31), 2**32 - 1, -(2**63), 2**64 - 1, 1.5, -2.25, True, "z", 255
     )
@@ -131,11 +131,19 @@ def exercise(echo: Any, gen: SimpleNamespace, cpp: bool) -> None:
     assert echo.echo_object(None) is None
     assert echo.echo_object(echo)._ref.key == echo._ref.key
 
-    class Callback(gen.POA.Callback):  # type: ignore[misc, name-defined]
+    class Callback(peer_gen.POA.Callback):  # type: ignore[misc, name-defined]
         def notify(self, what: str) -> str:
             return f"python got {what}"
 
     assert echo.call_back(Callback(), "ping") == "python got ping"
+    mine = Callback()
+    back = echo.echo_callbacks([mine, None, mine])
+    assert back[1] is None and back[0] == back[2]
+    assert (
+        back[0].notify("through C++" if cpp else "back")
+        == f"python got {'through C++' if cpp else 'back'}"
+    )
+    assert echo.swap_echo(again).echo_text("swapped") == "swapped"
     echo._set_counter(41)
     assert echo._get_counter() == 41
     assert echo._get_label() == ("cpp" if cpp else "python")
@@ -145,7 +153,7 @@ def exercise(echo: Any, gen: SimpleNamespace, cpp: bool) -> None:
 
 
 def test_a_python_client_calls_a_cpp_server_bound_in_omninames(
-    peer_bin: Path, omninames: OmniNames, gen: SimpleNamespace
+    peer_bin: Path, omninames: OmniNames, peer_gen: SimpleNamespace
 ) -> None:
     cpp = CppPeer(peer_bin, "server", "robot1/EchoCpp", naming=omninames.url)
     try:
@@ -154,24 +162,26 @@ def test_a_python_client_calls_a_cpp_server_bound_in_omninames(
             ["test", "--naming", omninames.url, "-MNC", "robot1"], context=zmq.Context()
         )
         try:
-            echo = client.resolve_name("EchoCpp", gen.Peer.Echo)  # robot1/EchoCpp, context first
-            exercise(echo, gen, cpp=True)
+            echo = client.resolve_name(
+                "EchoCpp", peer_gen.Peer.Echo
+            )  # robot1/EchoCpp, context first
+            exercise(echo, peer_gen, cpp=True)
         finally:
             client.close()
     finally:
         cpp.kill()
 
 
-def test_a_giop_1_0_cpp_server(peer_bin: Path, gen: SimpleNamespace) -> None:
+def test_a_giop_1_0_cpp_server(peer_bin: Path, peer_gen: SimpleNamespace) -> None:
     """Its IOR says IIOP 1.0: requests go as GIOP 1.0, bodies aligned by a padding context."""
     cpp = CppPeer(peer_bin, "server", "-", "-ORBmaxGIOPVersion", "1.0")
     try:
         ior = cpp.ready()
         invoker = IIOPInvoker()
         try:
-            echo = invoker.stub(gen.Peer.Echo, ior)
+            echo = invoker.stub(peer_gen.Peer.Echo, ior)
             assert invoker._target(echo._ref).minor == 0
-            exercise(echo, gen, cpp=True)
+            exercise(echo, peer_gen, cpp=True)
         finally:
             invoker.close()
     finally:
@@ -179,14 +189,14 @@ def test_a_giop_1_0_cpp_server(peer_bin: Path, gen: SimpleNamespace) -> None:
 
 
 def test_a_restarted_cpp_server_is_called_through_the_stub_already_held(
-    peer_bin: Path, gen: SimpleNamespace
+    peer_bin: Path, peer_gen: SimpleNamespace
 ) -> None:
     port = free_port()
     endpoint = ("-ORBendPoint", f"giop:tcp:127.0.0.1:{port}")
     cpp = CppPeer(peer_bin, "server", "-", *endpoint)
     invoker = IIOPInvoker()
     try:
-        echo = invoker.stub(gen.Peer.Echo, cpp.ready())
+        echo = invoker.stub(peer_gen.Peer.Echo, cpp.ready())
         echo._set_counter(5)
         assert echo._get_counter() == 5
         cpp.kill()
@@ -205,10 +215,10 @@ def test_a_restarted_cpp_server_is_called_through_the_stub_already_held(
 
 
 def test_a_cpp_client_calls_a_python_server_bound_in_omninames(
-    peer_bin: Path, omninames: OmniNames, gen: SimpleNamespace
+    peer_bin: Path, omninames: OmniNames, peer_gen: SimpleNamespace
 ) -> None:
     server = ServerThread("--naming", omninames.url, "-MNC", "robot2")
-    server.server.add_to_name_service(echo_servant(gen.Peer, gen.POA), "EchoPy")
+    server.server.add_to_name_service(echo_servant(peer_gen.Peer, peer_gen.POA), "EchoPy")
     server.start()
     try:
         status, out = run_peer(peer_bin, "client", "robot2/EchoPy", naming=omninames.url)
@@ -230,7 +240,7 @@ def test_a_cpp_client_calls_a_python_server_bound_in_omninames(
 
 @pytest.mark.parametrize("version", ["1.0", "1.1"])
 def test_giop_1_0_and_1_1_clients_are_served(
-    peer_bin: Path, omninames: OmniNames, gen: SimpleNamespace, version: str
+    peer_bin: Path, omninames: OmniNames, peer_gen: SimpleNamespace, version: str
 ) -> None:
     """Their request bodies may start 4 bytes off a multiple of 8: such requests are forwarded
     to a key 4 bytes longer and arrive aligned. What the client may report, and only then: a
@@ -238,7 +248,7 @@ def test_giop_1_0_and_1_1_clients_are_served(
     warning; and a forwarded reference is no longer `_is_equivalent` to itself in omniORB's
     eyes (it compares the place forwarded to)."""
     server = ServerThread("--naming", omninames.url, "-MNC", f"old{version[-1]}")
-    server.server.add_to_name_service(echo_servant(gen.Peer, gen.POA), "Echo")
+    server.server.add_to_name_service(echo_servant(peer_gen.Peer, peer_gen.POA), "Echo")
     server.start()
     try:
         _, out = run_peer(
@@ -253,14 +263,14 @@ def test_giop_1_0_and_1_1_clients_are_served(
 
 
 def test_a_restarted_python_server_keeps_its_iors(
-    peer_bin: Path, omninames: OmniNames, gen: SimpleNamespace, tmp_path: Path
+    peer_bin: Path, omninames: OmniNames, peer_gen: SimpleNamespace, tmp_path: Path
 ) -> None:
     """--iiop-endpoint with a fixed port: the same IOR reaches the restarted server."""
     port = free_port()
     script = tmp_path / "echo_server.py"
     script.write_text(
         "import sys\n"
-        f"sys.path.insert(0, {str(gen.path)!r})\n"
+        f"sys.path.insert(0, {str(peer_gen.path)!r})\n"
         "import Peer, Peer__POA\n"
         "from corba_peers import echo_servant\n"
         "from miro_gen import Server\n"
@@ -282,7 +292,7 @@ def test_a_restarted_python_server_keeps_its_iors(
     proc = start()
     client = Client(["test", "--naming", omninames.url], context=zmq.Context())
     try:
-        echo = client.resolve_name("restart/Echo", gen.Peer.Echo)
+        echo = client.resolve_name("restart/Echo", peer_gen.Peer.Echo)
         assert f"127.0.0.1:{port}" in echo._ref.endpoint
         echo._set_counter(3)
         proc.kill()
@@ -296,14 +306,14 @@ def test_a_restarted_python_server_keeps_its_iors(
         proc.wait(10)
 
 
-def test_python_to_python_over_iiop(omninames: OmniNames, gen: SimpleNamespace) -> None:
+def test_python_to_python_over_iiop(omninames: OmniNames, peer_gen: SimpleNamespace) -> None:
     """Both ends miro-gen, through omniNames: the same checks as against C++."""
     server = ServerThread("--naming", omninames.url, "-MNC", "robot3")
-    server.server.add_to_name_service(echo_servant(gen.Peer, gen.POA), "Echo")
+    server.server.add_to_name_service(echo_servant(peer_gen.Peer, peer_gen.POA), "Echo")
     server.start()
     client = Client(["test", "--naming", omninames.url, "-MNC", "robot3"], context=zmq.Context())
     try:
-        exercise(client.resolve_name("Echo", gen.Peer.Echo), gen, cpp=False)
+        exercise(client.resolve_name("Echo", peer_gen.Peer.Echo), peer_gen, cpp=False)
     finally:
         client.close()
         server.stop()
@@ -312,7 +322,7 @@ def test_python_to_python_over_iiop(omninames: OmniNames, gen: SimpleNamespace) 
 # ---- which naming service -------------------------------------------------------------------
 
 
-def test_the_manual_iioploc_url_still_reaches_miro_naming(gen: SimpleNamespace) -> None:
+def test_the_manual_iioploc_url_still_reaches_miro_naming(peer_gen: SimpleNamespace) -> None:
     """`-ORBInitRef NameService=iioploc://HOST:PORT/NameService` (the manual's spelling) with
     `miro naming` there: the process hears ZeroMQ's greeting and uses the ZeroMQ naming."""
     naming = NamingProcess()
@@ -321,11 +331,11 @@ def test_the_manual_iioploc_url_still_reaches_miro_naming(gen: SimpleNamespace) 
         url = f"NameService=iioploc://127.0.0.1:{naming.port}/NameService"
         server = ServerThread("-ORBInitRef", url, "-MNC", "manual")
         assert server.server.corba is None
-        server.server.add_to_name_service(echo_servant(gen.Peer, gen.POA), "Echo")
+        server.server.add_to_name_service(echo_servant(peer_gen.Peer, peer_gen.POA), "Echo")
         server.start()
         client = Client(["test", "-ORBInitRef", url], context=zmq.Context())
         try:
-            echo = client.resolve_name("manual/Echo", gen.Peer.Echo)
+            echo = client.resolve_name("manual/Echo", peer_gen.Peer.Echo)
             assert echo._ref.endpoint.startswith("tcp://")
             assert echo.echo_text("over ZeroMQ") == "over ZeroMQ"
         finally:
@@ -335,11 +345,11 @@ def test_the_manual_iioploc_url_still_reaches_miro_naming(gen: SimpleNamespace) 
         naming.stop()
 
 
-def test_a_zeromq_peer_where_giop_is_expected_is_named(gen: SimpleNamespace) -> None:
+def test_a_zeromq_peer_where_giop_is_expected_is_named(peer_gen: SimpleNamespace) -> None:
     naming = NamingProcess()
     invoker = IIOPInvoker()
     try:
-        echo = invoker.stub(gen.Peer.Echo, f"corbaloc:iiop:127.0.0.1:{naming.port}/Echo")
+        echo = invoker.stub(peer_gen.Peer.Echo, f"corbaloc:iiop:127.0.0.1:{naming.port}/Echo")
         with pytest.raises(TRANSIENT, match=r"ZeroMQ peer.*--naming tcp://127.0.0.1:\d+") as e:
             echo.nothing()
         assert e.value.completed == CompletionStatus.NO

@@ -124,6 +124,12 @@ public:
   Peer::Echo_ptr myself() { return _this(); }
   char* call_back(Peer::Callback_ptr cb, const char* what) { return cb->notify(what); }
   CORBA::Object_ptr echo_object(CORBA::Object_ptr o) { return CORBA::Object::_duplicate(o); }
+  Peer::CallbackSeq* echo_callbacks(const Peer::CallbackSeq& cbs) { return new Peer::CallbackSeq(cbs); }
+  void swap_echo(Peer::Echo_ptr& e)
+  {
+    CORBA::release(e);
+    e = _this();
+  }
   CORBA::Long counter() { return counter_; }
   void counter(CORBA::Long c) { counter_ = c; }
   char* label() { return CORBA::string_dup("cpp"); }
@@ -397,6 +403,23 @@ static int client(CORBA::ORB_ptr orb, const std::string& name)
   Peer::Callback_var cb = cb_impl->_this();
   CORBA::String_var got = echo->call_back(cb, "ping");
   check(std::strcmp(got, "cpp got ping") == 0, "callback", std::string(got));
+
+  Peer::CallbackSeq cbs;
+  cbs.length(2);
+  cbs[0] = Peer::Callback::_duplicate(cb);
+  cbs[1] = Peer::Callback::_nil();
+  Peer::CallbackSeq_var cbr = echo->echo_callbacks(cbs);
+  bool cbs_ok = cbr->length() == 2 && CORBA::is_nil(cbr[1]);
+  if (cbs_ok) {
+    CORBA::String_var via = cbr[0]->notify("again");
+    cbs_ok = std::strcmp(via, "cpp got again") == 0;
+  }
+  check(cbs_ok, "sequence of references");
+
+  Peer::Echo_var swapped = Peer::Echo::_duplicate(self);
+  echo->swap_echo(swapped.inout());
+  CORBA::String_var via_swapped = swapped->echo_text("swapped");
+  check(std::strcmp(via_swapped, "swapped") == 0, "inout reference");
 
   CORBA::Object_var same_obj = echo->echo_object(echo);
   check(same_obj->_is_equivalent(echo), "Object argument");
