@@ -14,6 +14,7 @@ from miro_gen.codegen.contexts import (
     StubContext,
 )
 from miro_gen.codegen.hints import TypeHints
+from miro_gen.codegen.python_limits import python_bases
 from miro_gen.codegen.scope import Scope
 from miro_gen.codegen.shapes import shape_of
 from miro_gen.codegen.steps import Assign, DecodeStep
@@ -55,7 +56,7 @@ class InterfaceLowering:
             scoped_name=d.scoped_name,
             doc=d.doc,
             repo_id=d.repo_id,
-            bases=[self.scope.ref(b, m) for b in d.bases] or ["_rpc.Stub"],
+            bases=[self.scope.ref(b, m) for b in python_bases(d.bases)] or ["_rpc.Stub"],
             operations=self._operations(d, m, in_stub=True),
             nested=nested,
         )
@@ -69,7 +70,8 @@ class InterfaceLowering:
             scoped_name=d.scoped_name,
             doc=d.doc,
             repo_id=d.repo_id,
-            bases=[self.scope.ref(b, m, poa=True) for b in d.bases] or ["_rpc.Servant"],
+            bases=[self.scope.ref(b, m, poa=True) for b in python_bases(d.bases)]
+            or ["_rpc.Servant"],
             operations=self._operations(d, m, in_stub=False),
         )
 
