@@ -4,7 +4,9 @@ An embedded naming service runs in this process; ExampleA (server), ExampleB (it
 ExampleC (event supplier) and ExampleD (event consumer) run as processes of their own, as they
 would on a robot, and their output is interleaved here line by line, each line labelled with the
 example it comes from. Ctrl-C (or the end of `--duration`) stops them, consumers and clients
-first, then the naming service.
+first, then the naming service. The naming service listens where `miro nslist` and `miro echo`
+look by default when it can (tcp://127.0.0.1:2809, or $MIRO_NAMING), and the demo prints the
+commands that see it from another terminal.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ from __future__ import annotations
 import argparse
 import os
 import signal
+import socket
 import subprocess
 import sys
 import threading
@@ -24,20 +27,15 @@ from typing import IO
 import zmq
 
 from miro_gen import log
+from miro_gen.cli.run import services_dir
 from miro_gen.transport.invoker import ZmqInvoker
 from miro_gen.transport.naming import NamingService
+from miro_gen.transport.options import DEFAULT_NAMING, UsageError, naming_endpoint
 from miro_gen.transport.reactor import Reactor
 
 READY_TIMEOUT = 30.0  # seconds an example may take to start
 STOP_TIMEOUT = 10.0  # seconds an example may take to stop after SIGINT
 COLOURS = {"naming": 37, "exampleA": 36, "exampleB": 32, "exampleC": 35, "exampleD": 33}
-
-
-def services_dir() -> Path | None:
-    """The folder of the manual's examples: `miro_gen/services`, shipped in the package (in a
-    checkout, a link to the top-level `services/`)."""
-    folder = (Path(__file__).parents[1] / "services").resolve()
-    return folder if (folder / "exampleA.py").is_file() else None
 
 
 class Output:
@@ -110,7 +108,31 @@ def stop_example(example: Example, out: Output) -> int:
             proc.wait()
     example.reader.join(STOP_TIMEOUT)
     code = proc.returncode
-    return 0 if code in (0, -signal.SIGINT) else code
+    return 0 if code in (0, -signal.SIGINT, 128 + signal.SIGINT) else code
+
+
+def naming_address(given: str | None) -> str:
+    """Where the demo's naming service listens: `given` (--naming, else $MIRO_NAMING), else
+    the default address when nothing listens there, else a free port of loopback."""
+    if given:
+        return naming_endpoint(given)
+    host, port = DEFAULT_NAMING.removeprefix("tcp://").rsplit(":", 1)
+    with socket.socket() as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            probe.bind((host, int(port)))
+        except OSError:  # in use (another naming service, say)
+            return "tcp://127.0.0.1:*"
+    return DEFAULT_NAMING
+
+
+def commands(endpoint: str) -> str:
+    """The commands that see the demo from another terminal."""
+    naming = "" if endpoint == DEFAULT_NAMING else f" --naming {endpoint}"
+    return (
+        f"see it from another terminal: miro nslist{naming}; "
+        f"miro echo '*/ExampleEvent' --channel ExampleEventChannel{naming}"
+    )
 
 
 def demo_main(argv: Sequence[str]) -> int:
@@ -132,9 +154,20 @@ def demo_main(argv: Sequence[str]) -> int:
         help="label colours (default: when the output is a terminal)",
     )
     p.add_argument("-MLL", "--log-level", type=int, default=4, help="Miro log level (default 4)")
+    p.add_argument(
+        "--naming",
+        metavar="URL",
+        default=os.environ.get("MIRO_NAMING"),
+        help=f"where its naming service listens (default $MIRO_NAMING, else {DEFAULT_NAMING} "
+        "when free, else a free port)",
+    )
     ns = p.parse_args(argv)
     if ns.duration < 0 or ns.period <= 0:
         p.error("--duration must be at least 0 and --period more than 0")
+    try:
+        address = naming_address(ns.naming)
+    except UsageError as e:
+        p.error(str(e))
     folder = services_dir()
     if folder is None:
         print(
@@ -150,9 +183,16 @@ def demo_main(argv: Sequence[str]) -> int:
     stop = threading.Event()
     old = {s: signal.signal(s, lambda *_: stop.set()) for s in (signal.SIGINT, signal.SIGTERM)}
     reactor = Reactor(zmq.Context.instance())
-    naming = NamingService(reactor, ZmqInvoker(reactor.context), "tcp://127.0.0.1:*")
+    try:
+        naming = NamingService(reactor, ZmqInvoker(reactor.context), address)
+    except zmq.ZMQError as e:
+        print(f"miro demo: cannot serve the naming service on {address}: {e}", file=sys.stderr)
+        for s, handler in old.items():
+            signal.signal(s, handler)
+        return 1
     reactor_thread = reactor.run_in_thread()
     out.line("naming", f"naming service at {naming.endpoint}")
+    out.line("naming", commands(naming.endpoint))
 
     env = dict(os.environ)
     root = folder.parent
@@ -168,6 +208,7 @@ def demo_main(argv: Sequence[str]) -> int:
         ("exampleD", [*common], "listens"),
     ]
     examples: list[Example] = []
+    interrupted = False  # by Ctrl-C before every example was up
     try:
         for label, args, ready_text in plan:
             if stop.is_set():
@@ -181,6 +222,7 @@ def demo_main(argv: Sequence[str]) -> int:
                 out.line(label, f"exited with status {example.proc.returncode}")
                 stop.set()  # the others depend on it: stop them too
                 break
+        interrupted = stop.is_set()  # a failure to start sets it too, and is reported below
         end = time.monotonic() + ns.duration if ns.duration else float("inf")
         while not stop.wait(0.1) and time.monotonic() < end:
             if all(e.proc.poll() is not None for e in examples):
@@ -197,4 +239,4 @@ def demo_main(argv: Sequence[str]) -> int:
         print(f"miro demo: {', '.join(failed)} failed", file=sys.stderr)
         return 1
     out.line("naming", "stopped")
-    return 0
+    return 128 + signal.SIGINT if interrupted else 0
