@@ -4,8 +4,9 @@
 from __future__ import annotations
 
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 import zmq
@@ -23,6 +24,24 @@ def naming() -> Iterator[str]:
     process = NamingProcess()
     yield process.endpoint
     process.stop()
+
+
+@pytest.fixture
+def servers(naming: str) -> Iterator[Callable[[str], Any]]:
+    """Makes Servers (`servers(naming_context)`) whose reactors run in threads of the test;
+    stopped after it."""
+    from loopback import RunningServer
+
+    started: list[RunningServer] = []
+
+    def make(context: str) -> Any:
+        r = RunningServer(naming, context)
+        started.append(r)
+        return r.server
+
+    yield make
+    for r in reversed(started):
+        r.stop()
 
 
 @pytest.fixture

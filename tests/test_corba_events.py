@@ -127,7 +127,8 @@ def test_a_cpp_supplier_and_a_python_consumer(
         nested = collector.values[3]
         assert isinstance(nested, P.Nested)
         assert (nested.name, nested.last, nested.outline) == ("nested-3", 1e300, P.Shape(4, 0.5))
-        assert nested.m == [[0, 1, 2], [3, 4, 5]] and nested.flags == [True, False, True]
+        assert [list(row) for row in nested.m] == [[0, 1, 2], [3, 4, 5]]
+        assert nested.flags == [True, False, True]
         collector.close()
     finally:
         client.close()

@@ -60,12 +60,16 @@ class Entry(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Entry(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroNaming::Entry", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Entry:
@@ -151,12 +155,16 @@ class NotFound(_exc.UserException, _cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_NotFound(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroNaming::NotFound", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> NotFound:
@@ -206,12 +214,16 @@ class AlreadyBound(_exc.UserException, _cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_AlreadyBound(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroNaming::AlreadyBound", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> AlreadyBound:
@@ -261,12 +273,16 @@ class InvalidName(_exc.UserException, _cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_InvalidName(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroNaming::InvalidName", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> InvalidName:
@@ -306,7 +322,7 @@ class Registry(_rpc.Stub):
         @param owner The binding server's unique id; its leases are renewed together.
         @param lease_ms How long the entry lives unless renewed.
         """
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _enc_Entry(_buf, binding)
@@ -323,11 +339,11 @@ class Registry(_rpc.Stub):
                 ) from None
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroNaming::Registry::bind", _x) from None
-        self._call("bind", bytes(_buf), (AlreadyBound, InvalidName))
+        self._call("bind", _buf.value(), (AlreadyBound, InvalidName))
 
     def rebind(self, binding: Entry, owner: str, lease_ms: int) -> None:
         """Bind a name, replacing whatever it was bound to (Miro's addToNameService)."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _enc_Entry(_buf, binding)
@@ -349,16 +365,16 @@ class Registry(_rpc.Stub):
                 ) from None
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroNaming::Registry::rebind", _x) from None
-        self._call("rebind", bytes(_buf), (InvalidName,))
+        self._call("rebind", _buf.value(), (InvalidName,))
 
     def resolve(self, name: str) -> Entry:
         """The entry bound to a full name."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _cdr.put_string(_buf, name, None, "MiroNaming::Registry::resolve(name)")
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroNaming::Registry::resolve", _x) from None
-        _data = self._call("resolve", bytes(_buf), (NotFound, InvalidName))
+        _data = self._call("resolve", _buf.value(), (NotFound, InvalidName))
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
@@ -370,16 +386,16 @@ class Registry(_rpc.Stub):
 
     def unbind(self, name: str) -> None:
         """Remove a name."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _cdr.put_string(_buf, name, None, "MiroNaming::Registry::unbind(name)")
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroNaming::Registry::unbind", _x) from None
-        self._call("unbind", bytes(_buf), (NotFound, InvalidName))
+        self._call("unbind", _buf.value(), (NotFound, InvalidName))
 
     def _list(self, prefix: str) -> EntrySeq:
         """The entries whose names start with `prefix` (all for an empty prefix), in name order."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _cdr.put_string(
                 _buf,
@@ -389,7 +405,7 @@ class Registry(_rpc.Stub):
             )
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroNaming::Registry::list", _x) from None
-        _data = self._call("list", bytes(_buf), ())
+        _data = self._call("list", _buf.value(), ())
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
@@ -416,7 +432,7 @@ class Registry(_rpc.Stub):
         @return false when the service holds no entry of this owner (it has restarted, or the
         leases ran out): the owner then binds its names again.
         """
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _cdr.put_string(_buf, owner, None, "MiroNaming::Registry::renew(owner)")
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
@@ -429,7 +445,7 @@ class Registry(_rpc.Stub):
                 ) from None
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroNaming::Registry::renew", _x) from None
-        _data = self._call("renew", bytes(_buf), ())
+        _data = self._call("renew", _buf.value(), ())
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4

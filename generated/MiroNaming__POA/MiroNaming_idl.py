@@ -59,8 +59,8 @@ class Registry(_rpc.Servant):
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("MiroNaming::Registry::bind", _x) from None
         self.bind(binding, owner, lease_ms)
-        _buf = bytearray(_cdr.HEADER_LE)
-        return bytes(_buf)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        return _buf.value()
 
     @_abc.abstractmethod
     def rebind(
@@ -93,8 +93,8 @@ class Registry(_rpc.Servant):
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("MiroNaming::Registry::rebind", _x) from None
         self.rebind(binding, owner, lease_ms)
-        _buf = bytearray(_cdr.HEADER_LE)
-        return bytes(_buf)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        return _buf.value()
 
     @_abc.abstractmethod
     def resolve(self, name: str) -> _m_MiroNaming_MiroNaming_idl.Entry:
@@ -116,7 +116,7 @@ class Registry(_rpc.Servant):
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("MiroNaming::Registry::resolve", _x) from None
         _r = self.resolve(name)
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _m_MiroNaming_MiroNaming_idl._enc_Entry(_buf, _r)
@@ -124,7 +124,7 @@ class Registry(_rpc.Servant):
                 raise _cdr.nested_error("MiroNaming::Registry::resolve result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("MiroNaming::Registry::resolve", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @_abc.abstractmethod
     def unbind(self, name: str) -> None:
@@ -146,8 +146,8 @@ class Registry(_rpc.Servant):
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("MiroNaming::Registry::unbind", _x) from None
         self.unbind(name)
-        _buf = bytearray(_cdr.HEADER_LE)
-        return bytes(_buf)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        return _buf.value()
 
     @_abc.abstractmethod
     def _list(self, prefix: str) -> _m_MiroNaming_MiroNaming_idl.EntrySeq:
@@ -169,7 +169,7 @@ class Registry(_rpc.Servant):
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("MiroNaming::Registry::list", _x) from None
         _r = self._list(prefix)
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _cdr.put_count(_buf, _r, None, "MiroNaming::Registry::list result")
             for _x1 in _r:
@@ -179,7 +179,7 @@ class Registry(_rpc.Servant):
                     raise _cdr.nested_error("MiroNaming::Registry::list result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("MiroNaming::Registry::list", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @_abc.abstractmethod
     def renew(self, owner: str, lease_ms: int) -> bool:
@@ -209,7 +209,7 @@ class Registry(_rpc.Servant):
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("MiroNaming::Registry::renew", _x) from None
         _r = self.renew(owner, lease_ms)
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _buf += _P1(_r)
@@ -220,7 +220,7 @@ class Registry(_rpc.Servant):
                 ) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("MiroNaming::Registry::renew", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     _dispatch = _rpc.merge_dispatch(
         {

@@ -73,14 +73,15 @@ def hz_main(argv: Sequence[str]) -> int:
     p = _parser(
         prog,
         "Print, every second, the rate at which the events of TOPIC arrive, the min, max and "
-        "standard deviation of the period, and the events missed (sequence gaps).",
+        "standard deviation of the period, the events missed (sequence gaps) and the bandwidth "
+        "(payload bytes a second).",
     )
     p.add_argument("-w", "--window", type=int, default=100, help="periods averaged (default 100)")
     ns = p.parse_args(split_common(p, argv))
     if ns.window < 1:
         p.error("--window must be 1 or more")
     from miro_gen.eventlog.gaps import GapCounter
-    from miro_gen.eventlog.rates import RateWindow
+    from miro_gen.eventlog.rates import RateWindow, data_rate
     from miro_gen.eventlog.wire import RawEvent
 
     found = server_and_channel(p, prog, argv, ns.channel)
@@ -98,7 +99,7 @@ def hz_main(argv: Sequence[str]) -> int:
             if window is None:
                 window = windows[topic] = RateWindow(ns.window)
                 gaps[topic] = GapCounter()
-            window.add(t)
+            window.add(t, len(e.data))
             gaps[topic].observe(e.supplier, e.type_name, e.seq)
 
     def report(_: object = None) -> None:
@@ -112,9 +113,11 @@ def hz_main(argv: Sequence[str]) -> int:
                 print(f"{topic}: 1 event", flush=True)
                 continue
             rate, low, high, std = stats
+            bandwidth = data_rate(windows[topic].bandwidth() or 0.0)
             print(
                 f"{topic}: {rate:.2f} Hz  min {low:.4f} s  max {high:.4f} s  "
-                f"std {std:.4f} s  window {len(windows[topic].periods)}  missed {missed}",
+                f"std {std:.4f} s  window {len(windows[topic].periods)}  missed {missed}  "
+                f"{bandwidth}",
                 flush=True,
             )
 

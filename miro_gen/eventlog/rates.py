@@ -11,15 +11,24 @@ class RateWindow:
 
     def __init__(self, window: int = 100) -> None:
         self.periods: deque[float] = deque(maxlen=window)
+        self.sizes: deque[int] = deque(maxlen=window)  # bytes of the arrivals ending a period
         self.last: float | None = None
         self.count = 0
 
-    def add(self, t: float) -> None:
-        """An arrival at `t` seconds."""
+    def add(self, t: float, size: int = 0) -> None:
+        """An arrival at `t` seconds, of `size` bytes."""
         if self.last is not None:
             self.periods.append(t - self.last)
+            self.sizes.append(size)
         self.last = t
         self.count += 1
+
+    def bandwidth(self) -> float | None:
+        """Bytes a second over the window, or None before two arrivals."""
+        if not self.periods:
+            return None
+        span = sum(self.periods)
+        return sum(self.sizes) / span if span > 0 else math.inf
 
     def stats(self) -> tuple[float, float, float, float] | None:
         """(rate Hz, min s, max s, standard deviation s), or None before two arrivals."""
@@ -30,3 +39,11 @@ class RateWindow:
         std = math.sqrt(sum((p - mean) ** 2 for p in self.periods) / n)
         rate = 1 / mean if mean > 0 else math.inf
         return rate, min(self.periods), max(self.periods), std
+
+
+def data_rate(bytes_per_second: float) -> str:
+    """`12.3 MB/s`, in decimal units as network rates are."""
+    for unit, scale in (("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if bytes_per_second >= scale:
+            return f"{bytes_per_second / scale:.3g} {unit}/s"
+    return f"{bytes_per_second:.3g} B/s"

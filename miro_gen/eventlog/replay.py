@@ -13,8 +13,6 @@ from __future__ import annotations
 import threading
 from typing import NamedTuple
 
-import zmq
-
 from miro_gen.eventlog.wire import MAX_EVENTS, pack_batch
 from miro_gen.transport.events import EventChannel, StructuredPushSupplier, topic
 
@@ -85,8 +83,7 @@ class ReplaySupplier(StructuredPushSupplier):
             first.type_hash,
             [(e.seq, e.stamp_ns, e.publish_ns, e.data) for e in run],
         )
-        try:
-            self.socket.send_multipart([topic(first.domain, first.type_name), body], zmq.NOBLOCK)
+        if self._send_frame(topic(first.domain, first.type_name), body):
             self.replayed += len(run)
-        except zmq.Again:  # at the high-water mark: dropped, as a live supplier's would be
+        else:  # at the high-water mark: dropped, as a live supplier's would be
             self.replay_dropped += len(run)

@@ -56,7 +56,13 @@ def import_block(*sections: list[str]) -> str:
     def key(line: str) -> tuple[bool, str]:
         return line.startswith("from "), line.split()[1].lower()
 
-    blocks = ["\n".join(sorted(set(section), key=key)) for section in sections if section]
+    def stdlib(line: str) -> bool:
+        return line.split()[1].split(".")[0] in sys.stdlib_module_names
+
+    # The standard library's modules first, whichever section a template named them in.
+    std = [line for section in sections for line in section if stdlib(line)]
+    rest = [[line for line in section if not stdlib(line)] for section in sections]
+    blocks = ["\n".join(sorted(set(section), key=key)) for section in (std, *rest) if section]
     return "\n\n".join(blocks)
 
 

@@ -40,6 +40,7 @@ import zmq
 from zmq.backend import Socket as _Socket
 
 from miro_gen.log import logger
+from miro_gen.transport.frames import ZERO_COPY_MIN
 
 _log = logger("MIRO")
 
@@ -288,7 +289,11 @@ class Dispatcher:
         try:
             for frame in frames[:-1]:
                 _send(sock, frame, _MORE)
-            _send(sock, frames[-1], _NOBLOCK)
+            body = frames[-1]
+            if len(body) < ZERO_COPY_MIN:
+                _send(sock, body, _NOBLOCK)
+            else:  # a large result goes without a copy
+                _send(sock, body, _NOBLOCK, False)
         except zmq.ZMQError as e:  # the caller is gone: nobody to tell
             _log.notice("could not send a reply: %s", e)
 

@@ -12,9 +12,11 @@ name, the type hash of its payload, a sequence number per supplier and type (so 
 what they missed), the source time stamp and the publish time. Events pushed within one reactor
 turn leave in one frame per topic (split at MAX_BATCH_EVENTS / MAX_BATCH_BYTES), so throughput
 is not capped at one ZeroMQ message per event; at low rates that is one event per frame, as fast
-as a single message. Slow consumers never block suppliers: the supplier's queue and ZeroMQ's are
-bounded, what overflows is dropped and counted (`StructuredPushSupplier.dropped`), and the
-sequence numbers make the drops visible (`StructuredPushConsumer.missed`).
+as a single message; an event of LARGE_EVENT bytes or more travels alone, copied once into its
+frame and decoded in place from the consumer's. Slow consumers never block suppliers: the
+supplier's queue and ZeroMQ's are bounded, what overflows is dropped and counted
+(`StructuredPushSupplier.dropped`), and the sequence numbers make the drops visible
+(`StructuredPushConsumer.missed`).
 """
 
 from __future__ import annotations
@@ -34,7 +36,8 @@ import zmq
 
 from miro_gen import clock
 from miro_gen.log import logger
-from miro_gen.runtime.cdr import type_for_hash
+from miro_gen.runtime.cdr import encode_after, type_for_hash
+from miro_gen.transport.local import bind_twin, nearest
 from miro_gen.transport.reactor import Reactor
 
 _log = logger("MIRO")
@@ -42,9 +45,16 @@ _log = logger("MIRO")
 CHANNEL_REPO_ID = "IDL:miro-gen/EventChannel:1.0"
 DEFAULT_CHANNEL = "EventChannel"
 EVENT_VERSION = 1
-HWM = 10_000  # events a socket queues for one peer before dropping
+HWM = 10_000  # frames a supplier's or a consumer's socket queues for one peer before dropping
 QUEUE_EVENTS = 100_000  # events a supplier holds for its reactor's next turn, at most
 QUEUE_BYTES = 64 << 20  # and bytes
+# Frames a channel queues for each of its peers. Fewer than HWM: the queue is the channel
+# host's memory, and frames may be camera images. (High-water marks are set once: libzmq can
+# stall a pipe whose mark is lowered while it carries messages.)
+PROXY_HWM = 1_000
+# Events from this size on travel alone, in a frame put together with one copy and handed to
+# ZeroMQ without another (copy=False); consumers decode them from ZeroMQ's buffer, in place.
+LARGE_EVENT = 64 * 1024
 # Events in one frame, at most. The count is 16 bits, and a high-water mark counts frames: HWM
 # frames must stay a bounded amount of memory. Yet frames must not be small: each send lets the
 # pushing thread take the GIL back for up to a switch interval, so a flush in many frames falls
@@ -55,6 +65,8 @@ TURN_EVENTS = 4096  # events a consumer delivers per reactor turn, so other hand
 _BATCH = Struct("<BBHQ32s")  # version, flags, count, supplier id, type hash
 _EVENT = Struct("<QqqI")  # sequence number, stamp ns, publish ns, payload length
 _EVENT_SIZE = _EVENT.size
+_LENGTH_AT = _BATCH.size + _EVENT_SIZE - 4  # the payload length of a frame's one event
+_U32 = Struct("<I")
 ANY = "*"
 
 
@@ -87,6 +99,10 @@ def subscription_prefix(domain: str, type_name: str) -> bytes:
     return topic(domain, type_name)
 
 
+class _Framed(list[bytes]):
+    """A large event's whole batch frame: it travels alone."""
+
+
 def _close_on(reactor: Reactor, socket: zmq.Socket[Any]) -> None:
     """Close a socket of the reactor's thread, on that thread."""
 
@@ -112,28 +128,47 @@ class EventChannel:
     domain_name: str = ""  # the default domain of suppliers (the process's naming context)
     _host: ChannelHost | None = field(default=None, repr=False)
 
+    def endpoints(self, context: zmq.Context[Any]) -> tuple[str, str]:
+        """(supplier, consumer) endpoints for sockets of `context`: in the process that hosts
+        the channel, in-process ones (ZeroMQ hands frames over without copying them); on its
+        host, its ipc:// twins (miro_gen.transport.local); elsewhere the advertised ones."""
+        host = self._host
+        if host is not None and host.context is context:
+            return host.local_endpoints
+        return nearest(self.supplier_endpoint), nearest(self.consumer_endpoint)
+
 
 class ChannelHost:
     """Runs a channel's XSUB/XPUB proxy in a thread (libzmq's, without the GIL) until closed:
-    in the process that creates the channel, or in `miro naming --channel`."""
+    in the process that creates the channel, or in `miro naming --channel`.
+
+    Besides its TCP endpoints it binds in-process ones, for the suppliers and consumers of its
+    own process (ZeroMQ hands their frames over without copying them), and their ipc://
+    twins, for those of other processes on its host."""
 
     def __init__(self, context: zmq.Context[Any], bind_host: str, advertise: str) -> None:
+        self.context = context
         self.xsub = context.socket(zmq.XSUB)
         self.xpub = context.socket(zmq.XPUB)
         for s in (self.xsub, self.xpub):
             s.setsockopt(zmq.LINGER, 0)
-            s.setsockopt(zmq.SNDHWM, HWM)
-            s.setsockopt(zmq.RCVHWM, HWM)
+            s.setsockopt(zmq.SNDHWM, PROXY_HWM)
+            s.setsockopt(zmq.RCVHWM, PROXY_HWM)
         self.xpub.setsockopt(zmq.XPUB_VERBOSER, 1)  # every (un)subscription reaches suppliers
         port_in = self.xsub.bind_to_random_port(f"tcp://{bind_host}")
         port_out = self.xpub.bind_to_random_port(f"tcp://{bind_host}")
         self.supplier_endpoint = f"tcp://{advertise}:{port_in}"
         self.consumer_endpoint = f"tcp://{advertise}:{port_out}"
-        control_name = f"inproc://miro-channel-{os.getpid()}-{id(self)}"
+        bind_twin(self.xsub, self.supplier_endpoint)
+        bind_twin(self.xpub, self.consumer_endpoint)
+        name = f"inproc://miro-channel-{os.getpid()}-{id(self)}"
+        self.local_endpoints = (f"{name}-suppliers", f"{name}-consumers")
+        self.xsub.bind(self.local_endpoints[0])
+        self.xpub.bind(self.local_endpoints[1])
         self.control = context.socket(zmq.PAIR)
-        self.control.bind(control_name)
+        self.control.bind(name)
         self._peer = context.socket(zmq.PAIR)
-        self._peer.connect(control_name)
+        self._peer.connect(name)
         self.thread = threading.Thread(target=self._run, name="miro-channel", daemon=True)
         self.thread.start()
 
@@ -215,12 +250,23 @@ def resolve_channel(server: Any, name: str = DEFAULT_CHANNEL) -> EventChannel:
 
 class _Topic:
     """What a supplier keeps per type name: the topic frame, the sequence numbers, whether
-    anyone subscribes (recomputed when the subscriptions change), the events not yet sent."""
+    anyone subscribes (recomputed when the subscriptions change), the events not yet sent,
+    whether the last event was large."""
 
-    __slots__ = ("frame", "generation", "last", "last_hash", "pending", "seq", "subscribed")
+    __slots__ = (
+        "frame",
+        "generation",
+        "large",
+        "last",
+        "last_hash",
+        "pending",
+        "seq",
+        "subscribed",
+    )
 
     def __init__(self, frame: bytes) -> None:
         self.frame = frame
+        self.large = False
         self.seq = itertools.count()
         self.generation = -1  # of the supplier's subscriptions that `subscribed` reflects
         self.subscribed = False
@@ -262,7 +308,7 @@ class StructuredPushSupplier:
         # At the high-water mark an XPUB drops silently; with NODROP a non-blocking send fails
         # instead, so that the supplier counts what it drops. It never blocks either way.
         self.socket.setsockopt(zmq.XPUB_NODROP, 1)
-        self.socket.connect(channel.supplier_endpoint)
+        self.socket.connect(channel.endpoints(self.reactor.context)[0])
         self.reactor.call_soon(self.reactor.register, self.socket, self._subscription_changed)
 
     def _topic(self, type_name: str) -> _Topic:
@@ -292,15 +338,20 @@ class StructuredPushSupplier:
         if not (t.subscribed if t.generation == self._generation else self._subscribed(t)):
             return False
         now = clock.current().time_ns()  # log time under --clock log, else the wall clock
-        data = payload.serialize()
-        packed = _EVENT.pack(seq, now if stamp is None else int(stamp * 1e9), now, len(data))
-        packed += data
+        type_hash = payload._type_hash
+        stamp_ns = now if stamp is None else int(stamp * 1e9)
+        packed, framed = self._encode(t, type_hash, (seq, stamp_ns, now), payload)
+        size = len(framed or packed)
         with self._lock:
-            if self._queued >= QUEUE_EVENTS or self._queued_bytes + len(packed) > QUEUE_BYTES:
+            if self._queued >= QUEUE_EVENTS or self._queued_bytes + size > QUEUE_BYTES:
                 self.dropped += 1
                 return True
-            type_hash = payload._type_hash
-            if type_hash == t.last_hash and t.pending:
+            if framed:  # alone, as it is
+                if not t.pending:
+                    self._dirty.append(t)
+                t.pending.append((type_hash, _Framed((framed,))))
+                t.last, t.last_hash = [], ""
+            elif type_hash == t.last_hash and t.pending:
                 t.last.append(packed)
             else:
                 if not t.pending:
@@ -308,12 +359,41 @@ class StructuredPushSupplier:
                 t.last, t.last_hash = [packed], type_hash
                 t.pending.append((type_hash, t.last))
             self._queued += 1
-            self._queued_bytes += len(packed)
+            self._queued_bytes += size
             if self._flush_pending:
                 return True
             self._flush_pending = True
         self.reactor.call_soon(self._flush)
         return True
+
+    def _encode(
+        self, t: _Topic, type_hash: str, head: tuple[int, int, int], payload: Any
+    ) -> tuple[bytes, bytes]:
+        """(event, b"") for a small event, to be batched; (b"", its whole frame) for a large
+        one. Once a type's events are large, the next is encoded into its frame directly (its
+        payload copied once); the payload length is filled in after."""
+        if t.large:
+            prefix = self._batch_head(type_hash, 1) + _EVENT.pack(*head, 0)
+            buf = encode_after(prefix, payload)
+            n = buf.size - len(prefix)
+            buf.overwrite(_LENGTH_AT, _U32.pack(n))
+            frame = buf.value()
+            if n + _EVENT_SIZE >= LARGE_EVENT:
+                return b"", frame
+            t.large = False
+            return frame[_BATCH.size :], b""
+        data = payload.serialize()
+        packed = _EVENT.pack(*head, len(data))
+        if len(packed) + len(data) < LARGE_EVENT:
+            return packed + data, b""
+        t.large = True
+        return b"", b"".join((self._batch_head(type_hash, 1), packed, data))
+
+    def _batch_head(self, type_hash: str, count: int) -> bytes:
+        raw = self._raw_hashes.get(type_hash)
+        if raw is None:
+            raw = self._raw_hashes[type_hash] = bytes.fromhex(type_hash)
+        return _BATCH.pack(EVENT_VERSION, 0, count, self.supplier_id, raw)
 
     def _flush(self) -> None:
         with self._lock:
@@ -326,6 +406,9 @@ class StructuredPushSupplier:
             self._flush_pending = False
         for frame, runs in queues:
             for type_hash, events in runs:
+                if type(events) is _Framed:
+                    self._send_body(frame, events[0], 1)
+                    continue
                 if len(events) <= MAX_BATCH_EVENTS and sum(map(len, events)) <= MAX_BATCH_BYTES:
                     self._send(frame, type_hash, events)
                     continue
@@ -342,16 +425,25 @@ class StructuredPushSupplier:
                 self._send(frame, type_hash, batch)
 
     def _send(self, frame: bytes, type_hash: str, packed: list[bytes]) -> None:
-        raw = self._raw_hashes.get(type_hash)
-        if raw is None:
-            raw = self._raw_hashes[type_hash] = bytes.fromhex(type_hash)
-        head = _BATCH.pack(EVENT_VERSION, 0, len(packed), self.supplier_id, raw)
-        try:
-            self.socket.send_multipart([frame, head + b"".join(packed)], zmq.NOBLOCK)
-            self.sent += len(packed)
-        except zmq.Again:  # at the high-water mark: dropped, visible as a gap
+        """One frame of the events `packed`."""
+        body = b"".join([self._batch_head(type_hash, len(packed)), *packed])
+        self._send_body(frame, body, len(packed))
+
+    def _send_body(self, frame: bytes, body: bytes, count: int) -> None:
+        if self._send_frame(frame, body):
+            self.sent += count
+        else:  # at the high-water mark: dropped, visible as a gap
             with self._lock:
-                self.dropped += len(packed)
+                self.dropped += count
+
+    def _send_frame(self, frame: bytes, body: bytes) -> bool:
+        """Send a topic frame and a batch frame (large ones without a copy); False at the
+        high-water mark."""
+        try:
+            self.socket.send_multipart([frame, body], zmq.NOBLOCK, copy=len(body) < LARGE_EVENT)
+        except zmq.Again:
+            return False
+        return True
 
     def _subscription_changed(self) -> None:
         changed = False
@@ -389,7 +481,7 @@ class StructuredPushConsumer:
         self.socket = self.reactor.context.socket(zmq.SUB)
         self.socket.setsockopt(zmq.LINGER, 0)
         self.socket.setsockopt(zmq.RCVHWM, HWM)
-        self.socket.connect(channel.consumer_endpoint)
+        self.socket.connect(channel.endpoints(self.reactor.context)[1])
         self._filters: list[tuple[str, str]] = []
         self._prefixes: set[bytes] = set()
         self._next_seq: dict[tuple[int, str], int] = {}  # per (supplier, type name)
@@ -429,7 +521,7 @@ class StructuredPushConsumer:
         delivered = 0
         while delivered < TURN_EVENTS:  # the poller reports the rest in the next turn
             try:
-                parts = recv(zmq.NOBLOCK)
+                parts = recv(zmq.NOBLOCK, copy=False)  # payloads are decoded in place
             except zmq.Again:
                 return
             delivered += 1  # a frame counts, even one that is dropped
@@ -485,12 +577,12 @@ class StructuredPushConsumer:
                 )
         return cls
 
-    def _parse(self, parts: list[bytes]) -> list[StructuredEvent]:
+    def _parse(self, parts: list[zmq.Frame]) -> list[StructuredEvent]:
         """The events of one message, decoded; raises if the frame does not parse (then none
         of its events count, and the sequence numbers stay as they were)."""
         if len(parts) != 2:
             raise ValueError(f"{len(parts)} frames, expected 2")
-        head, body = parts
+        head, body = parts[0].bytes, parts[1].buffer  # the body is not copied
         domain, type_name, wanted = self._topic(head)
         if not wanted:
             return []

@@ -17,6 +17,7 @@ from typing import Final, NamedTuple
 from miro_gen.runtime.rpc import ReplyStatus as Status
 
 VERSION: Final = 1
+ZERO_COPY_MIN: Final = 64 * 1024  # bytes of a body from which it is sent without a copy
 MAX_NAME: Final = 0xFFFF  # bytes of an object key, operation name or repository id
 
 

@@ -156,7 +156,10 @@ class ZmqInvoker:
         sock = conn.socket
         try:
             _send(sock, frames.request_header(tail, request_id, int(wait * 1000), oneway), _MORE)
-            _send(sock, body, _NOBLOCK)
+            if len(body) < frames.ZERO_COPY_MIN:
+                _send(sock, body, _NOBLOCK)
+            else:  # a large request goes without a copy
+                _send(sock, body, _NOBLOCK, False)
         except zmq.ZMQError:
             self._drop(conn)
             raise TRANSIENT(f"cannot send {operation} to {endpoint}") from None
