@@ -58,7 +58,7 @@ server.shutdown()
 """
 
 RAW_COUNTER = """
-import signal, struct, sys, zmq
+import signal, sys, zmq
 ctx = zmq.Context()
 s = ctx.socket(zmq.SUB)
 s.setsockopt(zmq.RCVHWM, 100000)
@@ -68,7 +68,7 @@ print("READY", flush=True)
 signal.signal(signal.SIGINT, lambda *_: (print(count, missed, flush=True), sys.exit(0)))
 count = missed = 0
 expected = None
-H = struct.Struct("<BBHQ32s"); E = struct.Struct("<QqqI")
+from miro_gen.transport.event_frames import BATCH as H, EVENT as E
 while True:
     topic, body = s.recv_multipart()
     n = H.unpack_from(body)[2]

@@ -16,8 +16,8 @@ from typing import Any
 from miro_gen.eventlog.progress import StatusLine, human_bytes
 from miro_gen.eventlog.tap import RawEventTap
 from miro_gen.eventlog.types import import_generated_packages
-from miro_gen.eventlog.wire import RawEvent
 from miro_gen.eventlog.writer import LogWriter
+from miro_gen.transport.event_frames import RawEvent
 
 CLOCK_TYPE = "MiroLogClock"  # a player's clock: not an event of the robot, never recorded
 TICK = 0.25  # seconds between chunk checks and progress updates

@@ -9,16 +9,16 @@ nobody does. Consumers connect SUB sockets to its XPUB side.
 
 Each event carries its domain (by convention the supplier's naming context: the robot), its type
 name, the type hash of its payload, a sequence number per supplier and type (so consumers count
-what they missed), the source time stamp and the publish time. Events pushed within one reactor
-turn leave in one frame per topic (split at MAX_BATCH_EVENTS / MAX_BATCH_BYTES), so throughput
-is not capped at one ZeroMQ message per event; at low rates that is one event per frame, as fast
-as a single message; an event of LARGE_EVENT bytes or more travels alone, copied once into its
-frame and decoded in place from the consumer's. Slow consumers never block suppliers: the
-supplier's queue and ZeroMQ's are bounded (in bytes: transport.sockets), what overflows is
-dropped and counted (`StructuredPushSupplier.dropped`), and the sequence numbers make the drops
-visible (`StructuredPushConsumer.missed`). A consumer keeps the events waiting for its handler
-as its quality of service says (keep-last depth, latest-only: transport.event_queue), so a slow
-one gets recent events and counts what it skipped (`dropped`, `lag`). Suppliers and consumers
+what they missed), the source time stamp and the publish time (the bytes: transport.event_frames).
+Events pushed within one reactor turn leave in one frame per topic (split at MAX_BATCH_EVENTS /
+MAX_BATCH_BYTES), so throughput is not capped at one ZeroMQ message per event; at low rates that is
+one event per frame, as fast as a single message; an event of LARGE_EVENT bytes or more travels
+alone, copied once into its frame and decoded in place from the consumer's. Slow consumers never
+block suppliers: the supplier's queue and ZeroMQ's are bounded (in bytes: transport.sockets), what
+overflows is dropped and counted (`StructuredPushSupplier.dropped`), and the sequence numbers make
+the drops visible (`StructuredPushConsumer.missed`). A consumer keeps the events waiting for its
+handler as its quality of service says (keep-last depth, latest-only: transport.event_queue), so a
+slow one gets recent events and counts what it skipped (`dropped`, `lag`). Suppliers and consumers
 find their channel again when its host restarts elsewhere (transport.channel_link).
 """
 
@@ -30,7 +30,6 @@ import threading
 import time
 from collections.abc import Iterable
 from dataclasses import dataclass
-from struct import Struct
 from struct import error as StructError
 from typing import Any
 
@@ -50,13 +49,23 @@ from miro_gen.transport.channels import ChannelHost as ChannelHost
 from miro_gen.transport.channels import EventChannel as EventChannel
 from miro_gen.transport.channels import EventChannelFactory as EventChannelFactory
 from miro_gen.transport.channels import resolve_channel as resolve_channel
+from miro_gen.transport.event_frames import (
+    BATCH_HEADER,
+    EVENT,
+    EVENT_HEADER,
+    LENGTH,
+    LENGTH_AT,
+    batch_head,
+    read_batch_head,
+    split_topic,
+)
+from miro_gen.transport.event_frames import topic as topic  # importable from here as before
 from miro_gen.transport.event_queue import DEFAULT_DEPTH, EventQueue, Waiting
 from miro_gen.transport.event_queue import KEEP_ALL as KEEP_ALL  # for consumers' depth=
 from miro_gen.transport.gaps import GapCounter, gap
 
 _log = logger("MIRO")
 
-EVENT_VERSION = 1
 HWM = 10_000  # frames a supplier's or a consumer's socket queues for one peer, at most
 MAX_SUBSCRIPTIONS = 10_000  # prefixes a supplier tracks; beyond, it sends every topic
 MAX_PREFIX = 4096  # bytes of a subscription prefix a supplier tracks
@@ -73,11 +82,6 @@ MAX_BATCH_EVENTS = 16_384
 MAX_BATCH_BYTES = 256 * 1024
 TURN_EVENTS = 4096  # events a consumer delivers per reactor turn, so other handlers get a turn
 TURN_FRAMES = 256  # frames a consumer reads per reactor turn
-_BATCH = Struct("<BBHQ32s")  # version, flags, count, supplier id, type hash
-_EVENT = Struct("<QqqI")  # sequence number, stamp ns, publish ns, payload length
-_EVENT_SIZE = _EVENT.size
-_LENGTH_AT = _BATCH.size + _EVENT_SIZE - 4  # the payload length of a frame's one event
-_U32 = Struct("<I")
 ANY = "*"
 
 
@@ -93,11 +97,6 @@ class StructuredEvent:
     publish_time: float  # when the supplier sent it, seconds since the epoch
     supplier: int = 0  # the supplier's random id
     type_hash: str = ""
-
-
-def topic(domain: str, type_name: str) -> bytes:
-    """The first frame of an event message; subscriptions are prefixes of it."""
-    return domain.encode() + b"\0" + type_name.encode() + b"\0"
 
 
 def subscription_prefix(domain: str, type_name: str) -> bytes:
@@ -235,7 +234,7 @@ class StructuredPushSupplier:
         stamp_ns = now if stamp is None else int(stamp * 1e9)
         packed, framed = self._encode(t, type_hash, (seq, stamp_ns, now), payload)
         size = len(framed or packed)
-        if (size if framed else size + _BATCH.size) > self.max_frame:
+        if (size if framed else size + BATCH_HEADER) > self.max_frame:
             self._refuse_large(type_name, size)
             return True
         with self._lock:
@@ -269,17 +268,17 @@ class StructuredPushSupplier:
         one. Once a type's events are large, the next is encoded into its frame directly (its
         payload copied once); the payload length is filled in after."""
         if t.large:
-            prefix = self._batch_head(type_hash, 1) + _EVENT.pack(*head, 0)
+            prefix = self._batch_head(type_hash, 1) + EVENT.pack(*head, 0)
             buf = encode_after(prefix, payload)
             n = buf.size - len(prefix)
-            buf.overwrite(_LENGTH_AT, _U32.pack(n))
+            buf.overwrite(LENGTH_AT, LENGTH.pack(n))
             frame = buf.value()
-            if n + _EVENT_SIZE >= LARGE_EVENT:
+            if n + EVENT_HEADER >= LARGE_EVENT:
                 return b"", frame
             t.large = False
-            return frame[_BATCH.size :], b""
+            return frame[BATCH_HEADER:], b""
         data = payload.serialize()
-        packed = _EVENT.pack(*head, len(data))
+        packed = EVENT.pack(*head, len(data))
         if len(packed) + len(data) < LARGE_EVENT:
             return packed + data, b""
         t.large = True
@@ -289,7 +288,7 @@ class StructuredPushSupplier:
         raw = self._raw_hashes.get(type_hash)
         if raw is None:
             raw = self._raw_hashes[type_hash] = bytes.fromhex(type_hash)
-        return _BATCH.pack(EVENT_VERSION, 0, count, self.supplier_id, raw)
+        return batch_head(count, self.supplier_id, raw)
 
     def _flush(self) -> None:
         with self._lock:
@@ -523,10 +522,7 @@ class StructuredPushConsumer:
         """(domain, type name, whether subscribed) of a topic frame."""
         known = self._topics.get(head)
         if known is None:
-            fields = head.split(b"\0")
-            if len(fields) != 3 or fields[2]:
-                raise ValueError("malformed topic")
-            domain, type_name = fields[0].decode(), fields[1].decode()
+            domain, type_name = split_topic(head)
             known = (domain, type_name, self._wanted(domain, type_name))
             if len(self._topics) >= 4096:  # a bounded cache, whatever the channel carries
                 self._topics.clear()
@@ -561,21 +557,19 @@ class StructuredPushConsumer:
         domain, type_name, wanted = self._topic(head)
         if not wanted:
             return
-        version, _, count, supplier, raw_hash = _BATCH.unpack_from(body)
-        if version != EVENT_VERSION:
-            raise ValueError(f"event version {version} is not supported")
+        count, supplier, raw_hash = read_batch_head(body)
         cls = self._class(raw_hash, domain, type_name)
         type_hash = raw_hash.hex()
         expected = self._gaps.expected(supplier, type_name)
         first = expected
         missed = 0
-        unpack, size, at = _EVENT.unpack_from, len(body), _BATCH.size
+        unpack, size, at = EVENT.unpack_from, len(body), BATCH_HEADER
         topic_key = (domain, type_name)
         waiting = []
         keep_from = count - 1 if self.queue.latest_only else 0  # latest-only: only the last
         for i in range(count):
             seq, stamp_ns, publish_ns, n = unpack(body, at)
-            at += _EVENT_SIZE
+            at += EVENT_HEADER
             if at + n > size:
                 raise ValueError("event payload is truncated")
             missed += gap(expected, seq)
