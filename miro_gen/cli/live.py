@@ -26,9 +26,9 @@ def _parser(prog: str, description: str) -> argparse.ArgumentParser:
 
 def _tap(server: Any, channel: Any, topics: list[tuple[str, str]], handler: Any) -> Any:
     from miro_gen.eventlog.tap import RawEventTap
-    from miro_gen.eventlog.types import import_generated_packages
+    from miro_gen.runtime import registry
 
-    import_generated_packages()
+    registry.discover()
     return RawEventTap(channel, topics, handler)
 
 

@@ -15,8 +15,8 @@ from typing import Any
 
 from miro_gen.eventlog.progress import StatusLine, human_bytes
 from miro_gen.eventlog.tap import RawEventTap
-from miro_gen.eventlog.types import import_generated_packages
 from miro_gen.eventlog.writer import LogWriter
+from miro_gen.runtime import registry
 from miro_gen.transport.event_frames import RawEvent
 
 CLOCK_TYPE = "MiroLogClock"  # a player's clock: not an event of the robot, never recorded
@@ -40,7 +40,7 @@ class Recorder:
         self.started = time.monotonic()
         self._last = (self.started, 0)
         self.rate = 0.0
-        import_generated_packages()  # now, not on the first event: that would delay it
+        registry.discover()  # now, not on the first event: that would delay it
         self.tap = RawEventTap(channel, subscriptions, self._write, skip=[CLOCK_TYPE])
         server.reactor().schedule_timer(TICK, TICK, self._tick)
 
