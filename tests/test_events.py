@@ -322,3 +322,54 @@ def test_a_type_is_found_by_hash_without_its_package_imported() -> None:
         [sys.executable, "-c", code], capture_output=True, text=True, env=service_env()
     )
     assert done.stdout.strip() == "Miro.Gps_idl GpsDataIDL", done.stderr
+
+
+def test_a_consumer_finds_a_type_its_program_never_imported(
+    naming: str, servers: Callable[[str], Server]
+) -> None:
+    """A consumer whose program never imported the payload's package: the generated packages
+    on the path are imported in a thread of their own (runtime.registry), and the frames that
+    came meanwhile wait for it, so every event is delivered, decoded, in order."""
+    import subprocess
+    import sys
+
+    from loopback import service_env
+
+    host = servers("r")
+    supplier = StructuredPushSupplier(EventChannelFactory(host).create_channel("Unknown"))
+    code = (
+        "import sys, threading\n"
+        "from miro_gen import Server, StructuredPushConsumer\n"
+        "from miro_gen.runtime import registry\n"
+        "search = registry.discover\n"
+        "def spy():\n"
+        "    print('search in', threading.current_thread().name, flush=True)\n"
+        "    return search()\n"
+        "registry.discover = spy\n"
+        f"server = Server(['c', '--naming', {naming!r}, '-MNC', 'c'])\n"
+        "class C(StructuredPushConsumer):\n"
+        "    def push_structured_event(self, event):\n"
+        "        p = event.payload\n"
+        "        print(type(p).__name__, p.counter, event.seq, flush=True)\n"
+        "        if event.seq == 2:\n"
+        "            server.shutdown()\n"
+        "C(server.resolve_channel('r/Unknown')).set_subscriptions([('*', '*')])\n"
+        "print('READY', 'Miro' in sys.modules, flush=True)\n"
+        "server.run()\n"
+    )
+    consumer = subprocess.Popen(
+        [sys.executable, "-c", code], stdout=subprocess.PIPE, text=True, env=service_env()
+    )
+    try:
+        assert consumer.stdout is not None
+        assert consumer.stdout.readline().split() == ["READY", "False"]
+        eventually(lambda: supplier.has_subscribers("ExampleEvent"))
+        values = [event(n) for n in range(3)]
+        host.reactor().call_soon(lambda: [supplier.push("ExampleEvent", v) for v in values])
+        out, _ = consumer.communicate(timeout=60)
+    finally:
+        consumer.kill()
+    lines = out.splitlines()
+    assert lines == ["search in miro-type-discovery"] + [
+        f"ExampleEventIDL {n} {n}" for n in range(3)
+    ]

@@ -18,8 +18,8 @@ from miro_gen.eventlog.tap import RawEventTap
 from miro_gen.eventlog.writer import LogWriter
 from miro_gen.runtime import registry
 from miro_gen.transport.event_frames import RawEvent
+from miro_gen.transport.log_clock import CLOCK_TYPE  # a player's clock: never recorded
 
-CLOCK_TYPE = "MiroLogClock"  # a player's clock: not an event of the robot, never recorded
 TICK = 0.25  # seconds between chunk checks and progress updates
 
 

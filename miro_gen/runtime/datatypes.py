@@ -7,7 +7,7 @@ a union's default branch gets. Generated code reaches them as `_cdr.IdlType`, `_
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar, Self
 
 from miro_gen.runtime import registry
 
@@ -35,6 +35,10 @@ class IdlType:
             registry.register(cls)
 
     def serialize(self) -> bytes:
+        raise NotImplementedError  # pragma: no cover - generated classes implement it
+
+    @classmethod
+    def deserialize(cls, data: bytes | bytearray | memoryview) -> Self:
         raise NotImplementedError  # pragma: no cover - generated classes implement it
 
     def _encode(self, buf: Encoder) -> None:
