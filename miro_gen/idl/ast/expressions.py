@@ -9,9 +9,7 @@ from typing import TYPE_CHECKING, Union
 from miro_gen.diagnostics import SourcePos
 
 if TYPE_CHECKING:
-    from miro_gen.idl.ast.declarations import (
-        Enum,
-    )
+    from miro_gen.idl.ast.declarations import Enum
 
 
 class Node:

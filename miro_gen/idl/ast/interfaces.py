@@ -6,21 +6,9 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from miro_gen.diagnostics import SourcePos
-from miro_gen.idl.ast.declarations import (
-    Decl,
-    Exception_,
-    Member,
-)
-from miro_gen.idl.ast.expressions import (
-    Annotation,
-    Expr,
-    Node,
-    ScopedName,
-)
-from miro_gen.idl.ast.type_specs import (
-    BaseType,
-    TypeSpec,
-)
+from miro_gen.idl.ast.declarations import Decl, Exception_, Member
+from miro_gen.idl.ast.expressions import Annotation, Expr, Node, ScopedName
+from miro_gen.idl.ast.type_specs import BaseType, TypeSpec
 
 if TYPE_CHECKING:
     from miro_gen.idl.ast import Definition

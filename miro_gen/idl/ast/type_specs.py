@@ -5,19 +5,10 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Union
 
 from miro_gen.diagnostics import SourcePos
-from miro_gen.idl.ast.expressions import (
-    Expr,
-    Node,
-    ScopedName,
-)
+from miro_gen.idl.ast.expressions import Expr, Node, ScopedName
 
 if TYPE_CHECKING:
-    from miro_gen.idl.ast.declarations import (
-        Decl,
-        Enum,
-        Struct,
-        Union_,
-    )
+    from miro_gen.idl.ast.declarations import Decl, Enum, Struct, Union_
 
 
 class BaseType(Node):
