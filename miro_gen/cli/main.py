@@ -30,6 +30,9 @@ def build_parser() -> argparse.ArgumentParser:
     sub.add_parser(
         "demo", help="run the manual's examples A to D with a naming service", add_help=False
     )
+    sub.add_parser(
+        "launch", help="start a robot's services from a launch file (TOML)", add_help=False
+    )
     sub.add_parser("sim", help="simulate a device (sim nmea: a GPS receiver)", add_help=False)
     sub.add_parser("new", help="scaffold a service in one of Miro's patterns", add_help=False)
     sub.add_parser("run", help="run a service of this project (services/NAME)", add_help=False)
@@ -66,6 +69,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         from miro_gen.cli import sim
 
         return sim.sim_main(args[1:])
+    if args and args[0] == "launch":
+        from miro_gen.cli import launch
+
+        return launch.launch_main(args[1:])
     if args and args[0] == "demo":
         from miro_gen.cli import demo
 
