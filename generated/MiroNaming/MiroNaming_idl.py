@@ -298,6 +298,7 @@ class Registry(_rpc.Stub):
 
     __slots__ = ()
     _repo_id = "IDL:MiroNaming/Registry:1.0"
+    _interface_hash = "3e5906eb5b3a765a612dda86029b12b2b4a1879062cc5d12e4f6c131c6b3388b"
 
     def bind(self, binding: Entry, owner: str, lease_ms: int) -> None:
         """Bind a name that is free (or already held by the same owner).

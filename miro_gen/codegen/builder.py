@@ -8,6 +8,7 @@ from collections.abc import Callable, Iterator
 from typing import Any
 
 from miro_gen.codegen import names
+from miro_gen.codegen.interface_schema import NoInterfaceSchema, interface_schema
 from miro_gen.codegen.model import (
     Field,
     Item,
@@ -552,6 +553,11 @@ class Builder:
             bases=[self.ref(b) for b in d.bases] or ["_rpc.Stub"],
         )
         stub.operations = self._operations(d, in_stub=True)
+        try:
+            stub.schema = interface_schema(d, self.spec.declarations)
+            stub.type_hash = type_hash(stub.schema)
+        except NoInterfaceSchema:  # the service object cannot describe it to callers
+            pass
         self._add(stub)
         # The skeleton, in the __POA package.
         main = self.m
@@ -569,6 +575,7 @@ class Builder:
             bases=[self.ref(b, poa=True) for b in d.bases] or ["_rpc.Servant"],
         )
         skel.operations = self._operations(d, in_stub=False)
+        skel.schema, skel.type_hash = stub.schema, stub.type_hash
         self._add(skel)
         self.m = main
 

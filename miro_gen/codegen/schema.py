@@ -110,26 +110,28 @@ def _scoped(decl: Any, data_scope: DataScope) -> str:
     return "::".join((*modules, name))
 
 
-def _type(t: Any, data_scope: DataScope) -> str:
+def _type(t: Any, data_scope: DataScope, refs: bool = False) -> str:
+    """The IDL spelling of type `t`; object references as `miro::ObjectRef` (a data schema),
+    or with `refs` as the interface they are (an interface schema)."""
     if isinstance(t, ast.BaseType):
-        return "::".join(OBJECT_REF) if t.name == "Object" else t.name
+        return "::".join(OBJECT_REF) if t.name == "Object" and not refs else t.name
     if isinstance(t, ast.StringType):
         base = "wstring" if t.wide else "string"
         return f"{base}<{t.bound}>" if t.bound is not None else base
     if isinstance(t, ast.SequenceType):
-        elem = _type(t.element, data_scope)
+        elem = _type(t.element, data_scope, refs)
         return f"sequence<{elem}, {t.bound}>" if t.bound is not None else f"sequence<{elem}>"
     if isinstance(t, ast.NamedType):
         decl = _completed(t.decl)
         if isinstance(decl, ast.Interface) or (
             isinstance(decl, ast.Forward) and decl.of == "interface"
         ):
-            return "::".join(OBJECT_REF)
+            return decl.scoped_name if refs else "::".join(OBJECT_REF)
         return _scoped(decl, data_scope)
     if isinstance(t, ast.FixedType):
         return f"fixed<{t.digits}, {t.scale}>"
     if isinstance(t, ast.MapType):
-        inner = f"{_type(t.key, data_scope)}, {_type(t.value, data_scope)}"
+        inner = f"{_type(t.key, data_scope, refs)}, {_type(t.value, data_scope, refs)}"
         return f"map<{inner}, {t.bound}>" if t.bound is not None else f"map<{inner}>"
     raise TypeError(f"not a data type: {t!r}")  # pragma: no cover
 
@@ -152,10 +154,12 @@ def _label(v: Any, data_scope: DataScope) -> str:
     return str(v)
 
 
-def _body(decl: Any, data_scope: DataScope) -> str:
+def _body(decl: Any, data_scope: DataScope, refs: bool = False) -> str:
+    """The declaration's text. With `refs` (an interface schema), object references keep
+    their interfaces and exceptions stay exceptions."""
     name = _place(decl, data_scope)[1]
     if isinstance(decl, ast.Typedef):
-        return f"typedef {_type(decl.type, data_scope)} {name}{_dims(decl.dims)};"
+        return f"typedef {_type(decl.type, data_scope, refs)} {name}{_dims(decl.dims)};"
     if isinstance(decl, ast.Enum):
         return f"enum {name} {{\n" + ",\n".join(f"  {e.name}" for e in decl.enumerators) + "\n};"
     if isinstance(decl, (ast.Struct, ast.Exception_)):
@@ -163,14 +167,15 @@ def _body(decl: Any, data_scope: DataScope) -> str:
         base = ""
         if isinstance(decl, ast.Struct) and decl.base is not None:
             base = f" : {_scoped(_completed(decl.base), data_scope)}"
-        lines = [f"  {_type(m.type, data_scope)} {m.name}{_dims(m.dims)};" for m in members]
-        return f"struct {name}{base} {{\n" + "\n".join(lines) + ("\n" if lines else "") + "};"
+        lines = [f"  {_type(m.type, data_scope, refs)} {m.name}{_dims(m.dims)};" for m in members]
+        word = "exception" if refs and isinstance(decl, ast.Exception_) else "struct"
+        return f"{word} {name}{base} {{\n" + "\n".join(lines) + ("\n" if lines else "") + "};"
     if isinstance(decl, ast.Union_):
         lines = [f"union {name} switch ({_type(decl.switch_type, data_scope)}) {{"]
         for c in decl.cases:
             for v in c.labels:
                 lines.append("  default:" if v is None else f"  case {_label(v, data_scope)}:")
-            lines.append(f"    {_type(c.type, data_scope)} {c.name}{_dims(c.dims)};")
+            lines.append(f"    {_type(c.type, data_scope, refs)} {c.name}{_dims(c.dims)};")
         lines.append("};")
         return "\n".join(lines)
     raise TypeError(f"not a data type: {decl!r}")  # pragma: no cover
