@@ -25,7 +25,9 @@ module Lab {
   struct Node;
   typedef sequence<Node> Nodes;
   struct Node { string name; Nodes children; };
-  union Reading switch (short) { case 1: double value; case 2: string text; default: boolean none; };
+  union Reading switch (short) {
+    case 1: double value; case 2: string text; default: boolean none;
+  };
   interface Base {
     readonly attribute string label;
     attribute long gain getraises (Busy) setraises (Busy);
