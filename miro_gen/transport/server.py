@@ -36,6 +36,7 @@ from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.runtime.rpc import Servant, Stub
 from miro_gen.transport.adapter import ObjectAdapter
 from miro_gen.transport.addresses import server_addresses
+from miro_gen.transport.introspection import SERVICE_KEY, ServiceImpl, bind_service, service_name
 from miro_gen.transport.invoker import ZmqInvoker
 from miro_gen.transport.naming import DEFAULT_LEASE, NamingClient
 from miro_gen.transport.options import CommonOptions, parse_common_options
@@ -74,6 +75,15 @@ class Client:
         entry = self.naming.resolve(name)
         if entry.repo_id != stub._repo_id:
             _log.debug("%s is a %s, used as a %s", entry.name, entry.repo_id, stub._repo_id)
+        elif entry.type_hash and stub._interface_hash and entry.type_hash != stub._interface_hash:
+            _log.warning(
+                "%s implements another version of %s than this program knows (interface hash "
+                "%s, here %s): calls may fail with BAD_OPERATION or MARSHAL",
+                entry.name,
+                entry.repo_id,
+                entry.type_hash[:12],
+                stub._interface_hash[:12],
+            )
         return stub(ObjectRef(entry.repo_id, entry.endpoint, entry.key), self.invoker)
 
     def close(self) -> None:
@@ -118,6 +128,9 @@ class Server(Client):
         self._renewer: threading.Thread | None = None
         self._on_shutdown: list[Callable[[], object]] = []
         self.hosted_channels: dict[str, Any] = {}  # event channels hosted here, by full name
+        # The service object (transport/introspection.py): bound when run() starts.
+        self.service = ServiceImpl(self, service_name(self.argv[0]))
+        self.adapter.activate(self.service, SERVICE_KEY)
         if clock is not None:
             from miro_gen.eventlog.follow import follow_log_clock
 
@@ -131,7 +144,8 @@ class Server(Client):
         path given); its reference. Replaces an older binding of the name, as Miro does."""
         full = self.naming.full_name(name)
         ref = self.adapter.reference_for(servant)
-        self.bind_entry(MiroNaming.Entry(full, ref.repo_id, ref.endpoint, ref.key, ""))
+        entry = MiroNaming.Entry(full, ref.repo_id, ref.endpoint, ref.key, servant._interface_hash)
+        self.bind_entry(entry)
         return ref
 
     def bind_entry(self, entry: MiroNaming.Entry) -> None:
@@ -141,6 +155,12 @@ class Server(Client):
             self._names[entry.name] = entry
         self._start_renewing()
         _log.notice("bound %s in the naming service", entry.name)
+        bind_service(self, self.service)  # with its first name: nothing can come between
+
+    def bound_entries(self) -> list[MiroNaming.Entry]:
+        """The naming entries this server keeps bound."""
+        with self._names_lock:
+            return list(self._names.values())
 
     def resolve_channel(self, name: str = "EventChannel") -> Any:
         """The event channel bound as `name` (see EventChannelFactory.create_channel)."""
@@ -158,6 +178,7 @@ class Server(Client):
         if threading.current_thread() is threading.main_thread():
             for sig in (signal.SIGINT, signal.SIGTERM):
                 handlers[sig] = signal.signal(sig, self._on_signal)
+        bind_service(self, self.service, background=True)  # a consumer's: run() goes on
         try:
             self._reactor.run()
         finally:
