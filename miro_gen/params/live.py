@@ -64,9 +64,7 @@ def find(section: str, category: str) -> Exposed:
     """The set of `category` in `section` ('' for any section, when only one has it);
     LookupError saying what there is otherwise."""
     with _lock:
-        found = [
-            e for e in _exposed if e.category == category and section in ("", e.section)
-        ]
+        found = [e for e in _exposed if e.category == category and section in ("", e.section)]
         known = [f"{e.section}/{e.category}" for e in _exposed]
     if len(found) == 1:
         return found[0]
