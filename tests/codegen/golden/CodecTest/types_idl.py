@@ -3112,7 +3112,6 @@ class Expr(_cdr.IdlUnion):
 
     __slots__ = ()
     _repo_id = "IDL:CodecTest/Expr:1.0"
-    _interface_hash = "545588093db1f4063cf7b79eb297789dfab333ff939bf603f07800425f1a170a"
     _type_name = "CodecTest::Expr"
     _type_hash = "545588093db1f4063cf7b79eb297789dfab333ff939bf603f07800425f1a170a"
     _data_schema = (
@@ -3318,7 +3317,6 @@ class Holder_Choice(_cdr.IdlUnion):
 
     __slots__ = ()
     _repo_id = "IDL:CodecTest/Holder/Choice:1.0"
-    _interface_hash = "770b0c93428553f58f4a212c612a0220b80910b2b1dffb539307e3a360f284c1"
     _type_name = "CodecTest::Holder::Choice"
     _type_hash = "770b0c93428553f58f4a212c612a0220b80910b2b1dffb539307e3a360f284c1"
     _data_schema = (
@@ -3951,7 +3949,6 @@ class KeywordUnion(_cdr.IdlUnion):
 
     __slots__ = ()
     _repo_id = "IDL:CodecTest/KeywordUnion:1.0"
-    _interface_hash = "05d17ab8c44f069a37aa94925433e624cfbf71aa072235386ea62e574c502bf7"
     _type_name = "CodecTest::KeywordUnion"
     _type_hash = "05d17ab8c44f069a37aa94925433e624cfbf71aa072235386ea62e574c502bf7"
     _data_schema = (

@@ -95,7 +95,6 @@ class ByEnum(_cdr.IdlUnion):
 
     __slots__ = ()
     _repo_id = "IDL:CodecUnions/ByEnum:1.0"
-    _interface_hash = "f208401f9807f0bdc1af3a63018e967c29b7fdf970da00d50aab44ed7bc62946"
     _type_name = "CodecUnions::ByEnum"
     _type_hash = "f208401f9807f0bdc1af3a63018e967c29b7fdf970da00d50aab44ed7bc62946"
     _data_schema = (
@@ -224,7 +223,6 @@ class ByEnumDefault(_cdr.IdlUnion):
 
     __slots__ = ()
     _repo_id = "IDL:CodecUnions/ByEnumDefault:1.0"
-    _interface_hash = "1507e61095f1bd49b2e4db5ee06b302f435f58706e93f1a968816cef4f3797c3"
     _type_name = "CodecUnions::ByEnumDefault"
     _type_hash = "1507e61095f1bd49b2e4db5ee06b302f435f58706e93f1a968816cef4f3797c3"
     _data_schema = (
@@ -350,7 +348,6 @@ class ByEnumPartial(_cdr.IdlUnion):
 
     __slots__ = ()
     _repo_id = "IDL:CodecUnions/ByEnumPartial:1.0"
-    _interface_hash = "727b667b382575b02f39b0e729452588d4cedfbb37da1a14986cedcf0fb81d33"
     _type_name = "CodecUnions::ByEnumPartial"
     _type_hash = "727b667b382575b02f39b0e729452588d4cedfbb37da1a14986cedcf0fb81d33"
     _data_schema = (
@@ -477,7 +474,6 @@ class ByChar(_cdr.IdlUnion):
 
     __slots__ = ()
     _repo_id = "IDL:CodecUnions/ByChar:1.0"
-    _interface_hash = "2bd1f0b33894ff4df0bf1ff2aca26d5c19bc817b69404885c8d46f366f1544c6"
     _type_name = "CodecUnions::ByChar"
     _type_hash = "2bd1f0b33894ff4df0bf1ff2aca26d5c19bc817b69404885c8d46f366f1544c6"
     _data_schema = (
@@ -620,7 +616,6 @@ class ByCharNul(_cdr.IdlUnion):
 
     __slots__ = ()
     _repo_id = "IDL:CodecUnions/ByCharNul:1.0"
-    _interface_hash = "e8fad4dde4dc03e8ce07d4059c0510a484ae06bf0d9717ee22b2ecb25c0e3c8d"
     _type_name = "CodecUnions::ByCharNul"
     _type_hash = "e8fad4dde4dc03e8ce07d4059c0510a484ae06bf0d9717ee22b2ecb25c0e3c8d"
     _data_schema = (
@@ -763,7 +758,6 @@ class ByBool(_cdr.IdlUnion):
 
     __slots__ = ()
     _repo_id = "IDL:CodecUnions/ByBool:1.0"
-    _interface_hash = "46dfdbf34f741dcd0057ec9fe7819851795c09cf5a774812c7770ee4ec425fd8"
     _type_name = "CodecUnions::ByBool"
     _type_hash = "46dfdbf34f741dcd0057ec9fe7819851795c09cf5a774812c7770ee4ec425fd8"
     _data_schema = (
@@ -881,7 +875,6 @@ class ByBoolDefault(_cdr.IdlUnion):
 
     __slots__ = ()
     _repo_id = "IDL:CodecUnions/ByBoolDefault:1.0"
-    _interface_hash = "fdf2cd7df6f3c60bff14db27f6525df159a2f6858af3e07a8d5921b4304d02c1"
     _type_name = "CodecUnions::ByBoolDefault"
     _type_hash = "fdf2cd7df6f3c60bff14db27f6525df159a2f6858af3e07a8d5921b4304d02c1"
     _data_schema = (
@@ -998,7 +991,6 @@ class ByBoolTrue(_cdr.IdlUnion):
 
     __slots__ = ()
     _repo_id = "IDL:CodecUnions/ByBoolTrue:1.0"
-    _interface_hash = "f0c8ac591744d251a706c94a98dca32baa1661e6b56d60dcf904b24066be83de"
     _type_name = "CodecUnions::ByBoolTrue"
     _type_hash = "f0c8ac591744d251a706c94a98dca32baa1661e6b56d60dcf904b24066be83de"
     _data_schema = (
@@ -1092,7 +1084,6 @@ class ByShort(_cdr.IdlUnion):
 
     __slots__ = ()
     _repo_id = "IDL:CodecUnions/ByShort:1.0"
-    _interface_hash = "b8541662fbfb894c6e94156a4a1ee30470de30ee545b6c8773eddb307be23903"
     _type_name = "CodecUnions::ByShort"
     _type_hash = "b8541662fbfb894c6e94156a4a1ee30470de30ee545b6c8773eddb307be23903"
     _data_schema = (
@@ -1239,7 +1230,6 @@ class ByUShort(_cdr.IdlUnion):
 
     __slots__ = ()
     _repo_id = "IDL:CodecUnions/ByUShort:1.0"
-    _interface_hash = "044c659dc74645957c807685616573fac8de05188d933d25e52577de82aa747c"
     _type_name = "CodecUnions::ByUShort"
     _type_hash = "044c659dc74645957c807685616573fac8de05188d933d25e52577de82aa747c"
     _data_schema = (
@@ -1382,7 +1372,6 @@ class ByLong(_cdr.IdlUnion):
 
     __slots__ = ()
     _repo_id = "IDL:CodecUnions/ByLong:1.0"
-    _interface_hash = "df7989801e35751cca87f5305c19e8ae21b205e86504e0ef79fe1cdda5f8c31a"
     _type_name = "CodecUnions::ByLong"
     _type_hash = "df7989801e35751cca87f5305c19e8ae21b205e86504e0ef79fe1cdda5f8c31a"
     _data_schema = (
@@ -1532,7 +1521,6 @@ class ByULong(_cdr.IdlUnion):
 
     __slots__ = ()
     _repo_id = "IDL:CodecUnions/ByULong:1.0"
-    _interface_hash = "c3749d8914c9b8f29a36ea9cb7b522c8e6c0a168099c69f4059922c9c4c5efba"
     _type_name = "CodecUnions::ByULong"
     _type_hash = "c3749d8914c9b8f29a36ea9cb7b522c8e6c0a168099c69f4059922c9c4c5efba"
     _data_schema = (
@@ -1652,7 +1640,6 @@ class ByLongLong(_cdr.IdlUnion):
 
     __slots__ = ()
     _repo_id = "IDL:CodecUnions/ByLongLong:1.0"
-    _interface_hash = "b6db942db48d19593bc8258f124c55ba662f770b867d22d920c8127bca5bfd25"
     _type_name = "CodecUnions::ByLongLong"
     _type_hash = "b6db942db48d19593bc8258f124c55ba662f770b867d22d920c8127bca5bfd25"
     _data_schema = (
@@ -1799,7 +1786,6 @@ class ByULongLong(_cdr.IdlUnion):
 
     __slots__ = ()
     _repo_id = "IDL:CodecUnions/ByULongLong:1.0"
-    _interface_hash = "32dcd9e9757287cf30e2d957c0b78e1c57d8255576ab17cda001bda281330bef"
     _type_name = "CodecUnions::ByULongLong"
     _type_hash = "32dcd9e9757287cf30e2d957c0b78e1c57d8255576ab17cda001bda281330bef"
     _data_schema = (
@@ -1946,7 +1932,6 @@ class ByOctet(_cdr.IdlUnion):
 
     __slots__ = ()
     _repo_id = "IDL:CodecUnions/ByOctet:1.0"
-    _interface_hash = "dff3bc49142e243b59d675f6496e7a87845b9aaa8d6ebbd9bf25320a32d229bc"
     _type_name = "CodecUnions::ByOctet"
     _type_hash = "dff3bc49142e243b59d675f6496e7a87845b9aaa8d6ebbd9bf25320a32d229bc"
     _data_schema = (
@@ -2094,7 +2079,6 @@ class ByInt8(_cdr.IdlUnion):
 
     __slots__ = ()
     _repo_id = "IDL:CodecUnions/ByInt8:1.0"
-    _interface_hash = "74c7ea539ed8fd5189b0ee7346eaa79b77375adba71df270392eb9da03864280"
     _type_name = "CodecUnions::ByInt8"
     _type_hash = "74c7ea539ed8fd5189b0ee7346eaa79b77375adba71df270392eb9da03864280"
     _data_schema = (
@@ -2237,7 +2221,6 @@ class ByUInt8(_cdr.IdlUnion):
 
     __slots__ = ()
     _repo_id = "IDL:CodecUnions/ByUInt8:1.0"
-    _interface_hash = "68340b41c36b950415a9ab518f992a5413a648e1e3dfbc51e400102c5f08c2f8"
     _type_name = "CodecUnions::ByUInt8"
     _type_hash = "68340b41c36b950415a9ab518f992a5413a648e1e3dfbc51e400102c5f08c2f8"
     _data_schema = (
@@ -2380,7 +2363,6 @@ class ByTypedef(_cdr.IdlUnion):
 
     __slots__ = ()
     _repo_id = "IDL:CodecUnions/ByTypedef:1.0"
-    _interface_hash = "190a5682049369b2a536aacc870ac34934099a05f8ca12bdb05f1117742fee5f"
     _type_name = "CodecUnions::ByTypedef"
     _type_hash = "190a5682049369b2a536aacc870ac34934099a05f8ca12bdb05f1117742fee5f"
     _data_schema = (
@@ -2541,7 +2523,6 @@ class ByTypedefEnum(_cdr.IdlUnion):
 
     __slots__ = ()
     _repo_id = "IDL:CodecUnions/ByTypedefEnum:1.0"
-    _interface_hash = "65eeb0e98f889a4d02da3e70e7cfec6c9c3c39a6a2ea5e5d529c3db858d85892"
     _type_name = "CodecUnions::ByTypedefEnum"
     _type_hash = "65eeb0e98f889a4d02da3e70e7cfec6c9c3c39a6a2ea5e5d529c3db858d85892"
     _data_schema = (
@@ -2666,7 +2647,6 @@ class Branches(_cdr.IdlUnion):
 
     __slots__ = ()
     _repo_id = "IDL:CodecUnions/Branches:1.0"
-    _interface_hash = "21bf8b233351ed0b3c22960381ddec46ec84bcb2e2b18af1f86894c3f815825e"
     _type_name = "CodecUnions::Branches"
     _type_hash = "21bf8b233351ed0b3c22960381ddec46ec84bcb2e2b18af1f86894c3f815825e"
     _data_schema = (
