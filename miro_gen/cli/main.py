@@ -8,6 +8,14 @@ from collections.abc import Sequence
 
 from miro_gen.cli.common import VersionAction
 
+# The live tools: sub-command -> (module, function)
+LIVE = {
+    "call": ("miro_gen.cli.call", "call_main"),
+    "pub": ("miro_gen.cli.pub", "pub_main"),
+    "list": ("miro_gen.cli.listing", "list_main"),
+    "param": ("miro_gen.cli.param", "param_main"),
+}
+
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
@@ -32,6 +40,14 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub.add_parser(
         "launch", help="start a robot's services from a launch file (TOML)", add_help=False
+    )
+    sub.add_parser("call", help="call an operation of a running object", add_help=False)
+    sub.add_parser("pub", help="publish an event by hand", add_help=False)
+    sub.add_parser(
+        "list", help="the running services, their objects, events and parameters", add_help=False
+    )
+    sub.add_parser(
+        "param", help="get, set or dump the parameters of a running service", add_help=False
     )
     sub.add_parser("sim", help="simulate a device (sim nmea: a GPS receiver)", add_help=False)
     sub.add_parser("new", help="scaffold a service in one of Miro's patterns", add_help=False)
@@ -73,6 +89,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         from miro_gen.cli import launch
 
         return launch.launch_main(args[1:])
+    if args and args[0] in LIVE:
+        import importlib
+
+        module, function = LIVE[args[0]]
+        return int(getattr(importlib.import_module(module), function)(args[1:]))
     if args and args[0] == "demo":
         from miro_gen.cli import demo
 

@@ -162,7 +162,8 @@ class ServiceImpl(MiroService__POA.Service):
 
         root = live.document()
         etree.indent(root, space="  ")
-        return str(etree.tostring(root, xml_declaration=True, encoding="unicode"))
+        body = etree.tostring(root, encoding="unicode")
+        return f'<?xml version="1.0" encoding="UTF-8"?>\n{body}'
 
     def _find(self, section: str, category: str) -> Exposed:
         from miro_gen.params import live
