@@ -53,7 +53,7 @@ from miro_gen.devices import (
     DevMessage,
     TtyConnection,
 )
-from miro_gen.params import ParamsError, read_parameters
+from miro_gen.params import ParamsError, live, read_parameters
 from miro_gen.transport.options import UsageError
 
 _log = log.logger("GPS")
@@ -124,6 +124,12 @@ def main(argv: list[str] | None = None) -> int:
         print(f"gps: {e}", file=sys.stderr)
         return 1
     impl = GpsImpl(supplier, params)
+
+    def follow(_: object) -> None:  # `miro param set`: the new values take effect at once
+        impl.timeout = params.waitTimeout.total_seconds()
+        impl.type_name = params.eventName
+
+    live.on_change(follow)
     consumer = NmeaConsumer(impl)
     framer = DelimitedFramer(b"$", b"\n", max_length=256)  # NMEA: at most 82 characters
     handler = DevEventHandler(framer, consumer)
