@@ -14,6 +14,7 @@ LIVE = {
     "pub": ("miro_gen.cli.pub", "pub_main"),
     "list": ("miro_gen.cli.listing", "list_main"),
     "param": ("miro_gen.cli.param", "param_main"),
+    "build": ("miro_gen.cli.build", "build_main"),
 }
 
 
@@ -48,6 +49,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub.add_parser(
         "param", help="get, set or dump the parameters of a running service", add_help=False
+    )
+    sub.add_parser(
+        "build", help="regenerate generated/ when the IDL or parameter files changed", add_help=False
     )
     sub.add_parser("sim", help="simulate a device (sim nmea: a GPS receiver)", add_help=False)
     sub.add_parser("new", help="scaffold a service in one of Miro's patterns", add_help=False)
