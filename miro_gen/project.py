@@ -78,11 +78,8 @@ def find_project(start: Path) -> Project | None:
     for folder in (start, *start.parents):
         if not (folder / "generated").is_dir():
             continue
-        project = Project(
-            folder,
-            sorted((folder / "idl").glob("*.idl")),
-            sorted([*(folder / "params").glob("*.xml"), *folder.glob("services/*/*Parameters.xml")]),
-        )
+        params = [*(folder / "params").glob("*.xml"), *folder.glob("services/*/*Parameters.xml")]
+        project = Project(folder, sorted((folder / "idl").glob("*.idl")), sorted(params))
         if project.idl_files or project.param_files:
             return project
     return None

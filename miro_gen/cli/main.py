@@ -51,7 +51,7 @@ def build_parser() -> argparse.ArgumentParser:
         "param", help="get, set or dump the parameters of a running service", add_help=False
     )
     sub.add_parser(
-        "build", help="regenerate generated/ when the IDL or parameter files changed", add_help=False
+        "build", help="regenerate generated/ when IDL or parameter files changed", add_help=False
     )
     sub.add_parser("sim", help="simulate a device (sim nmea: a GPS receiver)", add_help=False)
     sub.add_parser("new", help="scaffold a service in one of Miro's patterns", add_help=False)
