@@ -179,3 +179,41 @@ def test_without_a_naming_service_the_tools_say_so() -> None:
     assert done.returncode == 1
     assert done.stderr.startswith("miro list: the naming service at tcp://127.0.0.1:")
     assert "Traceback" not in done.stderr
+
+
+def test_bash_completes_names_operations_topics_and_parameters(robot: Robot) -> None:
+    script = subprocess.run(
+        [sys.executable, "-m", "miro_gen.cli.main", "completion", "bash"],
+        capture_output=True,
+        text=True,
+        env=service_env(),
+        timeout=60,
+    ).stdout
+    assert "complete -o filenames -F _miro_complete miro" in script
+
+    def tab(*words: str) -> list[str]:
+        """What bash offers at a Tab after `words` (the last one being typed)."""
+        line = " ".join(f"'{w}'" for w in words)
+        done = subprocess.run(
+            [
+                "bash",
+                "-c",
+                f"{script}\nCOMP_WORDS=({line}); COMP_CWORD={len(words) - 1}; _miro_complete; "
+                'printf "%s\\n" "${COMPREPLY[@]}"',
+            ],
+            capture_output=True,
+            text=True,
+            env=dict(
+                service_env(MIRO_CACHE=str(robot.cache), MIRO_NAMING=robot.naming),
+                PATH=f"{Path(sys.executable).parent}:{os.environ['PATH']}",
+            ),
+            timeout=60,
+        )
+        return done.stdout.split()
+
+    assert tab("miro", "pa") == ["param", "params"]
+    assert "robot1/ExampleA" in tab("miro", "call", "")
+    assert tab("miro", "call", "robot1/ExampleA", "") == ["getData", "setData"]
+    assert tab("miro", "param", "set", "gps", "Gps.W") == ["Gps.WaitTimeout"]
+    assert "robot1/ExampleEvent" in tab("miro", "pub", "")
+    assert tab("miro", "call", "--ti") == ["--timeout"]

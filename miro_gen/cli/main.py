@@ -15,6 +15,8 @@ LIVE = {
     "list": ("miro_gen.cli.listing", "list_main"),
     "param": ("miro_gen.cli.param", "param_main"),
     "build": ("miro_gen.cli.build", "build_main"),
+    "completion": ("miro_gen.cli.complete", "completion_main"),
+    "_complete": ("miro_gen.cli.complete", "complete_main"),
 }
 
 
@@ -52,6 +54,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub.add_parser(
         "build", help="regenerate generated/ when IDL or parameter files changed", add_help=False
+    )
+    sub.add_parser(
+        "completion", help='shell completion: eval "$(miro completion bash)"', add_help=False
     )
     sub.add_parser("sim", help="simulate a device (sim nmea: a GPS receiver)", add_help=False)
     sub.add_parser("new", help="scaffold a service in one of Miro's patterns", add_help=False)

@@ -90,7 +90,8 @@ class Robot:
 
         def describe(entry: MiroNaming.Entry) -> Running:
             try:
-                return Running(entry, self.service_at(entry.endpoint).describe())
+                service = self.service_at(entry.endpoint, min(self.timeout, DESCRIBE_TIMEOUT))
+                return Running(entry, service.describe())
             except SystemException as e:
                 return Running(entry, None, str(e))
 
