@@ -17,6 +17,7 @@ LIVE = {
     "build": ("miro_gen.cli.build", "build_main"),
     "completion": ("miro_gen.cli.complete", "completion_main"),
     "_complete": ("miro_gen.cli.complete", "complete_main"),
+    "doctor": ("miro_gen.cli.doctor", "doctor_main"),
 }
 
 
@@ -57,6 +58,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub.add_parser(
         "completion", help='shell completion: eval "$(miro completion bash)"', add_help=False
+    )
+    sub.add_parser(
+        "doctor",
+        help="which naming services are visible, and why one cannot be reached",
+        add_help=False,
     )
     sub.add_parser("sim", help="simulate a device (sim nmea: a GPS receiver)", add_help=False)
     sub.add_parser("new", help="scaffold a service in one of Miro's patterns", add_help=False)

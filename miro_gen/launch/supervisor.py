@@ -51,6 +51,7 @@ class Part:
     services: list[ServiceSpec]
     naming_url: str | None  # None: the services' own default (MIRO_NAMING, or 127.0.0.1:2809)
     others: dict[str, str]  # services of the file that run on other hosts -> their host
+    discover: bool = False  # find the naming service by its announcement (multicast DNS)
 
 
 def this_host() -> str:
@@ -71,6 +72,7 @@ def plan(spec: LaunchSpec, host: str | None = None) -> Part:
     naming = spec.naming
     here = naming is not None and (host is None or naming.host in (None, host))
     url = spec.naming_url
+    discover = False
     if url is None and naming is not None:
         address = naming.endpoint.split("://", 1)[1].rsplit(":", 1)
         if here and address[1] == "*":  # a free port, chosen now
@@ -90,12 +92,14 @@ def plan(spec: LaunchSpec, host: str | None = None) -> Part:
             url = naming.endpoint
         elif naming.host is not None and spec.hosts.get(naming.host):
             url = f"tcp://{spec.hosts[naming.host]}:{address[1]}"
-        else:
+        elif not naming.announce:
             raise PlanError(
                 f"the services of {host} cannot know where the naming service on "
-                f'{naming.host} is: give [launch] naming = "tcp://ADDRESS:PORT", '
-                f"or [hosts.{naming.host}] address"
+                f'{naming.host} is: it is not announced; give [launch] naming = "tcp://'
+                f'ADDRESS:PORT", or [hosts.{naming.host}] address'
             )
+        else:
+            discover = True  # the one the naming host announces (multicast DNS)
     for s in chosen:
         for dep in s.after:
             if dep in others:
@@ -106,7 +110,7 @@ def plan(spec: LaunchSpec, host: str | None = None) -> Part:
     services = list(chosen)
     if naming is not None and here:
         services.insert(0, naming_service(spec))
-    return Part(host, services, url, others)
+    return Part(host, services, url, others, discover)
 
 
 def free_port(host: str) -> int:
@@ -128,6 +132,8 @@ def naming_service(spec: LaunchSpec) -> ServiceSpec:
         argv += ["--host", address]
     if n.log_level is not None:
         argv += ["-MLL", str(n.log_level)]
+    if not n.announce:
+        argv.append("--no-announce")
     return ServiceSpec(
         name=NAMING_LABEL,
         argv=argv,
@@ -251,6 +257,8 @@ class Supervisor:
     def run(self) -> int:
         if self.naming_url is not None:
             self.watcher = NameWatcher(self.naming_url)
+        elif self.part.discover:
+            threading.Thread(target=self._discover, name="launch-discover", daemon=True).start()
         self.console.show_table(self.rows)
         try:
             while not self.stopping.is_set():
@@ -271,6 +279,25 @@ class Supervisor:
             self.console.note(f"stopped: {self.failure}")
             return 1
         return 0
+
+    def _discover(self) -> None:
+        """Look for the announced naming service until one is seen (or the launch stops)."""
+        from miro_gen.transport.discovery import FIND_TIMEOUT, browse
+
+        while not self.stopping.is_set():
+            try:
+                found = browse(FIND_TIMEOUT, first=True)
+            except Exception as e:  # no multicast here: say so once, keep trying
+                self.console.note(f"cannot look for the naming service: {e}")
+                found = []
+                self.stopping.wait(5)
+            if found:
+                url = found[0].url()
+                self.console.note(f"naming service found at {url}, announced by {found[0].host}")
+                self.watcher = NameWatcher(url)
+                self.naming_url = url
+                self.wake.set()
+                return
 
     def stop(self) -> None:
         """Stop everything (from a signal handler or another thread); a second call kills."""
@@ -303,6 +330,8 @@ class Supervisor:
         """What `c` still waits for ('' when nothing)."""
         if c.name == NAMING_LABEL:
             return ""
+        if self.part.discover and self.watcher is None:
+            return "an announced naming service"
         if self.watcher is not None and not self.watcher.answering:
             return f"the naming service at {self.watcher.url}"
         for dep in c.spec.after:

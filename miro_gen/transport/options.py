@@ -51,6 +51,7 @@ class CommonOptions:
     """What the common options say (the defaults when absent)."""
 
     naming: str = DEFAULT_NAMING
+    naming_given: bool = False  # by an option or the environment (else: the default, or found)
     naming_context: str = field(default_factory=socket.gethostname)
     log_level: int = DEFAULT_LOG_LEVEL
     log_filter: list[str] = field(default_factory=list)  # empty: every category
@@ -86,6 +87,7 @@ def parse_common_options(
         opts.naming = naming_endpoint(env["NameServiceIOR"])
     if env.get("MIRO_NAMING"):
         opts.naming = naming_endpoint(env["MIRO_NAMING"])
+    opts.naming_given = bool(env.get("MIRO_NAMING") or env.get("NameServiceIOR"))
     if env.get("MIRO_HOST"):
         opts.host = env["MIRO_HOST"]
     rest: list[str] = []
@@ -111,6 +113,7 @@ def parse_common_options(
             text = inline if eq else value(name)
             if name == "--naming":
                 opts.naming = naming_endpoint(text)
+                opts.naming_given = True
             elif name == "--host":
                 opts.host = text
             elif name == "-MCF":
@@ -133,6 +136,7 @@ def parse_common_options(
             ref = value(arg)
             if ref.startswith("NameService="):
                 opts.naming = naming_endpoint(ref)
+                opts.naming_given = True
             else:
                 opts.ignored.append(f"{arg} {ref}")
         elif arg.startswith("-ORB"):

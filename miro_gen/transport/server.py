@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import os
 import signal
 import sys
 import threading
@@ -65,6 +66,10 @@ class Client:
 
     def __init__(self, argv: Sequence[str] | None = None, *, context: Any = None) -> None:
         self.options, self.argv = _take_options(argv)
+        if not self.options.naming_given and os.environ.get("MIRO_DISCOVERY", "1") != "0":
+            from miro_gen.transport.discovery import naming_for  # the manual's -m 1
+
+            self.options.naming = naming_for(self.options.naming)
         self.context = context if context is not None else zmq.Context.instance()
         self.invoker = ZmqInvoker(self.context)
         self.naming = NamingClient(self.invoker, self.options.naming, self.options.naming_context)
