@@ -10,6 +10,7 @@ say why.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import signal
@@ -38,8 +39,9 @@ def ip(*args: str) -> None:
 class Hosts:
     """Namespaces named after this test run (`miro-<pid>-<host>`) and the processes in them."""
 
-    def __init__(self) -> None:
-        self.prefix = f"miro-{os.getpid()}-"
+    def __init__(self, addresses: dict[str, str] | None = None, tag: str = "") -> None:
+        self.addresses = ADDRESSES if addresses is None else addresses
+        self.prefix = f"miro-{os.getpid()}{tag}-"
         self.created: list[str] = []
         self.procs: list[subprocess.Popen[str]] = []
 
@@ -59,7 +61,7 @@ class Hosts:
         hub = self.ns("hub")
         ip("-n", hub, "link", "add", "br0", "type", "bridge")
         ip("-n", hub, "link", "set", "br0", "up")
-        for host, address in ADDRESSES.items():
+        for host, address in self.addresses.items():
             ns, port = self.ns(host), f"to-{host}"
             ip("-n", hub, "link", "add", port, "type", "veth", "peer", "name", "eth0", "netns", ns)
             ip("-n", hub, "link", "set", port, "master", "br0", "up")
@@ -67,13 +69,14 @@ class Hosts:
             ip("-n", ns, "link", "set", "eth0", "up")
             ip("-n", ns, "link", "set", "lo", "up")
 
-    def popen(self, host: str, *argv: str, stderr: Path) -> subprocess.Popen[str]:
-        """`argv` (run by this Python) in `host`'s namespace, from this checkout."""
-        with stderr.open("w") as err:
+    def popen(self, host: str, *argv: str, stderr: Path | None = None) -> subprocess.Popen[str]:
+        """`argv` (run by this Python) in `host`'s namespace, from this checkout; its output
+        (stderr to the file `stderr`, else with stdout)."""
+        with stderr.open("w") if stderr is not None else contextlib.nullcontext() as err:
             proc = subprocess.Popen(
                 ["ip", "netns", "exec", self.ns(host), sys.executable, *argv],
                 stdout=subprocess.PIPE,
-                stderr=err,
+                stderr=err if err is not None else subprocess.STDOUT,
                 text=True,
                 env=service_env(),
             )
@@ -104,17 +107,18 @@ class Hosts:
             subprocess.run(["ip", "netns", "delete", ns], capture_output=True, timeout=30)
 
 
-@pytest.fixture(scope="module")
-def hosts() -> Iterator[Hosts]:
+def network(addresses: dict[str, str] | None = None, tag: str = "") -> Iterator[Hosts]:
+    """Namespaces for `addresses` (host -> address in 10.77.0.0/24 or another /24) joined by a
+    hub; skips, saying why, where they cannot be made."""
     if not sys.platform.startswith("linux"):
         pytest.skip("network namespaces are a Linux feature")
     if os.geteuid() != 0:
         pytest.skip("creating network namespaces (ip netns add) needs root")
     if shutil.which("ip") is None:
         pytest.skip("the ip command (iproute2) is not installed")
-    h = Hosts()
+    h = Hosts(addresses, tag)
     try:
-        for host in ("hub", *ADDRESSES):
+        for host in ("hub", *h.addresses):
             done = h.add(host)
             if done.returncode != 0:
                 pytest.skip(
@@ -125,6 +129,11 @@ def hosts() -> Iterator[Hosts]:
         yield h
     finally:
         h.close()
+
+
+@pytest.fixture(scope="module")
+def hosts() -> Iterator[Hosts]:
+    yield from network()
 
 
 @pytest.fixture(scope="module")
