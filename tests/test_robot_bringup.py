@@ -120,9 +120,9 @@ def test_a_robot_on_two_hosts_found_by_discovery_and_operated_live(
 
     def shell(*args: str) -> subprocess.CompletedProcess[str]:
         """A miro command typed on the robot, which knows no address."""
+        on_robot = ["ip", "netns", "exec", hosts.ns("robot"), sys.executable]
         return subprocess.run(
-            ["ip", "netns", "exec", hosts.ns("robot"), sys.executable, "-m", "miro_gen.cli.main"]
-            + list(args),
+            [*on_robot, "-m", "miro_gen.cli.main", *args],
             capture_output=True,
             text=True,
             env=service_env(MIRO_CACHE=str(cache)),
