@@ -213,3 +213,26 @@ def ensure_fresh(project: Project) -> list[str]:
         wrote += [line for line in lines if line.startswith("wrote ")]
     _write_stamp(project, inputs)
     return wrote
+
+
+def before_running(folder: Path, prog: str) -> bool:
+    """What `miro run` and `miro launch` do first: regenerate the generated code of the project
+    `folder` is in when it is stale (saying so on stderr); False, having said why, when it is
+    stale and cannot be regenerated. True outside any project."""
+    import sys
+
+    project = find_project(folder)
+    if project is None:
+        return True
+    try:
+        wrote = ensure_fresh(project)
+    except StaleError as e:
+        print(f"{prog}: {e}", file=sys.stderr)
+        return False
+    if wrote:
+        print(
+            f"{prog}: the IDL or parameter files changed: regenerated {len(wrote)} files in "
+            f"{project.generated}",
+            file=sys.stderr,
+        )
+    return True

@@ -88,3 +88,24 @@ def test_outside_a_project_build_says_so(tmp_path: Path) -> None:
     done = run_module("miro_gen.cli.main", "build", cwd=tmp_path)
     assert done.returncode == 1
     assert "is not in a project" in done.stderr
+
+
+def test_run_and_launch_regenerate_before_they_start(tmp_path: Path) -> None:
+    root = make_project(tmp_path)
+    show = root / "services" / "show"
+    show.mkdir()
+    (show / "__main__.py").write_text(
+        "from Arm.ArmParameters import ArmParameters\nprint('speed', ArmParameters().speed)\n"
+    )
+    (root / "robot.toml").write_text('[services.show]\nrun = "services/show"\nrestart = "never"\n')
+    done = run_module("miro_gen.cli.main", "run", "show", cwd=root)
+    assert done.stdout == "speed 1.5\n", done.stderr
+    assert "miro run: the IDL or parameter files changed: regenerated" in done.stderr
+    xml = root / "services" / "arm" / "ArmParameters.xml"
+    xml.write_text(xml.read_text().replace('default="1.5"', 'default="2.5"'))
+    done = run_module("miro_gen.cli.main", "launch", "robot.toml", cwd=root)
+    assert done.returncode == 0, done.stderr
+    assert "show | speed 2.5" in " ".join(done.stdout.split())
+    assert "miro launch: the IDL or parameter files changed: regenerated 1 files" in done.stderr
+    done = run_module("miro_gen.cli.main", "run", "show", cwd=root)
+    assert (done.stdout, done.stderr) == ("speed 2.5\n", "")

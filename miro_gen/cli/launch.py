@@ -49,6 +49,12 @@ def parser() -> argparse.ArgumentParser:
         help="stop everything after S seconds (default: run until Ctrl-C)",
     )
     p.add_argument(
+        "--no-build",
+        action="store_true",
+        help="start even when the project's generated code is older than its IDL or parameter "
+        "files (by default it is regenerated first, as miro build does)",
+    )
+    p.add_argument(
         "--no-status", action="store_true", help="no live status table, even on a terminal"
     )
     return p
@@ -72,6 +78,10 @@ def launch_main(argv: Sequence[str]) -> int:
     if ns.check:
         print(describe(spec, part))
         return 0
+    from miro_gen.project import before_running
+
+    if not ns.no_build and not before_running(spec.folder, "miro launch"):
+        return 2
     if not part.services:
         print(f"{ns.file}: host {part.host} has no services to start", file=sys.stderr)
         return 0

@@ -82,6 +82,10 @@ def run_main(argv: Sequence[str]) -> int:
             file=sys.stderr,
         )
         return 1
+    from miro_gen.project import before_running
+
+    if not before_running(project, "miro run"):  # never the old generated code
+        return 1
     env = dict(os.environ)
     paths = [str(project / "generated"), str(project), env.get("PYTHONPATH", "")]
     env["PYTHONPATH"] = os.pathsep.join(p for p in paths if p)
