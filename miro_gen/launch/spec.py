@@ -362,9 +362,15 @@ def _naming(r: _Reader, table: dict[str, Any], spec: LaunchSpec) -> NamingSpec:
 
 
 def _default_naming() -> str:
-    from miro_gen.transport.options import DEFAULT_NAMING
+    """Where `miro naming` serves by default: $MIRO_NAMING, else tcp://127.0.0.1:2809."""
+    import os
 
-    return DEFAULT_NAMING
+    from miro_gen.transport.options import DEFAULT_NAMING, UsageError, naming_endpoint
+
+    try:
+        return naming_endpoint(os.environ.get("MIRO_NAMING") or DEFAULT_NAMING)
+    except UsageError:
+        return DEFAULT_NAMING
 
 
 def _service(r: _Reader, name: str, table: dict[str, Any], spec: LaunchSpec) -> ServiceSpec | None:
