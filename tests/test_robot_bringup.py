@@ -21,6 +21,7 @@ from pathlib import Path
 import pytest
 from loopback import eventually, service_env
 from miro_cli import REPO
+from test_launch import alive, started_pids
 from test_multihost import Hosts, network
 
 from miro_gen.testing import ServiceProcess
@@ -89,18 +90,6 @@ def launch_file(folder: Path) -> Path:
     return path
 
 
-def pids(proc: ServiceProcess) -> list[int]:
-    return [int(m[1]) for t in proc.lines if (m := re.search(r"started, pid (\d+)", t))]
-
-
-def alive(pid: int) -> bool:
-    try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
-    except FileNotFoundError:
-        return False
-    return stat.rsplit(")", 1)[1].split()[0] != "Z"
-
-
 def test_a_robot_on_two_hosts_found_by_discovery_and_operated_live(
     hosts: Hosts, tmp_path: Path
 ) -> None:
@@ -165,7 +154,7 @@ def test_a_robot_on_two_hosts_found_by_discovery_and_operated_live(
         late = shell("call", "robot1/Gps", "getWaitData")
         assert late.stderr.startswith("robot1/Gps getWaitData raised IDL:Miro/ETimeOut:1.0")
     finally:
-        started = pids(robot) + pids(base)
+        started = started_pids(robot) + started_pids(base)
         for proc in (robot, base):  # one Ctrl-C each
             proc.proc.send_signal(signal.SIGINT)
         codes = [proc.proc.wait(60) for proc in (robot, base)]

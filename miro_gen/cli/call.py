@@ -9,6 +9,7 @@ import sys
 from collections.abc import Sequence
 from typing import Any
 
+from miro_gen.cli.liveargs import connect
 from miro_gen.live.remote import LiveError, Robot
 from miro_gen.live.show import Signature, dump, flow, signatures
 from miro_gen.live.values import from_plain, hints, to_plain
@@ -37,14 +38,8 @@ def parser() -> argparse.ArgumentParser:
 
 
 def call_main(argv: Sequence[str]) -> int:
-    from miro_gen.transport.options import UsageError
-
     p = parser()
-    try:
-        robot = Robot(["miro call", *argv])
-    except UsageError as e:
-        p.error(str(e))
-    ns = p.parse_args(robot.client.argv[1:])
+    robot, ns = connect(p, "miro call", argv)
     if ns.timeout <= 0:
         p.error("--timeout must be more than 0 seconds")
     robot.timeout = ns.timeout

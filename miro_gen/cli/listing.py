@@ -13,6 +13,7 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
+from miro_gen.cli.liveargs import connect
 from miro_gen.launch.console import duration_text
 from miro_gen.live.remote import LiveError, Robot, Running
 from miro_gen.live.show import signatures
@@ -40,14 +41,8 @@ def parser() -> argparse.ArgumentParser:
 
 
 def list_main(argv: Sequence[str]) -> int:
-    from miro_gen.transport.options import UsageError
-
     p = parser()
-    try:
-        robot = Robot(["miro list", *argv])
-    except UsageError as e:
-        p.error(str(e))
-    ns = p.parse_args(robot.client.argv[1:])
+    robot, ns = connect(p, "miro list", argv)
     try:
         services = [s for s in robot.services() if _matches(s.name, ns.pattern)]
         entries = robot.entries()

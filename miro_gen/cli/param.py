@@ -17,7 +17,8 @@ from typing import Any
 
 from lxml import etree
 
-from miro_gen.live.remote import LiveError, Robot, Running
+from miro_gen.cli.liveargs import connect
+from miro_gen.live.remote import LiveError, Running
 
 
 def parser() -> argparse.ArgumentParser:
@@ -48,14 +49,8 @@ def parser() -> argparse.ArgumentParser:
 
 
 def param_main(argv: Sequence[str]) -> int:
-    from miro_gen.transport.options import UsageError
-
     p = parser()
-    try:
-        robot = Robot(["miro param", *argv])
-    except UsageError as e:
-        p.error(str(e))
-    ns = p.parse_args(robot.client.argv[1:])
+    robot, ns = connect(p, "miro param", argv)
     try:
         service = robot.service(ns.service)
         if service.description is None:

@@ -10,6 +10,7 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
+from miro_gen.cli.liveargs import connect
 from miro_gen.live.remote import LiveError, Robot
 
 SUBSCRIBER_WAIT = 2.0  # seconds a single event waits for a subscriber to appear
@@ -40,14 +41,8 @@ def parser() -> argparse.ArgumentParser:
 
 
 def pub_main(argv: Sequence[str]) -> int:
-    from miro_gen.transport.options import UsageError
-
     p = parser()
-    try:
-        robot = Robot(["miro pub", *argv])
-    except UsageError as e:
-        p.error(str(e))
-    ns = p.parse_args(robot.client.argv[1:])
+    robot, ns = connect(p, "miro pub", argv)
     if ns.rate < 0 or ns.count < 0:
         p.error("--rate and --count must be 0 or more")
     count = ns.count or (0 if ns.rate else 1)
