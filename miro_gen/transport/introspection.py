@@ -226,3 +226,5 @@ def _bind(server: Server, impl: ServiceImpl) -> None:
         server.bind_entry(entry)
     except (SystemException, MiroNaming.InvalidName) as e:
         _log.debug("the service object is not bound: %s", e)
+    except Exception as e:  # zmq.ZMQError: the server closed meanwhile, and its sockets
+        _log.debug("the service object is not bound: the server stopped (%s)", e)
