@@ -79,6 +79,40 @@ def from_import(module: str, names: list[str]) -> str:
     return f"from {module} import (\n" + "".join(f"    {n},\n" for n in ordered) + ")"
 
 
+def separate_first_party(text: str, first_party: frozenset[str]) -> str:
+    """`text` with the imports of `first_party` packages taken out of each block of imports
+    into a block of their own, after the others: ruff's isort puts them in a section of their
+    own. In miro-gen's own repository miro_gen is first-party; elsewhere it is one more
+    package, sorted with the others, as the templates write it."""
+    lines = text.split("\n")
+    out: list[str] = []
+    others: list[str] = []
+    mine: list[str] = []
+    current: list[str] | None = None  # the list the statement being read goes to
+
+    def flush() -> None:
+        out.extend(others)
+        if others and mine:
+            out.append("")
+        out.extend(mine)
+        others.clear()
+        mine.clear()
+
+    for line in lines:
+        m = re.match(r"(?:from|import) ([\w.]+)", line)
+        if m:
+            current = mine if m.group(1).split(".")[0] in first_party else others
+            current.append(line)
+        elif current is not None and (line.startswith(" ") or line.startswith(")")):
+            current.append(line)  # the rest of a statement in parentheses
+        else:
+            flush()
+            current = None
+            out.append(line)
+    flush()
+    return "\n".join(out)
+
+
 def _environment() -> jinja2.Environment:
     env = jinja2.Environment(
         loader=jinja2.FileSystemLoader(template_dir() / "service"),
@@ -169,6 +203,12 @@ def scaffold(
     outputs["README.md"] = "common/README.md.j2"
     outputs[f"test_{name}.py"] = f"{pattern}/test.py.j2"
     rendered = {out: env.get_template(tpl).render(context) for out, tpl in outputs.items()}
+    if (project / "miro_gen" / "__init__.py").is_file():  # miro-gen's own repository
+        mine = frozenset({"miro_gen"})
+        rendered = {
+            out: separate_first_party(text, mine) if out.endswith(".py") else text
+            for out, text in rendered.items()
+        }
     target.mkdir(parents=True)
     written = []
     for out, text in rendered.items():
