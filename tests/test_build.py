@@ -1,4 +1,4 @@
-"""`miro build` and miro_gen.project: generated/ is regenerated when the project's IDL or
+"""`miro build` and miro_gen.cli.freshness: generated/ is regenerated when the project's IDL or
 parameter files change, never silently left stale."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 from miro_cli import REPO, run_module
 
-from miro_gen import project as proj
+from miro_gen.cli import freshness as proj
 
 
 def make_project(tmp_path: Path) -> Path:

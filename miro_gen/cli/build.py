@@ -1,5 +1,5 @@
 """`miro build`: make a project's `generated/` what its IDL and parameter files make today
-(miro_gen.project); `--check` only says whether it is."""
+(miro_gen.cli.freshness); `--check` only says whether it is."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from miro_gen.project import StaleError, check, ensure_fresh, find_project
+from miro_gen.cli.freshness import StaleError, check, ensure_fresh, find_project
 
 
 def build_main(argv: Sequence[str]) -> int:

@@ -78,7 +78,7 @@ def launch_main(argv: Sequence[str]) -> int:
     if ns.check:
         print(describe(spec, part))
         return 0
-    from miro_gen.project import before_running
+    from miro_gen.cli.freshness import before_running
 
     if not ns.no_build and not before_running(spec.folder, "miro launch"):
         return 2

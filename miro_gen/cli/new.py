@@ -82,7 +82,7 @@ def run_main(argv: Sequence[str]) -> int:
             file=sys.stderr,
         )
         return 1
-    from miro_gen.project import before_running
+    from miro_gen.cli.freshness import before_running
 
     if not before_running(project, "miro run"):  # never the old generated code
         return 1

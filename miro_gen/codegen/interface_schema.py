@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from miro_gen.codegen.schema import _body, _completed, _type, _wrap
+from miro_gen.codegen.schema import _body, _type, _wrap
 from miro_gen.idl import ast
 
 LINE = 60  # characters of an operation's declaration before its parameters go one per line
@@ -69,10 +69,8 @@ class _Writer:
             self.need_type(t.key)
             self.need_type(t.value)
         elif isinstance(t, ast.NamedType):
-            decl = _completed(t.decl)
-            if isinstance(decl, ast.Interface) or (
-                isinstance(decl, ast.Forward) and decl.of == "interface"
-            ):
+            decl = t.decl.resolved if t.decl is not None else None
+            if decl is not None and decl.is_interface:
                 self.refer(decl)
             elif decl is not None:
                 self.need_decl(decl)
@@ -132,7 +130,7 @@ class _Writer:
             self.need_type(decl.type)
         elif isinstance(decl, ast.Struct | ast.Exception_):
             if isinstance(decl, ast.Struct) and decl.base is not None:
-                self.need_decl(_completed(decl.base))
+                self.need_decl(decl.base.resolved)
             for m in decl.members:
                 self.need_type(m.type)
         elif isinstance(decl, ast.Union_):
@@ -147,7 +145,7 @@ class _Writer:
             return
         self.active.append(iface)
         for base in iface.bases:
-            self.interface(_completed(base))
+            self.interface(base.resolved)
         nested = [
             d
             for d in self.children.get(tuple(iface.scope_path), [])
@@ -176,7 +174,7 @@ class _Writer:
         word = "abstract interface" if iface.abstract else "interface"
         if iface.local:
             word = "local interface"
-        bases = [_completed(b).scoped_name for b in iface.bases]
+        bases = [b.resolved.scoped_name for b in iface.bases]
         head = f"{word} {iface.name}" + (f" : {', '.join(bases)}" if bases else "") + " {"
         lines: list[str] = []
         for d in nested:

@@ -1,16 +1,24 @@
-"""The Jinja environment of the Python back end: templates/idl/ and the filters they use."""
+"""The Jinja environment of the code generators (templates/), its filters, and the rendering of
+the Python back end's contexts into file contents.
+
+Filters: `pyrepr` (a Python literal), `docstring` (a docstring literal, wrapped) and `wrap` with
+the global `bracket` (line breaking, see layout.py). Templates do no arithmetic and no layout
+decisions of their own.
+"""
 
 from __future__ import annotations
 
 import textwrap
-from functools import cache
+from functools import cache, lru_cache
 from pathlib import Path
 from typing import Any
 
 import jinja2
 
 from miro_gen import __version__
-from miro_gen.codegen.model import PyModule, isort_key
+from miro_gen.cache import cache_dir
+from miro_gen.codegen.contexts import ModuleContext, PackageContext
+from miro_gen.codegen.layout import bracket, wrap
 
 LINE = 100
 
@@ -26,11 +34,16 @@ def template_dir() -> Path:
 def pyrepr(value: Any) -> str:
     """A Python literal: strings always in double quotes (as ruff formats them)."""
     if isinstance(value, str):
-        text = repr(value)
-        if text.startswith("'") and '"' not in value:
-            text = '"' + text[1:-1].replace("\\'", "'") + '"'
-        return text
+        return _string_literal(value)
     return repr(value)
+
+
+@lru_cache(maxsize=4096)  # names and schema lines recur across a file's types
+def _string_literal(value: str) -> str:
+    text = repr(value)
+    if text.startswith("'") and '"' not in value:
+        text = '"' + text[1:-1].replace("\\'", "'") + '"'
+    return text
 
 
 def docstring(text: str | None, indent: int, fallback: str | None = None) -> str:
@@ -59,6 +72,12 @@ def _wrap_block(line: str, width: int) -> list[str]:
     ) or [line]
 
 
+def _bytecode_cache() -> jinja2.BytecodeCache | None:
+    """Templates compiled by an earlier run (checked against their source), per user."""
+    folder = cache_dir()
+    return jinja2.FileSystemBytecodeCache(folder) if folder is not None else None
+
+
 @cache
 def environment() -> jinja2.Environment:
     env = jinja2.Environment(
@@ -68,45 +87,33 @@ def environment() -> jinja2.Environment:
         keep_trailing_newline=True,
         undefined=jinja2.StrictUndefined,
         autoescape=False,
+        auto_reload=False,  # templates do not change during a run: no stat per use
+        bytecode_cache=_bytecode_cache(),
     )
     env.filters["pyrepr"] = pyrepr
     env.filters["docstring"] = docstring
+    env.filters["wrap"] = wrap
+    env.globals["bracket"] = bracket
     env.globals["version"] = __version__
     return env
 
 
-def render_module(module: PyModule) -> str:
+# Rendered in the place of the module's ruff exemptions, which are known once it is rendered.
+_NOQA_MARK = "\x00"
+
+
+def render_module(module: ModuleContext) -> str:
     """The module's code; it exempts itself from the line-length rule only when it must
     (long IDL names and literals can make lines longer than the project's limit)."""
-    template = environment().get_template("idl/module.py.j2")
-    text = template.render(m=module, noqa=sorted(module.noqa))
-    if any(len(line) > LINE for line in text.split("\n")):
-        text = template.render(m=module, noqa=sorted({*module.noqa, "E501"}))
-    return text
+    text = environment().get_template("idl/module.py.j2").render(m=module, noqa_mark=_NOQA_MARK)
+    codes = set(module.noqa)
+    if max(map(len, text.split("\n"))) > LINE:
+        codes.add("E501")
+    mark = f"# ruff: noqa: {_NOQA_MARK}\n"
+    exemption = f"# ruff: noqa: {', '.join(sorted(codes))}\n" if codes else ""
+    return text.replace(mark, exemption, 1)
 
 
-def render_package_init(
-    doc: str,
-    modules: list[str],
-    subpackages: list[tuple[str, str]],
-    exports: list[tuple[str, str]],
-    submodules: list[str],
-    hashes: list[tuple[str, str]],
-) -> str:
+def render_package_init(package: PackageContext) -> str:
     """A package `__init__` that imports its modules' names lazily (see the template)."""
-    public = sorted(
-        {name for name, _ in exports} | {name for _, name in subpackages}, key=isort_key
-    )
-    return (
-        environment()
-        .get_template("idl/package_init.py.j2")
-        .render(
-            doc=doc,
-            modules=modules,
-            subpackages=subpackages,
-            exports=exports,
-            submodules=submodules,
-            public=public,
-            hashes=hashes,
-        )
-    )
+    return environment().get_template("idl/package_init.py.j2").render(p=package)

@@ -15,31 +15,27 @@ types on the wire.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
 
 from miro_gen.idl import ast
 
 OBJECT_REF = ("miro", "ObjectRef")
+Dependency = ast.Decl | tuple[str, str]  # a declaration, or OBJECT_REF
 _OBJECT_REF_TEXT = (
     "struct ObjectRef {\n  string repo_id;\n  string endpoint;\n  sequence<octet> key;\n};"
 )
 
 
-def _completed(node: Any) -> Any:
-    if isinstance(node, ast.Forward) and node.full is not None:
-        return node.full
-    return node
-
-
 class _Collector:
     def __init__(self) -> None:
-        self.order: list[tuple[str, Any]] = []  # ("decl" | "forward" | "objectref", decl)
+        self.order: list[
+            tuple[str, ast.Decl | None]
+        ] = []  # ("decl" | "forward" | "objectref", decl)
         self.done: set[int] = set()
         self.active: set[int] = set()
         self.forwarded: set[int] = set()
 
-    def visit(self, decl: Any) -> None:
-        decl = _completed(decl)
+    def visit(self, decl: ast.Decl) -> None:
+        decl = decl.resolved
         key = id(decl)
         if key in self.done:
             return
@@ -50,44 +46,41 @@ class _Collector:
             return
         self.active.add(key)
         for dep in _dependencies(decl):
-            if dep is OBJECT_REF:
-                if ("objectref", None) not in self.order:
-                    self.order.append(("objectref", None))
-            else:
+            if isinstance(dep, ast.Decl):
                 self.visit(dep)
+            elif ("objectref", None) not in self.order:
+                self.order.append(("objectref", None))
         self.active.discard(key)
         self.done.add(key)
         self.order.append(("decl", decl))
 
 
-def _dependencies(decl: Any) -> list[Any]:
-    out: list[Any] = []
-    if isinstance(decl, ast.Typedef):
-        out += _type_deps(decl.type)
-    elif isinstance(decl, (ast.Struct, ast.Exception_)):
-        if isinstance(decl, ast.Struct) and decl.base is not None:
-            out.append(decl.base)
-        for m in decl.members:
-            out += _type_deps(m.type)
-    elif isinstance(decl, ast.Union_):
-        out += _type_deps(decl.switch_type)
-        for c in decl.cases:
-            out += _type_deps(c.type)
-    return out
+def _dependencies(decl: ast.Decl) -> list[Dependency]:
+    match decl:
+        case ast.Typedef():
+            return _type_deps(decl.type)
+        case ast.Struct():
+            base = [decl.base] if decl.base is not None else []
+            return base + [dep for m in decl.members for dep in _type_deps(m.type)]
+        case ast.Exception_():
+            return [dep for m in decl.members for dep in _type_deps(m.type)]
+        case ast.Union_():
+            cases = [dep for c in decl.cases for dep in _type_deps(c.type)]
+            return _type_deps(decl.switch_type) + cases
+    return []
 
 
-def _type_deps(t: Any) -> list[Any]:
-    if isinstance(t, ast.NamedType):
-        decl = _completed(t.decl)
-        if isinstance(decl, ast.Interface) or (
-            isinstance(decl, ast.Forward) and decl.of == "interface"
-        ):
+def _type_deps(t: ast.TypeSpec) -> list[Dependency]:
+    match t:
+        case ast.NamedType():
+            if t.decl is None:
+                return []
+            decl = t.decl.resolved
+            return [OBJECT_REF] if decl.is_interface else [decl]
+        case ast.SequenceType():
+            return _type_deps(t.element)
+        case ast.BaseType() if t.name == "Object":
             return [OBJECT_REF]
-        return [decl] if decl is not None else []
-    if isinstance(t, ast.SequenceType):
-        return _type_deps(t.element)
-    if isinstance(t, ast.BaseType) and t.name == "Object":
-        return [OBJECT_REF]
     return []
 
 
@@ -96,7 +89,7 @@ def _type_deps(t: Any) -> list[Any]:
 DataScope = Callable[[tuple[str, ...]], bool]
 
 
-def _place(decl: Any, data_scope: DataScope) -> tuple[tuple[str, ...], str]:
+def _place(decl: ast.Decl, data_scope: DataScope) -> tuple[tuple[str, ...], str]:
     """The modules a declaration is written in, and its name there."""
     path = tuple(decl.scope_path)
     for i in range(1, len(path)):
@@ -105,34 +98,33 @@ def _place(decl: Any, data_scope: DataScope) -> tuple[tuple[str, ...], str]:
     return path[:-1], path[-1]
 
 
-def _scoped(decl: Any, data_scope: DataScope) -> str:
+def _scoped(decl: ast.Decl, data_scope: DataScope) -> str:
     modules, name = _place(decl, data_scope)
     return "::".join((*modules, name))
 
 
-def _type(t: Any, data_scope: DataScope, refs: bool = False) -> str:
+def _type(t: ast.TypeSpec, data_scope: DataScope, refs: bool = False) -> str:
     """The IDL spelling of type `t`; object references as `miro::ObjectRef` (a data schema),
     or with `refs` as the interface they are (an interface schema)."""
-    if isinstance(t, ast.BaseType):
-        return "::".join(OBJECT_REF) if t.name == "Object" and not refs else t.name
-    if isinstance(t, ast.StringType):
-        base = "wstring" if t.wide else "string"
-        return f"{base}<{t.bound}>" if t.bound is not None else base
-    if isinstance(t, ast.SequenceType):
-        elem = _type(t.element, data_scope, refs)
-        return f"sequence<{elem}, {t.bound}>" if t.bound is not None else f"sequence<{elem}>"
-    if isinstance(t, ast.NamedType):
-        decl = _completed(t.decl)
-        if isinstance(decl, ast.Interface) or (
-            isinstance(decl, ast.Forward) and decl.of == "interface"
-        ):
-            return decl.scoped_name if refs else "::".join(OBJECT_REF)
-        return _scoped(decl, data_scope)
-    if isinstance(t, ast.FixedType):
-        return f"fixed<{t.digits}, {t.scale}>"
-    if isinstance(t, ast.MapType):
-        inner = f"{_type(t.key, data_scope, refs)}, {_type(t.value, data_scope, refs)}"
-        return f"map<{inner}, {t.bound}>" if t.bound is not None else f"map<{inner}>"
+    match t:
+        case ast.BaseType():
+            return "::".join(OBJECT_REF) if t.name == "Object" and not refs else t.name
+        case ast.StringType():
+            base = "wstring" if t.wide else "string"
+            return f"{base}<{t.bound}>" if t.bound is not None else base
+        case ast.SequenceType():
+            elem = _type(t.element, data_scope, refs)
+            return f"sequence<{elem}, {t.bound}>" if t.bound is not None else f"sequence<{elem}>"
+        case ast.NamedType() if t.decl is not None:
+            decl = t.decl.resolved
+            if decl.is_interface:
+                return decl.scoped_name if refs else "::".join(OBJECT_REF)
+            return _scoped(decl, data_scope)
+        case ast.FixedType():
+            return f"fixed<{t.digits}, {t.scale}>"
+        case ast.MapType():
+            inner = f"{_type(t.key, data_scope, refs)}, {_type(t.value, data_scope, refs)}"
+            return f"map<{inner}, {t.bound}>" if t.bound is not None else f"map<{inner}>"
     raise TypeError(f"not a data type: {t!r}")  # pragma: no cover
 
 
@@ -140,7 +132,7 @@ def _dims(dims: list[int]) -> str:
     return "".join(f"[{d}]" for d in dims)
 
 
-def _label(v: Any, data_scope: DataScope) -> str:
+def _label(v: ast.ConstValue, data_scope: DataScope) -> str:
     if isinstance(v, ast.EnumValue):  # enumerators live in the scope that holds their enum
         return "::".join((*_place(v.enum, data_scope)[0], v.name))
     if isinstance(v, bool):
@@ -154,30 +146,34 @@ def _label(v: Any, data_scope: DataScope) -> str:
     return str(v)
 
 
-def _body(decl: Any, data_scope: DataScope, refs: bool = False) -> str:
+def _body(decl: ast.Decl, data_scope: DataScope, refs: bool = False) -> str:
     """The declaration's text. With `refs` (an interface schema), object references keep
     their interfaces and exceptions stay exceptions."""
     name = _place(decl, data_scope)[1]
-    if isinstance(decl, ast.Typedef):
-        return f"typedef {_type(decl.type, data_scope, refs)} {name}{_dims(decl.dims)};"
-    if isinstance(decl, ast.Enum):
-        return f"enum {name} {{\n" + ",\n".join(f"  {e.name}" for e in decl.enumerators) + "\n};"
-    if isinstance(decl, (ast.Struct, ast.Exception_)):
-        members = decl.members
-        base = ""
-        if isinstance(decl, ast.Struct) and decl.base is not None:
-            base = f" : {_scoped(_completed(decl.base), data_scope)}"
-        lines = [f"  {_type(m.type, data_scope, refs)} {m.name}{_dims(m.dims)};" for m in members]
-        word = "exception" if refs and isinstance(decl, ast.Exception_) else "struct"
-        return f"{word} {name}{base} {{\n" + "\n".join(lines) + ("\n" if lines else "") + "};"
-    if isinstance(decl, ast.Union_):
-        lines = [f"union {name} switch ({_type(decl.switch_type, data_scope)}) {{"]
-        for c in decl.cases:
-            for v in c.labels:
-                lines.append("  default:" if v is None else f"  case {_label(v, data_scope)}:")
-            lines.append(f"    {_type(c.type, data_scope, refs)} {c.name}{_dims(c.dims)};")
-        lines.append("};")
-        return "\n".join(lines)
+    match decl:
+        case ast.Typedef():
+            return f"typedef {_type(decl.type, data_scope, refs)} {name}{_dims(decl.dims)};"
+        case ast.Enum():
+            body = ",\n".join(f"  {e.name}" for e in decl.enumerators)
+            return f"enum {name} {{\n{body}\n}};"
+        case ast.Struct() | ast.Exception_():
+            base = ""
+            if isinstance(decl, ast.Struct) and decl.base is not None:
+                base = f" : {_scoped(decl.base.resolved, data_scope)}"
+            lines = [
+                f"  {_type(m.type, data_scope, refs)} {m.name}{_dims(m.dims)};"
+                for m in decl.members
+            ]
+            word = "exception" if refs and isinstance(decl, ast.Exception_) else "struct"
+            return f"{word} {name}{base} {{\n" + "\n".join(lines) + ("\n" if lines else "") + "};"
+        case ast.Union_():
+            lines = [f"union {name} switch ({_type(decl.switch_type, data_scope)}) {{"]
+            for c in decl.cases:
+                for v in c.labels:
+                    lines.append("  default:" if v is None else f"  case {_label(v, data_scope)}:")
+                lines.append(f"    {_type(c.type, data_scope, refs)} {c.name}{_dims(c.dims)};")
+            lines.append("};")
+            return "\n".join(lines)
     raise TypeError(f"not a data type: {decl!r}")  # pragma: no cover
 
 
@@ -190,7 +186,7 @@ def _wrap(path: tuple[str, ...], text: str) -> str:
     return text
 
 
-def data_schema(decl: Any) -> str:
+def data_schema(decl: ast.Decl) -> str:
     """The flattened IDL text of `decl` (a struct, union or exception) and its dependencies."""
     c = _Collector()
     c.visit(decl)
@@ -202,7 +198,7 @@ def data_schema(decl: Any) -> str:
     data_scope: DataScope = data_types.__contains__
     parts: list[str] = []
     for kind, d in c.order:
-        if kind == "objectref":
+        if d is None:  # the object reference struct
             parts.append(_wrap(OBJECT_REF[:-1], _OBJECT_REF_TEXT))
         elif kind == "forward":
             word = "union" if isinstance(d, ast.Union_) else "struct"

@@ -289,6 +289,17 @@ class Decl(Node):
     def scoped_name(self) -> str:
         return "::".join(self.scope_path)
 
+    @property
+    def resolved(self) -> Decl:
+        """The declaration itself; for a forward declaration, the complete one once seen."""
+        return self
+
+    @property
+    def is_interface(self) -> bool:
+        """Whether values of this type are object references (an interface, or its forward
+        declaration)."""
+        return False
+
 
 class Module(Decl):
     """`module M { ... };` (each opening of a module is its own node)."""
@@ -350,6 +361,16 @@ class Struct(Decl):
         self.base_name = base_name
         self.members: list[Member] = members if members is not None else []
         self.base = base
+
+    @property
+    def all_members(self) -> list[Member]:
+        """The members in encoding order: those of the IDL 4 base struct (and its bases) first."""
+        chain: list[Struct] = []
+        node: Struct | None = self
+        while node is not None:
+            chain.append(node)
+            node = node.base
+        return [m for s in reversed(chain) for m in s.members]
 
 
 class CaseBranch(Node):
@@ -514,6 +535,11 @@ class Exception_(Decl):
         super().__init__(name, pos, **kw)
         self.members: list[Member] = members if members is not None else []
 
+    @property
+    def all_members(self) -> list[Member]:
+        """The members in encoding order (exceptions have no bases)."""
+        return self.members
+
 
 class Native(Decl):
     """`native N;`"""
@@ -545,6 +571,14 @@ class Forward(Decl):
         self.abstract = abstract
         self.local = local
         self.full = full  # the complete declaration, once seen
+
+    @property
+    def resolved(self) -> Decl:
+        return self.full if self.full is not None else self
+
+    @property
+    def is_interface(self) -> bool:
+        return self.of == "interface"
 
 
 class Param(Node):
@@ -686,6 +720,10 @@ class Interface(Decl):
         self.bases: list[Interface] = []
         self.operations: list[Operation] = []
         self.attributes: list[Attribute] = []
+
+    @property
+    def is_interface(self) -> bool:
+        return True
 
 
 class Factory(Node):

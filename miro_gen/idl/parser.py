@@ -9,12 +9,12 @@ follows them (or, for `///<`-style comments, the one before).
 
 from __future__ import annotations
 
-import os
 import threading
 from bisect import bisect_left
 from pathlib import Path
 from typing import Any
 
+from miro_gen.cache import cache_dir
 from miro_gen.diagnostics import Diagnostics, SourcePos
 from miro_gen.idl import ast
 from miro_gen.idl.engine import Engine, ParseFailure, Tok, load_tables
@@ -745,20 +745,10 @@ _engine: Engine | None = None
 _builder = _AstBuilder()
 
 
-def _cache_dir() -> str | None:
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    folder = os.path.join(base, "miro-gen")
-    try:
-        os.makedirs(folder, exist_ok=True)
-    except OSError:
-        return None
-    return folder if os.access(folder, os.W_OK) else None
-
-
 def get_engine() -> Engine:
     global _engine
     if _engine is None:
-        tables = load_tables(str(GRAMMAR_PATH), _cache_dir())
+        tables = load_tables(str(GRAMMAR_PATH), cache_dir())
         strings: dict[str, str] = tables["strings"]
 
         def describe(name: str) -> str:

@@ -2,9 +2,9 @@
 
 `miro call` and `miro pub` need the stub of an interface, or the class of a payload, that may
 not be compiled on the caller's machine. The service's interface or data schema is compiled
-with miro-idl into a cache folder named after the text's hash (`$MIRO_CACHE`, else
-`~/.cache/miro-gen/schemas/HASH/`), with its AST JSON beside it; a later call with the same
-schema loads that. The hash names the exact text, so what is cached never goes stale.
+with miro-idl into a folder named after the text's hash (in `$MIRO_CACHE`, else in `schemas/`
+of the per-user cache, `~/.cache/miro-gen/`), with its AST JSON beside it; a later call with
+the same schema loads that. The hash names the exact text, so what is cached never goes stale.
 
 One process loads one version of a package: a schema whose package (`Miro`) is loaded already
 from elsewhere is refused with a message, unless the loaded package has the very classes
@@ -13,11 +13,8 @@ needed (same repository id and hash), which are then used as they are.
 
 from __future__ import annotations
 
-import contextlib
-import gc
 import hashlib
 import importlib
-import io
 import json
 import os
 import shutil
@@ -33,27 +30,38 @@ class SchemaError(Exception):
     """The schema cannot be compiled or loaded here (one line)."""
 
 
-def cache_root() -> Path:
+def cache_root() -> Path | None:
+    """Where compiled schemas are kept: $MIRO_CACHE, else `schemas/` in the per-user cache
+    (miro_gen.cache); None when there is none."""
     given = os.environ.get("MIRO_CACHE")
     if given:
         return Path(given)
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "miro-gen" / "schemas"
+    from miro_gen.cache import cache_dir
+
+    folder = cache_dir()
+    return Path(folder) / "schemas" if folder else None
 
 
-def _miro_idl(argv: list[str]) -> tuple[int, str, str]:
-    """miro-idl in this process: (status, stdout, stderr)."""
-    from miro_gen.cli import idl
+def _compile(source: Path, out: Path) -> tuple[str, str]:
+    """miro-idl's work on `source`, in this process: its AST JSON, and its Python in `out`;
+    ('', the first error) when it does not compile."""
+    from miro_gen.codegen.generate import build_modules, generated_files, write_files
+    from miro_gen.diagnostics import CompileError, Diagnostics
+    from miro_gen.idl.ast_json import dumps, specifications_json
+    from miro_gen.idl.frontend import compile_idl
 
-    out, err = io.StringIO(), io.StringIO()
-    enabled = gc.isenabled()
+    diag = Diagnostics()
     try:
-        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-            status = idl.main(argv)
-    finally:
-        if enabled:
-            gc.enable()  # miro-idl turns it off for its short runs
-    return status, out.getvalue(), err.getvalue()
+        spec = compile_idl(str(source), [], None, diag)
+        modules = build_modules([(spec, str(source))], diag)
+    except CompileError:
+        pass
+    errors = [str(d) for d in diag.items if d.severity == "error"]
+    if errors:
+        return "", errors[0]
+    files = generated_files(modules, out)
+    write_files(files, list(files), out)
+    return dumps(specifications_json([str(source)], [spec])), ""
 
 
 class Compiled:
@@ -95,25 +103,23 @@ def compile_schema(text: str) -> Compiled:
     """The schema `text` compiled (from the cache when it was compiled before)."""
     digest = hashlib.sha256(text.encode("utf-8")).hexdigest()
     root = cache_root()
-    folder = root / digest
-    if (folder / "ast.json").is_file():
-        return Compiled(folder)
+    if root is not None and (root / digest / "ast.json").is_file():
+        return Compiled(root / digest)
     try:
+        assert root is not None
         root.mkdir(parents=True, exist_ok=True)
         work = Path(tempfile.mkdtemp(prefix=".new-", dir=root))
-    except OSError:  # no cache here: a folder for this process only
+        folder = root / digest
+    except (AssertionError, OSError):  # no cache here: a folder for this process only
         work = Path(tempfile.mkdtemp(prefix="miro-schema-"))
         folder = work
     source = work / "schema.idl"
     source.write_text(text, encoding="utf-8")
-    status, out, err = _miro_idl(["--ast-json", str(source)])
-    if status == 0:
-        (work / "ast.json").write_text(out, encoding="utf-8")
-        status, _, err = _miro_idl(["-o", str(work / "py"), str(source)])
-    if status != 0:
+    ast_json, error = _compile(source, work / "py")
+    if error:
         shutil.rmtree(work, ignore_errors=True)
-        first = (err.strip().splitlines() or ["miro-idl failed"])[0]
-        raise SchemaError(f"the service's schema does not compile here: {first}")
+        raise SchemaError(f"the service's schema does not compile here: {error}")
+    (work / "ast.json").write_text(ast_json, encoding="utf-8")
     if work != folder:
         try:
             os.replace(work, folder)

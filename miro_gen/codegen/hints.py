@@ -1,0 +1,144 @@
+"""Python type hints and default values of IDL-typed values, as spelled in a generated module.
+
+`TypeHints.annotation` and `TypeHints.default` are the one place that decides how a shape
+(`shapes.py`) looks in Python: `int`, `list[Miro.Pose]`, `_cdr.ObjectRef`; `0`, a default
+factory. A new mapping (say numeric sequences as `array.array`) changes these two methods and
+the codec steps (`codec.py`) for the same shapes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from miro_gen.codegen import names
+from miro_gen.codegen.contexts import ModuleContext
+from miro_gen.codegen.scope import Scope
+from miro_gen.codegen.shapes import DATA_KINDS, Shape
+from miro_gen.idl import ast
+
+# Names enum classes have that enumerators must not shadow.
+_ENUM_RESERVED = frozenset(["name", "value", "mro"])
+
+
+def enumerator_name(name: str) -> str:
+    """The Python name of an enumerator (an attribute of its IntEnum)."""
+    return names.py_name(name, _ENUM_RESERVED)
+
+
+@dataclass(frozen=True)
+class Default:
+    """A default value: an expression (`value`), or a zero-argument callable making one."""
+
+    value: str = ""
+    factory: str = ""
+
+    @property
+    def zero(self) -> str:
+        """A zero-argument callable making the value."""
+        return self.factory or f"lambda: {self.value}"
+
+
+class TypeHints:
+    """Annotations and defaults of values, with the references they need recorded in the
+    module they are written in."""
+
+    def __init__(self, scope: Scope) -> None:
+        self.scope = scope
+
+    def annotation(
+        self,
+        shape: Shape,
+        m: ModuleContext,
+        use_alias: bool = True,
+        in_op: bool = False,
+        sending: bool = False,
+    ) -> str:
+        """The type hint of a value. Object references inside an operation's arguments and
+        results arrive as stubs, but as `ObjectRef` inside data types; so a typedef holding
+        references is spelled out there rather than named (its alias says `ObjectRef`). What is
+        being sent (a stub's arguments, a servant's results) may be any sequence, and for an
+        object reference a local servant."""
+        if (
+            use_alias
+            and shape.alias is not None
+            and not (in_op and shape.innermost.kind == "object")
+        ):
+            return self.scope.ref(shape.alias, m)
+        match shape.kind:
+            case "prim":
+                assert shape.prim is not None
+                return shape.prim.py
+            case "string":
+                return "str"
+            case "octets":
+                return "bytes"
+            case "seq" | "array":
+                inner = shape.elem if shape.kind == "seq" else shape.row
+                assert inner is not None
+                inner_ann = self.annotation(inner, m, in_op=in_op, sending=sending)
+                if sending:  # any sequence will do, and a list of stubs is one of stubs-or-servants
+                    m.use("typing")
+                    return f"_t.Sequence[{inner_ann}]"
+                return f"list[{inner_ann}]"
+            case "enum" | "struct" | "union" | "exception":
+                assert shape.decl is not None
+                return self.scope.ref(shape.decl, m)
+            case "object":
+                if not in_op:
+                    m.use("cdr")
+                    return "_cdr.ObjectRef"
+                stub = self.stub(shape, m)
+                if sending:
+                    m.use("rpc")
+                    return f"{stub} | _rpc.Servant | None"
+                return f"{stub} | None"
+        raise AssertionError(shape.kind)  # pragma: no cover
+
+    def stub(self, shape: Shape, m: ModuleContext) -> str:
+        """The stub class of an object reference (`_rpc.Stub` for `Object`)."""
+        decl = shape.decl.resolved if shape.decl is not None else None
+        if isinstance(decl, ast.Interface):
+            return self.scope.ref(decl, m)
+        m.use("rpc")
+        return "_rpc.Stub"
+
+    def default(self, shape: Shape, m: ModuleContext) -> Default:
+        """The default value of a field or union branch of this shape."""
+        match shape.kind:
+            case "prim":
+                assert shape.prim is not None
+                return Default(shape.prim.default)
+            case "string":
+                return Default('""')
+            case "octets":
+                return Default('b""')
+            case "enum":
+                return Default(self.enumerator(shape.enum, shape.enum.enumerators[0].name, m))
+            case "struct" | "union" | "exception":
+                assert shape.decl is not None
+                return Default(factory=self.scope.ref(shape.decl, m))
+            case "seq":
+                return Default(factory="list")
+            case "array":
+                return Default(factory=f"lambda: {self._array_value(shape, m)}")
+            case "object":
+                m.use("cdr")
+                return Default("_cdr.ObjectRef()")
+        raise AssertionError(shape.kind)  # pragma: no cover
+
+    def _array_value(self, shape: Shape, m: ModuleContext) -> str:
+        elem = shape.elem
+        assert elem is not None
+        n = shape.dims[0]
+        if shape.row.kind == "array":
+            return f"[{self._array_value(shape.row, m)} for _ in range({n})]"
+        if elem.kind in ("prim", "string", "octets", "enum", "object"):
+            return f"[{self.default(elem, m).value}] * {n}"
+        if elem.kind == "seq":
+            return f"[[] for _ in range({n})]"
+        assert elem.kind in DATA_KINDS and elem.decl is not None
+        return f"[{self.scope.ref(elem.decl, m)}() for _ in range({n})]"
+
+    def enumerator(self, enum: ast.Enum, name: str, m: ModuleContext) -> str:
+        """An enumerator as a value: `Color.RED`, through the enum's class."""
+        return f"{self.scope.ref(enum, m)}.{enumerator_name(name)}"
