@@ -21,12 +21,13 @@ from __future__ import annotations
 
 import argparse
 import os
-import select
+import queue
 import socket
 import statistics
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -50,21 +51,26 @@ def env() -> dict[str, str]:
 
 
 def wait_lines(procs: list[subprocess.Popen[str]], text: str, count: int) -> None:
-    """Read the processes' output until `count` lines contain `text`."""
-    seen = 0
-    streams = {p.stdout: p for p in procs if p.stdout is not None}
+    """Read the processes' output (a thread each) until `count` lines contain `text`."""
+    lines: queue.SimpleQueue[str | None] = queue.SimpleQueue()
+
+    def read(proc: subprocess.Popen[str]) -> None:
+        assert proc.stdout is not None
+        for line in proc.stdout:
+            lines.put(line)
+        lines.put(None)
+
+    for proc in procs:
+        threading.Thread(target=read, args=(proc,), daemon=True).start()
+    seen, ended = 0, 0
     while seen < count:
-        ready, _, _ = select.select(list(streams), [], [], 60)
-        if not ready:
-            raise RuntimeError(f"no {text!r} within 60 s")
-        for stream in ready:
-            line = stream.readline()  # type: ignore[union-attr]
-            if not line:
-                del streams[stream]
-                if not streams:
-                    raise RuntimeError("every process ended")
-            elif text in line:
-                seen += 1
+        line = lines.get(timeout=60)
+        if line is None:
+            ended += 1
+            if ended == len(procs):
+                raise RuntimeError("every process ended")
+        elif text in line:
+            seen += 1
 
 
 def stop(procs: list[subprocess.Popen[str]]) -> None:
