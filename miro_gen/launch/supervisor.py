@@ -36,6 +36,7 @@ NAMING_LABEL = "naming"
 NAMING_READY = "naming service at"
 POLL = 0.1  # seconds between looks at the children when nothing wakes the loop
 NAMES_POLL = 0.25  # seconds between looks at the naming service's names
+FIRST_POLL = 0.02  # seconds between looks while it does not answer yet
 
 
 class PlanError(Exception):
@@ -187,11 +188,11 @@ class NameWatcher:
     """Looks at the naming service's names from a thread of its own: whether it answers, and
     which names are bound."""
 
-    def __init__(self, url: str) -> None:
+    def __init__(self, url: str, changed: threading.Event | None = None) -> None:
         self.url = url
         self.answering = False
         self.names: frozenset[str] = frozenset()
-        self.changed = threading.Event()
+        self.changed = changed if changed is not None else threading.Event()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="launch-names", daemon=True)
         self._thread.start()
@@ -218,7 +219,8 @@ class NameWatcher:
                 if names != self.names or answering != self.answering:
                     self.names, self.answering = names, answering
                     self.changed.set()
-                self._stop.wait(NAMES_POLL)
+                # quickly until it first answers: everything waits for that
+                self._stop.wait(NAMES_POLL if answering else FIRST_POLL)
         finally:
             invoker.close()
 
@@ -256,7 +258,7 @@ class Supervisor:
 
     def run(self) -> int:
         if self.naming_url is not None:
-            self.watcher = NameWatcher(self.naming_url)
+            self.watcher = NameWatcher(self.naming_url, self.wake)
         elif self.part.discover:
             threading.Thread(target=self._discover, name="launch-discover", daemon=True).start()
         self.console.show_table(self.rows)
@@ -267,8 +269,6 @@ class Supervisor:
                     break
                 self.wake.wait(POLL)
                 self.wake.clear()
-                if self.watcher is not None and self.watcher.changed.is_set():
-                    self.watcher.changed.clear()
         finally:
             self._stop_all()
             if self.watcher is not None:
@@ -294,7 +294,7 @@ class Supervisor:
             if found:
                 url = found[0].url()
                 self.console.note(f"naming service found at {url}, announced by {found[0].host}")
-                self.watcher = NameWatcher(url)
+                self.watcher = NameWatcher(url, self.wake)
                 self.naming_url = url
                 self.wake.set()
                 return
