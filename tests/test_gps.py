@@ -1,6 +1,6 @@
 """The GPS driver as a process, against a pseudo-terminal fed NMEA with corrupt lines, split
-writes and a receiver that vanishes and comes back: every valid reading arrives as an event and
-through polling, and the driver's counts of bad sentences are right."""
+writes and a receiver that vanishes and comes back: every fix arrives as one event and through
+polling, and the driver's counts of bad sentences are right."""
 
 from __future__ import annotations
 
@@ -16,68 +16,23 @@ from pathlib import Path
 
 import Miro
 import pytest
-from loopback import NamingProcess, Recorder, RunningServer, eventually, service_env
+from device_rig import GPS, Driver, GpsRig
+from loopback import NamingProcess, Recorder, eventually, service_env
 
 from miro_gen import Client
 from miro_gen.sim.nmea import Fix, checksummed, sentences, synthetic_fixes
 from miro_gen.sim.pty_device import PtyDevice
 
-GPS = Path(__file__).resolve().parents[1] / "services" / "gps"
-CONFIG = """<config><section name="Gps"><parameter name="Gps">
-  <parameter name="Device" value="{device}"/>
-  <parameter name="TtyParams"><parameter name="Baudrate" value="9600"/></parameter>
-  <parameter name="WaitTimeout" value="2, 0"/>
-</parameter></section></config>
-"""
-
-
-class Driver:
-    """services/gps in a process of its own; its log in a file."""
-
-    def __init__(self, naming: str, device: Path, log: Path) -> None:
-        self.log = log
-        self.stderr = log.open("w")
-        config = log.with_name("rover.xml")  # the robot's run-time document
-        config.write_text(CONFIG.format(device=device))
-        self.proc = subprocess.Popen(
-            [sys.executable, str(GPS), "-MCF", str(config), "--naming", naming,
-             "-MNC", "rover", "-MLL", "5"],
-            stdout=subprocess.PIPE,
-            stderr=self.stderr,
-            text=True,
-            env=service_env(),
-        )  # fmt: skip
-        assert self.proc.stdout is not None
-        assert self.proc.stdout.readline().startswith("gps: reading")
-
-    def logged(self, text: str) -> int:
-        return self.log.read_text().count(text)
-
-    def stop(self) -> str:
-        self.proc.send_signal(signal.SIGINT)
-        out, _ = self.proc.communicate(timeout=20)
-        self.stderr.close()
-        return out
-
 
 @pytest.fixture
 def rig(tmp_path: Path) -> Iterator[tuple[PtyDevice, Driver, Recorder, Miro.Gps]]:
-    naming = NamingProcess()
-    device = PtyDevice(tmp_path / "gps0")
-    driver = Driver(naming.endpoint, device.link or Path(), tmp_path / "gps.log")
-    gui = RunningServer(naming.endpoint, "gui")
-    client = Client(["t", "--naming", naming.endpoint])
+    rig = GpsRig(tmp_path)
+    client = Client(["t", "--naming", rig.naming.endpoint])
     try:
-        events = Recorder(gui.server.resolve_channel("rover/EventChannel"))
-        events.set_subscriptions([("rover", "Gps")])
-        yield device, driver, events, client.resolve_name("rover/Gps", Miro.Gps)
+        yield rig.device, rig.driver, rig.events, client.resolve_name("rover/Gps", Miro.Gps)
     finally:
         client.close()
-        gui.stop()
-        if driver.proc.poll() is None:
-            driver.proc.kill()
-        device.close()
-        naming.stop()
+        rig.close()
 
 
 def test_the_driver_against_a_pseudo_terminal(
@@ -100,7 +55,7 @@ def test_the_driver_against_a_pseudo_terminal(
     while not events.events:  # the subscription travels to the driver meanwhile
         send(next(fixes))
         time.sleep(0.1)
-    eventually(lambda: len(events.events) == 2 * epochs)  # GGA and RMC each make a reading
+    eventually(lambda: len(events.events) == epochs)  # one reading per fix
     settled = len(events.events)
 
     # Ten epochs written in pieces, with bad sentences and noise among them.
@@ -118,7 +73,7 @@ def test_the_driver_against_a_pseudo_terminal(
         send(sent[-1], pieces=1 + n % 4)
         if n < len(bad):
             device.write(bad[n])
-    eventually(lambda: len(events.events) == settled + 20)
+    eventually(lambda: len(events.events) == settled + 10)
     assert events.missed == 0
     last = events.events[-1].payload
     assert isinstance(last, Miro.GpsDataIDL)
@@ -137,7 +92,7 @@ def test_the_driver_against_a_pseudo_terminal(
         send(later[-1])
     caller.join(5)
     assert waited and any(math.isclose(waited[0].latitude, f.latitude, abs_tol=2e-6) for f in later)
-    eventually(lambda: len(events.events) == 2 * epochs)
+    eventually(lambda: len(events.events) == epochs)
 
     # The receiver goes away and comes back.
     device.vanish()
@@ -149,7 +104,7 @@ def test_the_driver_against_a_pseudo_terminal(
     before = len(events.events)
     for fix in itertools.islice(fixes, 3):
         send(fix, pieces=3)
-    eventually(lambda: len(events.events) == before + 6)
+    eventually(lambda: len(events.events) == before + 3)
     assert events.missed == 0
 
     summary = driver.stop()
@@ -157,7 +112,7 @@ def test_the_driver_against_a_pseudo_terminal(
         f"gps: {4 * epochs} sentences used, 1 ignored, 2 with a bad checksum, 1 malformed, "
         in summary
     ), summary
-    assert f"{2 * epochs} readings" in summary
+    assert f"{epochs} readings, {epochs} published" in summary
 
 
 def test_a_wrong_parameter_document_stops_the_driver_with_its_line(tmp_path: Path) -> None:
@@ -187,8 +142,8 @@ def test_miro_sim_replays_the_shipped_recording(tmp_path: Path) -> None:
     import os
     import select
 
-    sys.path.insert(0, str(GPS))
-    from nmea import NmeaParser
+    sys.path.insert(0, str(GPS.parents[1]))
+    from services.gps.nmea_epochs import NmeaParser
 
     link = tmp_path / "gps0"
     sim = subprocess.Popen(
@@ -207,7 +162,7 @@ def test_miro_sim_replays_the_shipped_recording(tmp_path: Path) -> None:
             data += os.read(fd, 4096)
         os.close(fd)
         readings = [parser.feed(line, 0.0) for line in data.splitlines(keepends=True)[1:-1]]
-        assert sum(r is not None for r in readings) >= 40  # 20 epochs a second, two readings each
+        assert sum(len(r) for r in readings) >= 20  # 20 epochs a second, one reading each
         assert parser.counts.checksum == parser.counts.malformed == 0
     finally:
         sim.send_signal(signal.SIGINT)
@@ -227,3 +182,5 @@ def test_the_shipped_recording_of_the_drivers_events_decodes() -> None:
         fixes = [Miro.GpsDataIDL.deserialize(m.data) for _, _, m in reader.iter_messages()]
     assert len(fixes) >= 100
     assert all(f.valid and 45.38 < f.latitude < 45.39 for f in fixes)
+    times = [(f.utcTime.sec, f.utcTime.usec) for f in fixes]
+    assert times == sorted(set(times)), "one event per fix"

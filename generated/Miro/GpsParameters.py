@@ -48,6 +48,14 @@ class GpsParameters(_m_Miro_SvcParameters.TtyParameters):
         default=_rt.time_value(5, 0),
         description="How long getWaitData waits for the next reading before ETimeOut. [s]",
     )
+    dateNotBefore: str = _pd.Field(
+        default="",
+        description="A date (YYYY-MM-DD) the receiver cannot be before, such as the day it was installed: dates earlier than it move forward by 1024 GPS weeks (the week rollover of old receivers). Empty: no correction.",
+    )
+    hostDate: bool = _pd.Field(
+        default=False,
+        description="Take the date from the host clock while the receiver has sent none (receivers configured without RMC and ZDA); else readings stay invalid until a date arrives.",
+    )
 
     _xml_fields: _t.ClassVar[tuple[_rt.XmlField, ...]] = (
         _rt.XmlField("Device", "device", _rt.STRING),
@@ -55,6 +63,8 @@ class GpsParameters(_m_Miro_SvcParameters.TtyParameters):
         _rt.XmlField("ChannelName", "channelName", _rt.STRING),
         _rt.XmlField("EventName", "eventName", _rt.STRING),
         _rt.XmlField("WaitTimeout", "waitTimeout", _rt.TIME, "s"),
+        _rt.XmlField("DateNotBefore", "dateNotBefore", _rt.STRING),
+        _rt.XmlField("HostDate", "hostDate", _rt.BOOL),
     )
 
     @classmethod

@@ -121,11 +121,13 @@ GpsSatelliteSeqIDL: _t.TypeAlias = list[int]
 
 @_dc.dataclass(slots=True)
 class GpsDataIDL(_cdr.IdlType):
-    """One GPS reading: the state a driver assembles from the GGA, RMC, VTG and GSA sentences.
+    """One GPS reading: one fix, assembled from the sentences the receiver sent for it.
 
     Returned by Gps::getData and published on the event channel with
-    type name "Gps". Each sentence updates the fields it carries; the
-    others keep their last value. A floating-point field for which no
+    type name "Gps", once per fix (the sentences with the same UTC
+    time: GGA, RMC, GNS, GLL, GSA, VTG, ZDA, PGRMZ). Each sentence
+    updates the fields it carries; the others keep their last value. A floating-point field
+    for which no
     value has been received yet (or that the receiver leaves empty) is
     NaN; such an integer field is 0.
 
@@ -142,9 +144,17 @@ class GpsDataIDL(_cdr.IdlType):
     this holds seconds since UTC midnight (so sec < 86400).
     """
     valid: bool = False
-    """TRUE when the receiver reports a valid fix (RMC status 'A', or GGA quality > 0)."""
+    """TRUE when the reading is a fix from the sky, with its UTC date known.
+
+    The last sentence of the fix that says anything about it says
+    there is one (GGA quality 1 to 5 with at least 3 satellites, RMC
+    or GLL status 'A', a GNS or RMC mode indicator A, D, P, R or F,
+    GSA mode 2 or 3), and none says the position is estimated (dead
+    reckoning), manual input or simulated. FALSE readings are still
+    published; quality says why.
+    """
     quality: GpsFixQualityIDL = GpsFixQualityIDL.GPS_FIX_INVALID
-    """Kind of fix, from GGA."""
+    """Kind of fix: GGA's fix quality, else what the mode indicator of RMC, GNS or GLL says."""
     mode: GpsFixModeIDL = GpsFixModeIDL.GPS_MODE_UNKNOWN
     """Dimension of the fix, from GSA."""
     latitude: float = 0.0
@@ -152,7 +162,7 @@ class GpsDataIDL(_cdr.IdlType):
     longitude: float = 0.0
     """Longitude in degrees, positive east, -180 to 180 (GGA/RMC)."""
     altitude: float = 0.0
-    """Altitude of the antenna above mean sea level (the geoid), in metres (GGA)."""
+    """Altitude of the antenna above mean sea level (the geoid), in metres (GGA, GNS, PGRMZ)."""
     geoidSeparation: float = 0.0
     """Height of the geoid above the WGS 84 ellipsoid, in metres (GGA).
 

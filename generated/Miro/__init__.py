@@ -16,6 +16,7 @@ if _t.TYPE_CHECKING:
     from Miro.Example_idl import *
     from Miro.Exception_idl import *
     from Miro.Gps_idl import *
+    from Miro.Image_idl import *
     from Miro.Imu_idl import *
     from Miro.InertialSensor_idl import *
     from Miro.Motion_idl import *
@@ -36,6 +37,7 @@ if _t.TYPE_CHECKING:
 
 # name -> the module that defines it
 _EXPORTS: dict[str, str] = {
+    "Camera": "Miro.Image_idl",
     "ClosedMotion": "Miro.ClosedMotion_idl",
     "DifferentialMotion": "Miro.DifferentialMotion_idl",
     "EDevIO": "Miro.Exception_idl",
@@ -66,6 +68,15 @@ _EXPORTS: dict[str, str] = {
     "GpsFixQualityIDL": "Miro.Gps_idl",
     "GpsSatelliteSeqIDL": "Miro.Gps_idl",
     "GpsSentenceEventIDL": "Miro.Gps_idl",
+    "IMAGE_BGR8": "Miro.Image_idl",
+    "IMAGE_JPEG": "Miro.Image_idl",
+    "IMAGE_MONO8": "Miro.Image_idl",
+    "IMAGE_PNG": "Miro.Image_idl",
+    "IMAGE_RGB8": "Miro.Image_idl",
+    "ImageDataIDL": "Miro.Image_idl",
+    "ImageEncodingIDL": "Miro.Image_idl",
+    "ImageEventIDL": "Miro.Image_idl",
+    "ImageFormatIDL": "Miro.Image_idl",
     "Imu": "Miro.Imu_idl",
     "InertialDataIDL": "Miro.InertialSensor_idl",
     "InertialSensor": "Miro.InertialSensor_idl",
@@ -125,6 +136,7 @@ _TYPE_HASHES: dict[str, str] = {
     "3da8d9c25ff30cef597f1923f1c533c822035ed9684a5bbe879dd8c417616a7c": "SensorGroupIDL",
     "3e0e4eaa94e245c89e4df8fe554d1276fb90cf73996a681fd1da7eef045299c0": "RawPositionIDL",
     "4273752d252d361f2638db70dc411e76ddea3c2c7a93a617b66ca67873d4f133": "RangeScanEventIDL",
+    "4e445bf578a8e339753f31653e6ae3fc34e40cd313f3a1cbc33503615fda9ccf": "ImageEventIDL",
     "53fb54e8edea73e5dd8c54a9776caa5e3404a0c8eaa3f23c4d2de4684589f4e2": "ETimeOut",
     "5f93eea400997fc96cccea62fc6153d881fd1310e1ba339b93cc38c5f14a2e42": "GpsDataIDL",
     "683fc69c0fae353c7bb9f1bf8a3f313bfbb7e0f8e2c1e95125c21c4bbf5ca0c9": "MotionStatusIDL",
@@ -142,6 +154,7 @@ _TYPE_HASHES: dict[str, str] = {
     "c0069dbedbf58fa8fdacdb8f124541ed311fe7ba9cb46c197e42c80a7e0d180e": "Range3dMountingIDL",
     "c997b37005a56e67ab484b6626d7fe3868d28bd31ff4407b0cdfc093c9ffb3ca": "ScanDescriptionIDL",
     "cfbce9c999aa0519aeab581bd52ec430c8286a3df7e8684cc2a821fb7c19aad2": "RangeSensorIDL",
+    "d074ee8a9758b1efb4cc85141707ece0e67a877415f72f527b609b807465f5b7": "ImageFormatIDL",
     "d8e00d689aa7416d9e16a52adea9fd5aaea2baec8f01c412b0e342715e186542": "Vector3IDL",
     "ed4ebe588b6b760fdadbe7ee54f32b930dc474f926d00ec9e657cd3c1b61688a": "EDevIO",
     "f0b5b00bf42166f78c18816d6b64554353baa33562a566c18266d815555bbe7a": "EOutOfBounds",
@@ -156,6 +169,7 @@ _SUBMODULES: frozenset[str] = frozenset(
         "Example_idl",
         "Exception_idl",
         "Gps_idl",
+        "Image_idl",
         "Imu_idl",
         "InertialSensor_idl",
         "MotionStatus_idl",
@@ -190,6 +204,12 @@ __all__ = [
     "GPS_MODE_3D",
     "GPS_MODE_NO_FIX",
     "GPS_MODE_UNKNOWN",
+    "IMAGE_BGR8",
+    "IMAGE_JPEG",
+    "IMAGE_MONO8",
+    "IMAGE_PNG",
+    "IMAGE_RGB8",
+    "Camera",
     "ClosedMotion",
     "DifferentialMotion",
     "EDevIO",
@@ -207,6 +227,10 @@ __all__ = [
     "GpsFixQualityIDL",
     "GpsSatelliteSeqIDL",
     "GpsSentenceEventIDL",
+    "ImageDataIDL",
+    "ImageEncodingIDL",
+    "ImageEventIDL",
+    "ImageFormatIDL",
     "Imu",
     "InertialDataIDL",
     "InertialSensor",

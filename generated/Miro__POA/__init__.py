@@ -15,6 +15,7 @@ if _t.TYPE_CHECKING:
     from Miro__POA.DifferentialMotion_idl import *
     from Miro__POA.Example_idl import *
     from Miro__POA.Gps_idl import *
+    from Miro__POA.Image_idl import *
     from Miro__POA.Imu_idl import *
     from Miro__POA.InertialSensor_idl import *
     from Miro__POA.Motion_idl import *
@@ -27,6 +28,7 @@ if _t.TYPE_CHECKING:
 
 # name -> the module that defines it
 _EXPORTS: dict[str, str] = {
+    "Camera": "Miro__POA.Image_idl",
     "ClosedMotion": "Miro__POA.ClosedMotion_idl",
     "DifferentialMotion": "Miro__POA.DifferentialMotion_idl",
     "Example": "Miro__POA.Example_idl",
@@ -51,6 +53,7 @@ _SUBMODULES: frozenset[str] = frozenset(
         "DifferentialMotion_idl",
         "Example_idl",
         "Gps_idl",
+        "Image_idl",
         "Imu_idl",
         "InertialSensor_idl",
         "Motion_idl",
@@ -64,6 +67,7 @@ _SUBMODULES: frozenset[str] = frozenset(
 )
 
 __all__ = [
+    "Camera",
     "ClosedMotion",
     "DifferentialMotion",
     "Example",

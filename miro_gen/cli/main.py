@@ -64,7 +64,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="which naming services are visible, and why one cannot be reached",
         add_help=False,
     )
-    sub.add_parser("sim", help="simulate a device (sim nmea: a GPS receiver)", add_help=False)
+    sub.add_parser(
+        "sim",
+        help="simulate a device: nmea (a GPS receiver), scip (a laser scanner), camera",
+        add_help=False,
+    )
     sub.add_parser("new", help="scaffold a service in one of Miro's patterns", add_help=False)
     sub.add_parser("run", help="run a service of this project (services/NAME)", add_help=False)
     sub.add_parser("log", help="record, replay and inspect event logs (MCAP)", add_help=False)

@@ -1,4 +1,8 @@
-"""`miro sim nmea`: a GPS receiver on a pseudo-terminal, to run the GPS driver without hardware."""
+"""`miro sim KIND`: devices to run the drivers without hardware.
+
+- `miro sim nmea`: a GPS receiver on a pseudo-terminal (services/gps);
+- `miro sim scip`: a Hokuyo laser scanner on a pseudo-terminal or a TCP port (services/laser);
+"""
 
 from __future__ import annotations
 
@@ -35,14 +39,46 @@ def _recorded(args: argparse.Namespace) -> Iterator[tuple[float, list[bytes]]]:
             return
 
 
+KINDS = {
+    "nmea": "a GPS receiver (NMEA 0183) on a pseudo-terminal",
+    "scip": "a Hokuyo laser scanner (SCIP 2.0) on a pseudo-terminal or a TCP port",
+    "camera": "a camera: a video file, or an MJPEG stream over HTTP",
+}
+
+
 def sim_main(argv: Sequence[str]) -> int:
+    kind = argv[0] if argv else ""
+    if kind == "nmea":
+        return nmea_main(argv[1:])
+    if kind == "scip":
+        return scip_main(argv[1:])
+    if kind == "camera":
+        return camera_main(argv[1:])
+    usage = "usage: miro sim KIND [OPTIONS]   (miro sim KIND --help for its options)\n\n"
+    usage += "\n".join(f"  {k:8s}{what}" for k, what in KINDS.items())
+    if kind in ("-h", "--help"):
+        print(usage)
+        return 0
+    print(usage, file=sys.stderr)
+    if kind:
+        print(f"\nmiro sim: no simulator {kind!r}", file=sys.stderr)
+    return 2
+
+
+def _stop_on_signals() -> threading.Event:
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    return stop
+
+
+def nmea_main(argv: Sequence[str]) -> int:
     p = argparse.ArgumentParser(
         prog="miro sim nmea",
         description="Play a GPS receiver: NMEA 0183 (GGA, GSA, RMC, VTG) on a pseudo-terminal, "
         "at real-time rate, from a synthetic vehicle driving laps or from a recorded file. "
         "Prints the device to give the GPS driver.",
     )
-    p.add_argument("kind", choices=["nmea"], help="what to simulate")
     p.add_argument("--file", type=Path, help="replay this NMEA file instead of the vehicle")
     p.add_argument("--loop", action="store_true", help="replay the file again and again")
     p.add_argument("--rate", type=float, default=1.0, help="fixes per second (default 1)")
@@ -72,9 +108,7 @@ def sim_main(argv: Sequence[str]) -> int:
                 written += gap
         return 0
 
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
+    stop = _stop_on_signals()
     try:
         device = PtyDevice(args.link)
     except OSError as e:
@@ -95,4 +129,111 @@ def sim_main(argv: Sequence[str]) -> int:
         device.close()
     lost = f", {device.dropped} bytes nobody read" if device.dropped else ""
     print(f"sent {sent} epochs{lost}", flush=True)
+    return 0
+
+
+def scip_main(argv: Sequence[str]) -> int:
+    from miro_gen.devices.scip import MODELS
+    from miro_gen.sim.scip import Faults, PtyLink, ScipDevice, ScipServer, TcpLink, make_scene
+
+    p = argparse.ArgumentParser(
+        prog="miro sim scip",
+        description="Play a Hokuyo laser scanner speaking SCIP 2.0 (VV, PP, II, BM, QT, GD/GS, "
+        "MD/MS) on a pseudo-terminal (as a USB scanner) or a TCP port (as an Ethernet one), "
+        "scanning a room with a moving pillar or replaying recorded scans. Prints where it is.",
+    )
+    p.add_argument("--model", choices=sorted(MODELS), default="URG-04LX", help="default URG-04LX")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--link", type=Path, help="also reach the terminal at this path (a symlink)")
+    where.add_argument("--tcp", type=int, metavar="PORT", help="listen on this TCP port (0: any)")
+    p.add_argument(
+        "--scene",
+        type=Path,
+        help="replay these scans: a text file (a scan per line, millimetres) or an MCAP log of "
+        "RangeScanEventIDL events",
+    )
+    p.add_argument(
+        "--split", type=int, default=0, metavar="N", help="write in pieces of 1 to N bytes"
+    )
+    for fault, what in (
+        ("corrupt", "with a wrong checksum"),
+        ("truncate", "cut short"),
+        ("repeat", "followed by an old scan again"),
+    ):
+        p.add_argument(
+            f"--{fault}", type=int, default=0, metavar="N", help=f"every Nth scan {what}"
+        )
+    p.add_argument("--duration", type=float, default=0, help="stop after S seconds")
+    p.add_argument("--seed", type=int, default=0, help="for --split's random pieces")
+    args = p.parse_args(argv)
+    if min(args.split, args.corrupt, args.truncate, args.repeat, args.duration) < 0:
+        p.error("--split, --corrupt, --truncate, --repeat and --duration must not be negative")
+    try:
+        scene = make_scene(args.scene)
+    except (OSError, ValueError) as e:
+        print(f"miro sim: {e}", file=sys.stderr)
+        return 1
+    faults = Faults(args.corrupt, args.truncate, args.repeat)
+    device = ScipDevice(MODELS[args.model], scene, faults=faults)
+    stop = _stop_on_signals()
+    try:
+        link: PtyLink | TcpLink = TcpLink(args.tcp) if args.tcp is not None else PtyLink(args.link)
+    except OSError as e:
+        print(f"miro sim: cannot create the device: {e}", file=sys.stderr)
+        return 1
+    print(f"SCIP 2.0 ({args.model}) on {link.path} (Ctrl-C to stop)", flush=True)
+    server = ScipServer(device, link, split=args.split, seed=args.seed)
+    end = time.monotonic() + args.duration if args.duration else float("inf")
+    try:
+        server.run(until=lambda: stop.is_set() or time.monotonic() >= end)
+    finally:
+        link.close()
+    sent = ", ".join(f"{n} {k}" for k, n in faults.sent.items() if n)
+    print(f"sent {device.scans} scans{' (' + sent + ')' if sent else ''}", flush=True)
+    return 0
+
+
+def camera_main(argv: Sequence[str]) -> int:
+    p = argparse.ArgumentParser(
+        prog="miro sim camera",
+        description="Play a camera: a synthetic video (a disc circling over a gradient, each "
+        "frame's number in a bar code at the top left) written to a file (Motion JPEG in .avi, "
+        "MPEG-4 in .mp4) or served as an MJPEG stream over HTTP, as IP cameras serve it. "
+        "Needs OpenCV (pip install 'miro-gen[camera]').",
+    )
+    out = p.add_mutually_exclusive_group(required=True)
+    out.add_argument("--output", type=Path, help="write the video to this file and exit")
+    out.add_argument("--http", type=int, metavar="PORT", help="serve it on this port (0: any)")
+    p.add_argument("--width", type=int, default=1280, help="pixels (default 1280)")
+    p.add_argument("--height", type=int, default=720, help="pixels (default 720)")
+    p.add_argument("--rate", type=float, default=30.0, help="frames a second (default 30)")
+    p.add_argument("--frames", type=int, default=300, help="frames to write (default 300)")
+    p.add_argument("--duration", type=float, default=0, help="stop serving after S seconds")
+    args = p.parse_args(argv)
+    if min(args.width, args.height, args.frames) <= 0 or args.rate <= 0 or args.duration < 0:
+        p.error("--width, --height, --frames and --rate must be more than 0")
+    try:
+        from miro_gen.sim import camera
+    except ImportError as e:
+        print(f"miro sim: needs OpenCV ({e}): pip install 'miro-gen[camera]'", file=sys.stderr)
+        return 1
+    if args.output is not None:
+        try:
+            camera.write_video(args.output, args.frames, args.width, args.height, args.rate)
+        except OSError as e:
+            print(f"miro sim: {e}", file=sys.stderr)
+            return 1
+        print(f"wrote {args.frames} frames of {args.width}x{args.height} to {args.output}")
+        return 0
+    stop = _stop_on_signals()
+    try:
+        stream = camera.MjpegStream(args.width, args.height, args.rate, args.http)
+    except OSError as e:
+        print(f"miro sim: cannot serve on port {args.http}: {e}", file=sys.stderr)
+        return 1
+    stream.serve()
+    print(f"MJPEG on {stream.url} (Ctrl-C to stop)", flush=True)
+    stop.wait(args.duration or None)
+    stream.close()
+    print(f"sent {stream.sent} frames", flush=True)
     return 0

@@ -17,7 +17,7 @@ from miro_gen.devices.framers import (
     LengthPrefixedFramer,
     LineFramer,
 )
-from miro_gen.devices.handler import DevConsumer, DevEventHandler, DevMessage
+from miro_gen.devices.handler import DevConsumer, DevEventHandler, DevMessage, SubscriberNotice
 
 __all__ = [
     "Connection",
@@ -30,5 +30,6 @@ __all__ = [
     "LengthPrefixedFramer",
     "LineFramer",
     "SockConnection",
+    "SubscriberNotice",
     "TtyConnection",
 ]

@@ -5,6 +5,7 @@ from __future__ import annotations
 import time
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
+from typing import Protocol
 
 from miro_gen.devices.framers import Framer
 from miro_gen.log import logger
@@ -70,3 +71,28 @@ class DevEventHandler:
         """The device went away."""
         if self.consumer is not None:
             self.consumer.connection_changed(False)
+
+
+class Publisher(Protocol):
+    def has_subscribers(self, type_name: str) -> bool: ...
+
+
+class SubscriberNotice:
+    """Logs (at notice level) when the first consumer subscribes to a publisher's events and when
+    the last one leaves: `check()` it from a reactor timer. `supplier` has `has_subscribers(type)`
+    (a StructuredPushSupplier), or is None for a driver that only answers polls."""
+
+    def __init__(self, supplier: Publisher | None, type_name: str, what: str = "events") -> None:
+        self.supplier = supplier
+        self.type_name = type_name
+        self.what = what
+        self.subscribed = False
+
+    def check(self) -> None:
+        if self.supplier is None:
+            return
+        subscribed = self.supplier.has_subscribers(self.type_name)
+        if subscribed != self.subscribed:
+            self.subscribed = subscribed
+            who = "someone" if subscribed else "nobody"
+            _log.notice("%s subscribes to the %s (%s)", who, self.what, self.type_name)

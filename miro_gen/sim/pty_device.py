@@ -46,15 +46,19 @@ class PtyDevice:
                 os.close(fd)
         self.master = self._slave = -1
 
-    def write(self, data: bytes) -> None:
-        """Send bytes as the device would; what the terminal cannot take now is dropped."""
+    def write(self, data: bytes, wait: float = 0.0) -> None:
+        """Send bytes as the device would. What the terminal cannot take is dropped (and
+        counted), at once or, with `wait`, after waiting that long for the reader to make
+        room: a device does not wait, a replay that must lose nothing does."""
         view = memoryview(data)
         while view:
             try:
                 view = view[os.write(self.master, view) :]
             except OSError as e:
-                if e.errno not in (errno.EAGAIN, errno.EIO):
+                if e.errno not in (errno.EAGAIN, errno.EIO, errno.EBADF):  # EBADF: vanished
                     raise
+                if e.errno == errno.EAGAIN and select.select([], [self.master], [], wait)[1]:
+                    continue
                 self.dropped += len(view)
                 return
 
