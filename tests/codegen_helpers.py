@@ -13,6 +13,7 @@ The generated packages (CodecTest, CodecUnions, CodecOther) are imported from th
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import enum
 import importlib
@@ -190,8 +191,40 @@ def specification() -> dict[str, Any]:
     return _compiled()[0]
 
 
+# Declarations of other test IDL (tests/codegen/dds/, compiled with --case-sensitive), whose
+# generated packages a test puts on sys.path itself, for as long as it registers them.
+_other_decls: dict[str, Any] = {}
+_other_modules: set[tuple[str, ...]] = set()
+
+
+def data_types_of(specs: list[ast.Specification]) -> list[Any]:
+    """The structs, unions and exceptions of other compiled IDL, by name."""
+    kinds = (ast.Struct, ast.Union_, ast.Exception_)
+    found = {d.scoped_name: d for spec in specs for d in spec.declarations if isinstance(d, kinds)}
+    return [found[name] for name in sorted(found)]
+
+
+@contextlib.contextmanager
+def registered(specs: list[ast.Specification]) -> Iterator[None]:
+    """Make the helpers (classes, values, the Cyclone oracle) know other compiled IDL while its
+    generated packages are importable."""
+    for spec in specs:
+        for d in spec.declarations:
+            if isinstance(d, ast.Module):
+                _other_modules.add(d.scope_path)
+            elif not isinstance(d, ast.Forward):
+                _other_decls.setdefault(d.scoped_name, d)
+    _enum_decls.cache_clear()
+    try:
+        yield
+    finally:
+        _other_decls.clear()
+        _other_modules.clear()
+        _enum_decls.cache_clear()
+
+
 def module_paths() -> frozenset[tuple[str, ...]]:
-    return _compiled()[1]
+    return _compiled()[1] | _other_modules
 
 
 def data_types() -> list[Any]:
@@ -534,12 +567,24 @@ class Cyclone:
 
 @cache
 def _enum_decls() -> dict[Any, Any]:
-    return {pyclass(d): d for d in specification().values() if isinstance(d, ast.Enum)}
+    decls = [*specification().values(), *_other_decls.values()]
+    return {pyclass(d): d for d in decls if isinstance(d, ast.Enum)}
 
 
 @cache
 def cyclone() -> Cyclone:
     return Cyclone()
+
+
+def check_against_cyclone(decl: Any, value: Any) -> None:
+    """Our bytes for `value` equal Cyclone's, and each side decodes the other's to the value."""
+    ty = resolve(decl)
+    ours = value.serialize()
+    cyclone_value = cyclone().value(ty, value)
+    theirs = cyclone_value.serialize()
+    assert ours == theirs, f"\nours   {ours.hex(' ')}\ntheirs {theirs.hex(' ')}"
+    assert plain(pyclass(decl).deserialize(theirs)) == plain(value)
+    assert cyclone().cls(decl).deserialize(ours) == cyclone_value
 
 
 # =============================================================================================

@@ -57,6 +57,7 @@ _BASE_NAMES = {
     idltype.tk_octet: "octet",
     idltype.tk_any: "any",
     idltype.tk_TypeCode: "TypeCode",
+    idltype.tk_Principal: "Principal",
     idltype.tk_longlong: "long long",
     idltype.tk_ulonglong: "unsigned long long",
     idltype.tk_longdouble: "long double",

@@ -26,7 +26,8 @@ def write(path: Path, text: str) -> Path:
 def test_help_documents_every_flag() -> None:
     out = run_miro_idl("--help")
     assert out.returncode == 0
-    for flag in ("-I DIR", "-D NAME[=VALUE]", "-o OUTDIR", "--check", "--ast-json", "--version"):
+    flags = ("-I DIR", "-D NAME[=VALUE]", "-U NAME", "-o OUTDIR", "--check", "--ast-json")
+    for flag in (*flags, "--case-sensitive", "--version"):
         assert flag in out.stdout, flag
     assert "FILE" in out.stdout
 
@@ -161,3 +162,44 @@ def test_console_scripts_are_installed(script: str) -> None:
         pytest.skip(f"{script} is not installed next to {sys.executable} (pip install -e .)")
     out = subprocess.run([str(path), "--help"], capture_output=True, text=True, timeout=60)
     assert "Traceback" not in out.stderr
+
+
+def _one_error_line(out: subprocess.CompletedProcess[str]) -> str:
+    assert out.returncode == 1
+    assert out.stdout == ""
+    assert "Traceback" not in out.stderr and "internal error" not in out.stderr, out.stderr
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 1, out.stderr
+    return lines[0]
+
+
+def test_output_folder_that_is_a_file(tmp_path: Path) -> None:
+    write(tmp_path / "taken", "a file\n")
+    idl = write(tmp_path / "A.idl", "module A { const long C = 1; };\n")
+    line = _one_error_line(run_miro_idl("-o", str(tmp_path / "taken"), str(idl)))
+    assert line == (
+        f"error: -o {tmp_path / 'taken'}: the output folder is a file; "
+        "give a folder (it is made if missing)"
+    )
+    line = _one_error_line(run_miro_idl("-o", str(tmp_path / "taken" / "sub"), str(idl)))
+    assert f"the output folder is inside file '{tmp_path / 'taken'}'" in line
+    assert (tmp_path / "taken").read_text() == "a file\n"
+
+
+def test_input_that_is_a_folder(tmp_path: Path) -> None:
+    line = _one_error_line(run_miro_idl("--ast-json", str(tmp_path)))
+    assert line == f"error: cannot read '{tmp_path}': it is a folder, not an IDL file"
+
+
+def test_modules_nested_too_deep_for_the_file_system(tmp_path: Path) -> None:
+    """1,000 nested modules parse (--ast-json), but their package path would exceed the file
+    system's limit: generation refuses them with one line and writes nothing."""
+    depth = 1000
+    text = "".join(f"module M{i} {{ " for i in range(depth)) + "const long C = 1; " + "}; " * depth
+    idl = write(tmp_path / "deep.idl", text + "\n")
+    assert run_miro_idl("--ast-json", str(idl)).returncode == 0
+    out_dir = tmp_path / "out"
+    line = _one_error_line(run_miro_idl("-o", str(out_dir), str(idl)))
+    assert line.startswith("miro-idl: error: cannot generate IDL module M0::M1::M2::")
+    assert line.endswith("(the file system allows 4095); nest fewer modules")
+    assert not out_dir.exists()

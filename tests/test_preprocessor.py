@@ -14,7 +14,8 @@ from typing import Any
 import pytest
 from miro_cli import run_miro_idl
 
-from miro_gen.diagnostics import CompileError, Diagnostic, Diagnostics
+from miro_gen.diagnostics import CompileError, Diagnostic, Diagnostics, SourcePos
+from miro_gen.idl import preprocessor
 from miro_gen.idl.ast_json import specifications_json
 from miro_gen.idl.frontend import compile_idl
 from miro_gen.idl.preprocessor import Preprocessor, SourceText
@@ -115,12 +116,24 @@ def include_tree(tmp_path: Path) -> dict[str, Path]:
     return {"root": tmp_path, "main": main_dir, "inc1": inc1, "inc2": inc2}
 
 
-@pytest.mark.parametrize("spelling", ['"x.idl"', "<x.idl>"])
-def test_include_prefers_including_folder(include_tree: dict[str, Path], spelling: str) -> None:
-    main = write(include_tree["main"] / "main.idl", f"#include {spelling}\n")
+def test_quoted_include_prefers_including_folder(include_tree: dict[str, Path]) -> None:
+    main = write(include_tree["main"] / "main.idl", '#include "x.idl"\n')
     got = decls(main, [include_tree["inc1"], include_tree["inc2"]])
     assert got["WHICH"]["value"] == 0
     assert Path(got["WHICH"]["file"]).parent == include_tree["main"]
+
+
+def test_angle_include_searches_only_include_dirs(include_tree: dict[str, Path]) -> None:
+    """As in the C preprocessor and omniidl: `<x.idl>` never looks beside the including file."""
+    main = write(include_tree["main"] / "main.idl", "#include <x.idl>\n")
+    assert decls(main, [include_tree["inc1"], include_tree["inc2"]])["WHICH"]["value"] == 1
+    diag = Diagnostics()
+    with pytest.raises(CompileError):
+        compile_idl(str(main), [], None, diag)
+    (error,) = [d for d in diag.items if d.severity == "error"]
+    assert error.pos is not None and error.pos.line == 1
+    assert "cannot find include file 'x.idl' (searched: no -I folders given;" in error.message
+    assert 'it is beside the including file: write #include "x.idl" or add -I' in error.message
 
 
 @pytest.mark.parametrize("spelling", ['"x.idl"', "<x.idl>"])
@@ -838,3 +851,96 @@ def test_malformed_line_directive_is_an_error(tmp_path: Path, directive: str) ->
     main = write(tmp_path / "m.idl", directive + "\nconst long c = 1;\n")
     errors = compile_errors(main)
     assert errors[0].pos is not None and errors[0].pos.line == 1
+
+
+# -- include cycles, nesting and counts ---------------------------------------------------------
+def test_include_cycle_without_guards_is_named(tmp_path: Path) -> None:
+    write(tmp_path / "b.idl", '#include "a.idl"\nmodule B {};\n')
+    main = write(tmp_path / "a.idl", '#include "b.idl"\nmodule A {};\n')
+    errors = compile_errors(main)
+    assert len(errors) == 1, [str(e) for e in errors]
+    (error,) = errors
+    assert error.pos is not None
+    assert (Path(error.pos.path).name, error.pos.line) == ("b.idl", 1)
+    a, b = str(main), str(tmp_path / "b.idl")
+    assert f"#include cycle: {a} -> {b} -> {a};" in error.message
+    assert "include guards" in error.message
+
+
+def test_include_cycle_with_guards_is_fine(tmp_path: Path) -> None:
+    for name, other in (("a", "b"), ("b", "a")):
+        guard = f"{name.upper()}_IDL"
+        write(
+            tmp_path / f"{name}.idl",
+            f'#ifndef {guard}\n#define {guard}\n#include "{other}.idl"\n'
+            f"module {name.upper()} {{ const long C = 1; }};\n#endif\n",
+        )
+    main = tmp_path / "a.idl"
+    assert list(decls(main)) == ["B", "B::C", "A", "A::C"]
+
+
+def test_include_cycle_that_redefines_a_macro_each_round_is_caught(tmp_path: Path) -> None:
+    """The macro table stops changing after the first round: the second round repeats forever."""
+    write(tmp_path / "b.idl", '#include "a.idl"\n')
+    main = write(tmp_path / "a.idl", '#define X 1\n#include "b.idl"\nmodule A {};\n')
+    (error,) = compile_errors(main)
+    assert "#include cycle:" in error.message
+
+
+def test_include_nesting_beyond_the_limit_is_one_error(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(preprocessor, "MAX_INCLUDE_DEPTH", 5)
+    for i in range(10):
+        write(tmp_path / f"f{i}.idl", f'#include "f{i + 1}.idl"\n')
+    write(tmp_path / "f10.idl", "module M {};\n")
+    (error,) = compile_errors(tmp_path / "f0.idl")
+    assert error.message == "#include nested more than 5 deep"
+
+
+def test_include_count_is_capped(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Files that each include the next one twice, without guards, double the work with each
+    level (2^17 inclusions took 12 s): the count is capped, with one error saying why."""
+    monkeypatch.setattr(preprocessor, "MAX_INCLUSIONS", 100)
+    for i in range(10):
+        write(tmp_path / f"f{i}.idl", f'#include "f{i + 1}.idl"\n#include "f{i + 1}.idl"\n')
+    write(tmp_path / "f10.idl", "// nothing\n")
+    _, diag = preprocess(tmp_path / "f0.idl")
+    errors = [d for d in diag.items if d.severity == "error"]
+    assert len(errors) == 1, [str(e) for e in errors]
+    assert errors[0].message.startswith("more than 100 inclusions: files are included again")
+
+
+def test_file_declaring_nothing_is_warned_about(tmp_path: Path) -> None:
+    diag = Diagnostics()
+    main = write(tmp_path / "e.idl", "// only a comment\n#if 0\nmodule M {};\n#endif\n")
+    compile_idl(str(main), [], None, diag)
+    (warning,) = [d for d in diag.items if d.severity == "warning"]
+    assert warning.pos == SourcePos(str(main), 1, 1)
+    assert warning.message.startswith("the file declares nothing")
+
+
+def test_file_that_only_includes_is_not_warned_about(tmp_path: Path) -> None:
+    write(tmp_path / "x.idl", "module X { const long C = 1; };\n")
+    diag = Diagnostics()
+    compile_idl(str(write(tmp_path / "all.idl", '#include "x.idl"\n')), [], None, diag)
+    assert not diag.items
+
+
+def test_omniidl_is_predefined_and_can_be_undefined(tmp_path: Path) -> None:
+    """ORB trees pick their workarounds by __OMNIIDL__ (omniORB's CosLifeCycle.idl declares
+    `_Factory` under it); -U removes a predefined macro, in command-line order with -D."""
+    main = write(
+        tmp_path / "o.idl",
+        "#ifdef __OMNIIDL__\nconst long OMNI = __OMNIIDL__;\n"
+        "#else\nconst long OTHER = 1;\n#endif\n",
+    )
+    assert decls(main)["OMNI"]["value"] == 0x2630
+    out = run_miro_idl("-U", "__OMNIIDL__", "--ast-json", str(main))
+    assert out.returncode == 0, out.stderr
+    assert [d["name"] for d in json.loads(out.stdout)["declarations"]] == ["OTHER"]
+    out = run_miro_idl(
+        "-D", "__OMNIIDL__=5", "-U", "__OMNIIDL__", "-D", "X", "--ast-json", str(main)
+    )
+    assert [d["name"] for d in json.loads(out.stdout)["declarations"]] == ["OTHER"]
+    assert run_miro_idl("-U", "1bad", "--ast-json", str(main)).returncode == 1

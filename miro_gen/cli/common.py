@@ -14,15 +14,16 @@ from miro_gen.diagnostics import Diagnostics
 _MACRO_NAME = re.compile(r"[A-Za-z_]\w*$")
 
 
-def parse_defines(items: list[str], diag: Diagnostics) -> dict[str, str]:
-    """`-D NAME` / `-D NAME=VALUE` options as a macro table."""
-    out: dict[str, str] = {}
-    for item in items:
-        name, sep, value = item.partition("=")
+def parse_defines(items: list[tuple[str, str]], diag: Diagnostics) -> dict[str, str | None]:
+    """`-D NAME`, `-D NAME=VALUE` and `-U NAME` options, as ("D" or "U", text) in command-line
+    order, as a macro table: None undefines a predefined macro."""
+    out: dict[str, str | None] = {}
+    for option, item in items:
+        name, sep, value = item.partition("=") if option == "D" else (item, "", "")
         if not _MACRO_NAME.match(name):
-            diag.error(None, f"invalid macro name in -D {item!r}")
+            diag.error(None, f"invalid macro name in -{option} {item!r}")
             continue
-        out[name] = value if sep else "1"
+        out[name] = None if option == "U" else value if sep else "1"
     return out
 
 

@@ -12,6 +12,7 @@ import os
 from collections.abc import Iterable
 from pathlib import Path
 
+from miro_gen.codegen import python_limits
 from miro_gen.codegen.contexts import ModuleContext
 from miro_gen.codegen.lower import lower_file
 from miro_gen.codegen.packages import GENERATED_MARK, package_contexts
@@ -47,11 +48,20 @@ def build_modules(
 ) -> list[ModuleContext]:
     """The Python modules of each (specification, main IDL file); refusals become errors."""
     modules: list[ModuleContext] = []
+    declarations: dict[str, ast.Decl] = {}
     for spec, path in specs:
         try:
+            mine = [d for d in spec.declarations if d.pos.path == path]
+            python_limits.check_inheritance(mine)
+            python_limits.check_nested_names(mine, spec.declarations)
             modules += lower_file(spec, path, display_source(path))
         except Unsupported as e:
             diag.error(e.pos, e.message)
+        for d in spec.declarations:
+            if not isinstance(d, ast.Forward):
+                declarations.setdefault(d.scoped_name, d)
+    for pos, message in python_limits.base_class_cycles(modules, declarations):
+        diag.error(pos, message)
     return modules
 
 

@@ -121,9 +121,9 @@ class TypeHints:
                 return Default(factory="list")
             case "array":
                 return Default(factory=f"lambda: {self._array_value(shape, m)}")
-            case "object":
+            case "object":  # a factory, not a call in the class body (ruff's RUF009)
                 m.use("cdr")
-                return Default("_cdr.ObjectRef()")
+                return Default(factory="_cdr.ObjectRef")
         raise AssertionError(shape.kind)  # pragma: no cover
 
     def _array_value(self, shape: Shape, m: ModuleContext) -> str:
@@ -132,7 +132,10 @@ class TypeHints:
         n = shape.dims[0]
         if shape.row.kind == "array":
             return f"[{self._array_value(shape.row, m)} for _ in range({n})]"
-        if elem.kind in ("prim", "string", "octets", "enum", "object"):
+        if elem.kind == "object":
+            m.use("cdr")
+            return f"[_cdr.ObjectRef()] * {n}"
+        if elem.kind in ("prim", "string", "octets", "enum"):
             return f"[{self.default(elem, m).value}] * {n}"
         if elem.kind == "seq":
             return f"[[] for _ in range({n})]"

@@ -15,6 +15,7 @@ from miro_gen.codegen.contexts import (
 )
 from miro_gen.codegen.hints import TypeHints
 from miro_gen.codegen.interface_schema import NoInterfaceSchema, interface_schema
+from miro_gen.codegen.python_limits import python_bases
 from miro_gen.codegen.scope import Scope
 from miro_gen.codegen.shapes import shape_of
 from miro_gen.codegen.steps import Assign, DecodeStep
@@ -69,7 +70,7 @@ class InterfaceLowering:
             scoped_name=d.scoped_name,
             doc=d.doc,
             repo_id=d.repo_id,
-            bases=[self.scope.ref(b, m) for b in d.bases] or ["_rpc.Stub"],
+            bases=[self.scope.ref(b, m) for b in python_bases(d.bases)] or ["_rpc.Stub"],
             operations=self._operations(d, m, in_stub=True),
             schema=self.schema(d),
             nested=nested,
@@ -84,7 +85,8 @@ class InterfaceLowering:
             scoped_name=d.scoped_name,
             doc=d.doc,
             repo_id=d.repo_id,
-            bases=[self.scope.ref(b, m, poa=True) for b in d.bases] or ["_rpc.Servant"],
+            bases=[self.scope.ref(b, m, poa=True) for b in python_bases(d.bases)]
+            or ["_rpc.Servant"],
             operations=self._operations(d, m, in_stub=False),
             schema=self.schema(d),
         )

@@ -259,10 +259,15 @@ TypeSpec = Union[
 # ---- declarations -------------------------------------------------------------------------
 
 
+_NO_PRAGMAS: list[Pragma] = []  # shared, never appended to
+
+
 class Decl(Node):
     """A named declaration. `scope_path` and `repo_id` are set by the resolver."""
 
-    __slots__ = ("annotations", "doc", "instance", "name", "pos", "repo_id", "scope_path")
+    __slots__ = (
+        "annotations", "doc", "instance", "name", "pos", "pragmas", "repo_id", "scope_path",
+    )  # fmt: skip
 
     kind = "decl"
 
@@ -276,6 +281,7 @@ class Decl(Node):
         scope_path: tuple[str, ...] = (),
         repo_id: str = "",
         instance: int = 0,
+        pragmas: list[Pragma] | None = None,
     ) -> None:
         self.name = name
         self.pos = pos
@@ -284,6 +290,8 @@ class Decl(Node):
         self.scope_path = scope_path
         self.repo_id = repo_id
         self.instance = instance  # preprocessor file instance, for #pragma prefix scoping
+        # `#pragma` lines inside a struct, exception, union or enum body (OMG's ir.idl has them).
+        self.pragmas: list[Pragma] = pragmas if pragmas is not None else _NO_PRAGMAS
 
     @property
     def scoped_name(self) -> str:
@@ -698,7 +706,9 @@ class AttributeGroup(Node):
 class Interface(Decl):
     """`[abstract|local] interface I [: bases] { exports };`"""
 
-    __slots__ = ("abstract", "attributes", "base_names", "bases", "body", "local", "operations")
+    __slots__ = (
+        "abstract", "attributes", "base_names", "base_refs", "bases", "body", "local", "operations",
+    )  # fmt: skip
 
     kind = "interface"
 
@@ -718,6 +728,8 @@ class Interface(Decl):
         self.base_names: list[ScopedName] = base_names if base_names is not None else []
         self.body: list[Definition] = body if body is not None else []
         self.bases: list[Interface] = []
+        # What each base name denotes, as written: the interface, or a typedef of it.
+        self.base_refs: list[Decl] = []
         self.operations: list[Operation] = []
         self.attributes: list[Attribute] = []
 
@@ -775,8 +787,9 @@ class ValueType(Decl):
     """A value type (concrete, abstract or custom)."""
 
     __slots__ = (
-        "abstract", "attributes", "base_names", "bases", "body", "custom", "factories", "members",
-        "operations", "supports", "supports_names", "truncatable",
+        "abstract", "attributes", "base_names", "base_refs", "bases", "body", "custom",
+        "factories", "members", "operations", "supports", "supports_names", "supports_refs",
+        "truncatable",
     )  # fmt: skip
 
     kind = "valuetype"
@@ -802,6 +815,9 @@ class ValueType(Decl):
         self.body: list[Definition] = body if body is not None else []
         self.bases: list[ValueType] = []
         self.supports: list[Interface] = []
+        # What each base and supported name denotes, as written (the type or a typedef of it).
+        self.base_refs: list[Decl] = []
+        self.supports_refs: list[Decl] = []
         self.members: list[Member] = []
         self.operations: list[Operation] = []
         self.attributes: list[Attribute] = []

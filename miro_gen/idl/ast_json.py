@@ -9,6 +9,7 @@ from typing import Any
 from miro_gen.idl import ast
 
 JsonObj = dict[str, Any]
+_ENCODER = json.JSONEncoder(ensure_ascii=False)
 
 
 def type_string(t: Any) -> str:
@@ -124,14 +125,14 @@ def declaration_json(d: ast.Decl) -> JsonObj:
         out["type"] = type_string(d.type)
         out["value"] = const_json(d.value)
     elif isinstance(d, ast.Interface):
-        out["bases"] = [b.scoped_name for b in d.bases]
+        out["bases"] = [b.scoped_name for b in d.base_refs]
         out["abstract"] = d.abstract
         out["local"] = d.local
         out["operations"] = [_operation(op) for op in d.operations]
         out["attributes"] = [_attribute(a) for a in d.attributes]
     elif isinstance(d, ast.ValueType):
-        out["bases"] = [b.scoped_name for b in d.bases]
-        out["supports"] = [s.scoped_name for s in d.supports]
+        out["bases"] = [b.scoped_name for b in d.base_refs]
+        out["supports"] = [s.scoped_name for s in d.supports_refs]
         out["abstract"] = d.abstract
         out["custom"] = d.custom
         out["truncatable"] = d.truncatable
@@ -176,7 +177,8 @@ def dumps(doc: JsonObj) -> str:
     One line per declaration keeps the output greppable and diffable while letting the C encoder
     do the work (an indented dump is several times slower on large files).
     """
-    head = json.dumps(doc["files"], ensure_ascii=False)
-    decls = ",\n".join(json.dumps(d, ensure_ascii=False) for d in doc["declarations"])
+    encode = _ENCODER.encode  # one encoder: json.dumps with options makes one per call
+    head = encode(doc["files"])
+    decls = ",\n".join(map(encode, doc["declarations"]))
     body = f"\n{decls}\n" if decls else ""
     return f'{{"files": {head}, "declarations": [{body}]}}\n'

@@ -16,15 +16,19 @@ from miro_gen.idl.resolver import Resolver
 def compile_idl(
     path: str,
     include_dirs: Sequence[str] = (),
-    defines: dict[str, str] | None = None,
+    defines: dict[str, str | None] | None = None,
     diagnostics: Diagnostics | None = None,
+    *,
+    case_sensitive: bool = False,
 ) -> ast.Specification:
     """Parse and resolve one IDL file (one translation unit, with its includes).
 
     Problems are collected in `diagnostics`; `CompileError` is raised if any of them is an error.
+    `case_sensitive` reads DDS and ROS 2 files as Cyclone's `idlc -f case-sensitive` does:
+    identifiers that differ in case are distinct, and only exact keywords are reserved.
     """
     diag = diagnostics if diagnostics is not None else Diagnostics()
-    resolver = Resolver(diag)
+    resolver = Resolver(diag, case_sensitive)
     try:
         with _recursion_limit(RECURSION_LIMIT):
             return _compile(path, include_dirs, defines, diag, resolver)
@@ -53,7 +57,7 @@ def _recursion_limit(limit: int) -> Iterator[None]:
 def _compile(
     path: str,
     include_dirs: Sequence[str],
-    defines: dict[str, str] | None,
+    defines: dict[str, str | None] | None,
     diag: Diagnostics,
     resolver: Resolver,
 ) -> ast.Specification:
@@ -61,10 +65,16 @@ def _compile(
     src = Preprocessor(list(include_dirs), defines, diag).run(path)
     if diag.error_count > before:
         raise CompileError(diag.items)
-    definitions = parse(src, diag)
+    definitions = parse(src, diag, resolver.case_sensitive)
     if definitions is None:  # a syntax error: nothing to resolve
         raise CompileError(diag.items)
     declarations = resolver.resolve(definitions)
     if diag.error_count > before:
         raise CompileError(diag.items)
+    if not declarations:
+        diag.warning(
+            SourcePos(path, 1, 1),
+            "the file declares nothing (it is empty, all comments, or its declarations are "
+            "left out by #if/#ifdef)",
+        )
     return ast.Specification(path, definitions, declarations, src.includes)

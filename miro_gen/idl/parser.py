@@ -55,29 +55,30 @@ class _AstBuilder:
         self.src: SourceText = SourceText("", [], [])
         self.diag = Diagnostics()
         self.named: list[tuple[int, Any]] = []
+        self.case_sensitive = False
 
-    def begin(self, src: SourceText, diag: Diagnostics) -> None:
+    def begin(self, src: SourceText, diag: Diagnostics, case_sensitive: bool = False) -> None:
         self.src = src
         self.diag = diag
         self.named = []
+        self.case_sensitive = case_sensitive
 
     # -- helpers ------------------------------------------------------------------------------
     def pos(self, tok: Token) -> SourcePos:
         return self.src.pos_at(tok.start_pos)
 
     def ident(self, tok: Token) -> str:
+        """A declared identifier, checked against the keywords."""
         v = str(tok)
         if v[0] == "_":
-            # Escaped identifier: the underscore is dropped and keywords are allowed.
-            if len(v) == 1 or not v[1].isalpha():
-                self.diag.error(self.pos(tok), f"invalid identifier '{v}'")
-            return v[1:]
+            return self._unescaped(tok, v)
+        if self.case_sensitive:
+            # DDS and ROS 2 files: only the exact spelling of a keyword is one (idlc -f
+            # case-sensitive), and a keyword where only a name can stand is that name, as
+            # rosidl's parser reads it (`sequence<int32> sequence;` in the Fibonacci action).
+            return v
         if v in RESERVED:
-            self.diag.error(
-                self.pos(tok),
-                f"'{v}' is a keyword and cannot be used as a name here "
-                f"(write '_{v}' to use it as an identifier)",
-            )
+            self._keyword_error(tok, v)
             return v
         lv = v.lower()
         kw = RESERVED_FOLDED.get(lv)
@@ -91,13 +92,40 @@ class _AstBuilder:
                 )
         return v
 
+    def use_ident(self, tok: Token) -> str:
+        """An identifier in a scoped name (a use, not a declaration).
+
+        As in omniidl, only declarations are checked against the keywords ignoring case: real
+        files escape a declaration (`typedef Object _Factory;`) and use the plain spelling
+        (`sequence<Factory>`). `CORBA::Object` and `CORBA::ValueBase` name the built-in types.
+        """
+        v = str(tok)
+        if v[0] == "_":
+            return self._unescaped(tok, v)
+        if v in RESERVED and tok.type == "IDENT" and not self.case_sensitive:
+            self._keyword_error(tok, v)
+        return v
+
+    def _unescaped(self, tok: Token, v: str) -> str:
+        """An escaped identifier: the underscore is dropped and keywords are allowed."""
+        if len(v) == 1 or not v[1].isalpha():
+            self.diag.error(self.pos(tok), f"invalid identifier '{v}'")
+        return v[1:]
+
+    def _keyword_error(self, tok: Token, v: str) -> None:
+        self.diag.error(
+            self.pos(tok),
+            f"'{v}' is a keyword and cannot be used as a name here "
+            f"(write '_{v}' to use it as an identifier)",
+        )
+
     def declared(self, tok: Token, node: Any) -> Any:
         """Record a node named by `tok`, for doc-comment attachment."""
         self.named.append((tok.start_pos or 0, node))
         return node
 
     def scoped(self, toks: _Children, absolute: bool) -> ast.ScopedName:
-        return ast.ScopedName(tuple(self.ident(t) for t in toks), absolute, self.pos(toks[0]))
+        return ast.ScopedName(tuple(self.use_ident(t) for t in toks), absolute, self.pos(toks[0]))
 
     def instance(self, tok: Token) -> int:
         return self.src.instance_at(tok.start_pos)
@@ -508,13 +536,15 @@ class _AstBuilder:
         return out
 
     def struct_type(self, c: _Children) -> ast.Struct:
-        _kw, name, base, *members = c
+        _kw, name, base, *items = c
+        members, pragmas = _members_and_pragmas(items)
         node = ast.Struct(
             self.ident(name),
             self.pos(name),
             base_name=base.name if base is not None else None,
-            members=[m for group in members for m in group],
+            members=members,
             instance=self.instance(name),
+            pragmas=pragmas,
         )
         return self.declared(name, node)  # type: ignore[no-any-return]
 
@@ -527,14 +557,15 @@ class _AstBuilder:
         i = 0
         while isinstance(rest[i], ast.Annotation):
             i += 1
-        switch_anns, switch_type, cases = rest[:i], rest[i], rest[i + 1 :]
+        switch_anns, switch_type, items = rest[:i], rest[i], rest[i + 1 :]
         node = ast.Union_(
             self.ident(name),
             self.pos(name),
             switch_type=switch_type,
-            cases=cases,
+            cases=[x for x in items if not isinstance(x, ast.Pragma)],
             switch_annotations=switch_anns,
             instance=self.instance(name),
+            pragmas=[x for x in items if isinstance(x, ast.Pragma)],
         )
         return self.declared(name, node)  # type: ignore[no-any-return]
 
@@ -561,9 +592,14 @@ class _AstBuilder:
         return _Label(c[1] if c[0].type == "CASE" else None, self.pos(c[0]))
 
     def enum_type(self, c: _Children) -> ast.Enum:
-        _kw, name, *enumerators = c
+        _kw, name, *items = c
+        enumerators = [x for x in items if not isinstance(x, ast.Pragma)]
         node = ast.Enum(
-            self.ident(name), self.pos(name), enumerators=enumerators, instance=self.instance(name)
+            self.ident(name),
+            self.pos(name),
+            enumerators=enumerators,
+            instance=self.instance(name),
+            pragmas=[x for x in items if isinstance(x, ast.Pragma)],
         )
         for i, e in enumerate(enumerators):
             e.enum = node
@@ -578,12 +614,14 @@ class _AstBuilder:
         return self.declared(name, node)  # type: ignore[no-any-return]
 
     def except_dcl(self, c: _Children) -> ast.Exception_:
-        _kw, name, *members = c
+        _kw, name, *items = c
+        members, pragmas = _members_and_pragmas(items)
         node = ast.Exception_(
             self.ident(name),
             self.pos(name),
-            members=[m for group in members for m in group],
+            members=members,
             instance=self.instance(name),
+            pragmas=pragmas,
         )
         return self.declared(name, node)  # type: ignore[no-any-return]
 
@@ -638,6 +676,12 @@ class _AstBuilder:
 
 
 _PRECEDENCE = {"|": 1, "^": 2, "&": 3, ">>": 4, "<<": 4, "+": 5, "-": 5, "*": 6, "/": 6, "%": 6}
+
+
+def _members_and_pragmas(items: _Children) -> tuple[list[ast.Member], list[ast.Pragma]]:
+    """A struct or exception body: member groups (one list per line) and `#pragma` lines."""
+    members = [m for x in items if not isinstance(x, ast.Pragma) for m in x]
+    return members, [x for x in items if isinstance(x, ast.Pragma)]
 
 
 def _split_annotations(c: _Children) -> tuple[list[Any], list[Any]]:
@@ -762,16 +806,17 @@ def get_engine() -> Engine:
     return _engine
 
 
-def parse(src: SourceText, diag: Diagnostics) -> list[Any] | None:
+def parse(src: SourceText, diag: Diagnostics, case_sensitive: bool = False) -> list[Any] | None:
     """Parse preprocessed IDL into its top-level definitions; None after a syntax error.
 
     Problems found in well-formed syntax (a bad literal, a keyword used as a name) are reported
-    but do not stop the parse, so the resolver can report its own problems too.
+    but do not stop the parse, so the resolver can report its own problems too. With
+    `case_sensitive`, an identifier clashes only with a keyword spelled exactly alike.
     """
     engine = get_engine()
     comments: list[tuple[int, str]] = []
     with _lock:
-        _builder.begin(src, diag)
+        _builder.begin(src, diag, case_sensitive)
         try:
             result = engine.parse(src.text, comments)
         except ParseFailure as e:

@@ -22,9 +22,18 @@ from miro_gen.diagnostics import Diagnostics, SourcePos
 from miro_gen.idl.literals import LiteralError, decode_char, decode_integer
 
 MAX_INCLUDE_DEPTH = 200
+# Inclusions per translation unit (each #include of a guarded file counts). Real trees stay far
+# below (TAO's files: at most about 100); include chains without guards double with
+# each level and would otherwise run for minutes.
+MAX_INCLUSIONS = 10_000
 MAX_EXPANSION_DEPTH = 200
 MAX_EXPANDED_LINE = 1_000_000
 MAX_CONDITION_DEPTH = 2_000
+
+# `__OMNIIDL__` too, with omniidl 4.2's value: ORB IDL trees (Debian's omniORB tree) choose their
+# workarounds by it (`typedef Object _Factory;`, `#include <ir.idl>`), and miro-idl reads IDL as
+# omniidl does (as clang defines `__GNUC__`). `-U __OMNIIDL__` removes it.
+PREDEFINED_MACROS = {"__MIRO_IDL__": "1", "__OMNIIDL__": "0x2630"}
 
 _DIRECTIVE = re.compile(r"\s*#\s*([A-Za-z_]\w*)?\s*(.*)$", re.S)
 _IDENT = re.compile(r"[A-Za-z_]\w*")
@@ -86,9 +95,15 @@ class SourceText:
         return SourcePos(self.paths[0] if self.paths else "<input>", 1, col)
 
     def pos_at(self, offset: int) -> SourcePos:
-        """Source position of character `offset` of `text`."""
-        starts = self._line_starts()
+        """Source position of character `offset` of `text` (called for every declaration and
+        name the parser builds: the common case, a line macros left alone, is inlined)."""
+        starts = self._starts
+        if starts is None:
+            starts = self._line_starts()
         line = bisect_right(starts, offset)
+        if line <= len(self.line_map) and (line - 1) not in self.col_maps:
+            p, src_line, _ = self.line_map[line - 1]
+            return SourcePos(self.paths[p], src_line, offset - starts[line - 1] + 1)
         return self.pos(line, offset - starts[line - 1] + 1)
 
     def instance_at(self, offset: int) -> int:
@@ -131,15 +146,21 @@ class Preprocessor:
     def __init__(
         self,
         include_dirs: list[str] | tuple[str, ...] = (),
-        defines: dict[str, str] | None = None,
+        defines: dict[str, str | None] | None = None,
         diagnostics: Diagnostics | None = None,
     ) -> None:
         self.include_dirs = list(include_dirs)
         self.diag = diagnostics if diagnostics is not None else Diagnostics()
-        self._initial_macros: dict[str, Macro] = {"__MIRO_IDL__": Macro("__MIRO_IDL__", None, "1")}
+        self._initial_macros = {
+            name: Macro(name, None, value) for name, value in PREDEFINED_MACROS.items()
+        }
         for name, value in (defines or {}).items():
-            self._initial_macros[name] = Macro(name, None, value)
+            if value is None:  # -U NAME
+                self._initial_macros.pop(name, None)
+            else:
+                self._initial_macros[name] = Macro(name, None, value)
         self._file_cache: dict[str, str | None] = {}
+        self._realpaths: dict[str, str] = {}
 
     # -- public -------------------------------------------------------------------------------
     def run(self, path: str) -> SourceText:
@@ -154,6 +175,12 @@ class Preprocessor:
         self._once: set[str] = set()
         self._instances = 0
         self._depth = 0
+        self._inclusions = 0
+        # The files being included, outermost first: (real path, shown path, macro generation
+        # on entry). The generation counts changes to the macro table: a file included again
+        # while the table is as it was on its first entry would repeat itself forever.
+        self._chain: list[tuple[str, str, int]] = [(os.path.realpath(path), path, 0)]
+        self._macro_gen = 0
         text = self._read(path)
         if text is None:
             self.diag.error(None, f"cannot read '{path}'")
@@ -190,10 +217,14 @@ class Preprocessor:
             self._path_index[path] = idx
         return idx
 
-    def _find_include(self, name: str, current: str) -> str | None:
+    def _search_dirs(self, current: str, quoted: bool) -> list[str]:
+        """Where `#include "x"` (the including file's folder, then the -I folders) or
+        `#include <x>` (the -I folders only) looks, as the C preprocessor and omniidl do."""
+        return [os.path.dirname(current), *self.include_dirs] if quoted else self.include_dirs
+
+    def _find_include(self, name: str, dirs: list[str]) -> str | None:
         if os.path.isabs(name):
             return name if os.path.isfile(name) else None
-        dirs = [os.path.dirname(current), *self.include_dirs]
         for d in dirs:
             candidate = os.path.normpath(os.path.join(d, name)) if d else os.path.normpath(name)
             if os.path.isfile(candidate):
@@ -349,7 +380,8 @@ class Preprocessor:
         if name == "undef":
             ident = _IDENT.match(rest)
             if ident:
-                self.macros.pop(ident.group(0), None)
+                if self.macros.pop(ident.group(0), None) is not None:
+                    self._macro_gen += 1
                 self._macro_re = None
             else:
                 self.diag.error(pos, "#undef needs a macro name")
@@ -395,31 +427,71 @@ class Preprocessor:
         if not m:
             self.diag.error(pos, '#include expects "FILE" or <FILE>')
             return
+        quoted = m.group(1) is not None
         name = m.group(1) or m.group(2)
-        found = self._find_include(name, current)
+        dirs = self._search_dirs(current, quoted)
+        found = self._find_include(name, dirs)
         if found is None:
-            searched = [os.path.dirname(current) or ".", *self.include_dirs]
-            self.diag.error(
-                pos, f"cannot find include file '{name}' (searched: {', '.join(searched)})"
-            )
+            searched = ", ".join(d or "." for d in dirs) or "no -I folders given"
+            hint = ""
+            if not quoted and self._find_include(name, self._search_dirs(current, True)):
+                hint = f'; it is beside the including file: write #include "{name}" or add -I'
+            self.diag.error(pos, f"cannot find include file '{name}' (searched: {searched}{hint})")
             return
         incs = self._includes.setdefault(current, [])
         if found not in incs:
             incs.append(found)
-        if os.path.realpath(found) in self._once:
+        real = self._realpath(found)
+        if real in self._once:
             return
         text = self._read(found)
         if text is None:
             self.diag.error(pos, f"cannot read include file '{found}'")
             return
-        if self._depth >= MAX_INCLUDE_DEPTH:
-            self.diag.error(pos, f"#include nested too deeply (more than {MAX_INCLUDE_DEPTH})")
+        if not self._may_include(real, found, pos):
             return
         self._depth += 1
+        self._chain.append((real, found, self._macro_gen))
         try:
             self._process(found, text)
         finally:
             self._depth -= 1
+            self._chain.pop()
+
+    def _realpath(self, path: str) -> str:
+        real = self._realpaths.get(path)
+        if real is None:
+            real = self._realpaths[path] = os.path.realpath(path)
+        return real
+
+    def _may_include(self, real: str, shown: str, pos: SourcePos) -> bool:
+        """Report an include cycle that never ends, too deep nesting or too many inclusions."""
+        self._inclusions += 1
+        if self._inclusions > MAX_INCLUSIONS:
+            if self._inclusions == MAX_INCLUSIONS + 1:  # once
+                self.diag.error(
+                    pos,
+                    f"more than {MAX_INCLUSIONS} inclusions: files are included again and "
+                    "again; protect them with include guards (#ifndef X_IDL / #define X_IDL / "
+                    "... / #endif) or #pragma once",
+                )
+            return False
+        earlier = [i for i, (r, _, _) in enumerate(self._chain) if r == real]
+        forever = any(self._chain[i][2] == self._macro_gen for i in earlier)
+        if forever or self._depth >= MAX_INCLUDE_DEPTH:
+            cycle = ""
+            if earlier:
+                names = [p for _, p, _ in self._chain[earlier[-1] :]]
+                cycle = ": " + " -> ".join([*names, shown])
+            what = (
+                "#include cycle" + cycle + "; without include guards it never ends "
+                "(#ifndef X_IDL / #define X_IDL / ... / #endif, or #pragma once)"
+                if forever
+                else f"#include nested more than {MAX_INCLUDE_DEPTH} deep{cycle}"
+            )
+            self.diag.error(pos, what)
+            return False
+        return True
 
     def _define(self, rest: str, pos: SourcePos) -> None:
         m = re.match(r"([A-Za-z_]\w*)(\(([^)]*)\))?\s*(.*)$", rest, re.S)
@@ -434,8 +506,11 @@ class Preprocessor:
                 self.diag.error(pos, f"malformed parameter list in #define {name}")
                 return
             params = tuple(plist)
-        self.macros[name] = Macro(name, params, m.group(4).strip())
-        self._macro_re = None
+        macro = Macro(name, params, m.group(4).strip())
+        if self.macros.get(name) != macro:
+            self.macros[name] = macro
+            self._macro_gen += 1
+            self._macro_re = None
 
     # -- macro expansion ----------------------------------------------------------------------
     def _macro_pattern(self) -> re.Pattern[str]:

@@ -72,6 +72,9 @@ KNOWN_ANNOTATIONS = frozenset(
 )
 # Integer-valued annotations and their ranges (DDS-XTypes 1.3: member ids have 28 bits).
 _ANNOTATION_LIMITS = {"id": 0x0FFFFFFF, "position": 0xFFFF, "bit_bound": 64}
+# CORBA's pseudo-objects in the built-in module CORBA, as base types of the same names.
+BUILTIN_TYPES = ("TypeCode", "Principal", "Object", "ValueBase")
+BUILTIN_POS = SourcePos("<built in>", 1, 0)
 _CONTEXT_ID = re.compile(r"[A-Za-z][A-Za-z0-9._]*\*?$")
 _DISCRIMINATOR_BASES = frozenset([*INT_RANGES, "char", "wchar", "boolean"])
 
@@ -129,8 +132,13 @@ def _join(prefix: str, name: str) -> str:
 
 
 class Resolver:
-    def __init__(self, diag: Diagnostics) -> None:
+    def __init__(self, diag: Diagnostics, case_sensitive: bool = False) -> None:
         self.diag = diag
+        # The key of a name in a scope: CORBA folds case (identifiers that differ only in case
+        # collide); under --case-sensitive (DDS and ROS 2 files, like idlc -f case-sensitive)
+        # they are distinct, and a use does not reserve its name.
+        self.case_sensitive = case_sensitive
+        self._fold: Any = str if case_sensitive else str.lower
         self.global_scope = Scope("global", "", None, ())
         self.declarations: list[ast.Decl] = []
         self.defining: list[ast.Decl] = []  # structs/unions whose bodies are being resolved
@@ -147,6 +155,21 @@ class Resolver:
         self._decl_scopes: dict[int, Scope] = {}  # id(interface/valuetype) -> its scope
         self._scope_owners: dict[int, Any] = {}  # id(scope) -> interface/valuetype
         self._inherited: dict[int, dict[str, tuple[str, Any, ast.Decl]]] = {}
+        self.saw_local = False  # a local interface was declared (forward declarations too)
+        self._declare_builtins()
+
+    def _declare_builtins(self) -> None:
+        """Module CORBA and its pseudo-objects, known without any include (as omniidl knows
+        `CORBA::TypeCode` and `CORBA::Principal`); `CORBA::Object` and `CORBA::ValueBase` are
+        the keywords `Object` and `ValueBase`. Files that open `module CORBA` (the ORB's
+        orb.idl, ir.idl) reopen this module."""
+        corba = Entry("CORBA", "module", BUILTIN_POS, None)
+        corba.scope = self._new_scope("module", "CORBA", self.global_scope)
+        self.global_scope.entries[self._fold("CORBA")] = corba
+        for name in BUILTIN_TYPES:
+            corba.scope.entries[self._fold(name)] = Entry(
+                name, "built-in type", BUILTIN_POS, ast.BaseType(name)
+            )
 
     # =========================================================================================
     # entry point
@@ -171,8 +194,8 @@ class Resolver:
         self, scope: Scope, name: str, pos: SourcePos, what: str, node: Any
     ) -> Entry | None:
         """Enter `name` into `scope`, reporting clashes; returns the entry (None on a clash)."""
-        key = name.lower()
-        if scope.kind not in ("global", "operation") and key == scope.name.lower():
+        key = self._fold(name)
+        if scope.kind not in ("global", "operation") and key == self._fold(scope.name):
             self.diag.error(
                 pos, f"{what} '{name}' clashes with the name of its enclosing scope '{scope.name}'"
             )
@@ -242,7 +265,7 @@ class Resolver:
         """Resolve a scoped name from `scope`; reports and returns None when it fails."""
         parts = name.parts
         first = parts[0]
-        key = first.lower()
+        key = self._fold(first)
         hits: list[tuple[Entry, Scope]] = []
         if name.absolute:
             hits = self._find_in(self.global_scope, key)
@@ -272,7 +295,7 @@ class Resolver:
                     f"'{entry.name}' is {_a(entry.what)}, not a scope; cannot find '{part}' in it",
                 )
                 return None
-            hits = self._find_in(inner, part.lower())
+            hits = self._find_in(inner, self._fold(part))
             if not hits:
                 self.diag.error(
                     name.pos, f"'{name}' is not declared: no '{part}' in '{entry.name}'"
@@ -301,6 +324,8 @@ class Resolver:
             self.diag.note(entry.pos, f"'{entry.name}' declared here")
 
     def _mark_used(self, ident: str, pos: SourcePos, scope: Scope, found_in: Scope) -> None:
+        if self.case_sensitive:
+            return
         key = ident.lower()
         s: Scope | None = scope
         while s is not None and s is not found_in:
@@ -332,7 +357,7 @@ class Resolver:
     # -- modules ------------------------------------------------------------------------------
     def _module(self, m: ast.Module, scope: Scope, frame: Frame) -> None:
         self._annotations(m.annotations, scope)
-        key = m.name.lower()
+        key = self._fold(m.name)
         existing = scope.entries.get(key)
         if existing is not None and existing.what == "module" and existing.scope is not None:
             if existing.name != m.name:
@@ -382,10 +407,16 @@ class Resolver:
                 self.diag.error(p.pos, f"conflicting #pragma version for '{decl.scoped_name}'")
                 self.diag.note(old[1], "earlier version set here")
                 return
-            if id(decl) in self.explicit_ids:
-                self.diag.error(
-                    p.pos, f"'{decl.scoped_name}' already has a repository id from #pragma ID"
-                )
+            explicit = self.explicit_ids.get(id(decl))
+            if explicit is not None:
+                # Allowed when the id already carries that version (omniidl, CORBA 3.0 10.7.5).
+                if not explicit[0].startswith("IDL:") or explicit[0].rsplit(":", 1)[1] != version:
+                    self.diag.error(
+                        p.pos,
+                        f"cannot set the version of '{decl.scoped_name}' to {version}: "
+                        f"#pragma ID gave it the repository id '{explicit[0]}'",
+                    )
+                    self.diag.note(explicit[1], "#pragma ID here")
                 return
             self.versions[id(decl)] = (version, p.pos)
             return
@@ -415,8 +446,16 @@ class Resolver:
             self.diag.error(pos, f"conflicting repository ids for '{decl.scoped_name}'")
             self.diag.note(old[1], f"'{old[0]}' set here")
             return
-        if id(decl) in self.versions:
-            self.diag.error(pos, f"'{decl.scoped_name}' already has a #pragma version")
+        version = self.versions.get(id(decl))
+        if version is not None:
+            implied = f"IDL:{self.repo_parts[id(decl)][0]}:{version[0]}"
+            if repo_id != implied:
+                self.diag.error(
+                    pos,
+                    f"cannot set the repository id of '{decl.scoped_name}' to '{repo_id}': "
+                    f"#pragma version made it '{implied}'",
+                )
+                self.diag.note(version[1], "#pragma version here")
             return
         self.explicit_ids[id(decl)] = (repo_id, pos)
 
@@ -442,7 +481,8 @@ class Resolver:
     # -- interfaces ---------------------------------------------------------------------------
     def _forward(self, f: ast.Forward, scope: Scope, frame: Frame) -> None:
         self._annotations(f.annotations, scope)
-        key = f.name.lower()
+        self.saw_local |= f.local
+        key = self._fold(f.name)
         existing = scope.entries.get(key)
         kind_word = {
             "interface": "interface",
@@ -452,6 +492,10 @@ class Resolver:
         }[f.of]
         if existing is not None:
             node = existing.node
+            if isinstance(node, ast.BaseType) and f.of == "interface" and existing.name == f.name:
+                # TAO's ORB IDL forward-declares the pseudo-objects it uses (`interface
+                # TypeCode;` in module CORBA): that names the built-in, which stays as it is.
+                return
             compatible = (
                 (isinstance(node, ast.Forward) and node.of == f.of)
                 or (f.of == "interface" and isinstance(node, ast.Interface))
@@ -493,7 +537,7 @@ class Resolver:
 
     def _complete_forwards(self, scope: Scope, decl: ast.Decl, of: str) -> Entry | None:
         """Declare a full definition, completing earlier forward declarations of it."""
-        key = decl.name.lower()
+        key = self._fold(decl.name)
         existing = scope.entries.get(key)
         what = {
             "interface": "interface",
@@ -537,7 +581,7 @@ class Resolver:
             b = self.lookup(bname, scope)
             if b is None:
                 continue
-            node = b.node
+            node = self._aliased(b.node)
             if isinstance(node, ast.Forward) and node.of == "interface":
                 if node.full is None:
                     self.diag.error(
@@ -572,6 +616,7 @@ class Resolver:
                     f"local interface '{bname}'",
                 )
             i.bases.append(node)
+            i.base_refs.append(b.node)
             base_scope = self._scope_of(node)
             if base_scope is not None:
                 inner.bases.append(base_scope)
@@ -580,6 +625,44 @@ class Resolver:
         self._check_inherited_clashes(i)
         sub = self._frame_for(inner, i, frame)
         self._definitions(i.body, inner, sub)
+        if i.local:
+            self.saw_local = True
+        elif self.saw_local:  # most files have no local interfaces: nothing to check
+            self._check_no_local_types(i)
+
+    def _check_no_local_types(self, i: ast.Interface) -> None:
+        """An unconstrained interface's operations cannot pass local types (CORBA 3.0 section
+        3.8.6): they cannot be marshalled."""
+        where = f"in unconstrained interface '{i.name}',"
+        for a in i.attributes:
+            if (local := _local_type(a.type)) is not None:
+                self.diag.error(a.pos, f"{where} attribute '{a.name}' has local type '{local}'")
+        for op in i.operations:
+            if (local := _local_type(op.returns)) is not None:
+                self.diag.error(
+                    op.pos, f"{where} operation '{op.name}' has local return type '{local}'"
+                )
+            for p in op.params:
+                if (local := _local_type(p.type)) is not None:
+                    self.diag.error(
+                        p.pos,
+                        f"{where} parameter '{p.name}' of operation '{op.name}' has local "
+                        f"type '{local}'",
+                    )
+            for e in op.raises:
+                if (local := _local_type(e)) is not None:
+                    self.diag.error(
+                        op.pos, f"{where} operation '{op.name}' raises local exception '{local}'"
+                    )
+
+    def _aliased(self, node: Any) -> Any:
+        """What a base or `supports` name denotes through typedefs (`typedef I J;
+        interface K : J {};` inherits I, as omniidl accepts)."""
+        if isinstance(node, ast.Typedef) and not node.dims:
+            target = self._unalias(node)
+            if isinstance(target, (ast.Interface, ast.ValueType, ast.Forward)):
+                return target
+        return node
 
     def _scope_of(self, decl: ast.Decl) -> Scope | None:
         return self._decl_scopes.get(id(decl))
@@ -609,7 +692,7 @@ class Resolver:
         names: dict[str, tuple[str, Any, ast.Decl]] = {}
         for b in [*i.bases, *(i.supports if isinstance(i, ast.ValueType) else [])]:
             for name, node, owner in self._all_callables(b):
-                key = name.lower()
+                key = self._fold(name)
                 prev = names.get(key)
                 if prev is not None and prev[1] is not node:
                     self.diag.error(
@@ -624,7 +707,7 @@ class Resolver:
 
     def _check_not_inherited(self, owner: Any, name: str, pos: SourcePos, what: str) -> None:
         inherited = self._inherited.get(id(owner), {})
-        prev = inherited.get(name.lower())
+        prev = inherited.get(self._fold(name))
         if prev is not None:
             self.diag.error(
                 pos,
@@ -712,7 +795,7 @@ class Resolver:
             b = self.lookup(bname, scope)
             if b is None:
                 continue
-            node = _completed(b.node)
+            node = _completed(self._aliased(b.node))
             if not isinstance(node, ast.ValueType):
                 self.diag.error(bname.pos, f"'{bname}' is {_a(b.what)}, not a value type")
                 continue
@@ -726,29 +809,41 @@ class Resolver:
                     f"abstract value type '{v.name}' can only inherit abstract value types",
                 )
             v.bases.append(node)
+            v.base_refs.append(b.node)
             s = self._scope_of(node)
             if s is not None:
                 inner.bases.append(s)
         if v.truncatable and (not v.bases or v.bases[0].abstract):
             self.diag.error(v.pos, f"'{v.name}' is truncatable but has no concrete base value type")
+        if v.truncatable and v.custom:
+            self.diag.error(v.pos, f"custom value type '{v.name}' cannot be truncatable")
+        if not v.custom and not v.abstract:
+            for base in v.bases:
+                if base.custom:
+                    self.diag.error(
+                        v.pos,
+                        f"value type '{v.name}' is not custom but inherits custom value type "
+                        f"'{base.scoped_name}'",
+                    )
         for sname in v.supports_names:
             s_entry = self.lookup(sname, scope)
             if s_entry is None:
                 continue
-            node = _completed(s_entry.node)
+            node = _completed(self._aliased(s_entry.node))
             if not isinstance(node, ast.Interface):
                 self.diag.error(sname.pos, f"'{sname}' is {_a(s_entry.what)}, not an interface")
                 continue
-            concrete = [x for x in v.supports if not x.abstract]
-            if not node.abstract and concrete:
+            if not node.abstract and v.supports:
                 self.diag.error(
                     sname.pos,
-                    f"value type '{v.name}' cannot support '{sname}': it already supports "
-                    f"'{concrete[0].scoped_name}', and a value type may support only one "
-                    "non-abstract interface",
+                    f"value type '{v.name}' cannot support '{sname}' here: a value type supports "
+                    "at most one non-abstract interface, and it comes first",
                 )
                 continue
+            if not node.abstract:
+                self._check_supported_derives(v, node, sname.pos)
             v.supports.append(node)
+            v.supports_refs.append(s_entry.node)
             s = self._scope_of(node)
             if s is not None:
                 inner.bases.append(s)
@@ -757,6 +852,26 @@ class Resolver:
         self._check_inherited_clashes(v)
         sub = self._frame_for(inner, v, frame)
         self._definitions(v.body, inner, sub)
+
+    def _check_supported_derives(
+        self, v: ast.ValueType, iface: ast.Interface, pos: SourcePos
+    ) -> None:
+        """The non-abstract interface a value type supports must derive from the one its base
+        value types support (CORBA 3.0 section 3.9.1.4), as omniidl checks."""
+        for base in v.bases:
+            b: ast.ValueType | None = base
+            while b is not None and not b.supports:
+                b = b.bases[0] if b.bases else None
+            if b is None or b.supports[0].abstract:
+                continue
+            inherited = b.supports[0]
+            if inherited is not iface and inherited not in _all_bases(iface):
+                self.diag.error(
+                    pos,
+                    f"value type '{v.name}' supports '{iface.scoped_name}', which does not "
+                    f"derive from '{inherited.scoped_name}', supported by its base "
+                    f"'{base.scoped_name}'",
+                )
 
     def _state_members(self, g: ast.StateMemberGroup, scope: Scope, frame: Frame) -> None:
         owner = self._owner(scope)
@@ -773,6 +888,8 @@ class Resolver:
                 public=g.public,
             )
             m.dims = self._dims(dims, scope)
+            if self.saw_local and (local := _local_type(typ)) is not None:
+                self.diag.error(pos, f"state member '{name}' has local type '{local}'")
             self._declare(scope, name, pos, "state member", m)
             if owner is not None:
                 owner.members.append(m)
@@ -821,15 +938,21 @@ class Resolver:
         self.defining.append(s)
         self._members(s.members, inner, sub, "member")
         self.defining.pop()
+        self._body_pragmas(s, inner, sub)
         if s.base is not None:
-            inherited = {m.name.lower(): m for m in _all_struct_members(s.base)}
+            inherited = {self._fold(m.name): m for m in _all_struct_members(s.base)}
             for m in s.members:
-                if m.name.lower() in inherited:
+                if self._fold(m.name) in inherited:
                     self.diag.error(
                         m.pos,
                         f"member '{m.name}' clashes with a member of base struct "
                         f"'{s.base.scoped_name}'",
                     )
+
+    def _body_pragmas(self, d: ast.Decl, scope: Scope, frame: Frame) -> None:
+        """`#pragma` lines inside a struct, exception, union or enum body, after its members."""
+        for p in d.pragmas:
+            self._pragma(p, scope, frame)
 
     def _members(self, members: list[ast.Member], scope: Scope, frame: Frame, what: str) -> None:
         last_type: Any = None
@@ -853,6 +976,7 @@ class Resolver:
             entry.scope = inner
         sub = self._frame_for(inner, e, frame)
         self._members(e.members, inner, sub, "member")
+        self._body_pragmas(e, inner, sub)
 
     def _enum(self, en: ast.Enum, scope: Scope, frame: Frame) -> None:
         self._annotations(en.annotations, scope)
@@ -865,8 +989,7 @@ class Resolver:
             self._declare(scope, e.name, e.pos, "enumerator", e)
             e.scope_path = (*scope.path, e.name)
             self.repo_parts[id(e)] = (_join(prefix, e.name), "1.0")
-        if len(en.enumerators) > 2**32:  # pragma: no cover - unreachable in practice
-            self.diag.error(en.pos, "too many enumerators")
+        self._body_pragmas(en, scope, frame)
 
     def _union(self, u: ast.Union_, scope: Scope, frame: Frame) -> None:
         self._annotations(u.annotations, scope)
@@ -896,6 +1019,7 @@ class Resolver:
         self.defining.append(u)
         seen: dict[Any, SourcePos] = {}
         has_default = False
+        default_pos = u.pos
         last_type: Any = None
         resolved: Any = None
         for case in u.cases:
@@ -907,6 +1031,7 @@ class Resolver:
                             case.pos, f"union '{u.name}' has more than one default label"
                         )
                     has_default = True
+                    default_pos = case.pos
                     case.labels.append(None)
                     continue
                 if target is None:
@@ -931,6 +1056,7 @@ class Resolver:
             case.dims = self._dims(case.dims_expr, inner)
             self._declare(inner, case.name, case.pos, "union member", case)
         self.defining.pop()
+        self._body_pragmas(u, inner, sub)
         if has_default and target is not None:
             total = None
             if target.kind == "enum" and target.enum is not None:
@@ -939,7 +1065,7 @@ class Resolver:
                 total = 2
             if total is not None and len(seen) >= total:
                 self.diag.error(
-                    u.pos,
+                    default_pos,
                     f"union '{u.name}' has a default label although every value of its "
                     "discriminator has a case",
                 )
@@ -1030,6 +1156,8 @@ class Resolver:
             if entry is None:
                 return t
             node = entry.node
+            if isinstance(node, ast.BaseType):  # CORBA::TypeCode and the other built-ins
+                return node
             if not _is_type(node):
                 self.diag.error(t.name.pos, f"'{t.name}' is {_a(entry.what)}, not a type")
                 self.diag.note(entry.pos, f"'{entry.name}' declared here")
@@ -1209,7 +1337,7 @@ class Resolver:
     def _annotation_arg(self, expr: ast.Expr) -> ast.ConstValue | None:
         # A bare identifier that names nothing is an enumerator-like word (FINAL, SEQUENTIAL, ...).
         if isinstance(expr, ast.NameRef) and len(expr.name.parts) == 1 and not expr.name.absolute:
-            key = expr.name.parts[0].lower()
+            key = self._fold(expr.name.parts[0])
             s: Scope | None = self._scope
             found = False
             while s is not None and not found:
@@ -1222,6 +1350,26 @@ class Resolver:
     # =========================================================================================
     # repository ids
     # =========================================================================================
+    def _check_forward_prefixes(self) -> None:
+        """A definition and its forward declarations must share their repository-id prefix; a
+        `#pragma ID` or `version` given to the forward declaration passes to the definition
+        (a pragma after the definition changes only the definition), as in omniidl."""
+        for fwd in self.forwards:
+            full = fwd.full
+            if full is None or id(full) not in self.repo_parts:
+                continue
+            fwd_path, full_path = self.repo_parts[id(fwd)][0], self.repo_parts[id(full)][0]
+            if fwd_path != full_path:
+                self.diag.error(
+                    full.pos,
+                    f"the repository id of '{full.scoped_name}' ('{full_path}') differs from the "
+                    f"one of its forward declaration ('{fwd_path}'): check #pragma prefix",
+                )
+                self.diag.note(fwd.pos, "forward declaration here")
+            for table in (self.explicit_ids, self.versions):
+                if id(fwd) in table and id(full) not in table:
+                    table[id(full)] = table[id(fwd)]
+
     def _finish_repo_ids(self) -> None:
         # typeprefix: the innermost scope wins, so apply outer ones first.
         for scope_path, prefix in sorted(self.type_prefixes, key=lambda tp: len(tp[0])):
@@ -1230,6 +1378,7 @@ class Resolver:
                 if d.scope_path[:n] == scope_path:
                     version = self.repo_parts[id(d)][1]
                     self.repo_parts[id(d)] = ("/".join((prefix, *d.scope_path[n - 1 :])), version)
+        self._check_forward_prefixes()
         for d in self.declarations:
             key = id(d)
             explicit = self.explicit_ids.get(key)
@@ -1239,17 +1388,6 @@ class Resolver:
             path, version = self.repo_parts[key]
             v = self.versions.get(key)
             d.repo_id = f"IDL:{path}:{v[0] if v else version}"
-        by_path: dict[tuple[str, ...], str] = {}
-        for d in self.declarations:
-            if isinstance(d, (ast.Forward, ast.Interface, ast.Struct, ast.Union_, ast.ValueType)):
-                prev = by_path.get(d.scope_path)
-                if prev is not None and prev != d.repo_id and not isinstance(d, ast.Module):
-                    self.diag.error(
-                        d.pos,
-                        f"repository id '{d.repo_id}' of '{d.scoped_name}' differs from the "
-                        f"one of its forward declaration ('{prev}')",
-                    )
-                by_path.setdefault(d.scope_path, d.repo_id)
         # Enumerators are not listed, but get ids for code generators.
         for d in self.declarations:
             if isinstance(d, ast.Enum):
@@ -1271,6 +1409,18 @@ def _completed(node: Any) -> Any:
 def _a(word: str) -> str:
     """`word` with its indefinite article: "an interface", "a struct"."""
     return f"{'an' if word[:1] in 'aeiou' else 'a'} {word}"
+
+
+def _all_bases(i: ast.Interface) -> list[ast.Interface]:
+    """Every interface `i` inherits from, directly or not."""
+    out: list[ast.Interface] = []
+    todo = list(i.bases)
+    while todo:
+        b = todo.pop()
+        if b not in out:
+            out.append(b)
+            todo.extend(b.bases)
+    return out
 
 
 def _all_struct_members(s: ast.Struct) -> list[ast.Member]:
@@ -1299,6 +1449,39 @@ def _is_type(node: Any) -> bool:
             ast.ValueBox,
         ),
     )
+
+
+def _local_type(t: Any, seen: set[int] | None = None) -> str | None:
+    """The scoped name of the local interface that `t` is or holds (through typedefs,
+    sequences, maps and members of structs, unions and exceptions), or None."""
+    seen = set() if seen is None else seen
+    if id(t) in seen:
+        return None
+    seen.add(id(t))
+    if isinstance(t, ast.NamedType):
+        return _local_type(t.decl, seen) if t.decl is not None else None
+    if isinstance(t, ast.Forward):
+        if t.full is not None:
+            return _local_type(t.full, seen)
+        return t.scoped_name if t.local else None
+    if isinstance(t, ast.Interface):
+        return t.scoped_name if t.local else None
+    if isinstance(t, ast.Typedef):
+        return _local_type(t.type, seen)
+    if isinstance(t, ast.SequenceType):
+        return _local_type(t.element, seen)
+    if isinstance(t, ast.MapType):
+        return _local_type(t.key, seen) or _local_type(t.value, seen)
+    if isinstance(t, (ast.Struct, ast.Exception_)):
+        members: list[Any] = t.members
+    elif isinstance(t, ast.Union_):
+        members = t.cases
+    else:
+        return None
+    for m in members:
+        if (local := _local_type(m.type, seen)) is not None:
+            return local
+    return None
 
 
 def _incomplete_forward(t: Any, seen: set[int]) -> ast.Forward | None:
