@@ -29,7 +29,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT / "generated"), str(ROOT)]
 
-from miro_gen.params.document import ConfigDocument  # noqa: E402
+from miro_gen.params.runtime.document import ConfigDocument  # noqa: E402
 
 TARGET = 0.5  # seconds
 N = 10_000

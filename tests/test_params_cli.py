@@ -156,8 +156,9 @@ def test_inheritance_errors(tmp_path: Path) -> None:
     out = run_miro_params("-o", str(tmp_path / "out"), str(src))
     assert out.returncode == 1
     found = errors(out.stderr)
-    assert any(n == 6 and "BaseParameters, which is final" in m for _, n, m in found), out.stderr
-    assert any(n == 10 and "'Nowhere'" in m for _, n, m in found), out.stderr
+    # makeParams' final never forbade deriving: only the unknown parent is an error
+    assert [n for _, n, _ in found] == [10], out.stderr
+    assert "'Nowhere'" in found[0][2]
 
 
 def test_every_error_is_reported_with_its_line(tmp_path: Path) -> None:
@@ -171,10 +172,9 @@ def test_every_error_is_reported_with_its_line(tmp_path: Path) -> None:
         return any(n == line and text in msg for _, n, msg in found)
 
     # problems of the file's structure and of its types are reported in the same run
-    assert has(11, "final='maybe': expected true or false"), out.stderr
     assert has(9, "'C' is declared twice"), out.stderr
-    assert has(6, "BaseParameters, which is final"), out.stderr
     assert has(11, "'Nowhere'"), out.stderr
+    assert "Bad.xml:11: warning: final='maybe': expected true or false; read as true" in out.stderr
     assert not (tmp_path / "out").exists()
 
 
@@ -200,7 +200,7 @@ def test_type_and_default_errors(tmp_path: Path) -> None:
     assert out.returncode == 1
     by_line = {line: msg for _, line, msg in errors(out.stderr)}
     assert "unknown type 'float64'" in by_line[3]
-    assert "expected an integer" in by_line[4] and "twelve" in by_line[4]
+    assert "default='twelve': unknown name 'twelve'" in by_line[4]
     assert "inherited" in by_line[5]
     assert "values=" in by_line[6]
     assert "cannot read the type" in by_line[7]
@@ -296,7 +296,8 @@ def test_dummy_items_are_checked_against_the_idl_package(tmp_path: Path) -> None
     out = run_miro_params("-I", "idl", "-o", str(tmp_path / "out"), str(src))
     assert out.returncode == 1
     assert "D.xml:6: error: Miro::SensorPositionIDL has no member 'omega'" in out.stderr
-    assert "D.xml:8: error: dummy item Miro::NoSuchIDL names no IDL struct" in out.stderr
+    # a dummy item that names no IDL struct is a hand-written class: no error, no code
+    assert [(name, line) for name, line, _ in errors(out.stderr)] == [("D.xml", 6)]
 
 
 def test_packages_follow_the_namespace_or_the_folder(tmp_path: Path) -> None:
@@ -323,11 +324,11 @@ def test_packages_follow_the_namespace_or_the_folder(tmp_path: Path) -> None:
 
 
 def test_include_cycles_and_misplaced_values(tmp_path: Path) -> None:
+    # headers that include each other: C++'s include guards made that harmless
     write(tmp_path / "A.xml", '<config><config_global name="include" value="B.h"/></config>')
     write(tmp_path / "B.xml", '<config><config_global name="include" value="A.h"/></config>')
     out = run_miro_params("-o", str(tmp_path / "out"), str(tmp_path / "A.xml"))
-    assert out.returncode == 1 and "B.xml:1: error: " in out.stderr
-    assert "include cycle" in out.stderr
+    assert out.returncode == 0, out.stderr
     src = write(
         tmp_path / "V.xml",
         '<config><config_item name="V">\n<config_parameter name="N" type="int" values="a, b"/>'

@@ -11,7 +11,7 @@ import pytest
 from miro_cli import REPO, run_miro_params
 from params_helpers import compile_and_import, compile_params, import_generated, write
 
-from miro_gen.params.document import ConfigDocument
+from miro_gen.params.runtime.document import ConfigDocument
 
 CTOR = REPO / "tests" / "params" / "Constructor.xml"
 

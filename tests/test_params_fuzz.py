@@ -81,6 +81,28 @@ ATTRS = {
     "config_parameter": ["name", "type", "default", "values", "static_const", "inherited"],
 }
 ATTR_VALUES = [
+    "python_class",
+    "local_forward",
+    "Behaviour",
+    "Mcp::",
+    "::",
+    "Config",
+    "M_PI/2",
+    "150*1024*1024",
+    "ACE_SCHED_FIFO, 50",
+    "0,5",
+    "1 / 0",
+    "(int)2.5",
+    "INFINITY",
+    "1 << 70",
+    "~0u",
+    "std::vector<AParameters>",
+    "vector<BParameters>",
+    "ACE_Sched_Params",
+    "ACE_TTY_IO::Serial_Params",
+    "Miro::Enumeration",
+    "3, 1.5",
+    "maybe",
     "",
     "A",
     "B",
@@ -109,9 +131,13 @@ ATTR_VALUES = [
 @st.composite
 def compile_time_files(draw: st.DrawFn) -> bytes:
     root = etree.Element("config")
-    for _ in range(draw(st.integers(0, 4))):
-        tag = draw(st.sampled_from([*ATTRS, "constructor", "bogus"]))
-        elem = etree.SubElement(root, tag)
+    for _ in range(draw(st.integers(0, 5))):
+        tag = draw(st.sampled_from([*ATTRS, "config_group", "constructor", "bogus"]))
+        parent = root
+        if tag == "config_group":  # items inside a group, as real files put them
+            parent = etree.SubElement(root, tag, name=draw(st.sampled_from(["g", "", "A"])))
+            tag = "config_item"
+        elem = etree.SubElement(parent, tag)
         for attr in draw(st.lists(st.sampled_from(ATTRS.get(tag, ["name"])), max_size=4)):
             elem.set(attr, draw(st.sampled_from(ATTR_VALUES)))
         if tag == "config_item":
@@ -122,22 +148,35 @@ def compile_time_files(draw: st.DrawFn) -> bytes:
                 for attr in draw(st.lists(st.sampled_from(ATTRS["config_parameter"]), max_size=4)):
                     p.set(attr, draw(st.sampled_from(ATTR_VALUES)))
                 if p.tag == "constructor":
-                    p.text = draw(st.sampled_from(["a = 1;", "for(;;)", "b.resize(2);", "", "{"]))
+                    p.text = draw(
+                        st.sampled_from(
+                            ["a = 1;", "for(;;)", "b.resize(2);", "", "{", "a = 1 << 2;",
+                             "static int t[3] = {1};", "a = M_PI;", "a.b.c = 2;", "a = b;"]
+                        )
+                    )  # fmt: skip
     return etree.tostring(root)
 
 
 def test_random_compile_time_files_compile_or_report_errors(tmp_path: Path) -> None:
+    """...and what compiles renders as Python that compiles (the generator's own output)."""
     from miro_gen.cli.params import compile_files
+    from miro_gen.params.compiler.generate import render_module
+    from miro_gen.params.compiler.pymodel import PyParamsModule
 
-    @settings(SETTINGS, max_examples=150)
+    @settings(SETTINGS, max_examples=200)
     @given(data=compile_time_files())
     def check(data: bytes) -> None:
         src = tmp_path / "F.xml"
         src.write_bytes(data)
         diag = Diagnostics()
+        modules: list[object] = []
         with contextlib.suppress(CompileError):
-            compile_files([str(src)], [], None, diag)
+            modules = compile_files([str(src)], [], None, diag)
         for d in diag.items:
             assert d.severity != "error" or d.pos is None or d.pos.path.endswith("F.xml"), d
+        if not diag.has_errors:
+            for m in modules:
+                assert isinstance(m, PyParamsModule)
+                compile(render_module(m), "generated.py", "exec")
 
     check()

@@ -15,10 +15,11 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 from lxml import etree
+from miro_cli import REPO
 from params_helpers import PARAMS, SETTINGS, all_types, write
 
-from miro_gen.params.document import ConfigDocument
 from miro_gen.params.runtime import InetAddr, ParamsError
+from miro_gen.params.runtime.document import ConfigDocument
 
 
 @pytest.fixture(scope="module")
@@ -86,8 +87,8 @@ def test_defaults_of_every_type(types_module: ModuleType) -> None:
     assert (a.mode, a.modes, a.numbers) == ("Run", [], [1, 2, 3])
     assert (a.tags, a.ids, a.matrix, a.path) == (set(), set(), [], [])
     assert a.origin.x == 1.5 and a.tty.device == "/dev/ttyS0"
-    assert type(a).version == 3  # static_const: a class constant, not a field
-    assert "version" not in type(a).model_fields
+    assert type(a).VERSION == 3  # static_const: a class constant (makeParams: upper case)
+    assert "VERSION" not in type(a).model_fields and "version" not in type(a).model_fields
     point3 = types_module.Point3Parameters()
     assert (point3.x, point3.y, point3.z) == (2.5, 0.0, 0.0)  # inherited: X's default overridden
     assert isinstance(point3, types_module.PointParameters)
@@ -418,6 +419,58 @@ def test_hostname_document_is_found_in_cwd_then_miro_root(
     monkeypatch.delenv("MIRO_ROOT")
     (tmp_path / f"{host}.xml").unlink()
     assert ConfigDocument([]).sections() == []  # no document: every default stays
+
+
+def test_a_missing_document_is_reported_once_at_notice_level(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    import logging
+
+    host = socket.gethostname().split(".")[0]
+    monkeypatch.setenv("MIRO_ROOT", str(tmp_path / "root"))
+    monkeypatch.chdir(tmp_path)
+    caplog.set_level(logging.DEBUG, logger="miro")
+    for _ in range(3):
+        assert ConfigDocument([]).sections() == []
+    notices = [r for r in caplog.records if "no run-time parameter document" in r.getMessage()]
+    assert len(notices) == 1 and notices[0].levelname == "NOTICE"
+    message = notices[0].getMessage()
+    assert str(tmp_path / f"{host}.xml") in message
+    assert str(tmp_path / "root" / "etc" / f"{host}.xml") in message
+
+
+def test_documents_over_the_size_limit_are_refused_before_they_are_parsed(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("MIRO_PARAMS_MAX_BYTES", "1000")
+    big = write(tmp_path / "big.xml", "<config>" + " " * 1000 + "</config>")
+    with pytest.raises(ParamsError) as e:
+        ConfigDocument(path=big)
+    assert str(e.value) == (
+        f"{big}:1: error: the document is larger than 1000 bytes, the limit for parameter "
+        "documents (set MIRO_PARAMS_MAX_BYTES to allow more)"
+    )
+    with pytest.raises(ParamsError, match="larger than 1000 bytes"):
+        ConfigDocument(text=big.read_text())
+    with pytest.raises(ParamsError, match="larger than 1000 bytes"):
+        ConfigDocument(path="/dev/zero")  # reading stops at the limit
+    monkeypatch.delenv("MIRO_PARAMS_MAX_BYTES")
+    assert ConfigDocument(path=big).sections() == []  # the default limit is 8 MiB
+
+
+def test_the_run_time_half_imports_no_compiler() -> None:
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, miro_gen.params, Test.Parameters\n"
+        "bad = [m for m in sys.modules if m.startswith(('lark', 'jinja2', "
+        "'miro_gen.params.compiler', 'miro_gen.codegen'))]\n"
+        "assert not bad, bad"
+    )
+    env = {"PYTHONPATH": f"{REPO}:{REPO / 'generated'}", "PATH": "/usr/bin:/bin"}
+    result = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
 
 
 def test_missing_category_keeps_defaults_and_instances_are_listed() -> None:

@@ -9,9 +9,9 @@ import pytest
 from miro_cli import run_miro_params
 from params_helpers import write
 
-from miro_gen.params.document import ConfigDocument
 from miro_gen.params.runtime import ParamsError
-from miro_gen.params.xmlsafe import ENTITIES, XmlError, parse_xml
+from miro_gen.params.runtime.document import ConfigDocument
+from miro_gen.params.runtime.xmlsafe import ENTITIES, XmlError, parse_xml
 
 BILLION_LAUGHS = """<?xml version="1.0"?>
 <!DOCTYPE config [

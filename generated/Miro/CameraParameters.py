@@ -10,8 +10,13 @@ import typing as _t
 
 import pydantic as _pd
 
-import Miro.SvcParameters as _m_Miro_SvcParameters
 import miro_gen.params.runtime as _rt
+
+try:
+    import Miro.SvcParameters as _m_Miro_SvcParameters
+except ModuleNotFoundError as _e:
+    _rt.missing_module(_e, "Miro.SvcParameters", "params/SvcParameters.xml")
+    raise
 
 __all__ = [
     "CameraParameters",
@@ -25,7 +30,6 @@ SECTIONS: dict[str, tuple[str, ...]] = {
 }
 
 
-@_t.final
 class CameraParameters(_m_Miro_SvcParameters.DevParameters):
     """A camera read through OpenCV: a V4L2 device, a video file or a network stream."""
 

@@ -10,8 +10,13 @@ import typing as _t
 
 import pydantic as _pd
 
-import Miro.SvcParameters as _m_Miro_SvcParameters
 import miro_gen.params.runtime as _rt
+
+try:
+    import Miro.SvcParameters as _m_Miro_SvcParameters
+except ModuleNotFoundError as _e:
+    _rt.missing_module(_e, "Miro.SvcParameters", "params/SvcParameters.xml")
+    raise
 
 __all__ = [
     "GpsParameters",
@@ -25,12 +30,12 @@ SECTIONS: dict[str, tuple[str, ...]] = {
 }
 
 
-@_t.final
 class GpsParameters(_m_Miro_SvcParameters.TtyParameters):
     """An NMEA 0183 receiver on a serial line."""
 
     device: str = _pd.Field(
         default="/dev/ttyUSB0",
+        description="The device file.",
     )
     objectName: str = _pd.Field(
         default="Gps",

@@ -10,8 +10,13 @@ import typing as _t
 
 import pydantic as _pd
 
-import Miro.SvcParameters as _m_Miro_SvcParameters
 import miro_gen.params.runtime as _rt
+
+try:
+    import Miro.SvcParameters as _m_Miro_SvcParameters
+except ModuleNotFoundError as _e:
+    _rt.missing_module(_e, "Miro.SvcParameters", "params/SvcParameters.xml")
+    raise
 
 __all__ = [
     "LaserParameters",
@@ -25,7 +30,6 @@ SECTIONS: dict[str, tuple[str, ...]] = {
 }
 
 
-@_t.final
 class LaserParameters(_m_Miro_SvcParameters.TtyParameters):
     """A Hokuyo laser scanner speaking SCIP 2.0 (URG, UTM, UST series) on a serial line, USB or
     Ethernet.
@@ -84,11 +88,11 @@ class LaserParameters(_m_Miro_SvcParameters.TtyParameters):
         description="Horizontal distance of the scanner from the robot's centre of rotation. [mm]",
     )
     alpha: float = _pd.Field(
-        default=_rt.deg2rad(0),
+        default=_rt.deg2rad(0.0),
         description="Direction from the robot's centre to the scanner, from the robot's heading. [°]",
     )
     beta: float = _pd.Field(
-        default=_rt.deg2rad(0),
+        default=_rt.deg2rad(0.0),
         description="Direction the scanner's front looks, relative to Alpha. [°]",
     )
 

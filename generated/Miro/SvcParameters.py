@@ -13,21 +13,42 @@ import Miro.ScanDescription_idl as _m_Miro_ScanDescription_idl
 import miro_gen.params.runtime as _rt
 
 __all__ = [
+    "CameraControlParameters",
     "DevParameters",
     "DifferentialMotionParameters",
+    "EventParameters",
+    "FocusParameters",
+    "InclinometerParameters",
+    "LogNotifyParameters",
+    "MagnetometerParameters",
     "MotionParameters",
+    "PanParameters",
+    "PanTiltParameters",
     "RangeSensorParameters",
     "ScanDescriptionIDL_xml",
     "SensorDescriptionIDL_xml",
     "SensorGroupIDL_xml",
     "SensorPositionIDL_xml",
+    "ShutterParameters",
     "SockParameters",
+    "ThermometerParameters",
     "ThreadParameters",
+    "TiltParameters",
     "TtyParameters",
+    "ZoomParameters",
 ]
 
 # run-time section (config_group) -> the classes declared in it
 SECTIONS: dict[str, tuple[str, ...]] = {
+    "Camera": (
+        "ZoomParameters",
+        "FocusParameters",
+        "ShutterParameters",
+        "PanParameters",
+        "TiltParameters",
+        "CameraControlParameters",
+        "PanTiltParameters",
+    ),
     "Miro": (
         "DevParameters",
         "TtyParameters",
@@ -36,12 +57,22 @@ SECTIONS: dict[str, tuple[str, ...]] = {
         "MotionParameters",
         "DifferentialMotionParameters",
         "RangeSensorParameters",
+        "InclinometerParameters",
+        "MagnetometerParameters",
+        "ThermometerParameters",
+    ),
+    "Notification": (
+        "EventParameters",
+        "LogNotifyParameters",
     ),
 }
 
 
 class DevParameters(_rt.Config):
-    """A device driver: the device file it opens."""
+    """A device driver: the device file it opens.
+
+    Abstract (final="false"): a base of other parameter classes.
+    """
 
     device: str = _pd.Field(
         default="/dev/null",
@@ -54,10 +85,14 @@ class DevParameters(_rt.Config):
 
 
 class TtyParameters(DevParameters):
-    """A device on a serial line."""
+    """A device on a serial line.
+
+    Abstract (final="false"): a base of other parameter classes.
+    """
 
     device: str = _pd.Field(
         default="/dev/ttyS0",
+        description="The device file.",
     )
     ttyParams: _rt.SerialParams = _pd.Field(
         default_factory=_rt.SerialParams,
@@ -71,7 +106,10 @@ class TtyParameters(DevParameters):
 
 
 class SockParameters(_rt.Config):
-    """A device or service reached over a socket."""
+    """A device or service reached over a socket.
+
+    Abstract (final="false"): a base of other parameter classes.
+    """
 
     address: _rt.InetAddr = _pd.Field(
         default=_rt.InetAddr("localhost", 5000),
@@ -88,7 +126,10 @@ class SockParameters(_rt.Config):
 
 
 class ThreadParameters(_rt.Config):
-    """A service thread's scheduling."""
+    """A service thread's scheduling.
+
+    Abstract (final="false"): a base of other parameter classes.
+    """
 
     schedParams: _rt.SchedParams = _pd.Field(
         default_factory=_rt.SchedParams,
@@ -100,7 +141,10 @@ class ThreadParameters(_rt.Config):
 
 
 class MotionParameters(_rt.Config):
-    """Velocity limits of a motion service."""
+    """Velocity limits of a motion service.
+
+    Abstract (final="false"): a base of other parameter classes.
+    """
 
     minTranslation: int = _pd.Field(
         default=-1000,
@@ -111,11 +155,11 @@ class MotionParameters(_rt.Config):
         description="[mm/s]",
     )
     minRotation: float = _pd.Field(
-        default=_rt.deg2rad(-90),
+        default=_rt.deg2rad(-90.0),
         description="[°/s]",
     )
     maxRotation: float = _pd.Field(
-        default=_rt.deg2rad(90),
+        default=_rt.deg2rad(90.0),
         description="[°/s]",
     )
     maxAcceleration: float = _pd.Field(
@@ -133,7 +177,10 @@ class MotionParameters(_rt.Config):
 
 
 class DifferentialMotionParameters(MotionParameters):
-    """A differential drive: two wheels on one axis."""
+    """A differential drive: two wheels on one axis.
+
+    Abstract (final="false"): a base of other parameter classes.
+    """
 
     minLTranslation: int = _pd.Field(
         default=-1000,
@@ -212,7 +259,10 @@ ScanDescriptionIDL_xml: _rt.Layout = _rt.Layout(
 
 
 class RangeSensorParameters(_rt.Config):
-    """A range sensor (sonar ring, laser scanner): its layout."""
+    """A range sensor (sonar ring, laser scanner): its layout.
+
+    Abstract (final="false"): a base of other parameter classes.
+    """
 
     scanDescription: _m_Miro_ScanDescription_idl.ScanDescriptionIDL = _pd.Field(
         default_factory=_m_Miro_ScanDescription_idl.ScanDescriptionIDL,
@@ -221,3 +271,277 @@ class RangeSensorParameters(_rt.Config):
     _xml_fields: _t.ClassVar[tuple[_rt.XmlField, ...]] = (
         _rt.XmlField("ScanDescription", "scanDescription", _rt.Struct(ScanDescriptionIDL_xml)),
     )
+
+
+class InclinometerParameters(_rt.Config):
+    """The range an inclinometer measures.
+
+    Abstract (final="false"): a base of other parameter classes.
+    """
+
+    minPitch: float = _pd.Field(
+        default=_rt.deg2rad(-180.0),
+        description="[°]",
+    )
+    maxPitch: float = _pd.Field(
+        default=_rt.deg2rad(180.0),
+        description="[°]",
+    )
+    minRoll: float = _pd.Field(
+        default=_rt.deg2rad(-180.0),
+        description="[°]",
+    )
+    maxRoll: float = _pd.Field(
+        default=_rt.deg2rad(180.0),
+        description="[°]",
+    )
+
+    _xml_fields: _t.ClassVar[tuple[_rt.XmlField, ...]] = (
+        _rt.XmlField("MinPitch", "minPitch", _rt.ANGLE, "°"),
+        _rt.XmlField("MaxPitch", "maxPitch", _rt.ANGLE, "°"),
+        _rt.XmlField("MinRoll", "minRoll", _rt.ANGLE, "°"),
+        _rt.XmlField("MaxRoll", "maxRoll", _rt.ANGLE, "°"),
+    )
+
+
+class MagnetometerParameters(_rt.Config):
+    """The field strengths a magnetometer measures.
+
+    Abstract (final="false"): a base of other parameter classes.
+    """
+
+    minFieldStrength: float = _pd.Field(
+        default=-80.0,
+        description="[µT]",
+    )
+    maxFieldStrength: float = _pd.Field(
+        default=80.0,
+        description="[µT]",
+    )
+
+    _xml_fields: _t.ClassVar[tuple[_rt.XmlField, ...]] = (
+        _rt.XmlField("MinFieldStrength", "minFieldStrength", _rt.DOUBLE, "µT"),
+        _rt.XmlField("MaxFieldStrength", "maxFieldStrength", _rt.DOUBLE, "µT"),
+    )
+
+
+class ThermometerParameters(_rt.Config):
+    """The temperatures a thermometer measures.
+
+    Abstract (final="false"): a base of other parameter classes.
+    """
+
+    minTemperature: float = _pd.Field(
+        default=-20.0,
+        description="[°C]",
+    )
+    maxTemperature: float = _pd.Field(
+        default=70.0,
+        description="[°C]",
+    )
+
+    _xml_fields: _t.ClassVar[tuple[_rt.XmlField, ...]] = (
+        _rt.XmlField("MinTemperature", "minTemperature", _rt.DOUBLE, "°C"),
+        _rt.XmlField("MaxTemperature", "maxTemperature", _rt.DOUBLE, "°C"),
+    )
+
+
+class ZoomParameters(_rt.Config):
+    """A camera's zoom, if it has one: its range of fields of view.
+
+    Abstract (final="false"): a base of other parameter classes.
+    """
+
+    present: bool = _pd.Field(
+        default=False,
+    )
+    rangeMin: float = _pd.Field(
+        default=_rt.deg2rad(90.0),
+        description="[°]",
+    )
+    rangeMax: float = _pd.Field(
+        default=_rt.deg2rad(90.0),
+        description="[°]",
+    )
+
+    _xml_fields: _t.ClassVar[tuple[_rt.XmlField, ...]] = (
+        _rt.XmlField("Present", "present", _rt.BOOL),
+        _rt.XmlField("RangeMin", "rangeMin", _rt.ANGLE, "°"),
+        _rt.XmlField("RangeMax", "rangeMax", _rt.ANGLE, "°"),
+    )
+
+
+class FocusParameters(_rt.Config):
+    """A camera's focus, if it has one: its range of distances.
+
+    Abstract (final="false"): a base of other parameter classes.
+    """
+
+    present: bool = _pd.Field(
+        default=False,
+    )
+    autoFocus: bool = _pd.Field(
+        default=False,
+    )
+    rangeMin: float = _pd.Field(
+        default=0.0,
+        description="[mm]",
+    )
+    rangeMax: float = _pd.Field(
+        default=float("inf"),
+        description="[mm]",
+    )
+
+    _xml_fields: _t.ClassVar[tuple[_rt.XmlField, ...]] = (
+        _rt.XmlField("Present", "present", _rt.BOOL),
+        _rt.XmlField("AutoFocus", "autoFocus", _rt.BOOL),
+        _rt.XmlField("RangeMin", "rangeMin", _rt.DOUBLE, "mm"),
+        _rt.XmlField("RangeMax", "rangeMax", _rt.DOUBLE, "mm"),
+    )
+
+
+class ShutterParameters(_rt.Config):
+    """A camera's shutter, if it can be set: its range of exposure times.
+
+    Abstract (final="false"): a base of other parameter classes.
+    """
+
+    present: bool = _pd.Field(
+        default=False,
+    )
+    rangeMin: _dt.timedelta = _pd.Field(
+        default=_rt.time_value(0, 20000),
+        description="[s]",
+    )
+    rangeMax: _dt.timedelta = _pd.Field(
+        default=_rt.time_value(0, 20000),
+        description="[s]",
+    )
+
+    _xml_fields: _t.ClassVar[tuple[_rt.XmlField, ...]] = (
+        _rt.XmlField("Present", "present", _rt.BOOL),
+        _rt.XmlField("RangeMin", "rangeMin", _rt.TIME, "s"),
+        _rt.XmlField("RangeMax", "rangeMax", _rt.TIME, "s"),
+    )
+
+
+class PanParameters(_rt.Config):
+    """A pan unit's range."""
+
+    rangeMin: float = _pd.Field(
+        default=_rt.deg2rad(0.0),
+        description="[°]",
+    )
+    rangeMax: float = _pd.Field(
+        default=_rt.deg2rad(0.0),
+        description="[°]",
+    )
+
+    _xml_fields: _t.ClassVar[tuple[_rt.XmlField, ...]] = (
+        _rt.XmlField("RangeMin", "rangeMin", _rt.ANGLE, "°"),
+        _rt.XmlField("RangeMax", "rangeMax", _rt.ANGLE, "°"),
+    )
+
+
+class TiltParameters(_rt.Config):
+    """A tilt unit's range."""
+
+    rangeMin: float = _pd.Field(
+        default=_rt.deg2rad(0.0),
+        description="[°]",
+    )
+    rangeMax: float = _pd.Field(
+        default=_rt.deg2rad(0.0),
+        description="[°]",
+    )
+
+    _xml_fields: _t.ClassVar[tuple[_rt.XmlField, ...]] = (
+        _rt.XmlField("RangeMin", "rangeMin", _rt.ANGLE, "°"),
+        _rt.XmlField("RangeMax", "rangeMax", _rt.ANGLE, "°"),
+    )
+
+
+class CameraControlParameters(_rt.Config):
+    """What a camera's controls can do."""
+
+    zoom: ZoomParameters = _pd.Field(
+        default_factory=ZoomParameters,
+    )
+    focus: FocusParameters = _pd.Field(
+        default_factory=FocusParameters,
+    )
+    shutter: ShutterParameters = _pd.Field(
+        default_factory=ShutterParameters,
+    )
+
+    _xml_fields: _t.ClassVar[tuple[_rt.XmlField, ...]] = (
+        _rt.XmlField("Zoom", "zoom", _rt.Struct(ZoomParameters)),
+        _rt.XmlField("Focus", "focus", _rt.Struct(FocusParameters)),
+        _rt.XmlField("Shutter", "shutter", _rt.Struct(ShutterParameters)),
+    )
+
+
+class PanTiltParameters(_rt.Config):
+    """A pan-tilt unit."""
+
+    pan: PanParameters = _pd.Field(
+        default_factory=PanParameters,
+    )
+    tilt: TiltParameters = _pd.Field(
+        default_factory=TiltParameters,
+    )
+
+    _xml_fields: _t.ClassVar[tuple[_rt.XmlField, ...]] = (
+        _rt.XmlField("Pan", "pan", _rt.Struct(PanParameters)),
+        _rt.XmlField("Tilt", "tilt", _rt.Struct(TiltParameters)),
+    )
+
+
+class EventParameters(_rt.Config):
+    """An event's type and domain, as the notification service names them.
+
+    Abstract (final="false"): a base of other parameter classes.
+    """
+
+    type: str = _pd.Field(
+        default="",
+    )
+    domain: str = _pd.Field(
+        default="",
+    )
+
+    _xml_fields: _t.ClassVar[tuple[_rt.XmlField, ...]] = (
+        _rt.XmlField("Type", "type", _rt.STRING),
+        _rt.XmlField("Domain", "domain", _rt.STRING),
+    )
+
+
+class LogNotifyParameters(_rt.Config):
+    """What an event logger records, and how large its files grow."""
+
+    tCRFileSize: int = _pd.Field(
+        default=1048576,
+        description="[bytes]",
+    )
+    maxFileSize: int = _pd.Field(
+        default=157286400,
+        description="[bytes]",
+    )
+    typeName: list[str] = _pd.Field(
+        default_factory=list,
+    )
+    event: list[EventParameters] = _pd.Field(
+        default_factory=list,
+    )
+
+    _xml_fields: _t.ClassVar[tuple[_rt.XmlField, ...]] = (
+        _rt.XmlField("TCRFileSize", "tCRFileSize", _rt.ULONG, "bytes"),
+        _rt.XmlField("MaxFileSize", "maxFileSize", _rt.ULONG, "bytes"),
+        _rt.XmlField("TypeName", "typeName", _rt.Vector(_rt.STRING)),
+        _rt.XmlField("Event", "event", _rt.Vector(_rt.Struct(EventParameters))),
+    )
+
+    @classmethod
+    def instance(cls) -> LogNotifyParameters:
+        """The process-wide instance (config_item instance="true")."""
+        return _rt.instance_of(cls)

@@ -27,7 +27,10 @@ SECTIONS: dict[str, tuple[str, ...]] = {
 
 
 class MatrixParameters(_rt.Config):
-    """The parameters of Test::MatrixParameters (section 'body')."""
+    """The parameters of Test::Matrix (section 'body').
+
+    Abstract (final="false"): a base of other parameter classes.
+    """
 
     row1: str = _pd.Field(
         default="",
@@ -47,7 +50,10 @@ class MatrixParameters(_rt.Config):
 
 
 class BodyFrameParameters(_rt.Config):
-    """The parameters of Test::BodyFrameParameters (section 'body')."""
+    """The parameters of Test::BodyFrame (section 'body').
+
+    Abstract (final="false"): a base of other parameter classes.
+    """
 
     frameName: str = _pd.Field(
         default="",
@@ -63,7 +69,10 @@ class BodyFrameParameters(_rt.Config):
 
 
 class BodyParameters(_rt.Config):
-    """The parameters of Test::BodyParameters (section 'body')."""
+    """The parameters of Test::Body (section 'body').
+
+    Abstract (final="false"): a base of other parameter classes.
+    """
 
     bodyName: str = _pd.Field(
         default="",

@@ -22,9 +22,8 @@ SECTIONS: dict[str, tuple[str, ...]] = {
 }
 
 
-@_t.final
 class MyParameters(_rt.Config):
-    """The parameters of Test::MyParameters (section 'test')."""
+    """The parameters of Test::My (section 'test')."""
 
     testVector: list[int] = _pd.Field(
         default_factory=list,

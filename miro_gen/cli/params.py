@@ -19,8 +19,13 @@ and makes the command exit with status 1 without writing anything.
 Types: bool, char, short/int/long (signed, unsigned), float, double, string, std::string,
 angle (degrees in XML, radians in memory), ACE_Time_Value ("sec, usec"), ACE_INET_Addr
 ("host:port"), ACE_TTY_IO::Serial_Params, ACE_Sched_Params, Enumeration and EnumerationMultiple
-(with values="A, B"), vector<T>, set<T>, and parameter classes (XParameters) and IDL structs
+(with values="A B"), vector<T>, set<T>, and parameter classes (XParameters) and IDL structs
 (dummy items) of this file or an included one.
+
+default= is read as makeParams pasted it into C++: an expression (150*1024*1024, M_PI/2,
+(double)1/3, 0x10, INFINITY), constructor arguments for ACE_Time_Value ("0, 100000") and
+ACE_Sched_Params ("ACE_SCHED_FIFO, 50"), a size for vectors. final="false" marks an abstract
+class; a dummy item is written by hand (see docs/PARAMS.md and --python-class).
 """
 
 EPILOG = """\
@@ -61,6 +66,16 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="NAME",
         help="the generated module's name (default: the file's stem); one FILE only",
     )
+    p.add_argument(
+        "--python-class",
+        dest="python_classes",
+        action="append",
+        default=[],
+        metavar="TYPE=MODULE",
+        help="the hand-written Python class of the dummy item TYPE (Miro::BAP::Behaviour) is "
+        "in MODULE (MODULE:CLASS when it is not TYPE's name with Parameters); may be repeated; "
+        'as <config_global name="python_class" type=TYPE value=MODULE/>',
+    )
     mode = p.add_mutually_exclusive_group()
     mode.add_argument(
         "--check",
@@ -81,10 +96,23 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     diag = Diagnostics()
     for f in args.files:
-        if not Path(f).is_file():
+        path = Path(f)
+        if path.is_dir():
+            diag.error(None, f"'{f}' is a folder, not a compile-time file (give its .xml files)")
+        elif not path.exists():
             diag.error(None, f"cannot read '{f}': no such file")
     if args.name is not None and len(args.files) != 1:
         diag.error(None, "-n NAME names the module of one FILE; give one")
+    outdir = Path(args.outdir)
+    if not args.xsd and outdir.exists() and not outdir.is_dir():
+        diag.error(None, f"the output folder '{args.outdir}' is a file (-o OUTDIR)")
+    python_classes: dict[str, str] = {}
+    for given in args.python_classes:
+        cxx, eq, module = given.partition("=")
+        if not eq or not cxx.strip() or not module.strip():
+            diag.error(None, f"--python-class {given!r}: give TYPE=MODULE")
+        python_classes[cxx.strip().lstrip(":")] = module.strip()
+    args.python_classes = python_classes
     if diag.has_errors:
         diag.print()
         return 1
@@ -95,17 +123,25 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 1
     except KeyboardInterrupt:
         return 130
+    except RecursionError:  # classes deriving from each other thousands deep, ...
+        diag.print()
+        print("miro-params: error: the input is nested too deeply to compile", file=sys.stderr)
+        return 1
     except Exception as e:  # a bug in miro-params, not in the input
         diag.print()
         return internal_error("miro-params", e)
 
 
 def compile_files(
-    paths: list[str], include_dirs: list[str], name: str | None, diag: Diagnostics
+    paths: list[str],
+    include_dirs: list[str],
+    name: str | None,
+    diag: Diagnostics,
+    python_classes: dict[str, str] | None = None,
 ) -> list[object]:
     """The template contexts of `paths` (errors in `diag`)."""
-    from miro_gen.params.build import build_modules
-    from miro_gen.params.loader import Loader
+    from miro_gen.params.compiler.build import build_modules
+    from miro_gen.params.compiler.loader import Loader
 
     loader = Loader(include_dirs, diag)
     targets = []
@@ -114,19 +150,20 @@ def compile_files(
         if f is not None:
             targets.append(f)
     names = {Path(paths[0]).resolve(): name} if name else {}
-    return list(build_modules(list(loader.files.values()), targets, names, diag))
+    files = list(loader.files.values())
+    return list(build_modules(files, targets, names, diag, python_classes))
 
 
 def _run(args: argparse.Namespace, diag: Diagnostics) -> int:
     if args.xsd:
         return _xsd(args, diag)
     from miro_gen.codegen.generate import changed_files, write_files
-    from miro_gen.params import generate
-    from miro_gen.params.pymodel import PyParamsModule
+    from miro_gen.params.compiler import generate
+    from miro_gen.params.compiler.pymodel import PyParamsModule
 
     modules = [
         m
-        for m in compile_files(args.files, args.include_dirs, args.name, diag)
+        for m in compile_files(args.files, args.include_dirs, args.name, diag, args.python_classes)
         if isinstance(m, PyParamsModule)
     ]
     diag.print()
@@ -139,7 +176,17 @@ def _run(args: argparse.Namespace, diag: Diagnostics) -> int:
         for rel in changed:
             print(f"miro-params: {outdir / rel} is out of date", file=sys.stderr)
         return 1 if changed else 0
-    write_files(files, changed, outdir)
+    try:
+        write_files(files, changed, outdir)
+    except OSError as e:
+        where = e.filename or outdir
+        why = (
+            "a file is in the way of a folder"
+            if isinstance(e, (FileExistsError, NotADirectoryError))
+            else e.strerror or str(e)
+        )
+        print(f"miro-params: cannot write '{where}': {why}", file=sys.stderr)
+        return 1
     for rel in changed:
         print(f"wrote {outdir / rel}")
     if not changed:
@@ -148,10 +195,10 @@ def _run(args: argparse.Namespace, diag: Diagnostics) -> int:
 
 
 def _xsd(args: argparse.Namespace, diag: Diagnostics) -> int:
-    from miro_gen.params import dynamic
-    from miro_gen.params.xsd import render_xsd
+    from miro_gen.params.compiler import dynamic
+    from miro_gen.params.compiler.xsd import render_xsd
 
-    classes = dynamic.load(args.files, args.include_dirs, diag)
+    classes = dynamic.load(args.files, args.include_dirs, diag, args.python_classes)
     diag.print()
     sys.stdout.write(render_xsd(c.cls for c in classes if c.target))
     return 0

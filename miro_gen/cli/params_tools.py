@@ -19,7 +19,7 @@ from miro_gen.cli.common import internal_error
 from miro_gen.diagnostics import CompileError, Diagnostic, Diagnostics, SourcePos
 
 if TYPE_CHECKING:
-    from miro_gen.params.dynamic import ParamClass
+    from miro_gen.params.compiler.dynamic import ParamClass
 
 DESCRIPTION = """\
 Check or print run-time parameter documents (<config><section><parameter name=...>) against the
@@ -60,6 +60,11 @@ def build_parser() -> argparse.ArgumentParser:
         )
         if name == "show":
             s.add_argument("--section", metavar="S", help="only this section")
+            s.add_argument(
+                "--all",
+                action="store_true",
+                help='also list abstract classes (final="false") among the known ones',
+            )
     return p
 
 
@@ -89,7 +94,7 @@ def _compile_time_files(folder: Path) -> list[str]:
 
 
 def _run(args: argparse.Namespace, diag: Diagnostics) -> int:
-    from miro_gen.params import dynamic
+    from miro_gen.params.compiler import dynamic
 
     params = args.params or _compile_time_files(Path("params"))
     if not params:
@@ -111,8 +116,8 @@ def _check(
     doc_path: str, typed: list[ParamClass], args: argparse.Namespace, show: bool
 ) -> list[Diagnostic]:
     """The problems of one document (and its values printed, for show)."""
-    from miro_gen.params.document import ConfigDocument
     from miro_gen.params.runtime import ParamsError
+    from miro_gen.params.runtime.document import ConfigDocument
 
     try:
         doc = ConfigDocument(path=doc_path)
@@ -134,7 +139,9 @@ def _check(
                 matches = [c for c in typed if label in c.names] or [
                     c
                     for c in typed
-                    if c.item.file.namespace == label and c.item.group in (name, None)
+                    if c.item.file.namespace == label
+                    and c.item.group in (name, None)
+                    and not c.abstract
                 ]
             elif elem.tag == "instance":
                 label = elem.get("type", "")
@@ -143,7 +150,8 @@ def _check(
                 problems.append(Diagnostic("error", pos, f"unexpected element <{elem.tag!s}>"))
                 continue
             if len(matches) != 1:
-                known = ", ".join(sorted({c.item.class_name for c in typed})) or "none"
+                listed = [c for c in typed if not c.abstract or getattr(args, "all", False)]
+                known = ", ".join(sorted({c.item.class_name for c in listed})) or "none"
                 why = "no" if not matches else "more than one"
                 problems.append(
                     Diagnostic(

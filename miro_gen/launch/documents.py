@@ -71,7 +71,7 @@ def write_parameters(path: Path, base: Path | None, parameters: dict[str, Any]) 
     """Write the document for a service to `path`: `base` (if any) with `parameters` set in
     it; `path`."""
     if base is not None:
-        from miro_gen.params.xmlsafe import XmlError, read_xml
+        from miro_gen.params.runtime.xmlsafe import XmlError, read_xml
 
         try:
             root = read_xml(str(base)).getroot()

@@ -1,14 +1,22 @@
-"""makeParams in Python: the run-time side that generated parameter modules and services use.
+"""makeParams in Python.
 
-`ConfigDocument` reads a run-time document; generated classes derive from `Config`; problems in
-a document raise `ParamsError`. The compiler itself (`loader`, `build`, `generate`) is imported
-by `miro-params` only.
+`miro_gen.params.runtime` is what generated parameter modules and services import (`Config`,
+`ConfigDocument`, `ParamsError`, the codecs); `miro_gen.params.compiler` is `miro-params` itself,
+imported only by the tools. The names below are the run-time ones services use.
 """
 
 from __future__ import annotations
 
-from miro_gen.params.document import ConfigDocument, Instance, read_parameters
-from miro_gen.params.runtime import Config, InetAddr, ParamsError, SchedParams, SerialParams
+from miro_gen.params.runtime import (
+    Config,
+    ConfigDocument,
+    InetAddr,
+    Instance,
+    ParamsError,
+    SchedParams,
+    SerialParams,
+    read_parameters,
+)
 
 __all__ = [
     "Config",

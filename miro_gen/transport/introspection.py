@@ -30,7 +30,7 @@ from miro_gen.transport import offers
 if TYPE_CHECKING:  # loaded when first used: a service that never reads parameters, never
     from lxml import etree  # pays for lxml
 
-    from miro_gen.params.live import Exposed
+    from miro_gen.params.runtime.live import Exposed
     from miro_gen.transport.server import Server
 
 SERVICE_KEY = b"_service"
@@ -70,7 +70,7 @@ class ServiceImpl(MiroService__POA.Service):
         self._supplier: Any = None
 
     def describe(self) -> MiroService.Description:
-        from miro_gen.params import live
+        from miro_gen.params.runtime import live
 
         names = self.server.bound_entries()
         by_key = {e.key: e.name for e in names}
@@ -118,8 +118,9 @@ class ServiceImpl(MiroService__POA.Service):
         return _text(self._find(section, category).element())
 
     def set_parameters(self, section: str, category: str, element: str) -> str:
-        from miro_gen.params import ParamsError, live
-        from miro_gen.params.xmlsafe import XmlError, parse_xml
+        from miro_gen.params import ParamsError
+        from miro_gen.params.runtime import live
+        from miro_gen.params.runtime.xmlsafe import XmlError, parse_xml
 
         target = self._find(section, category)
         try:
@@ -158,7 +159,7 @@ class ServiceImpl(MiroService__POA.Service):
     def dump_parameters(self) -> str:
         from lxml import etree
 
-        from miro_gen.params import live
+        from miro_gen.params.runtime import live
 
         root = live.document()
         etree.indent(root, space="  ")
@@ -166,7 +167,7 @@ class ServiceImpl(MiroService__POA.Service):
         return f'<?xml version="1.0" encoding="UTF-8"?>\n{body}'
 
     def _find(self, section: str, category: str) -> Exposed:
-        from miro_gen.params import live
+        from miro_gen.params.runtime import live
 
         try:
             return live.find(section, category)

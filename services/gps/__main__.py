@@ -57,7 +57,7 @@ from miro_gen.devices import (
     TtyConnection,
     startup,
 )
-from miro_gen.params import live
+from miro_gen.params.runtime import live
 
 from .nmea_epochs import NmeaParser, parse_date
 

@@ -4,7 +4,7 @@ codec's read, write, show and default."""
 
 from __future__ import annotations
 
-from miro_gen.params.codecs import Scalar
+from miro_gen.params.runtime import Scalar
 
 Value = list[tuple[float, float]]
 

@@ -17,7 +17,7 @@ from typing import Any, Final
 from lxml import etree
 
 from miro_gen.diagnostics import Diagnostic, SourcePos
-from miro_gen.params import values
+from miro_gen.params.runtime import values
 
 
 class _Fail:

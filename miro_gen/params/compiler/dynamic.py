@@ -15,11 +15,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from miro_gen.diagnostics import CompileError, Diagnostics
-from miro_gen.params.build import build_modules
-from miro_gen.params.generate import render_module
-from miro_gen.params.loader import Loader
-from miro_gen.params.model import ItemDecl, ParamsFile
-from miro_gen.params.pymodel import PyParamsModule
+from miro_gen.params.compiler.build import build_modules
+from miro_gen.params.compiler.generate import render_module
+from miro_gen.params.compiler.loader import Loader
+from miro_gen.params.compiler.model import ItemDecl, ParamsFile
+from miro_gen.params.compiler.pymodel import PyParamsModule
 from miro_gen.params.runtime import Config
 
 
@@ -32,6 +32,11 @@ class ParamClass:
     target: bool  # declared in a file given on the command line (not only included)
 
     @property
+    def abstract(self) -> bool:
+        """final="false": a base of other classes, not listed unless asked."""
+        return not self.item.final
+
+    @property
     def names(self) -> list[str]:
         """The names a run-time document may use for it: `My`, `MyParameters`,
         `Test::MyParameters`, `Test::My`."""
@@ -42,8 +47,14 @@ class ParamClass:
         return [n for n in out if n]
 
 
-def load(paths: list[str], include_dirs: list[str], diag: Diagnostics) -> list[ParamClass]:
-    """The classes of `paths` and of the files they include; raises `CompileError`."""
+def load(
+    paths: list[str],
+    include_dirs: list[str],
+    diag: Diagnostics,
+    python_classes: dict[str, str] | None = None,
+) -> list[ParamClass]:
+    """The classes of `paths` and of the files they include; raises `CompileError`. A dummy
+    item gets the stand-in made from its declaration: the tools check what it declares."""
     loader = Loader(include_dirs, diag)
     targets: list[ParamsFile] = []
     for path in paths:
@@ -51,18 +62,22 @@ def load(paths: list[str], include_dirs: list[str], diag: Diagnostics) -> list[P
         if f is not None:
             targets.append(f)
     files = list(loader.files.values())  # included files come before their includers
-    modules = build_modules(files, files, {}, diag) if not diag.has_errors else []
+    modules = (
+        build_modules(files, files, {}, diag, python_classes, tools=True)
+        if not diag.has_errors
+        else []
+    )
     diag.check()
     out: list[ParamClass] = []
     target_paths = {f.path.resolve() for f in targets}
     for f, m in zip(files, modules, strict=True):
         module = _install(m, diag)
-        for item in f.items:
-            if item.dummy or item.extern:
-                continue
-            cls = getattr(module, item.class_name, None)
+        for c in m.classes:
+            if c.decl.file is not f or c.dummy_target is not None:
+                continue  # stand-ins of other files' dummy items; IDL layouts
+            cls = getattr(module, c.name, None)
             if isinstance(cls, type) and issubclass(cls, Config):
-                out.append(ParamClass(cls, item, f.path.resolve() in target_paths))
+                out.append(ParamClass(cls, c.decl, f.path.resolve() in target_paths))
     return out
 
 

@@ -2,10 +2,17 @@
 
 An include names a C++ header; it stands for the compile-time file or IDL file that header was
 generated from: `miro/SvcParameters.h` is `SvcParameters.xml`, `idl/ScanDescriptionC.h` (TAO's
-client header) is `ScanDescription.idl`. They are looked for in the including file's folder, then
-in the `-I` folders, then in the project's own `params/`. Other headers (`vector`, `ace/...`) are
-C++ matters and are ignored. An IDL header needs no IDL file: its types are imported from the
-module miro-idl generated for it (`Miro.ScanDescription_idl`).
+client header) is `ScanDescription.idl`. They are looked for as the C++ compiler looked for the
+header: in the including file's folder, then in the `-I` folders; then in the folders above the
+including file and their `src/` (where a Miro source tree holds `miro/`), and last in the
+project's own `params/`. Other headers (`vector`, `ace/...`, hand-written
+`BehaviourParameters.h`) are C++ matters and are ignored. An IDL header needs no IDL file: its
+types are imported from the module miro-idl generated for it (`Miro.ScanDescription_idl`).
+
+makeParams' reading is kept where it was lenient: `final` is false only when it says "false",
+`dummy`, `extern` and `instance` are true only when they say "true" (other spellings are
+warnings); `default=""` is C++'s value-initialisation (no default); `namespace` globals nest
+(`Miro` then `BAP` is `Miro::BAP`).
 """
 
 from __future__ import annotations
@@ -16,22 +23,24 @@ from pathlib import Path
 from lxml import etree
 
 from miro_gen.diagnostics import Diagnostics, SourcePos
-from miro_gen.params.model import Constructor, Include, ItemDecl, ParamDecl, ParamsFile
-from miro_gen.params.xmlsafe import XmlError, read_xml
+from miro_gen.params.compiler.model import Constructor, Include, ItemDecl, ParamDecl, ParamsFile
+from miro_gen.params.runtime.xmlsafe import XmlError, read_xml
 
 _ITEM_ATTRS = frozenset(["name", "parent", "final", "dummy", "extern", "instance"])
+_GLOBAL_KINDS = frozenset(["forward", "local_forward"])
 _PARAM_ATTRS = frozenset(
     ["name", "type", "default", "measure", "values", "static_const", "inherited", "fullname"]
 )
 _INCLUDE_KINDS = ("include", "Include", "src_Include")
 _IDENT = re.compile(r"[A-Za-z_]\w*$")
+_SCOPED = re.compile(r"(::)?[A-Za-z_]\w*(::[A-Za-z_]\w*)*$")
 _NAMESPACE = re.compile(r"[A-Za-z_]\w*(::[A-Za-z_]\w*)*$")
 
 
 def builtin_params_dir() -> Path | None:
     """The project's `params/` (SvcParameters.xml): the checkout's, or the installed copy."""
     here = Path(__file__).resolve()
-    for candidate in (here.parents[2] / "params", here.parent / "xml"):
+    for candidate in (here.parents[3] / "params", here.parents[1] / "xml"):
         if (candidate / "SvcParameters.xml").is_file():
             return candidate
     return None
@@ -46,17 +55,26 @@ def display_path(path: Path) -> str:
         return path.name
 
 
-def _bool(elem: etree._Element, attr: str, default: bool, f: ParamsFile, diag: Diagnostics) -> bool:
+def _flag(elem: etree._Element, attr: str, f: ParamsFile, diag: Diagnostics) -> bool | None:
+    """makeParams' reading of a true/false attribute: None when absent. makeParams compared
+    with one word (`final` is false only for "false", the others true only for "true"); other
+    spellings of true and false are read as meant, anything else as makeParams did, with a
+    warning."""
     text = elem.get(attr)
     if text is None:
-        return default
+        return None
     t = text.strip().lower()
     if t in ("true", "1", "yes"):
         return True
     if t in ("false", "0", "no"):
         return False
-    diag.error(f.pos(elem.sourceline), f"{attr}={text!r}: expected true or false")
-    return default
+    as_makeparams = attr == "final"  # final: anything but "false"; the others: only "true"
+    diag.warning(
+        f.pos(elem.sourceline),
+        f"{attr}={text!r}: expected true or false; read as {str(as_makeparams).lower()}, "
+        "as makeParams did",
+    )
+    return as_makeparams
 
 
 def _doc(elem: etree._Element) -> str | None:
@@ -73,9 +91,7 @@ class Loader:
 
     def __init__(self, include_dirs: list[str], diag: Diagnostics) -> None:
         self.include_dirs = [Path(d) for d in include_dirs]
-        builtin = builtin_params_dir()
-        if builtin is not None:
-            self.include_dirs.append(builtin)
+        self.builtin = builtin_params_dir()
         self.diag = diag
         self.files: dict[Path, ParamsFile] = {}
         self._loading: set[Path] = set()
@@ -85,7 +101,7 @@ class Loader:
         if key in self.files:
             return self.files[key]
         if key in self._loading:
-            self.diag.error(pos, f"'{path}' is included again while it is read (an include cycle)")
+            # C++'s include guards: a header included again while it is read adds nothing
             return None
         self._loading.add(key)
         try:
@@ -93,10 +109,15 @@ class Loader:
         except XmlError as e:
             self.diag.items.extend(e.diagnostics)
             return None
+        finally:
+            self._loading.discard(key)
         f = ParamsFile(path=path, display=display_path(path))
-        self._read(f, tree.getroot())
+        self._loading.add(key)
+        try:
+            self._read(f, tree.getroot())
+        finally:
+            self._loading.discard(key)
         self.files[key] = f
-        self._loading.discard(key)
         return f
 
     def _read(self, f: ParamsFile, root: etree._Element) -> None:
@@ -136,57 +157,72 @@ class Loader:
         value = (elem.get("value") or "").strip()
         pos = f.pos(elem.sourceline)
         if name == "namespace":
-            if not _NAMESPACE.match(value):
+            if not value:
+                self.diag.warning(pos, "a namespace global without a value; ignored")
+            elif not _NAMESPACE.match(value):
                 self.diag.error(pos, f"namespace {value!r} is not a C++ namespace name")
-            elif f.namespace:
-                self.diag.error(
-                    pos, f"a second namespace ({value!r}; the first is {f.namespace!r})"
-                )
-            else:
-                f.namespace = value
+            else:  # makeParams nests them: Miro, then BAP, is Miro::BAP
+                f.namespace = f"{f.namespace}::{value}" if f.namespace else value
         elif name in _INCLUDE_KINDS:
+            if not value:
+                self.diag.warning(pos, f"a {name} global without a file name; ignored")
+                return
             inc = Include(value, pos, name)
             self._resolve_include(f, inc)
             f.includes.append(inc)
-        elif name == "forward":
+        elif name in _GLOBAL_KINDS:
             f.forwards.append(value)
-        elif name == "python_helper":
+        elif name in ("python_helper", "python_class"):
             # <config_global name="python_helper" type="Miro::Polygon" value="my_pkg.polygon"/>
-            cxx = (elem.get("type") or "").strip()
-            if not cxx or not re.match(r"[A-Za-z_][\w.]*$", value):
-                self.diag.error(pos, 'python_helper needs type="C++ type" and value="module"')
-            else:
+            # <config_global name="python_class" type="Miro::BAP::Behaviour" value="my_bap"/>
+            cxx = (elem.get("type") or "").strip().lstrip(":")
+            if not cxx or not re.match(r"[A-Za-z_][\w.]*(:[A-Za-z_]\w*)?$", value):
+                self.diag.error(pos, f'{name} needs type="C++ type" and value="module"')
+            elif name == "python_helper":
                 f.helpers[cxx] = value
                 f.helper_pos[cxx] = pos
+            else:
+                f.python_classes[cxx] = value
         else:
             self.diag.warning(pos, f"config_global {name!r} is not known; ignored")
 
     def _resolve_include(self, f: ParamsFile, inc: Include) -> None:
         header = inc.value.strip('<>" ')
-        base = header.rsplit("/", 1)[-1]
+        folder_part, _, base = header.rpartition("/")
         stem, dot, ext = base.rpartition(".")
         if not dot or ext not in ("h", "hh", "hpp", "xml"):
             return  # <vector>, <set>: C++ only
-        folders = [f.path.parent, *self.include_dirs]
         if stem.endswith("C") and ext == "h":  # TAO's client header of an IDL file
             # its types come from the module miro-idl generated for it (<stem>_idl)
             inc.idl_stem = stem[:-1]
-            idl = stem[:-1] + ".idl"
-            for folder in folders:
-                for candidate in (folder / idl, folder / header.rsplit("/", 1)[0] / idl):
-                    if candidate.is_file():
-                        inc.idl_file = candidate
-                        return
+            inc.idl_file = self._find(f, folder_part, stem[:-1] + ".idl")
             return
-        xml = stem + ".xml"
-        sub = header.rsplit("/", 1)[0] + "/" + xml if "/" in header else xml
-        for folder in folders:
-            for candidate in (folder / sub, folder / xml):
-                if candidate.is_file() and candidate.resolve() != f.path.resolve():
-                    loaded = self.load(candidate, inc.pos)
-                    if loaded is not None:
-                        inc.params_file = candidate
-                    return
+        found = self._find(f, folder_part, stem + ".xml")
+        if found is not None:
+            loaded = self.load(found, inc.pos)
+            if loaded is not None:
+                inc.params_file = found
+
+    def _find(self, f: ParamsFile, folder_part: str, name: str) -> Path | None:
+        """Where the C++ compiler would have found the header's source: the including file's
+        folder and the -I folders; then the folders above the including file and their
+        `src/` (Miro's builds gave `-I$MIRO_ROOT -I$MIRO_ROOT/src`), with the header's folder
+        (`miro/X.xml`); then the first folders without it; last the project's `params/` (for
+        `SvcParameters.xml` only: its other files are the project's own)."""
+        sub = f"{folder_part}/{name}" if folder_part else name
+        here = f.path.resolve().parent
+        near = [here, *self.include_dirs]
+        candidates = [d / sub for d in near]
+        candidates += [d / sub for up in here.parents for d in (up, up / "src")]
+        if folder_part:
+            candidates += [d / name for d in near]
+        if self.builtin is not None and name == "SvcParameters.xml":
+            candidates.append(self.builtin / name)
+        me = f.path.resolve()
+        for candidate in candidates:
+            if candidate.is_file() and candidate.resolve() != me:
+                return candidate
+        return None
 
     def _item(self, f: ParamsFile, elem: etree._Element, group: str | None) -> None:
         pos = f.pos(elem.sourceline)
@@ -194,23 +230,30 @@ class Loader:
             if attr not in _ITEM_ATTRS:
                 self.diag.warning(pos, f"config_item attribute {attr!r} is not known; ignored")
         name = (elem.get("name") or "").strip()
-        if name and not _IDENT.match(name):
+        dummy = _flag(elem, "dummy", f, self.diag) is True
+        # a dummy item names an existing type, which may be scoped (ACE_TTY_IO::Serial_Params)
+        if name and not (_SCOPED if dummy else _IDENT).match(name):
             self.diag.error(pos, f"config_item name {name!r} is not an identifier")
             return
         item = ItemDecl(
-            name=name,
+            name=name.lstrip(":"),
             pos=pos,
             file=f,
+            namespace=f.namespace,
             parent=(elem.get("parent") or "").strip() or None,
-            final=_bool(elem, "final", True, f, self.diag),
-            dummy=_bool(elem, "dummy", False, f, self.diag),
-            extern=_bool(elem, "extern", False, f, self.diag),
-            instance=_bool(elem, "instance", False, f, self.diag),
+            final=_flag(elem, "final", f, self.diag) is not False,
+            dummy=dummy,
+            extern=_flag(elem, "extern", f, self.diag) is True,
+            instance=_flag(elem, "instance", f, self.diag) is True,
             group=group,
             doc=_doc(elem),
         )
         if item.dummy and not name:
             self.diag.error(pos, "a dummy config_item needs the name of the type it describes")
+            return
+        # `parent="Mcp::"`: the item without a name of namespace Mcp (Mcp::Parameters)
+        if item.parent and not _SCOPED.match(item.parent.removesuffix("::")):
+            self.diag.error(pos, f"parent {item.parent!r} is not a C++ class name")
             return
         for other in f.items:
             if other.class_name == item.class_name:
@@ -238,7 +281,7 @@ class Loader:
             elif child.tag == "constructor":
                 text = child.text or ""
                 # the statements start where the text starts: on the <constructor> line
-                item.constructor = Constructor(text, f.pos(child.sourceline, 1))
+                item.constructors.append(Constructor(text, f.pos(child.sourceline, 1)))
             else:
                 self._unexpected(f, child, "config_item")
         f.items.append(item)
@@ -257,16 +300,23 @@ class Loader:
             self.diag.error(pos, f"config_parameter {name!r} needs a type")
             return None
         values = elem.get("values")
+        default = elem.get("default")
+        if default is not None and not default.strip() and not _is_text_type(type_):
+            default = None  # `member()`: C++ value-initialises it, as without a default
         return ParamDecl(
             name=name,
             type=type_,
             pos=pos,
-            default=elem.get("default"),
+            default=default,
             measure=(elem.get("measure") or "").strip() or None,
-            values=[v.strip() for v in re.split(r"[,|]", values) if v.strip()]
-            if values is not None
-            else None,
-            static_const=_bool(elem, "static_const", False, f, self.diag),
-            inherited=_bool(elem, "inherited", False, f, self.diag),
+            # Miro's Enumeration splits them at spaces; commas and bars are read too
+            values=[v for v in re.split(r"[\s,|]+", values) if v] if values is not None else None,
+            static_const=_flag(elem, "static_const", f, self.diag) is True,
+            inherited=_flag(elem, "inherited", f, self.diag) is True,
             doc=_doc(elem),
         )
+
+
+def _is_text_type(cxx: str) -> bool:
+    """Types whose `default=` makeParams quoted (an empty one is an empty string)."""
+    return cxx in ("string", "std::string", "QString", "CORBA::String")

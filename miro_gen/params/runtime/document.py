@@ -8,7 +8,8 @@
     </config>
 
 The document is `-MiroConfigFile FILE` / `-MCF FILE` from `argv`, else `<hostname>.xml` found in the
-working folder and then in `$MIRO_ROOT/etc`. Without any, every service runs on its defaults.
+working folder and then in `$MIRO_ROOT/etc`. Without any, every service runs on its defaults, and
+the paths looked for are logged once at notice level (`-MLL 5` shows them).
 """
 
 from __future__ import annotations
@@ -22,11 +23,14 @@ from typing import Any, NamedTuple
 from lxml import etree
 
 from miro_gen.diagnostics import Diagnostic, SourcePos
-from miro_gen.params import live
-from miro_gen.params.runtime import Config, ParamsError
-from miro_gen.params.xmlsafe import XmlError, parse_xml, read_xml
+from miro_gen.log import logger
+from miro_gen.params.runtime import live
+from miro_gen.params.runtime.config import Config, ParamsError
+from miro_gen.params.runtime.xmlsafe import XmlError, parse_xml, read_xml
 
 ROOT_TAG = "config"
+_log = logger("ConfigDocument")
+_reported: set[tuple[str, ...]] = set()  # the searches already reported as finding nothing
 
 
 class Instance(NamedTuple):
@@ -61,9 +65,18 @@ def find_document(argv: Sequence[str]) -> Path | None:
     if named is not None:
         return Path(named)
     name = socket.gethostname().split(".")[0] + ".xml"
-    for folder in search_path():
-        if (folder / name).is_file():
-            return folder / name
+    looked = [folder / name for folder in search_path()]
+    for path in looked:
+        if path.is_file():
+            return path
+    key = tuple(str(p.resolve()) for p in looked)
+    if key not in _reported:  # once per process and search
+        _reported.add(key)
+        _log.notice(
+            "no run-time parameter document (looked for %s; give one with -MCF FILE): "
+            "every parameter keeps its default",
+            " and ".join(str(p.resolve()) for p in looked),
+        )
     return None
 
 

@@ -14,8 +14,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 from miro_gen.codegen.render import environment
-from miro_gen.params import codecs
-from miro_gen.params.runtime import Config, Struct, layout_of
+from miro_gen.params.runtime import Config, Struct, codecs, layout_of
 
 Slot = tuple[str | None, codecs.Codec]  # (name=, codec) of an element that may appear
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 from miro_gen.codegen.generate import GENERATED_MARK as IDL_MARK
 from miro_gen.codegen.render import LINE, environment
-from miro_gen.params.pymodel import GENERATED_MARK, PyParamsModule
+from miro_gen.params.compiler.pymodel import GENERATED_MARK, PyParamsModule
 
 
 def render_module(m: PyParamsModule) -> str:

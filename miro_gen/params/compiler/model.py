@@ -29,6 +29,10 @@ class ParamDecl:
 
     @property
     def attr(self) -> str:
+        """makeParams' member name: the first letter lower-cased (`static_const` ones are
+        upper-cased whole: `MAX_SPEED`)."""
+        if self.static_const:
+            return self.name.upper()
         return self.name[:1].lower() + self.name[1:]
 
 
@@ -42,11 +46,16 @@ class Constructor:
 
 @dataclass
 class ItemDecl:
-    """A `config_item`: one parameter class (`<name>Parameters`)."""
+    """A `config_item`: one parameter class (`<name>Parameters`).
+
+    `final="false"` marks an abstract class (makeParams' editors offer only final ones); a
+    `dummy` item is declared for the tools and written by hand (no class is generated); an
+    `extern` item is a type defined elsewhere whose run-time layout is listed here."""
 
     name: str
     pos: SourcePos
     file: ParamsFile
+    namespace: str = ""  # where it is declared: the namespace globals read so far
     parent: str | None = None
     final: bool = True
     dummy: bool = False
@@ -54,7 +63,8 @@ class ItemDecl:
     instance: bool = False
     group: str | None = None  # the config_group: the run-time section
     params: list[ParamDecl] = field(default_factory=list)
-    constructor: Constructor | None = None
+    # `<constructor>` blocks, run one after the other (makeParams appended them)
+    constructors: list[Constructor] = field(default_factory=list)
     doc: str | None = None
 
     @property
@@ -64,8 +74,17 @@ class ItemDecl:
 
     @property
     def scoped_name(self) -> str:
-        ns = self.file.namespace
+        """The C++ name: a generated class lives in the file's namespace; a dummy item names
+        a type where it is declared (`ACE_TTY_IO::Serial_Params` before any namespace)."""
+        ns = self.namespace if self.dummy else self.file.namespace
         return f"{ns}::{self.class_name}" if ns else self.class_name
+
+    @property
+    def hand_written_name(self) -> str:
+        """The class a dummy item stands for as a parent (makeParams appends `Parameters`)."""
+        return self.class_name.rsplit("::", 1)[-1] + (
+            "" if self.class_name.endswith("Parameters") else "Parameters"
+        )
 
 
 @dataclass
@@ -91,6 +110,8 @@ class ParamsFile:
     groups: list[str] = field(default_factory=list)
     helpers: dict[str, str] = field(default_factory=dict)  # C++ type -> Python helper module
     helper_pos: dict[str, SourcePos] = field(default_factory=dict)
+    # dummy item (scoped C++ name) -> "module" or "module:Class" of its hand-written class
+    python_classes: dict[str, str] = field(default_factory=dict)
 
     def pos(self, line: int | None, col: int = 0) -> SourcePos:
         return SourcePos(self.display, line or 0, col)

@@ -19,65 +19,19 @@ import pydantic
 from lxml import etree
 
 from miro_gen.diagnostics import Diagnostic
-from miro_gen.params import codecs, values
-from miro_gen.params.codecs import (
+from miro_gen.params.runtime import codecs, values
+from miro_gen.params.runtime.codecs import (
     ANGLE,
     BOOL,
-    CHAR,
-    DOUBLE,
     FAIL,
-    FLOAT,
-    INET_ADDR,
     INT,
-    LONG,
-    SHORT,
-    STRING,
     TIME,
     UINT,
-    ULONG,
-    USHORT,
     Codec,
     Enum,
     Problems,
-    Scalar,
     Vector,
-    enum_multiple,
 )
-from miro_gen.params.values import InetAddr, deg2rad, rad2deg, time_value
-
-__all__ = [
-    "ANGLE",
-    "BOOL",
-    "CHAR",
-    "DOUBLE",
-    "FLOAT",
-    "INET_ADDR",
-    "INT",
-    "LONG",
-    "SHORT",
-    "STRING",
-    "TIME",
-    "UINT",
-    "ULONG",
-    "USHORT",
-    "Codec",
-    "Config",
-    "Enum",
-    "InetAddr",
-    "Layout",
-    "ParamsError",
-    "SchedParams",
-    "SerialParams",
-    "Struct",
-    "Vector",
-    "XmlField",
-    "deg2rad",
-    "enum_multiple",
-    "instance_of",
-    "rad2deg",
-    "resize",
-    "time_value",
-]
 
 T = TypeVar("T")
 
@@ -143,9 +97,15 @@ def layout_of(cls: type[Any]) -> Layout:
 
 
 class Struct(Codec):
-    """A nested parameter structure: `<parameter name="X">` with named children."""
+    """A nested parameter structure: `<parameter name="X">` with named children. The target is
+    a class, a layout, or a function returning one (a class defined further down its module:
+    recursive types)."""
 
-    def __init__(self, target: type[Any] | Layout, label: str | None = None) -> None:
+    def __init__(
+        self,
+        target: type[Any] | Layout | Callable[[], type[Any] | Layout],
+        label: str | None = None,
+    ) -> None:
         self._target = target
         self._layout: Layout | None = target if isinstance(target, Layout) else None
         self.label = label or ""
@@ -153,8 +113,10 @@ class Struct(Codec):
     @property
     def layout(self) -> Layout:
         if self._layout is None:
-            assert isinstance(self._target, type)
-            self._layout = layout_of(self._target)
+            target = self._target
+            if not isinstance(target, type) and callable(target):
+                target = target()
+            self._layout = target if isinstance(target, Layout) else layout_of(target)
         return self._layout
 
     @property
@@ -185,7 +147,7 @@ class Struct(Codec):
             f = layout.index.get(name)
             if f is None:
                 failed = True
-                if name in layout.constants or name[:1].lower() + name[1:] in layout.constants:
+                if name.upper() in layout.constants:
                     probs.error(child, f"{where}: {name} is a constant of {self.type_name}")
                 else:
                     known = ", ".join(f.xml for f in layout.fields) or "none"
@@ -424,6 +386,3 @@ class SchedParams(Config):
         """Set this process's (or `pid`'s) scheduling policy and priority (Linux)."""
         policy = getattr(os, self.policy)
         os.sched_setscheduler(pid, policy, os.sched_param(self.priority))
-
-
-__all__ += ["FAIL", "Scalar", "cxx_div", "cxx_mod", "show_lines"]
