@@ -22,6 +22,7 @@ import hashlib
 import io
 import json
 import os
+import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -138,12 +139,14 @@ def _run(main: Callable[[list[str]], int], argv: list[str]) -> tuple[int, str]:
     """A compiler's main() in this process: its status and what it printed."""
     out = io.StringIO()
     enabled = gc.isenabled()
+    limit = sys.getrecursionlimit()
     try:
         with contextlib.redirect_stdout(out), contextlib.redirect_stderr(out):
             status = main(argv)
-    finally:
+    finally:  # what the compilers change for their own short runs, as it was
         if enabled:
-            gc.enable()  # the compilers turn it off for their short runs
+            gc.enable()
+        sys.setrecursionlimit(limit)
     return status, out.getvalue()
 
 
@@ -219,8 +222,6 @@ def before_running(folder: Path, prog: str) -> bool:
     """What `miro run` and `miro launch` do first: regenerate the generated code of the project
     `folder` is in when it is stale (saying so on stderr); False, having said why, when it is
     stale and cannot be regenerated. True outside any project."""
-    import sys
-
     project = find_project(folder)
     if project is None:
         return True
