@@ -3,7 +3,8 @@
 The IDL compiler lives in `miro_gen.idl` (`miro-idl`); generated code uses `miro_gen.runtime`;
 remote-call exceptions are in `miro_gen.exceptions`. The runtime's public names are importable
 from here (`from miro_gen import Server, Client`); they load the transport (and ZeroMQ) on first
-use, so the compilers start without it.
+use, so the compilers start without it, and `miro_gen.lifecycle`, which a service imports
+first, at once.
 """
 
 from typing import TYPE_CHECKING, Any
@@ -22,9 +23,9 @@ from miro_gen.exceptions import (
     SystemException,
     UserException,
 )
-from miro_gen.runtime.rpc import nonblocking
 
 if TYPE_CHECKING:
+    from miro_gen.runtime.rpc import nonblocking
     from miro_gen.transport.events import (
         EventChannelFactory,
         StructuredEvent,
@@ -38,6 +39,7 @@ __version__ = "0.1.0"
 
 _EVENTS = "miro_gen.transport.events"
 _LAZY = {
+    "nonblocking": "miro_gen.runtime.rpc",
     "Server": "miro_gen.transport.server",
     "Client": "miro_gen.transport.server",
     "EventChannelFactory": _EVENTS,

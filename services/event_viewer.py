@@ -13,29 +13,30 @@ QT_QPA_PLATFORM=offscreen it needs no display); --duration quits after S seconds
 
 from __future__ import annotations
 
-import argparse
 import importlib
 import sys
 import time
 from pathlib import Path
 
+from miro_gen.lifecycle import defer_signals, run_main
+
+if __name__ == "__main__":
+    defer_signals()  # first: a Ctrl-C while it starts ends it quietly (status 130)
 if __package__ in (None, ""):  # run as a script from a checkout: the generated code beside it
     sys.path[:0] = [str(Path(__file__).resolve().parents[1] / "generated")]
 
 import Miro  # noqa: F401 - the project's event types, for decoding
 import MiroNaming
-
 from miro_gen import Server, StructuredEvent, SystemException
-from miro_gen.transport.options import UsageError
+from miro_gen.transport.options import service_parser
 
 try:
-    from PySide6.QtCore import QTimer, Signal
-    from PySide6.QtWidgets import QLabel, QMainWindow, QSplitter, QVBoxLayout, QWidget
-
     from miro_gen.qt import QtEventBridge, Subscription
     from miro_gen.qt.app import application, no_display
     from miro_gen.qt.fields import FieldError, get_field, is_number, leaves
     from miro_gen.qt.widgets import FieldsView, PlotWidget
+    from PySide6.QtCore import QTimer, Signal
+    from PySide6.QtWidgets import QLabel, QMainWindow, QSplitter, QVBoxLayout, QWidget
 except ImportError as e:  # PySide6 missing (or a system library Qt needs)
     hint = "" if "miro-gen[qt]" in str(e) else ": pip install miro-gen[qt]"
     print(f"event_viewer: {e}{hint}", file=sys.stderr)
@@ -152,12 +153,8 @@ class ViewerWindow(QMainWindow):
 
 
 def main(argv: list[str] | None = None) -> int:
-    try:
-        server = Server(sys.argv if argv is None else argv)
-    except UsageError as e:
-        print(f"event_viewer: {e}", file=sys.stderr)
-        return 2
-    p = argparse.ArgumentParser(prog="event_viewer", description=__doc__.split("\n\n")[0])
+    server = Server(sys.argv if argv is None else argv)  # takes the common options out
+    p = service_parser("event_viewer", __doc__.split("\n\n")[0])
     p.add_argument("type", help="the event type name (ExampleEvent, Gps, Position, Imu, ...)")
     p.add_argument("--domain", default="*", help="the supplier's naming context (default any)")
     p.add_argument("--channel", default="EventChannel", help="event channel (EventChannel)")
@@ -213,4 +210,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run_main(main, "event_viewer")

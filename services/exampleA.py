@@ -10,16 +10,20 @@ from __future__ import annotations
 
 import sys
 import threading
+from functools import partial
 from pathlib import Path
 
+from miro_gen.lifecycle import defer_signals, run_main
+
+if __name__ == "__main__":
+    defer_signals()  # first: a Ctrl-C while it starts ends it quietly (status 130)
 if __package__ in (None, ""):  # run as a script from a checkout: the generated code beside it
     sys.path[:0] = [str(Path(__file__).resolve().parents[1] / "generated")]
 
 import Miro
 import Miro__POA
-
 from miro_gen import Server, log, nonblocking
-from miro_gen.transport.options import UsageError
+from miro_gen.transport.options import service_parser
 
 _log = log.logger("MIRO")
 
@@ -49,16 +53,13 @@ class ExampleImpl(Miro__POA.Example):
 
 
 def main(argv: list[str] | None = None) -> int:
-    try:
-        server = Server(sys.argv if argv is None else argv)
-    except UsageError as e:  # a bad common option, or a --host that is not this machine's
-        print(f"exampleA: {e}", file=sys.stderr)
-        return 2
+    server = Server(sys.argv if argv is None else argv)  # takes the common options out
+    service_parser("exampleA", __doc__.split("\n\n")[0]).parse_args(server.argv[1:])
     server.add_to_name_service(ExampleImpl(), "ExampleA")
-    print("ExampleA is ready", flush=True)
+    server.reactor().call_soon(partial(print, flush=True), "ExampleA is ready")  # once it runs
     server.run()
     return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run_main(main, "exampleA")

@@ -1,6 +1,6 @@
 """ExampleB, the manual's client (§5.1): finds ExampleA in the naming service and polls it.
 
-    python services/exampleB.py [--count N] [--period S] [common options]
+    python services/exampleB.py [--count N] [--period S] [--wait S] [common options]
 
 Sets a and b, gets them back (ExampleA steps them), and sets the values it got plus one, N times
 (default: until Ctrl-C), printing what the manual prints:
@@ -13,19 +13,20 @@ Sets a and b, gets them back (ExampleA steps them), and sets the values it got p
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from pathlib import Path
 
+from miro_gen.lifecycle import defer_signals, run_main
+
+if __name__ == "__main__":
+    defer_signals()  # first: a Ctrl-C while it starts ends it quietly (status 130)
 if __package__ in (None, ""):  # run as a script from a checkout: the generated code beside it
     sys.path[:0] = [str(Path(__file__).resolve().parents[1] / "generated")]
 
 import Miro
-import MiroNaming
-
-from miro_gen import Client, SystemException
-from miro_gen.transport.options import UsageError
+from miro_gen import Client
+from miro_gen.transport.options import service_parser
 
 
 def number(x: float) -> str:
@@ -34,23 +35,15 @@ def number(x: float) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    try:
-        client = Client(sys.argv if argv is None else argv)
-    except UsageError as e:  # a bad common option, or a --host that is not this machine's
-        print(f"exampleB: {e}", file=sys.stderr)
-        return 2
-    p = argparse.ArgumentParser(prog="exampleB", description=__doc__.split("\n\n")[0])
+    client = Client(sys.argv if argv is None else argv)  # takes the common options out
+    p = service_parser("exampleB", __doc__.split("\n\n")[0])
     p.add_argument("--count", type=int, default=0, help="rounds to run (default: until Ctrl-C)")
     p.add_argument("--period", type=float, default=1.0, help="seconds between rounds")
+    p.add_argument(
+        "--wait", type=float, default=0.0, help="seconds to wait for ExampleA (default: none)"
+    )
     args = p.parse_args(client.argv[1:])
-    try:
-        example = client.resolve_name("ExampleA", Miro.Example)
-    except MiroNaming.NotFound as e:
-        print(f"exampleB: {e.name} is not bound in the naming service", file=sys.stderr)
-        return 1
-    except SystemException as e:
-        print(f"exampleB: {e}", file=sys.stderr)
-        return 1
+    example = client.resolve_name("ExampleA", Miro.Example, wait=args.wait)
     print("The object 'ExampleA' has been found in the naming service", flush=True)
     a, b = 0.0, 10.0
     rounds = 0
@@ -66,13 +59,10 @@ def main(argv: list[str] | None = None) -> int:
             time.sleep(args.period)
     except KeyboardInterrupt:
         pass
-    except SystemException as e:
-        print(f"exampleB: {e}", file=sys.stderr)
-        return 1
     finally:
         client.close()
     return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run_main(main, "exampleB")

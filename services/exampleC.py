@@ -6,18 +6,20 @@ ExampleEvent every N seconds, from a reactor timer (the timed publication patter
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 from typing import Any
 
+from miro_gen.lifecycle import defer_signals, run_main
+
+if __name__ == "__main__":
+    defer_signals()  # first: a Ctrl-C while it starts ends it quietly (status 130)
 if __package__ in (None, ""):  # run as a script from a checkout: the generated code beside it
     sys.path[:0] = [str(Path(__file__).resolve().parents[1] / "generated")]
 
 import Miro
-
 from miro_gen import EventChannelFactory, Server, StructuredPushSupplier
-from miro_gen.transport.options import UsageError
+from miro_gen.transport.options import service_parser
 
 CHANNEL = "ExampleEventChannel"
 EVENT = "ExampleEvent"
@@ -40,12 +42,8 @@ class Publisher:
 
 
 def main(argv: list[str] | None = None) -> int:
-    try:
-        server = Server(sys.argv if argv is None else argv)
-    except UsageError as e:  # a bad common option, or a --host that is not this machine's
-        print(f"exampleC: {e}", file=sys.stderr)
-        return 2
-    p = argparse.ArgumentParser(prog="exampleC", description=__doc__.split("\n\n")[0])
+    server = Server(sys.argv if argv is None else argv)  # takes the common options out
+    p = service_parser("exampleC", __doc__.split("\n\n")[0])
     p.add_argument("period", nargs="?", type=float, default=1.0, help="seconds between events")
     args = p.parse_args(server.argv[1:])
     if args.period <= 0:
@@ -59,4 +57,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run_main(main, "exampleC")

@@ -8,18 +8,20 @@ D is the supplier's naming context (its robot); by default events from any.
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
+from miro_gen.lifecycle import defer_signals, run_main
+
+if __name__ == "__main__":
+    defer_signals()  # first: a Ctrl-C while it starts ends it quietly (status 130)
 if __package__ in (None, ""):  # run as a script from a checkout: the generated code beside it
     sys.path[:0] = [str(Path(__file__).resolve().parents[1] / "generated")]
 
 import Miro  # noqa: F401 - the package that has the event type, for decoding
 import MiroNaming
-
-from miro_gen import Server, StructuredEvent, StructuredPushConsumer, SystemException
-from miro_gen.transport.options import UsageError
+from miro_gen import Server, StructuredEvent, StructuredPushConsumer
+from miro_gen.transport.options import service_parser
 
 CHANNEL = "ExampleEventChannel"
 EVENT = "ExampleEvent"
@@ -36,21 +38,14 @@ class ExampleConsumer(StructuredPushConsumer):
 
 
 def main(argv: list[str] | None = None) -> int:
-    try:
-        server = Server(sys.argv if argv is None else argv)
-    except UsageError as e:  # a bad common option, or a --host that is not this machine's
-        print(f"exampleD: {e}", file=sys.stderr)
-        return 2
-    p = argparse.ArgumentParser(prog="exampleD", description=__doc__.split("\n\n")[0])
+    server = Server(sys.argv if argv is None else argv)  # takes the common options out
+    p = service_parser("exampleD", __doc__.split("\n\n")[0])
     p.add_argument("--domain", default="*", help="the supplier's naming context (default: any)")
     args = p.parse_args(server.argv[1:])
     try:
         channel = server.resolve_channel(CHANNEL)
     except MiroNaming.NotFound as e:
         print(f"exampleD: {e.name} is not bound: start exampleC first", file=sys.stderr)
-        return 1
-    except SystemException as e:
-        print(f"exampleD: {e}", file=sys.stderr)
         return 1
     consumer = ExampleConsumer(channel)
     consumer.set_subscriptions([(args.domain, EVENT)])
@@ -60,4 +55,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run_main(main, "exampleD")

@@ -12,28 +12,29 @@ needs no mutex (the manual's C++ version needed one).
 
 from __future__ import annotations
 
-import argparse
 import math
 import sys
 import time
 from pathlib import Path
 from typing import Any
 
+from miro_gen.lifecycle import defer_signals, run_main
+
+if __name__ == "__main__":
+    defer_signals()  # first: a Ctrl-C while it starts ends it quietly (status 130)
 if __package__ in (None, ""):  # run as a script from a checkout: the generated code beside it
     sys.path[:0] = [str(Path(__file__).resolve().parents[1] / "generated")]
 
 import Miro
-
 from miro_gen import (
     EventChannelFactory,
     Server,
     StructuredEvent,
     StructuredPushConsumer,
     StructuredPushSupplier,
-    SystemException,
 )
 from miro_gen.transport.events import EventChannel
-from miro_gen.transport.options import UsageError
+from miro_gen.transport.options import service_parser
 
 EARTH_RADIUS = 6_371_000.0  # metres
 STALE = 2.0  # seconds after which a fix is too old to publish
@@ -85,23 +86,15 @@ class GpsToPosition(StructuredPushConsumer):
 
 
 def main(argv: list[str] | None = None) -> int:
-    try:
-        server = Server(sys.argv if argv is None else argv)
-    except UsageError as e:
-        print(f"gps_position: {e}", file=sys.stderr)
-        return 2
-    p = argparse.ArgumentParser(prog="gps_position", description=__doc__.split("\n\n")[0])
+    server = Server(sys.argv if argv is None else argv)  # takes the common options out
+    p = service_parser("gps_position", __doc__.split("\n\n")[0])
     p.add_argument("--rate", type=float, default=10.0, help="positions per second (default 10)")
     p.add_argument("--domain", default="*", help="the GPS's naming context (default: any)")
     p.add_argument("--channel", default="EventChannel", help="event channel (default EventChannel)")
     args = p.parse_args(server.argv[1:])
     if args.rate <= 0:
         p.error("--rate must be more than 0")
-    try:
-        channel = EventChannelFactory(server).find_or_create_channel(args.channel)
-    except SystemException as e:
-        print(f"gps_position: {e}", file=sys.stderr)
-        return 1
+    channel = EventChannelFactory(server).find_or_create_channel(args.channel)
     filter_ = GpsToPosition(channel, StructuredPushSupplier(channel))
     filter_.set_subscriptions([(args.domain, "Gps")])
     server.reactor().schedule_timer(1 / args.rate, 1 / args.rate, filter_)
@@ -112,4 +105,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run_main(main, "gps_position")

@@ -10,26 +10,27 @@ rules for widgets are in miro_gen/qt/designer.py and docs/QT.md.
 
 from __future__ import annotations
 
-import argparse
 import importlib
 import sys
 from pathlib import Path
 
+from miro_gen.lifecycle import defer_signals, run_main
+
+if __name__ == "__main__":
+    defer_signals()  # first: a Ctrl-C while it starts ends it quietly (status 130)
 if __package__ in (None, ""):  # run as a script from a checkout: the generated code beside it
     sys.path[:0] = [str(Path(__file__).resolve().parents[1] / "generated")]
 
 import Miro  # noqa: F401 - the project's types and stubs, for decoding and calling
 import MiroNaming
-
 from miro_gen import Server, SystemException
-from miro_gen.transport.options import UsageError
+from miro_gen.transport.options import service_parser
 
 try:
-    from PySide6.QtCore import QTimer
-
     from miro_gen.qt import QtEventBridge
     from miro_gen.qt.app import application, no_display
     from miro_gen.qt.designer import FormBinding, UiError, load_ui
+    from PySide6.QtCore import QTimer
 except ImportError as e:  # PySide6 missing (or a system library Qt needs)
     hint = "" if "miro-gen[qt]" in str(e) else ": pip install miro-gen[qt]"
     print(f"qt_panel: {e}{hint}", file=sys.stderr)
@@ -39,12 +40,8 @@ FORM = Path(__file__).resolve().with_name("example_panel.ui")
 
 
 def main(argv: list[str] | None = None) -> int:
-    try:
-        server = Server(sys.argv if argv is None else argv)
-    except UsageError as e:
-        print(f"qt_panel: {e}", file=sys.stderr)
-        return 2
-    p = argparse.ArgumentParser(prog="qt_panel", description=__doc__.split("\n\n")[0])
+    server = Server(sys.argv if argv is None else argv)  # takes the common options out
+    p = service_parser("qt_panel", __doc__.split("\n\n")[0])
     p.add_argument("form", nargs="?", type=Path, default=FORM, help="a Qt Designer .ui file")
     p.add_argument("--channel", default="ExampleEventChannel", help="the event channel")
     p.add_argument("--domain", default="*", help="the suppliers' naming context (default any)")
@@ -103,4 +100,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run_main(main, "qt_panel")

@@ -168,7 +168,8 @@ def test_echo_prints_decoded_events_of_chosen_topics(recorded: Path) -> None:
     assert len(lines) == 3
     assert " robot1/ExampleEvent #" in lines[1] and lines[1].endswith(repr(event(1)))
     none = run_miro("log", "echo", str(recorded), "robot9/*")
-    assert none.returncode == 0 and none.stdout == ""
+    assert none.returncode == 1 and none.stdout == ""
+    assert "no topic matches robot9/*; the log's topics: robot1/ExampleEvent" in none.stderr
 
 
 def test_info_lists_topics_types_counts_and_rates(recorded: Path) -> None:

@@ -107,7 +107,7 @@ def test_no_new_value_is_etimeout_at_the_client(gps: tuple[GpsImpl, Miro.Gps, Re
     start = time.monotonic()
     with pytest.raises(Miro.ETimeOut) as caught:
         stub.getWaitData()
-    assert 0.9 < time.monotonic() - start < 4
+    assert time.monotonic() - start > 0.9  # it waited for its timeout (a load only adds)
     assert "no new Gps value within 1 s" in caught.value.what
 
 

@@ -258,6 +258,6 @@ def test_a_server_told_to_advertise_loopback_is_unreachable_from_another_host(
         "1",
     )
     assert b.returncode == 1
-    assert b.stderr.startswith("exampleB: TRANSIENT: cannot reach tcp://127.0.0.1:"), b.stderr
+    assert b.stderr.startswith("exampleB: cannot reach tcp://127.0.0.1:"), b.stderr
     assert "Traceback" not in b.stderr
     stop(a, a_log)

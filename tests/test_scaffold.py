@@ -1,5 +1,7 @@
-"""`miro new`: every pattern scaffolds into a fresh project, passes ruff and mypy --strict, and its
-own test passes against a naming service; `miro run` starts a service; bad names are refused."""
+"""`miro new`: every pattern scaffolds into a fresh project, passes ruff (with this repository's
+settings, a project's and ruff's defaults) and mypy --strict (with miro-gen installed as a
+package), and its own test passes against a naming service; `miro run` starts a service, which
+parses its own options; bad names are refused."""
 
 from __future__ import annotations
 
@@ -10,8 +12,10 @@ import subprocess
 import sys
 from pathlib import Path
 
+import Miro
 import pytest
-from loopback import NamingProcess
+import zmq
+from loopback import NamingProcess, free_port
 from miro_cli import REPO
 
 PATTERNS = ["basic", "server", "client", "publisher", "subscriber", "device", "timed"]
@@ -88,22 +92,64 @@ def project(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return root
 
 
-def test_the_scaffolds_pass_ruff(project: Path) -> None:
-    for args in (
-        ["check", "--no-cache", "services"],
-        ["format", "--check", "--no-cache", "services"],
-    ):
-        done = subprocess.run([tool("ruff"), *args], cwd=project, capture_output=True, text=True)
+@pytest.mark.parametrize(
+    "settings",
+    [
+        [],  # the project's: as this repository's pyproject.toml, in a project of one's own
+        ["--isolated"],  # ruff's defaults (line length 88)
+        ["--config", str(REPO / "services" / "ruff.toml")],  # in services/ of this repository
+    ],
+    ids=["project", "defaults", "this-repository"],
+)
+def test_the_scaffolds_pass_ruff(project: Path, settings: list[str]) -> None:
+    for args in (["check", "--no-cache"], ["format", "--check", "--no-cache"]):
+        done = subprocess.run(
+            [tool("ruff"), *args, *settings, "services"],
+            cwd=project,
+            capture_output=True,
+            text=True,
+        )
         assert done.returncode == 0, done.stdout + done.stderr
 
 
-def test_the_scaffolds_pass_mypy_strict(project: Path) -> None:
-    mypy_path = os.pathsep.join([str(project / "generated"), str(REPO), str(REPO / "generated")])
+def test_the_generated_packages_are_typed() -> None:
+    for package in ("Miro", "Miro__POA", "MiroNaming", "MiroNaming__POA", "_GlobalIDL"):
+        assert (REPO / "generated" / package / "py.typed").is_file()
+    assert (REPO / "miro_gen" / "py.typed").is_file()
+
+
+def installed(site: Path) -> None:
+    """miro_gen and the generated packages, as the wheel installs them (pyproject.toml:
+    miro_gen, Miro*, _GlobalIDL*), in `site`: mypy checks against them only if they are
+    typed packages (PEP 561)."""
+    skip = shutil.ignore_patterns("__pycache__")
+    shutil.copytree(REPO / "miro_gen", site / "miro_gen", symlinks=True, ignore=skip)
+    for package in (REPO / "generated").iterdir():
+        if package.name.startswith(("Miro", "_GlobalIDL")):
+            shutil.copytree(package, site / package.name, ignore=skip)
+
+
+def test_the_scaffolds_pass_mypy_strict(project: Path, tmp_path: Path) -> None:
+    """In a project of one's own: miro-gen installed (in a virtual environment whose other
+    packages come from this one's), the project's generated code on mypy_path."""
+    import site
+    import venv
+
+    venv.create(tmp_path / "env", with_pip=False)
+    python = tmp_path / "env" / "bin" / "python"
+    found = subprocess.run(
+        [str(python), "-c", "import site; print(site.getsitepackages()[0])"],
+        capture_output=True, text=True, check=True,
+    )  # fmt: skip
+    packages = Path(found.stdout.strip())
+    installed(packages)
+    (packages / "others.pth").write_text("\n".join(site.getsitepackages()) + "\n")
     done = subprocess.run(
-        [sys.executable, "-m", "mypy", "--strict", "--explicit-package-bases", "--cache-dir",
-         str(project / ".mypy_cache"), "services", "generated"],
+        [sys.executable, "-m", "mypy", "--strict", "--explicit-package-bases",
+         "--python-executable", str(python), "--cache-dir", str(tmp_path / "cache"),
+         "services", "generated"],
         cwd=project,
-        env=dict(env(), MYPYPATH=mypy_path),
+        env=dict(os.environ, MYPYPATH=str(project / "generated")),
         capture_output=True,
         text=True,
         timeout=300,
@@ -158,9 +204,13 @@ def test_miro_run_starts_a_service_against_a_real_naming_service(project: Path) 
 @pytest.mark.parametrize(
     ("name", "message"),
     [
-        ("GpsLogger", "is not a service name"),
+        (
+            "GpsLogger",
+            "is not a service name: use lower-case letters, digits and single "
+            "underscores, starting with a letter (gps_logger would do)",
+        ),
         ("1gps", "is not a service name"),
-        ("class", "is not a service name"),
+        ("class", "'class' is a Python keyword, and a service's name is a module's"),
         ("gps__logger", "is not a service name"),
         ("a_name_that_is_far_too_long", "at most 20 characters"),
         ("my_basic", "exists already: nothing was written"),
@@ -179,3 +229,61 @@ def test_an_unknown_interface_is_refused(project: Path) -> None:
     assert done.returncode == 1
     assert "no generated code for interface Lab::Missing" in done.stderr
     assert not (project / "services" / "nowhere").exists()
+
+
+def test_a_scaffolded_service_parses_its_own_options(project: Path) -> None:
+    helped = miro(project, "run", "my_server", "--help")
+    assert helped.returncode == 0 and helped.stdout.startswith("usage: my_server")
+    assert "common options" in helped.stdout
+    wrong = miro(project, "run", "my_server", "--colour", "blue")
+    assert wrong.returncode == 2
+    assert "my_server: error: unrecognized arguments: --colour blue" in wrong.stderr
+
+
+def test_a_scaffolded_server_without_a_naming_service_is_one_line(project: Path) -> None:
+    done = miro(project, "run", "my_server", "--naming", f"tcp://127.0.0.1:{free_port()}")
+    assert done.returncode == 1
+    assert done.stderr.count("\n") == 1 and "Traceback" not in done.stderr
+    assert done.stderr.startswith("my_server: cannot bind ")
+    assert "is `miro naming` running? see --naming / MIRO_NAMING" in done.stderr
+
+
+def test_a_scaffolded_client_waits_for_its_server(project: Path) -> None:
+    """Started before its server, the client waits for the name, then polls."""
+    import Miro__POA
+
+    from miro_gen import Server
+
+    class Example(Miro__POA.Example):
+        def setData(self, a: float, b: float) -> None:
+            pass
+
+        def getData(self) -> Miro.ExampleStructIDL:
+            return Miro.ExampleStructIDL(4.0, 2.0)
+
+    naming = NamingProcess()
+    args = ["--naming", naming.endpoint, "-MNC", "waiting"]
+    client = subprocess.Popen(
+        [sys.executable, "-m", "miro_gen.cli.main", "run", "my_client", *args, "-MLL", "5"],
+        cwd=project,
+        env=env(),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    server = None
+    try:
+        assert client.stdout is not None
+        lines = iter(client.stdout.readline, "")
+        assert any("waiting for Example" in line for line in lines)  # after other notices
+        server = Server(["test", *args], context=zmq.Context())
+        server.add_to_name_service(Example(), "Example")
+        assert next(lines).strip() == "my_client found Example"
+        assert next(lines).strip() == "getData: ExampleStructIDL(a=4.0, b=2.0)"
+    finally:
+        client.send_signal(signal.SIGINT)
+        assert client.wait(20) == 0
+        if server is not None:
+            server.shutdown()
+            server._cleanup()
+        naming.stop()

@@ -87,7 +87,8 @@ def info_main(argv: Sequence[str]) -> int:
     type_width = max((len(t.schema_name or "(no schema)") for t in topics), default=0)
     for t in topics:
         n = counts.get(t.id, 0)
-        rate = f"{n / duration:10.2f} Hz" if duration > 0 else ""
+        # n events over the span are n - 1 periods (and one event has no rate)
+        rate = f"{(n - 1) / duration:10.2f} Hz" if duration > 0 and n > 1 else ""
         print(
             f"  {t.topic:<{width}}  {t.schema_name or '(no schema)':<{type_width}}  "
             f"{n:8d} events{rate}  hash {t.type_hash[:12]}"
@@ -131,6 +132,8 @@ def echo_main(argv: Sequence[str]) -> int:
         return 1
     shown = 0
     with log:
+        if ns.topics and not _matching_topics(ns.file, log, ns.topics):
+            return 1
         try:
             _compile_missing_types(ns.file, log)
             for topic, message in log.messages():
@@ -150,6 +153,29 @@ def echo_main(argv: Sequence[str]) -> int:
     if log.unfinished:
         unfinished_warning(ns.file)
     return 0
+
+
+def _matching_topics(path: str, log: Any, wanted: list[tuple[str, str]]) -> bool:
+    """Whether any topic of the log matches `wanted`; if not, say so and list its topics. A
+    pattern that matches none of them while others do is a warning."""
+    from miro_gen.eventlog.types import matches
+
+    topics = sorted({t.topic: (t.domain, t.type_name) for t in log.topics()}.items())
+    unmatched = [
+        f"{domain}/{type_name}"
+        for domain, type_name in wanted
+        if not any(matches((domain, type_name), *parts) for _, parts in topics)
+    ]
+    if len(unmatched) < len(wanted):
+        for pattern in unmatched:
+            print(f"{path}: warning: no topic matches {pattern}", file=sys.stderr)
+        return True
+    names = ", ".join(name for name, _ in topics) or "none"
+    print(
+        f"{path}: no topic matches {', '.join(unmatched)}; the log's topics: {names}",
+        file=sys.stderr,
+    )
+    return False
 
 
 def _record(argv: Sequence[str]) -> int:

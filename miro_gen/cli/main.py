@@ -78,7 +78,16 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = list(sys.argv[1:] if argv is None else argv)
+    """Run a sub-command; 130 after Ctrl-C (128 + the signal), without a traceback."""
+    try:
+        return dispatch(list(sys.argv[1:] if argv is None else argv))
+    except KeyboardInterrupt:
+        from miro_gen import lifecycle
+
+        return lifecycle.exit_status()
+
+
+def dispatch(args: list[str]) -> int:
     if args and args[0] == "idl":
         from miro_gen.cli import idl
 
@@ -94,12 +103,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args and args[0] in ("naming", "nslist"):
         from miro_gen.cli import naming
 
-        run = naming.naming_main if args[0] == "naming" else naming.nslist_main
-        return run(args[1:])
-    if args and args[0] in ("new", "run"):
+        command = naming.naming_main if args[0] == "naming" else naming.nslist_main
+        return command(args[1:])
+    if args and args[0] == "new":
         from miro_gen.cli import new
 
-        return (new.new_main if args[0] == "new" else new.run_main)(args[1:])
+        return new.new_main(args[1:])
+    if args and args[0] == "run":
+        from miro_gen.cli import run
+
+        return run.run_main(args[1:])
     if args and args[0] == "sim":
         from miro_gen.cli import sim
 

@@ -18,7 +18,7 @@ from miro_gen.exceptions import SystemException
 from miro_gen.transport.addresses import server_addresses
 from miro_gen.transport.events import CHANNEL_REPO_ID, ChannelHost
 from miro_gen.transport.invoker import ZmqInvoker
-from miro_gen.transport.naming import NamingService, check_name
+from miro_gen.transport.naming import NamingService, check_name, naming_errors
 from miro_gen.transport.options import DEFAULT_NAMING, UsageError, naming_endpoint
 from miro_gen.transport.reactor import Reactor
 
@@ -111,7 +111,7 @@ def naming_main(argv: Sequence[str]) -> int:
     channels = [_host_channel(service, name) for name in ns.channel]
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: reactor.stop())
-    bound = service.adapter.socket.getsockopt_string(zmq.LAST_ENDPOINT)
+    bound = service.adapter.bound
     every = "://0.0.0.0:" in bound
     note = " (every interface: other hosts use this machine's address)" if every else ""
     print(f"naming service at {bound}{note}", flush=True)
@@ -142,7 +142,7 @@ def _iiop_endpoint(p: argparse.ArgumentParser, text: str) -> str:
 
 def _host_channel(service: NamingService, name: str) -> ChannelHost:
     """Host the event channel `name` in this process and bind it, lease-free, in `service`."""
-    bound = service.adapter.socket.getsockopt_string(zmq.LAST_ENDPOINT)
+    bound = service.adapter.bound
     bind_host = bound.split("://", 1)[1].rsplit(":", 1)[0]
     advertise = service.endpoint.split("://", 1)[1].rsplit(":", 1)[0]
     host = ChannelHost(service.adapter.reactor.context, bind_host, advertise)
@@ -169,9 +169,10 @@ def nslist_main(argv: Sequence[str]) -> int:
         p.error(str(e))
     ns = p.parse_args(client.argv[1:])
     try:
-        entries = client.naming.registry._list(ns.prefix)
+        with naming_errors(client.options.naming, "list names"):
+            entries = client.naming.registry._list(ns.prefix)
     except SystemException as e:
-        print(f"miro nslist: {client.options.naming}: {e}", file=sys.stderr)
+        print(f"miro nslist: {e.message}", file=sys.stderr)
         return 1
     finally:
         client.close()

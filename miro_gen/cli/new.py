@@ -1,9 +1,8 @@
-"""`miro new NAME` (scaffold a service in one of the manual's patterns) and `miro run NAME`."""
+"""`miro new NAME`: scaffold a service in one of the manual's patterns."""
 
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -60,35 +59,3 @@ def new_main(argv: Sequence[str]) -> int:
         f"  edit {args.dir}/{args.name}/ (see its README.md)"
     )
     return 0
-
-
-def run_main(argv: Sequence[str]) -> int:
-    if not argv or argv[0] in ("-h", "--help"):
-        print(
-            "usage: miro run NAME [ARGS...]\n\n"
-            "Run the service DIR/NAME of the project in the current folder (DIR: services, or "
-            "the MIRO_SERVICES environment variable) as `python -m DIR.NAME ARGS`, with the "
-            "project's generated code on the path.",
-            file=sys.stderr if not argv else sys.stdout,
-        )
-        return 2 if not argv else 0
-    name, rest = argv[0], list(argv[1:])
-    folder = os.environ.get("MIRO_SERVICES", "services")
-    project = Path.cwd()
-    if not (project / folder / name / "__main__.py").is_file():
-        print(
-            f"miro run: no service {name!r} in {project / folder} "
-            f"(make one with `miro new {name}`)",
-            file=sys.stderr,
-        )
-        return 1
-    from miro_gen.cli.freshness import before_running
-
-    if not before_running(project, "miro run"):  # never the old generated code
-        return 1
-    env = dict(os.environ)
-    paths = [str(project / "generated"), str(project), env.get("PYTHONPATH", "")]
-    env["PYTHONPATH"] = os.pathsep.join(p for p in paths if p)
-    sys.stdout.flush()
-    os.execve(sys.executable, [sys.executable, "-m", f"{folder}.{name}", *rest], env)
-    return 0  # pragma: no cover - execve does not return

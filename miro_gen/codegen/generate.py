@@ -73,6 +73,8 @@ def generated_files(modules: list[ModuleContext], outdir: Path) -> dict[str, str
             files[m.path] = render_module(m)
     for package in package_contexts(modules, outdir):
         files[package.path] = render_package_init(package)
+        if "." not in package.package:  # PEP 561: mypy checks against it where installed
+            files[package.package + "/py.typed"] = ""
     return files
 
 

@@ -19,7 +19,7 @@ from typing import NoReturn
 from miro_gen.exceptions import SystemException
 from miro_gen.params import Config, ParamsError, read_parameters
 from miro_gen.transport.events import EventChannelFactory, StructuredPushSupplier
-from miro_gen.transport.options import UsageError
+from miro_gen.transport.options import UsageError, service_parser
 from miro_gen.transport.server import Server
 
 
@@ -40,7 +40,7 @@ def start(
         server = Server(list(sys.argv if argv is None else argv))
     except UsageError as e:
         fail(name, e, 2)
-    parser = argparse.ArgumentParser(prog=name, description=(doc or "").split("\n\n")[0])
+    parser = service_parser(name, (doc or "").split("\n\n")[0])  # --help: the common ones too
     options(parser)
     return server, parser.parse_args(server.argv[1:])
 

@@ -25,11 +25,17 @@ class Console:
     """Writes labelled lines to `stream`; `table` (on a terminal) keeps a status table below."""
 
     def __init__(
-        self, stream: IO[str], labels: list[str], colour: bool, table: bool = False
+        self,
+        stream: IO[str],
+        labels: list[str],
+        colour: bool,
+        table: bool = False,
+        routine: bool = True,
     ) -> None:
         self.stream = stream
         self.colour = colour
         self.table = table
+        self.routine = routine  # show the launch's routine notes (started, up, stopping)
         self.width = max([len(LAUNCH_LABEL), *map(len, labels)])
         self.colours = {label: PALETTE[i % len(PALETTE)] for i, label in enumerate(labels)}
         self.lock = threading.Lock()
@@ -49,9 +55,10 @@ class Console:
             self._draw()
             self.stream.flush()
 
-    def note(self, text: str) -> None:
-        """A line of the launch's own."""
-        self.line(LAUNCH_LABEL, text)
+    def note(self, text: str, routine: bool = False) -> None:
+        """A line of the launch's own; a `routine` one only when the console shows them."""
+        if self.routine or not routine:
+            self.line(LAUNCH_LABEL, text)
 
     def show_table(self, rows: Callable[[], list[Row]]) -> None:
         """Keep the table of `rows()` (a header first) at the bottom until `close()`."""

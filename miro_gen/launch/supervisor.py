@@ -165,6 +165,7 @@ class Child:
     up_since: float | None = None
     next_start: float = 0.0
     groups: list[int] = field(default_factory=list)  # every process group it has had
+    was_up: bool = False  # it has been up at least once
 
     @property
     def name(self) -> str:
@@ -318,8 +319,9 @@ class Supervisor:
             if c.state == "starting" and c.ready.is_set():
                 c.state = "up"
                 c.up_since = now
+                c.was_up = True
                 if c.spec.ready:
-                    self.console.note(f"{c.name} is up")
+                    self.console.note(f"{c.name} is up", routine=True)
             if c.state == "waiting" or (c.state == "restarting" and now >= c.next_start):
                 reason = self._blocked(c)
                 c.waiting_for = reason
@@ -386,7 +388,7 @@ class Supervisor:
         c.reader = threading.Thread(target=self._copy, args=(c, proc), daemon=True)
         c.reader.start()
         again = f" (restart {c.restarts})" if c.restarts else ""
-        self.console.note(f"{c.name} started, pid {proc.pid}{again}")
+        self.console.note(f"{c.name} started, pid {proc.pid}{again}", routine=not c.restarts)
 
     def _command(self, c: Child) -> tuple[list[str], dict[str, str]]:
         spec = c.spec
@@ -470,7 +472,7 @@ class Supervisor:
             why = f"exited with {c.last_exit} after {c.restarts} restarts"
         elif code == 0:
             c.state = "exited"
-            self.console.note(f"{c.name} exited with status 0")
+            self.console.note(f"{c.name} exited with status 0", routine=True)
             return
         else:
             c.state = "failed"
@@ -485,7 +487,8 @@ class Supervisor:
         self.stopping.set()
         running = [c for c in self.children if c.proc is not None]
         if running:
-            self.console.note("stopping " + ", ".join(c.name for c in reversed(running)))
+            names = ", ".join(c.name for c in reversed(running))
+            self.console.note(f"stopping {names}", routine=True)
         for depth in sorted({c.depth for c in running}, reverse=True):
             wave = [c for c in running if c.depth == depth]
             for c in wave:
@@ -511,7 +514,7 @@ class Supervisor:
             if c.state in ("waiting", "restarting", "starting", "up"):
                 c.state = "stopped"
         if running:
-            self.console.note("all stopped")
+            self.console.note("all stopped", routine=True)
 
     # ---- the status table -----------------------------------------------------------------------
 
@@ -530,6 +533,11 @@ class Supervisor:
             up = since(c.up_since) if c.state == "up" else ""
             out.append((c.name, state, pid, str(c.restarts), c.last_exit, up))
         return out
+
+    @property
+    def all_came_up(self) -> bool:
+        """Whether every service has been up at least once."""
+        return all(c.was_up for c in self.children)
 
     def status(self) -> dict[str, Any]:
         """The children's states by name (for tests and tools)."""

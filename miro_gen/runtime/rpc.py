@@ -23,6 +23,7 @@ from miro_gen.exceptions import (
     NO_IMPLEMENT,
     OBJECT_NOT_EXIST,
     SYSTEM_EXCEPTIONS,
+    TRANSIENT,
     UNKNOWN,
     CompletionStatus,
     SystemException,
@@ -46,6 +47,9 @@ class ReplyStatus(enum.IntEnum):
     OK = 0
     USER_EXCEPTION = 1
     SYSTEM_EXCEPTION = 2
+
+
+_OK = ReplyStatus.OK
 
 
 class Reply(NamedTuple):
@@ -122,10 +126,14 @@ def raise_user_exception(reply: Reply, declared: tuple[type[UserException], ...]
 # ---- stubs --------------------------------------------------------------------------------------
 
 
-class Stub:
-    """Base of generated client proxies: holds the object reference and the invoker."""
+Rebind = Callable[[], ObjectRef]  # looks the object up again (in the naming service)
 
-    __slots__ = ("_invoker", "_ref", "_timeout")
+
+class Stub:
+    """Base of generated client proxies: holds the object reference and the invoker, and for a
+    stub found by name, how to look that name up again (`_set_rebind`)."""
+
+    __slots__ = ("_invoker", "_rebind", "_ref", "_timeout")
 
     _repo_id: ClassVar[str] = "IDL:omg.org/CORBA/Object:1.0"
     _interface_hash: ClassVar[str] = ""  # SHA-256 of the interface schema (see Servant)
@@ -134,16 +142,36 @@ class Stub:
         self._ref = ref
         self._invoker = invoker
         self._timeout = DEFAULT_TIMEOUT if timeout is None else timeout
+        self._rebind: Rebind | None = None
+
+    def _set_rebind(self, rebind: Rebind | None) -> None:
+        """Follow the object when its server moves (`rebind` looks it up again), or not (None).
+
+        A call that fails before its request was delivered (TRANSIENT or OBJECT_NOT_EXIST,
+        completed NO: the server's old endpoint is gone, or it restarted and the object's key
+        is new) looks the object up again and, if it is elsewhere now, is sent once more.
+        Never after delivery (COMM_FAILURE, TIMEOUT): at most once stays at most once.
+        `Client.resolve_name` sets this for the stubs it returns."""
+        self._rebind = rebind
 
     def _call(
         self, operation: str, body: bytes, declared: tuple[type[UserException], ...] = ()
     ) -> bytes:
         """Invoke and return the reply body; raise what the server raised."""
-        reply = self._invoker.invoke(self._ref, operation, body, timeout=self._timeout)
+        try:
+            reply = self._invoker.invoke(self._ref, operation, body, timeout=self._timeout)
+        except (TRANSIENT, OBJECT_NOT_EXIST) as exc:
+            reply = self._again(exc, operation, body)
         if reply is None:
             raise MARSHAL(f"no reply to {operation}", completed=CompletionStatus.MAYBE)
-        if reply.status == ReplyStatus.OK:
+        if reply.status is _OK:
             return reply.body
+        if reply.status == ReplyStatus.SYSTEM_EXCEPTION and self._undelivered(reply):
+            reply = self._invoker.invoke(self._ref, operation, body, timeout=self._timeout)
+            if reply is None:  # pragma: no cover - only oneway calls have no reply
+                raise MARSHAL(f"no reply to {operation}", completed=CompletionStatus.MAYBE)
+            if reply.status is _OK:
+                return reply.body
         if reply.status == ReplyStatus.USER_EXCEPTION:
             raise_user_exception(reply, declared)
         raise_system_exception(reply)
@@ -151,12 +179,50 @@ class Stub:
 
     def _send(self, operation: str, body: bytes) -> None:
         """Invoke a oneway operation: no reply is awaited."""
-        self._invoker.invoke(self._ref, operation, body, oneway=True, timeout=self._timeout)
+        try:
+            self._invoker.invoke(self._ref, operation, body, oneway=True, timeout=self._timeout)
+        except (TRANSIENT, OBJECT_NOT_EXIST) as exc:
+            self._again(exc, operation, body, oneway=True)
+
+    def _again(
+        self, exc: SystemException, operation: str, body: bytes, oneway: bool = False
+    ) -> Reply | None:
+        """After `exc` (raised by the invoker): once more at the object's new address if it
+        was not delivered and the object has moved; else `exc` stands."""
+        if self._rebind is None or exc.completed != CompletionStatus.NO or not self._moved():
+            raise exc
+        return self._invoker.invoke(
+            self._ref, operation, body, oneway=oneway, timeout=self._timeout
+        )
+
+    def _undelivered(self, reply: Reply) -> bool:
+        """Whether a system exception reply says the request ran nowhere (OBJECT_NOT_EXIST or
+        TRANSIENT, completed NO) and, for a stub that follows its name, the object moved."""
+        return (
+            self._rebind is not None
+            and reply.repo_id in _UNDELIVERED
+            and _not_completed(reply)
+            and self._moved()
+        )
+
+    def _moved(self) -> bool:
+        """Look the object up again; whether its reference changed (then it is used)."""
+        assert self._rebind is not None
+        try:
+            ref = self._rebind()
+        except Exception:  # not bound (yet), naming unreachable: the first failure stands
+            return False
+        if ref == self._ref:
+            return False
+        self._ref = ref
+        return True
 
     def _narrow(self, cls: type[StubT]) -> StubT:
         """This reference as a stub of `cls` (e.g. an `Object` received, as the interface it
         is known to be). Not checked here: a wrong guess fails with BAD_OPERATION on use."""
-        return cls(self._ref, self._invoker, self._timeout)
+        stub = cls(self._ref, self._invoker, self._timeout)
+        stub._rebind = self._rebind
+        return stub
 
     def __repr__(self) -> str:
         return f"<{type(self).__name__} stub for {self._ref.endpoint or '?'} key={self._ref.key!r}>"
@@ -166,6 +232,18 @@ class Stub:
 
     def __hash__(self) -> int:
         return hash(self._ref)
+
+
+_UNDELIVERED = frozenset((TRANSIENT._repo_id, OBJECT_NOT_EXIST._repo_id))
+
+
+def _not_completed(reply: Reply) -> bool:
+    """Whether a system exception reply says the operation did not run (completed NO)."""
+    try:
+        e = header_endianness(reply.body)
+        return bool(_SYSTEM_BODY[e].unpack_from(reply.body, 4)[1] == CompletionStatus.NO)
+    except Exception:
+        return False
 
 
 def make_stub(cls: type[Any], ref: ObjectRef, invoker: Invoker) -> Any:
@@ -192,8 +270,9 @@ F = TypeVar("F", bound=Callable[..., Any])
 def nonblocking(method: F) -> F:
     """Mark a servant method that returns at once: it never waits for data, never sleeps and
     never calls another object. A server runs such methods on the thread that receives the
-    request instead of its worker pool, which saves two thread hand-offs per call. A marked
-    method that blocks stops its whole process from serving meanwhile: mark only what is quick."""
+    request and never hands the socket to another thread meanwhile (which it does for other
+    methods that take long). A marked method that blocks stops its process from serving calls
+    meanwhile: mark only what is quick."""
     method._miro_nonblocking = True  # type: ignore[attr-defined]
     return method
 

@@ -5,8 +5,6 @@ from __future__ import annotations
 
 import importlib
 import importlib.util
-import keyword
-import re
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -14,11 +12,10 @@ from pathlib import Path
 import jinja2
 
 from miro_gen.codegen.render import template_dir
-from miro_gen.scaffold.interface import Interface, InterfaceError, load_interface
+from miro_gen.diagnostics import CompileError, Diagnostics
+from miro_gen.scaffold.interface import WIDTH, Interface, InterfaceError, load_interface
+from miro_gen.scaffold.names import name_problem
 from miro_gen.scaffold.patterns import PATTERNS, Parameter
-
-NAME = re.compile(r"^[a-z][a-z0-9]*(_[a-z0-9]+)*$")
-MAX_NAME = 20  # characters: the files made from the templates then fit in 100 columns
 
 
 class ScaffoldError(ValueError):
@@ -38,11 +35,9 @@ def camel_case(name: str) -> str:
 
 def check_name(name: str, target: Path) -> str:
     """The service's class name, after checking that `name` can be one and is free."""
-    if not NAME.match(name) or keyword.iskeyword(name) or len(name) > MAX_NAME:
-        raise ScaffoldError(
-            f"{name!r} is not a service name: use lower-case letters, digits and single "
-            f"underscores, starting with a letter, at most {MAX_NAME} characters (gps_logger)"
-        )
+    problem = name_problem(name)
+    if problem is not None:
+        raise ScaffoldError(problem)
     if target.exists():
         raise ScaffoldError(f"{target} exists already: nothing was written")
     camel = camel_case(name)
@@ -61,7 +56,13 @@ def import_block(*sections: list[str]) -> str:
     def key(line: str) -> tuple[bool, str]:
         return line.startswith("from "), line.split()[1].lower()
 
-    blocks = ["\n".join(sorted(set(section), key=key)) for section in sections if section]
+    def stdlib(line: str) -> bool:
+        return line.split()[1].split(".")[0] in sys.stdlib_module_names
+
+    # The standard library's modules first, whichever section a template named them in.
+    std = [line for section in sections for line in section if stdlib(line)]
+    rest = [[line for line in section if not stdlib(line)] for section in sections]
+    blocks = ["\n".join(sorted(set(section), key=key)) for section in (std, *rest) if section]
     return "\n\n".join(blocks)
 
 
@@ -74,43 +75,9 @@ def from_import(module: str, names: list[str]) -> str:
 
     ordered = sorted(set(names), key=key)
     line = f"from {module} import {', '.join(ordered)}"
-    if len(line) <= 100:
+    if len(line) <= WIDTH:
         return line
     return f"from {module} import (\n" + "".join(f"    {n},\n" for n in ordered) + ")"
-
-
-def separate_first_party(text: str, first_party: frozenset[str]) -> str:
-    """`text` with the imports of `first_party` packages taken out of each block of imports
-    into a block of their own, after the others: ruff's isort puts them in a section of their
-    own. In miro-gen's own repository miro_gen is first-party; elsewhere it is one more
-    package, sorted with the others, as the templates write it."""
-    lines = text.split("\n")
-    out: list[str] = []
-    others: list[str] = []
-    mine: list[str] = []
-    current: list[str] | None = None  # the list the statement being read goes to
-
-    def flush() -> None:
-        out.extend(others)
-        if others and mine:
-            out.append("")
-        out.extend(mine)
-        others.clear()
-        mine.clear()
-
-    for line in lines:
-        m = re.match(r"(?:from|import) ([\w.]+)", line)
-        if m:
-            current = mine if m.group(1).split(".")[0] in first_party else others
-            current.append(line)
-        elif current is not None and (line.startswith(" ") or line.startswith(")")):
-            current.append(line)  # the rest of a statement in parentheses
-        else:
-            flush()
-            current = None
-            out.append(line)
-    flush()
-    return "\n".join(out)
 
 
 def _environment() -> jinja2.Environment:
@@ -126,15 +93,58 @@ def _environment() -> jinja2.Environment:
 
 
 def compile_idl(idl: Path, project: Path, include_dirs: list[str]) -> None:
-    """`miro-idl -o generated IDL` into the project, so the interface can be imported."""
-    from miro_gen.cli import idl as idl_cli
+    """Compile `idl` into `project/generated` (as `miro-idl -o generated` would), so that the
+    interface can be imported; its problems are printed, and make a ScaffoldError."""
+    from miro_gen.codegen import generate
+    from miro_gen.idl.frontend import compile_idl as front_end
 
     out = project / "generated"
-    if idl_cli.main(["-o", str(out), *(f"-I{d}" for d in include_dirs), str(idl)]) != 0:
-        raise ScaffoldError(f"{idl} does not compile (see above): nothing was written")
+    diag = Diagnostics()
+    try:
+        spec = front_end(str(idl), include_dirs, {}, diag)
+        modules = generate.build_modules([(spec, str(idl))], diag)
+        diag.check()
+    except CompileError:
+        diag.print()
+        raise ScaffoldError(f"{idl} does not compile (see above): nothing was written") from None
+    diag.print()  # warnings
+    files = generate.generated_files(modules, out)
+    _write(files, out)
     if str(out) not in sys.path:
         sys.path.insert(0, str(out))
     importlib.invalidate_caches()
+
+
+def compile_parameters(xml: Path, project: Path) -> list[Path]:
+    """Compile a service's Parameters.xml into `project/generated` (as `miro-params -o
+    generated` would)."""
+    from miro_gen.params.compiler import generate
+    from miro_gen.params.compiler.build import build_modules
+    from miro_gen.params.compiler.loader import Loader
+    from miro_gen.params.compiler.pymodel import PyParamsModule
+
+    diag = Diagnostics()
+    try:
+        loader = Loader([], diag)
+        target = loader.load(xml)
+        targets = [target] if target is not None else []
+        built = build_modules(list(loader.files.values()), targets, {}, diag)
+        modules = [m for m in built if isinstance(m, PyParamsModule)]
+        diag.check()
+    except CompileError:
+        diag.print()
+        raise ScaffoldError(f"{xml} does not compile (see above)") from None
+    out = project / "generated"
+    return _write(generate.generated_files(modules, out), out)
+
+
+def _write(files: dict[str, str], out: Path) -> list[Path]:
+    """Write what changed of `files` under `out`; the paths written."""
+    from miro_gen.codegen.generate import changed_files, write_files
+
+    changed = changed_files(files, out)
+    write_files(files, changed, out)
+    return [out / rel for rel in changed]
 
 
 def scaffold(
@@ -193,8 +203,6 @@ def scaffold(
         "default_server": fill["server"],
         "default_channel": "EventChannel",
         "rate": f"{rate:g}",
-        "rate_low": int(rate * 0.7),
-        "rate_high": int(rate * 1.3) + 1,
     }
     env = _environment()
     outputs = {"__init__.py": "common/__init__.py.j2", "__main__.py": f"{pattern}/__main__.py.j2"}
@@ -203,20 +211,10 @@ def scaffold(
     outputs["README.md"] = "common/README.md.j2"
     outputs[f"test_{name}.py"] = f"{pattern}/test.py.j2"
     rendered = {out: env.get_template(tpl).render(context) for out, tpl in outputs.items()}
-    if (project / "miro_gen" / "__init__.py").is_file():  # miro-gen's own repository
-        mine = frozenset({"miro_gen"})
-        rendered = {
-            out: separate_first_party(text, mine) if out.endswith(".py") else text
-            for out, text in rendered.items()
-        }
     target.mkdir(parents=True)
     written = []
     for out, text in rendered.items():
         path = target / out
         path.write_text(text)
         written.append(path)
-    from miro_gen.cli import params as params_cli
-
-    if params_cli.main(["-o", str(project / "generated"), str(target / "Parameters.xml")]) != 0:
-        raise ScaffoldError(f"{target / 'Parameters.xml'} does not compile (see above)")
-    return written
+    return written + compile_parameters(target / "Parameters.xml", project)

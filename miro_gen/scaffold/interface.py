@@ -18,6 +18,9 @@ class Param:
     default: str  # a value of that type, for calls in tests
 
 
+WIDTH = 88  # columns of the code scaffolds lay out: ruff's default, so both settings agree
+
+
 @dataclass
 class Operation:
     name: str
@@ -25,6 +28,26 @@ class Operation:
     params: list[Param]
     returns: str
     result: str  # the default result, or "" for None
+
+    def definition(self, indent: int) -> str:
+        """Its `def` line, as ruff would format it: one line, or one parameter a line with
+        a trailing comma (which keeps it so at any line length)."""
+        params = ["self", *(f"{p.name}: {p.annotation}" for p in self.params)]
+        return _laid_out(f"def {self.name}(", params, f") -> {self.returns}:", indent)
+
+    def check(self, stub: str, indent: int) -> str:
+        """Test lines that call it through `stub` with plain arguments and compare the
+        result with the servant's default."""
+        args = [p.default for p in self.params]
+        call = _laid_out(f"{stub}.{self.name}(", args, ")", indent)
+        if not self.result:
+            return call
+        if "\n" not in call and indent + len(f"assert {call} == {self.result}") <= WIDTH:
+            return f"assert {call} == {self.result}"
+        pad = "\n" + " " * indent
+        return _laid_out(f"got = {stub}.{self.name}(", args, ")", indent) + (
+            f"{pad}assert got == {self.result}"
+        )
 
 
 @dataclass
@@ -129,3 +152,13 @@ def _default(t: object, used: set[str]) -> str:
     if isinstance(t, type) and (dataclasses.is_dataclass(t) or hasattr(t, "serialize")):
         return f"{_spell(t, used)}()"
     return "None"
+
+
+def _laid_out(head: str, items: list[str], tail: str, indent: int) -> str:
+    """`head items tail` on one line if it fits in WIDTH, else one item a line."""
+    one = f"{head}{', '.join(items)}{tail}"
+    if indent + len(one) <= WIDTH or not items:
+        return one
+    inner = " " * (indent + 4)
+    lines = [head, *(f"{inner}{item}," for item in items), " " * indent + tail]
+    return "\n".join(lines)

@@ -51,6 +51,7 @@ PATTERNS: dict[str, Pattern] = {
         (
             Parameter("ServerName", "std::string", "{server}", "The object to poll."),
             Parameter("Period", "ACE_Time_Value", "0, 500000", "Time between polls.", "s"),
+            Parameter("Wait", "ACE_Time_Value", "30, 0", "How long to wait for it at start.", "s"),
         ),
         interface="Miro::Example",
     ),

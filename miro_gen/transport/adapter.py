@@ -1,12 +1,13 @@
 """The server side of remote calls: one ROUTER socket serving all of a process's objects.
 
-Requests arrive on the reactor thread, which runs no servant code unless told it is quick (a
-method marked `@nonblocking`): each request goes to a bounded pool of worker threads, so a servant
-may block (wait for the next value) or call another service that calls back into this one
-(A -> B -> A) without stopping the process from serving. The reply is handed back to the reactor
-thread, which alone touches the socket. A frame that does not parse
-is logged and dropped; a request for an unknown object gets OBJECT_NOT_EXIST; a request whose
-caller has stopped waiting by the time a worker is free is not run.
+The socket is served by a leader/followers group of threads (`miro_gen.transport.dispatch`):
+the thread that receives a request runs its servant and sends the reply, and another thread
+takes over the socket when a servant blocks, so a servant may wait (for the next value) or call
+another service that calls back into this one (A -> B -> A) without stopping the process from
+serving. Methods marked `@nonblocking` always run on the receiving thread. The reactor runs no
+servant code. A frame that does not parse is logged and dropped; a request for an unknown
+object gets OBJECT_NOT_EXIST; a request that waited for a free thread until its caller stopped
+waiting is not run.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ import itertools
 import os
 import threading
 import time
-from concurrent.futures import ThreadPoolExecutor
+from collections.abc import Hashable
 
 import zmq
 
@@ -30,6 +31,7 @@ from miro_gen.runtime.rpc import (
     system_exception_reply,
 )
 from miro_gen.transport import frames
+from miro_gen.transport.dispatch import Dispatcher
 from miro_gen.transport.reactor import Reactor
 
 _log = logger("MIRO")
@@ -40,7 +42,8 @@ MAX_PENDING = 10_000  # requests queued for workers; beyond this, TRANSIENT (try
 
 class ObjectAdapter:
     """Serves servants on `bind` (a ZeroMQ endpoint, port `*` for any free one), advertising
-    `host` as the address other processes reach it at."""
+    `host` as the address other processes reach it at; at most `workers` servant calls run at
+    once. `reactor` gives the ZeroMQ context."""
 
     def __init__(
         self,
@@ -58,17 +61,15 @@ class ObjectAdapter:
         self.socket.setsockopt(zmq.HEARTBEAT_IVL, 500)
         self.socket.setsockopt(zmq.HEARTBEAT_TIMEOUT, 2000)
         self.socket.bind(bind)
-        bound = self.socket.getsockopt_string(zmq.LAST_ENDPOINT)
-        self.endpoint = _advertised(bound, host)
+        self.bound = self.socket.getsockopt_string(zmq.LAST_ENDPOINT)  # what it listens on
+        self.endpoint = _advertised(self.bound, host)
         self._servants: dict[bytes, Servant] = {}
         self._keys = itertools.count(1)
         self._prefix = f"{os.getpid()}.".encode()
         self._lock = threading.Lock()
-        self._pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="miro-worker")
-        self._pending = 0
-        self._closed = False
-        self._inline: dict[tuple[type, str], bool] = {}  # (servant class, operation): @nonblocking
-        reactor.call_soon(reactor.register, self.socket, self._readable)
+        self._quick: dict[tuple[type, str], bool] = {}  # (servant class, operation): @nonblocking
+        # From here on the socket belongs to the dispatcher's threads.
+        self._dispatcher = Dispatcher(self.socket, self._receive, workers, MAX_PENDING)
 
     # ---- objects --------------------------------------------------------------------------------
 
@@ -97,92 +98,76 @@ class ObjectAdapter:
                     return ObjectRef(servant._repo_id, self.endpoint, key)
         return self.activate(servant)
 
-    # ---- requests (reactor thread) --------------------------------------------------------------
+    # ---- requests (on the thread that owns the socket) ------------------------------------------
 
-    def _readable(self) -> None:
-        for _ in range(1000):  # then let timers and other sockets have a turn
-            try:
-                parts = self.socket.recv_multipart(zmq.NOBLOCK)
-            except zmq.Again:
-                return
-            self._request(parts)
-
-    def _request(self, parts: list[bytes]) -> None:
+    def _receive(self, parts: list[bytes]) -> _Call | list[bytes] | None:
+        """A message: the call to run, an immediate reply, or None (dropped)."""
         if len(parts) != 3:
             _log.warning("dropped a request of %d frames", len(parts) - 1)
-            return
+            return None
         peer, header, body = parts
         try:
             req = frames.decode_request(header)
         except frames.FrameError as e:
             _log.warning("dropped a request: %s", e)
-            return
-        with self._lock:
-            servant = self._servants.get(req.key)
+            return None
+        servant = self._servants.get(req.key)
         if servant is None:
-            self._reply(
-                peer,
-                req,
-                system_exception_reply(
-                    OBJECT_NOT_EXIST(f"no object with key {req.key!r} at {self.endpoint}")
-                ),
-            )
-            return
-        if self._pending >= MAX_PENDING:
-            self._reply(
-                peer,
-                req,
-                system_exception_reply(
-                    TRANSIENT(f"{self.endpoint} is overloaded", completed=CompletionStatus.NO)
-                ),
-            )
-            return
+            missing = OBJECT_NOT_EXIST(f"no object with key {req.key!r} at {self.endpoint}")
+            return _reply_frames(peer, req, system_exception_reply(missing))
         kind = (type(servant), req.operation)
-        inline = self._inline.get(kind)
-        if inline is None:
-            inline = self._inline[kind] = is_nonblocking(servant, req.operation)
-        if inline:
-            self._reply(peer, req, servant._invoke(req.operation, body, self.invoker))
-            return
-        self._pending += 1
-        received = time.monotonic()
-        self._pool.submit(self._work, servant, peer, req, body, received)
-
-    # ---- workers --------------------------------------------------------------------------------
-
-    def _work(
-        self, servant: Servant, peer: bytes, req: frames.Request, body: bytes, received: float
-    ) -> None:
-        reply = None
-        try:
-            late = req.timeout_ms and time.monotonic() - received > req.timeout_ms / 1000
-            if late:  # the caller has given up: running it now would surprise everyone
-                _log.notice("skipped %s: its caller stopped waiting", req.operation)
-                return
-            reply = servant._invoke(req.operation, body, self.invoker)
-        finally:  # one hand-off back to the reactor thread per request
-            self.reactor.call_soon(self._done, peer, req, reply)
-
-    def _done(self, peer: bytes, req: frames.Request, reply: Reply | None) -> None:
-        self._pending -= 1
-        if reply is not None:
-            self._reply(peer, req, reply)
-
-    def _reply(self, peer: bytes, req: frames.Request, reply: Reply) -> None:
-        if req.oneway or self._closed:
-            return
-        head = frames.encode_reply(frames.Reply(req.request_id, reply.status, reply.repo_id))
-        try:
-            self.socket.send_multipart([peer, head, reply.body], zmq.NOBLOCK)
-        except zmq.ZMQError as e:  # the caller is gone: nobody to tell
-            _log.notice("could not reply to %s: %s", req.operation, e)
+        quick = self._quick.get(kind)
+        if quick is None:
+            quick = self._quick[kind] = is_nonblocking(servant, req.operation)
+        return _Call(self, servant, peer, req, body, kind, quick)
 
     def close(self) -> None:
-        """Stop serving (from the reactor thread, or after the reactor has stopped)."""
-        self._closed = True
-        self.reactor.unregister(self.socket)
-        self._pool.shutdown(wait=False, cancel_futures=True)
-        self.socket.close(0)
+        """Stop serving (from any thread; the socket closes when its owner is free)."""
+        self._dispatcher.close()
+
+
+class _Call:
+    """One request to run: a dispatcher task."""
+
+    __slots__ = ("adapter", "body", "kind", "peer", "quick", "received", "request", "servant")
+
+    def __init__(
+        self,
+        adapter: ObjectAdapter,
+        servant: Servant,
+        peer: bytes,
+        request: frames.Request,
+        body: bytes,
+        kind: Hashable,
+        quick: bool,
+    ) -> None:
+        self.adapter = adapter
+        self.servant = servant
+        self.peer = peer
+        self.request = request
+        self.body = body
+        self.kind = kind
+        self.quick = quick
+        self.received = time.monotonic() if request.timeout_ms and not quick else 0.0
+
+    def late(self) -> bool:
+        timeout_ms = self.request.timeout_ms
+        return bool(timeout_ms) and time.monotonic() - self.received > timeout_ms / 1000
+
+    def run(self) -> list[bytes] | None:
+        req = self.request
+        reply = self.servant._invoke(req.operation, self.body, self.adapter.invoker)
+        return _reply_frames(self.peer, req, reply)
+
+    def refuse(self) -> list[bytes] | None:
+        busy = TRANSIENT(f"{self.adapter.endpoint} is overloaded", completed=CompletionStatus.NO)
+        return _reply_frames(self.peer, self.request, system_exception_reply(busy))
+
+
+def _reply_frames(peer: bytes, req: frames.Request, reply: Reply) -> list[bytes] | None:
+    if req.oneway:
+        return None
+    return [peer, frames.reply_header(req.request_id, reply.status, reply.repo_id), reply.body]
 
 
 def _advertised(bound: str, host: str | None) -> str:

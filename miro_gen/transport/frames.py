@@ -32,9 +32,14 @@ class FrameError(ValueError):
 
 # version, kind, flags, reserved, timeout ms, request id | key length (then key, op length, op)
 _REQUEST: Final = Struct("<BBBBIQH")
+_REQUEST_PREFIX: Final = Struct("<BBBBIQ")  # the part that changes from call to call
 # version, kind, status, reserved, reserved, request id | repository id length (then the id)
 _REPLY: Final = Struct("<BBBBIQH")
 _U16: Final = Struct("<H")
+_OK: Final = Status.OK
+_OK_REPLY: Final = bytes((VERSION, Kind.REPLY, Status.OK, 0))  # version, kind, status, reserved
+_REQUEST_KIND: Final = int(Kind.REQUEST)
+_ONEWAY_KIND: Final = int(Kind.ONEWAY)
 
 
 class Request(NamedTuple):
@@ -52,44 +57,90 @@ class Reply(NamedTuple):
 
 
 def encode_request(r: Request) -> bytes:
-    op = r.operation.encode("utf-8")
-    if len(r.key) > MAX_NAME or len(op) > MAX_NAME:
+    return request_header(request_tail(r.key, r.operation), r.request_id, r.timeout_ms, r.oneway)
+
+
+def request_tail(key: bytes, operation: str) -> bytes:
+    """The end of a request header, from the key length on: the same for every call of one
+    operation of one object, so callers build it once (`request_header` adds the rest)."""
+    op = operation.encode("utf-8")
+    if len(key) > MAX_NAME or len(op) > MAX_NAME:
         raise ValueError("object key and operation name are limited to 65535 bytes")
-    kind = Kind.ONEWAY if r.oneway else Kind.REQUEST
-    head = _REQUEST.pack(VERSION, kind, 0, 0, r.timeout_ms, r.request_id, len(r.key))
-    return head + r.key + _U16.pack(len(op)) + op
+    return _U16.pack(len(key)) + key + _U16.pack(len(op)) + op
+
+
+def request_header(tail: bytes, request_id: int, timeout_ms: int, oneway: bool = False) -> bytes:
+    """A request header: `encode_request` with the tail built beforehand."""
+    kind = _ONEWAY_KIND if oneway else _REQUEST_KIND
+    return _REQUEST_PREFIX.pack(VERSION, kind, 0, 0, timeout_ms, request_id) + tail
 
 
 def decode_request(frame: bytes) -> Request:
     try:
-        version, kind, _, _, timeout_ms, request_id, n_key = _REQUEST.unpack_from(frame)
-        _check_version(version)
-        if kind not in (Kind.REQUEST, Kind.ONEWAY):
+        version, kind, _, _, timeout_ms, request_id = _REQUEST_PREFIX.unpack_from(frame)
+        if version != VERSION:
+            _check_version(version)
+        if kind != _REQUEST_KIND and kind != _ONEWAY_KIND:
             raise FrameError(f"expected a request, got frame kind {kind}")
-        at = _REQUEST.size
-        key = bytes(frame[at : at + n_key])
-        at += n_key
-        (n_op,) = _U16.unpack_from(frame, at)
-        at += 2
-        op_bytes = bytes(frame[at : at + n_op])
-        if len(key) != n_key or len(op_bytes) != n_op or at + n_op != len(frame):
-            raise FrameError("request header is truncated or has trailing bytes")
-        operation = op_bytes.decode("utf-8")
+        tail = frame[_REQUEST_PREFIX.size :]
+        target = _targets.get(tail)
+        if target is None:
+            target = _target(tail)
     except (StructError, UnicodeDecodeError) as e:
         raise FrameError(f"malformed request header: {e}") from None
-    return Request(request_id, key, operation, timeout_ms, kind == Kind.ONEWAY)
+    return Request(request_id, target[0], target[1], timeout_ms, kind == _ONEWAY_KIND)
+
+
+_targets: dict[bytes, tuple[bytes, str]] = {}  # request tails seen, decoded (a few per object)
+MAX_TARGETS: Final = 4096
+
+
+def _target(tail: bytes) -> tuple[bytes, str]:
+    """The object key and operation of a request tail (`request_tail`), remembered."""
+    (n_key,) = _U16.unpack_from(tail)
+    at = 2
+    key = bytes(tail[at : at + n_key])
+    at += n_key
+    (n_op,) = _U16.unpack_from(tail, at)
+    at += 2
+    op_bytes = bytes(tail[at : at + n_op])
+    if len(key) != n_key or len(op_bytes) != n_op or at + n_op != len(tail):
+        raise FrameError("request header is truncated or has trailing bytes")
+    target = key, op_bytes.decode("utf-8")
+    if len(_targets) >= MAX_TARGETS:  # many objects, or someone making up keys: start again
+        _targets.clear()
+    _targets[tail] = target
+    return target
 
 
 def encode_reply(r: Reply) -> bytes:
-    repo = r.repo_id.encode("utf-8")
+    return reply_header(r.request_id, r.status, r.repo_id)
+
+
+def reply_header(request_id: int, status: int, repo_id: str = "") -> bytes:
+    """A reply header (`encode_reply` without building a `Reply` first)."""
+    if not repo_id:
+        return _REPLY.pack(VERSION, Kind.REPLY, status, 0, 0, request_id, 0)
+    repo = repo_id.encode("utf-8")
     if len(repo) > MAX_NAME:
         raise ValueError("repository ids are limited to 65535 bytes")
-    return _REPLY.pack(VERSION, Kind.REPLY, r.status, 0, 0, r.request_id, len(repo)) + repo
+    return _REPLY.pack(VERSION, Kind.REPLY, status, 0, 0, request_id, len(repo)) + repo
+
+
+def ok_reply_id(frame: bytes) -> int:
+    """The request id of a reply that says ok and carries no repository id (the common case,
+    checked with the least work); -1 for any other frame, which `decode_reply` then reads."""
+    if len(frame) == _REPLY.size and frame[:4] == _OK_REPLY and frame[16:] == b"\0\0":
+        return int.from_bytes(frame[8:16], "little")
+    return -1
 
 
 def decode_reply(frame: bytes) -> Reply:
     try:
         version, kind, status, _, _, request_id, n_repo = _REPLY.unpack_from(frame)
+        ok = not status and not n_repo and version == VERSION and kind == Kind.REPLY
+        if ok and len(frame) == _REPLY.size:  # the common case: ok, no repository id
+            return Reply(request_id, _OK)
         _check_version(version)
         if kind != Kind.REPLY:
             raise FrameError(f"expected a reply, got frame kind {kind}")

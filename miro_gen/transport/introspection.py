@@ -37,6 +37,7 @@ SERVICE_KEY = b"_service"
 SERVICES = "_services"  # the naming context, under a process's own, of the service objects
 CHANGED_EVENT = "ParametersChanged"
 APPLY_TIMEOUT = 5.0  # seconds a change waits for the reactor thread
+BIND_TIMEOUT = 2.0  # seconds each naming call of binding the service object may take
 STARTED = time.time()
 _log = log.logger("MIRO")
 
@@ -67,7 +68,13 @@ class ServiceImpl(MiroService__POA.Service):
         self.server = server
         self.name = name
         self.bound = False  # bind_service has been called
+        self.thread: threading.Thread | None = None  # binding it in the background
         self._supplier: Any = None
+
+    def join(self) -> None:
+        """Wait for a bind in the background to end (its naming calls are short)."""
+        if self.thread is not None and self.thread is not threading.current_thread():
+            self.thread.join(BIND_TIMEOUT * 3 + 1)
 
     def describe(self) -> MiroService.Description:
         from miro_gen.params.runtime import live
@@ -197,35 +204,49 @@ def bind_service(server: Server, impl: ServiceImpl, background: bool = False) ->
     """Bind the service object as `<context>/_services/<name>` (once). A name held by another
     live process gets this one's pid appended, unless $MIRO_SERVICE named it (a launch's
     restart: the name is this process's now). A process whose naming service does not answer
-    is left unbound. `background`: from a thread of its own (run() does not wait for it)."""
+    is left unbound. `background`: from a thread of its own, with sockets of its own, which the
+    server's clean-up waits for (`ServiceImpl.join`)."""
     if impl.bound:
         return
     impl.bound = True
-    if background:
-        with contextlib.suppress(RuntimeError):  # an interpreter on its way out
-            threading.Thread(
-                target=_bind, args=(server, impl), name="miro-service", daemon=True
-            ).start()
-    else:
-        _bind(server, impl)
+    if not background:
+        _bind(server, impl, server.invoker)
+        return
+
+    def bind() -> None:
+        from miro_gen.transport.invoker import ZmqInvoker
+
+        invoker = ZmqInvoker(server.context)
+        try:
+            _bind(server, impl, invoker)
+        finally:
+            invoker.close()
+
+    with contextlib.suppress(RuntimeError):  # an interpreter on its way out
+        impl.thread = threading.Thread(target=bind, name="miro-service", daemon=True)
+        impl.thread.start()
 
 
-def _bind(server: Server, impl: ServiceImpl) -> None:
+def _bind(server: Server, impl: ServiceImpl, invoker: Any) -> None:
     import MiroNaming
 
     from miro_gen.exceptions import SystemException
 
+    registry = MiroNaming.Registry(server.naming.registry._ref, invoker, timeout=BIND_TIMEOUT)
+    lease = int(server.lease * 1000)
     ref = server.adapter.reference_for(impl)
     full = f"{server.options.naming_context}/{SERVICES}/{impl.name}"
     entry = MiroNaming.Entry(full, ref.repo_id, ref.endpoint, ref.key, impl._interface_hash)
     try:
         if not os.environ.get("MIRO_SERVICE"):
             try:
-                server.naming.registry.bind(entry, server.owner, int(server.lease * 1000))
+                registry.bind(entry, server.owner, lease)
             except MiroNaming.AlreadyBound:
                 entry.name = f"{full}-{os.getpid()}"
-        server.bind_entry(entry)
-    except (SystemException, MiroNaming.InvalidName) as e:
+        registry.rebind(entry, server.owner, lease)
+        if not server.keep_entry(entry):  # the server stopped meanwhile: leave nothing behind
+            registry.unbind(entry.name)
+            return
+        _log.notice("bound %s in the naming service", entry.name)
+    except (SystemException, MiroNaming.InvalidName, MiroNaming.NotFound) as e:
         _log.debug("the service object is not bound: %s", e)
-    except Exception as e:  # zmq.ZMQError: the server closed meanwhile, and its sockets
-        _log.debug("the service object is not bound: the server stopped (%s)", e)

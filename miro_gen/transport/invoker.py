@@ -5,23 +5,29 @@ thread waits for its own replies only. Sockets are set up so that failures are r
 and never replayed (PITFALLS.md, ZeroMQ):
 
 * `IMMEDIATE`: a request is only queued on a live connection; if none comes up within the
-  connect time, the call fails with TRANSIENT (completed NO) and nothing is sent later;
+  connect time, or the server's host refuses the connection, the call fails with TRANSIENT
+  (completed NO) and nothing is sent later;
 * ZMTP heartbeats, and a socket monitor: a server that dies or vanishes during a call gives
   COMM_FAILURE (completed MAYBE) within about a heartbeat timeout;
 * after a timeout or a failure the socket is closed with linger 0 and a fresh one is made for the
   next call, so a request the caller gave up on is never delivered to a restarted server.
+
+A call is a send and a blocking receive with a time limit (checking the monitor every
+`CHECK_INTERVAL` while the reply is late); request headers are built once per object and
+operation.
 """
 
 from __future__ import annotations
 
 import contextlib
 import itertools
+import struct
 import threading
 import time
 from typing import Any
 
 import zmq
-from zmq.utils.monitor import parse_monitor_message
+from zmq.backend import Socket as _Socket
 
 from miro_gen.exceptions import COMM_FAILURE, TIMEOUT, TRANSIENT, CompletionStatus
 from miro_gen.log import logger
@@ -34,7 +40,18 @@ _log = logger("MIRO")
 CONNECT_TIMEOUT = 2.0  # seconds a call waits for a connection before TRANSIENT
 HEARTBEAT_IVL_MS = 500
 HEARTBEAT_TIMEOUT_MS = 2000
-_LOST = zmq.EVENT_DISCONNECTED | zmq.EVENT_CLOSED
+CHECK_INTERVAL_MS = 250  # while waiting for a reply, how often to look for a lost connection
+MAX_TAILS = 4096  # request header tails kept (objects x operations); then start again
+
+_send, _recv, _set = _Socket.send, _Socket.recv, _Socket.set  # without pyzmq's Python wrappers
+_NOBLOCK = int(zmq.NOBLOCK)
+_MORE = int(zmq.SNDMORE) | _NOBLOCK
+_RCVTIMEO = int(zmq.RCVTIMEO)
+_CONNECTED = int(zmq.EVENT_HANDSHAKE_SUCCEEDED)
+_REFUSED = int(zmq.EVENT_CONNECT_RETRIED)  # before a first connection: nobody listens there
+_LOST = int(zmq.EVENT_DISCONNECTED | zmq.EVENT_CLOSED)
+_EVENT = struct.Struct("=HI")  # a monitor message's first frame: event, value
+_OK = ReplyStatus.OK
 
 
 class _Connection:
@@ -50,33 +67,42 @@ class _Connection:
         s.setsockopt(zmq.HEARTBEAT_TIMEOUT, HEARTBEAT_TIMEOUT_MS)
         s.setsockopt(zmq.HEARTBEAT_TTL, HEARTBEAT_TIMEOUT_MS)
         s.setsockopt(zmq.RECONNECT_IVL, 100)
-        self.monitor = s.get_monitor_socket(zmq.EVENT_HANDSHAKE_SUCCEEDED | _LOST)
+        s.setsockopt(zmq.RCVTIMEO, CHECK_INTERVAL_MS)
+        self.rcvtimeo = CHECK_INTERVAL_MS
+        self.monitor = s.get_monitor_socket(_CONNECTED | _REFUSED | _LOST)
         s.connect(endpoint)
         self.connected = False
+        self.refused = False
         self.lost = False
-        self.poller = zmq.Poller()
-        self.poller.register(s, zmq.POLLIN)
-        self.poller.register(self.monitor, zmq.POLLIN)
 
     def read_monitor(self) -> None:
         while True:
             try:
-                event = parse_monitor_message(self.monitor.recv_multipart(zmq.NOBLOCK))
+                event, _ = _EVENT.unpack_from(self.monitor.recv_multipart(zmq.NOBLOCK)[0])
             except zmq.Again:
                 return
-            if event["event"] == zmq.EVENT_HANDSHAKE_SUCCEEDED:
+            except struct.error:  # pragma: no cover - libzmq sends well-formed events
+                continue
+            if event == _CONNECTED:
                 self.connected = True
-            elif event["event"] & _LOST and self.connected:
+            elif event == _REFUSED and not self.connected:
+                self.refused = True
+            elif event & _LOST and self.connected:
                 self.lost = True
 
     def wait_connected(self, deadline: float) -> bool:
-        while not self.connected:
+        while not self.connected and not self.refused:
             left = deadline - time.monotonic()
             if left <= 0:
                 return False
             if self.monitor.poll(int(left * 1000) + 1):
                 self.read_monitor()
-        return True
+        return self.connected
+
+    def set_rcvtimeo(self, ms: int) -> None:
+        if ms != self.rcvtimeo:
+            _set(self.socket, _RCVTIMEO, ms)
+            self.rcvtimeo = ms
 
     def close(self) -> None:
         with contextlib.suppress(zmq.ZMQError):
@@ -94,6 +120,7 @@ class ZmqInvoker:
         self.adapter = adapter
         self._local = threading.local()
         self._ids = itertools.count(1)
+        self._tails: dict[tuple[bytes, str], bytes] = {}
         self._all: set[_Connection] = set()
         self._lock = threading.Lock()
         self._closed = False
@@ -109,27 +136,43 @@ class ZmqInvoker:
         oneway: bool = False,
         timeout: float | None = None,
     ) -> Reply | None:
-        if not ref.endpoint:
+        endpoint = ref.endpoint
+        if self._closed:
+            raise TRANSIENT("the invoker is closed")
+        if not endpoint:
             raise TRANSIENT("the object reference has no endpoint (nil reference?)")
-        wait = 0.0 if timeout is None else max(0.0, timeout)
-        started = time.monotonic()
-        deadline = started + wait if wait else float("inf")
-        conn = self._connection(ref.endpoint)
-        if not conn.wait_connected(min(deadline, started + CONNECT_TIMEOUT)):
-            self._drop(conn)
-            raise TRANSIENT(f"cannot reach {ref.endpoint} for {operation}")
-        request_id = next(self._ids)
-        header = frames.encode_request(
-            frames.Request(request_id, ref.key, operation, int(wait * 1000), oneway)
-        )
+        wait = timeout if timeout is not None and timeout > 0 else 0.0
+        start = time.monotonic()
         try:
-            conn.socket.send_multipart([header, body], zmq.NOBLOCK)
-        except zmq.Again:
+            conn: _Connection = self._local.conns[endpoint]
+        except (AttributeError, KeyError):
+            conn = self._connection(endpoint)
+        if not conn.connected:
+            self._connect(conn, operation, start + wait if wait else start + CONNECT_TIMEOUT)
+        tail = self._tails.get((ref.key, operation))
+        if tail is None:
+            tail = self._tail(ref.key, operation)
+        request_id = next(self._ids)
+        sock = conn.socket
+        try:
+            _send(sock, frames.request_header(tail, request_id, int(wait * 1000), oneway), _MORE)
+            _send(sock, body, _NOBLOCK)
+        except zmq.ZMQError:
             self._drop(conn)
-            raise TRANSIENT(f"cannot send {operation} to {ref.endpoint}") from None
+            raise TRANSIENT(f"cannot send {operation} to {endpoint}") from None
         if oneway:
             return None
-        return self._await(conn, request_id, operation, deadline)
+        if wait and wait * 1000 < conn.rcvtimeo:
+            conn.set_rcvtimeo(int(wait * 1000) + 1)
+        return self._await(conn, request_id, operation, start + wait if wait else float("inf"))
+
+    def _connect(self, conn: _Connection, operation: str, deadline: float) -> None:
+        """Wait for the connection's handshake until `deadline` (or the connect timeout);
+        TRANSIENT (completed NO: nothing was sent) when it is refused or does not come."""
+        if not conn.wait_connected(min(deadline, time.monotonic() + CONNECT_TIMEOUT)):
+            self._drop(conn)
+            why = "connection refused" if conn.refused else "no connection in time"
+            raise TRANSIENT(f"cannot reach {conn.endpoint} for {operation}: {why}")
 
     def reference_for(self, servant: Servant) -> ObjectRef:
         if self.adapter is None:
@@ -140,50 +183,69 @@ class ZmqInvoker:
     # ---- internals ------------------------------------------------------------------------------
 
     def _await(self, conn: _Connection, request_id: int, operation: str, deadline: float) -> Reply:
-        while True:
-            left = deadline - time.monotonic()
-            if left <= 0:
-                self._drop(conn)
-                raise TIMEOUT(
-                    f"{operation}: no reply from {conn.endpoint} in time",
-                    completed=CompletionStatus.MAYBE,
-                )
-            wait_ms = -1 if left == float("inf") else min(int(left * 1000) + 1, 2**31 - 1)
-            events = dict(conn.poller.poll(wait_ms))
-            if conn.monitor in events:
-                conn.read_monitor()
-                if conn.lost:
-                    self._drop(conn)
-                    raise COMM_FAILURE(
-                        f"{operation}: lost the connection to {conn.endpoint}",
-                        completed=CompletionStatus.MAYBE,
-                    )
-            if conn.socket in events:
-                reply = self._receive(conn, request_id)
-                if reply is not None:
-                    return reply
-
-    def _receive(self, conn: _Connection, request_id: int) -> Reply | None:
+        """The reply to `request_id`: a blocking receive, interrupted every CHECK_INTERVAL to
+        look for a lost connection and the deadline."""
+        sock = conn.socket
         while True:
             try:
-                parts = conn.socket.recv_multipart(zmq.NOBLOCK)
+                frame = _recv(sock, 0, False)
+                parts = [frame.bytes]
+                while frame.more:
+                    frame = _recv(sock, _NOBLOCK, False)
+                    parts.append(frame.bytes)
             except zmq.Again:
-                return None
-            if len(parts) != 2:
-                _log.warning("dropped a reply of %d frames from %s", len(parts), conn.endpoint)
+                self._check(conn, operation, deadline)
                 continue
-            try:
-                head = frames.decode_reply(parts[0])
-            except frames.FrameError as e:
-                _log.warning("dropped a reply from %s: %s", conn.endpoint, e)
-                continue
-            if head.request_id != request_id:  # a late reply to an earlier call
-                continue
-            return Reply(ReplyStatus(head.status), parts[1], head.repo_id)
+            if len(parts) == 2 and frames.ok_reply_id(parts[0]) == request_id:
+                if conn.rcvtimeo != CHECK_INTERVAL_MS:
+                    conn.set_rcvtimeo(CHECK_INTERVAL_MS)
+                return Reply(_OK, parts[1])  # the common case
+            reply = self._other_reply(conn, parts, request_id)
+            if reply is not None:
+                if conn.rcvtimeo != CHECK_INTERVAL_MS:
+                    conn.set_rcvtimeo(CHECK_INTERVAL_MS)
+                return reply
+
+    def _check(self, conn: _Connection, operation: str, deadline: float) -> None:
+        """No reply yet: COMM_FAILURE if the connection is lost, TIMEOUT past `deadline`."""
+        conn.read_monitor()
+        if conn.lost:
+            self._drop(conn)
+            raise COMM_FAILURE(
+                f"{operation}: lost the connection to {conn.endpoint}",
+                completed=CompletionStatus.MAYBE,
+            )
+        left = deadline - time.monotonic()
+        if left <= 0:
+            self._drop(conn)
+            raise TIMEOUT(
+                f"{operation}: no reply from {conn.endpoint} in time",
+                completed=CompletionStatus.MAYBE,
+            )
+        conn.set_rcvtimeo(min(CHECK_INTERVAL_MS, int(left * 1000) + 1))
+
+    def _other_reply(self, conn: _Connection, parts: list[bytes], request_id: int) -> Reply | None:
+        """A message that is not an ok reply to `request_id`: an exception reply to it, or
+        None (a late reply to an earlier call, or a malformed one: logged and dropped)."""
+        if len(parts) != 2:
+            _log.warning("dropped a reply of %d frames from %s", len(parts), conn.endpoint)
+            return None
+        try:
+            head = frames.decode_reply(parts[0])
+        except frames.FrameError as e:
+            _log.warning("dropped a reply from %s: %s", conn.endpoint, e)
+            return None
+        if head.request_id != request_id:  # a late reply to an earlier call
+            return None
+        return Reply(ReplyStatus(head.status), parts[1], head.repo_id)
+
+    def _tail(self, key: bytes, operation: str) -> bytes:
+        if len(self._tails) >= MAX_TAILS:
+            self._tails.clear()
+        tail = self._tails[(key, operation)] = frames.request_tail(key, operation)
+        return tail
 
     def _connection(self, endpoint: str) -> _Connection:
-        if self._closed:
-            raise TRANSIENT("the invoker is closed")
         conns: dict[str, _Connection] | None = getattr(self._local, "conns", None)
         if conns is None:
             conns = self._local.conns = {}

@@ -8,16 +8,18 @@ naming service learns the names of the live servers at their next renewal.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import threading
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
 import MiroNaming
 import MiroNaming__POA
 
-from miro_gen.exceptions import TRANSIENT
+from miro_gen.exceptions import COMM_FAILURE, TIMEOUT, TRANSIENT
 from miro_gen.log import logger
 from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.transport.adapter import ObjectAdapter
@@ -31,6 +33,7 @@ NAMING_OWNER = "miro-naming"  # the owner of the entries the naming service bind
 DEFAULT_LEASE = 3.0  # seconds an entry lives without renewal
 PURGE_INTERVAL = 0.25  # seconds between sweeps for expired entries
 Entry = MiroNaming.Entry
+NAMING_HINT = "is `miro naming` running? see --naming / MIRO_NAMING"
 
 
 def check_name(name: str) -> str:
@@ -166,6 +169,10 @@ class NamingClient:
     def resolve(self, name: str) -> MiroNaming.Entry:
         """The entry of `name`: a path as it is; a plain name in this process's context first,
         then at the root. NotFound names what was looked for."""
+        with naming_errors(self.registry._ref.endpoint, f"resolve {name}"):
+            return self._resolve(name)
+
+    def _resolve(self, name: str) -> MiroNaming.Entry:
         if "/" in name:
             return self.registry.resolve(name)
         try:
@@ -177,5 +184,16 @@ class NamingClient:
                 raise MiroNaming.NotFound(name=f"{self.context}/{name}") from None
 
 
-def unreachable(endpoint: str, exc: BaseException) -> TRANSIENT:
-    return TRANSIENT(f"the naming service at {endpoint} cannot be reached: {exc}")
+@contextlib.contextmanager
+def naming_errors(endpoint: str, what: str) -> Iterator[None]:
+    """Failures to reach the naming service, said as such, with what to do about them."""
+    try:
+        yield
+    except (TRANSIENT, COMM_FAILURE, TIMEOUT) as e:
+        reason = e.message.rsplit(": ", 1)[-1] if ": " in e.message else e.message
+        raise TRANSIENT(
+            f"cannot {what}: the naming service at {endpoint} cannot be reached ({reason}): "
+            f"{NAMING_HINT}",
+            e.minor,
+            e.completed,
+        ) from None

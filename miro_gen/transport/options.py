@@ -23,6 +23,7 @@ with a message naming the option.
 
 from __future__ import annotations
 
+import argparse
 import os
 import re
 import socket
@@ -173,3 +174,29 @@ def _context(text: str) -> str:
     if not parts:
         raise UsageError(f"the naming context {text!r} is empty")
     return "/".join(parts)
+
+
+COMMON_HELP = (
+    ("--naming URL", "where the naming service is: tcp://HOST:PORT (env MIRO_NAMING; default "
+     f"{DEFAULT_NAMING})"),
+    ("-ORBInitRef NameService=iioploc://HOST:PORT/NameService", "the same, as Miro wrote it"),
+    ("-MNC NAME", "naming context (-MiroNamingContext; default: the host name)"),
+    ("-MLL N", "log level, 0 emergency ... 4 warning (default) ... 9 prattle (-MiroLogLevel)"),
+    ("-MLF CAT [CAT ...]", "log categories to show (-MiroLogFilter; default: all)"),
+    ("-MCF FILE", "run-time parameter document (-MiroConfigFile; default: <hostname>.xml)"),
+    ("--host ADDR", "the address other machines reach this process at (env MIRO_HOST)"),
+    ("--clock wall|log|log:CHANNEL", "run on wall time (default) or a log player's time"),
+)  # fmt: skip
+
+
+def service_parser(prog: str, description: str) -> argparse.ArgumentParser:
+    """An argument parser for a service's own options, parsing what `Server(argv)` or
+    `Client(argv)` left in `argv` (`parser.parse_args(server.argv[1:])`): --help works, an
+    unknown option is an error (status 2), and the help lists the common options too."""
+    lines = [f"  {flag}\n      {text}" for flag, text in COMMON_HELP]
+    return argparse.ArgumentParser(
+        prog=prog,
+        description=description,
+        epilog="common options (every service takes them):\n" + "\n".join(lines),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )

@@ -2,7 +2,7 @@
 
 Like ACE's reactor in Miro, a process has one, and everything that reacts to input runs on it:
 a socket or descriptor becomes readable and its handler runs; a timer expires and its handler
-runs. Handlers must not block (a blocking servant runs on the server's worker pool instead).
+runs. Handlers must not block (servants run on the server's own threads, never here).
 Other threads hand work to the reactor with `call_soon`, which wakes it through a socket pair;
 a ZeroMQ socket must only be used by the thread that owns it, so this is how they reach it.
 

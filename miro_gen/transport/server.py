@@ -5,8 +5,8 @@
     server.run()                              # until SIGINT / SIGTERM, then unbinds its names
 
     client = Client(sys.argv)
-    example = client.resolve_name("ExampleA", Miro.Example)
-    example.setData(0.0, 10.0)
+    example = client.resolve_name("ExampleA", Miro.Example, wait=10)  # up to 10 s for it
+    example.setData(0.0, 10.0)                # follows ExampleA if its server restarts
 
 A Server owns the process's reactor and one ROUTER socket for all its objects, bound and
 advertised as `miro_gen.transport.addresses` decides (reachable from the naming service's host,
@@ -20,31 +20,31 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import os
-import signal
 import sys
 import threading
+import time
 import uuid
 from collections.abc import Callable, MutableSequence, Sequence
-from types import FrameType
 from typing import Any, TypeVar
 
 import MiroNaming
 import zmq
 
-from miro_gen import log
-from miro_gen.exceptions import SystemException
+from miro_gen import lifecycle, log
+from miro_gen.exceptions import TRANSIENT, SystemException
 from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.runtime.rpc import Servant, Stub
 from miro_gen.transport.adapter import ObjectAdapter
 from miro_gen.transport.addresses import server_addresses
 from miro_gen.transport.introspection import SERVICE_KEY, ServiceImpl, bind_service, service_name
 from miro_gen.transport.invoker import ZmqInvoker
-from miro_gen.transport.naming import DEFAULT_LEASE, NamingClient
+from miro_gen.transport.naming import DEFAULT_LEASE, NamingClient, naming_errors
 from miro_gen.transport.options import CommonOptions, parse_common_options
 from miro_gen.transport.reactor import Reactor
 
 StubT = TypeVar("StubT", bound=Stub)
 RENEW_TIMEOUT = 2.0  # seconds a lease renewal may take
+WAIT_STEP = 0.5  # at most this many seconds between two looks for a name being waited for
 _log = log.logger("MIRO")
 
 
@@ -74,10 +74,16 @@ class Client:
         self.invoker = ZmqInvoker(self.context)
         self.naming = NamingClient(self.invoker, self.options.naming, self.options.naming_context)
 
-    def resolve_name(self, name: str, stub: type[StubT]) -> StubT:
+    def resolve_name(
+        self, name: str, stub: type[StubT], *, wait: float = 0.0, rebind: bool = True
+    ) -> StubT:
         """A stub of the object bound to `name` (in this process's naming context first, then
-        at the root; a path such as `robot1/ExampleA` as it is)."""
-        entry = self.naming.resolve(name)
+        at the root; a path such as `robot1/ExampleA` as it is).
+
+        `wait`: seconds to wait for the name to be bound (and the naming service to answer),
+        as ROS 2's wait_for_service; then MiroNaming.NotFound (or TRANSIENT). `rebind`: the
+        stub looks the name up again when its server has moved (`Stub._set_rebind`)."""
+        entry = self._resolve(name, wait)
         if entry.repo_id != stub._repo_id:
             _log.debug("%s is a %s, used as a %s", entry.name, entry.repo_id, stub._repo_id)
         elif entry.type_hash and stub._interface_hash and entry.type_hash != stub._interface_hash:
@@ -89,7 +95,34 @@ class Client:
                 entry.type_hash[:12],
                 stub._interface_hash[:12],
             )
-        return stub(ObjectRef(entry.repo_id, entry.endpoint, entry.key), self.invoker)
+        found = stub(ObjectRef(entry.repo_id, entry.endpoint, entry.key), self.invoker)
+        if rebind:
+            found._set_rebind(lambda: self._lookup_again(name))
+        return found
+
+    def _resolve(self, name: str, wait: float) -> MiroNaming.Entry:
+        deadline = time.monotonic() + max(0.0, wait)
+        step = 0.05
+        said = False
+        while True:
+            try:
+                return self.naming.resolve(name)
+            except (MiroNaming.NotFound, TRANSIENT) as e:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise
+                if not said:
+                    why = e.message if isinstance(e, TRANSIENT) else f"{e.name} is not bound yet"
+                    _log.notice("waiting for %s: %s", name, why)
+                    said = True
+                time.sleep(min(step, left))
+                step = min(step * 2, WAIT_STEP)
+
+    def _lookup_again(self, name: str) -> ObjectRef:
+        entry = self.naming.resolve(name)
+        ref = ObjectRef(entry.repo_id, entry.endpoint, entry.key)
+        _log.debug("%s looked up again: %s", entry.name, entry.endpoint)
+        return ref
 
     def close(self) -> None:
         self.invoker.close()
@@ -131,6 +164,7 @@ class Server(Client):
         self._names_lock = threading.Lock()
         self._stop = threading.Event()
         self._renewer: threading.Thread | None = None
+        self._cleaned = False
         self._on_shutdown: list[Callable[[], object]] = []
         self.hosted_channels: dict[str, Any] = {}  # event channels hosted here, by full name
         # The service object (transport/introspection.py): bound when run() starts.
@@ -155,12 +189,21 @@ class Server(Client):
 
     def bind_entry(self, entry: MiroNaming.Entry) -> None:
         """Bind a naming entry under this server's lease (objects, event channels)."""
-        self.naming.registry.rebind(entry, self.owner, int(self.lease * 1000))
-        with self._names_lock:
-            self._names[entry.name] = entry
-        self._start_renewing()
+        with naming_errors(self.options.naming, f"bind {entry.name}"):
+            self.naming.registry.rebind(entry, self.owner, int(self.lease * 1000))
+        self.keep_entry(entry)
         _log.notice("bound %s in the naming service", entry.name)
         bind_service(self, self.service)  # with its first name: nothing can come between
+
+    def keep_entry(self, entry: MiroNaming.Entry) -> bool:
+        """Keep `entry`, bound already, under this server's lease (renewed, bound again in a
+        restarted naming service, unbound at the end); False when the server is stopping."""
+        with self._names_lock:
+            if self._stop.is_set():
+                return False
+            self._names[entry.name] = entry
+        self._start_renewing()
+        return True
 
     def bound_entries(self) -> list[MiroNaming.Entry]:
         """The naming entries this server keeps bound."""
@@ -178,28 +221,29 @@ class Server(Client):
         self._on_shutdown.append(fn)
 
     def run(self) -> None:
-        """Serve until SIGINT, SIGTERM or `shutdown()`; then unbind this server's names."""
-        handlers = {}
-        if threading.current_thread() is threading.main_thread():
-            for sig in (signal.SIGINT, signal.SIGTERM):
-                handlers[sig] = signal.signal(sig, self._on_signal)
-        bind_service(self, self.service, background=True)  # a consumer's: run() goes on
-        try:
-            self._reactor.run()
-        finally:
-            for sig, old in handlers.items():
-                signal.signal(sig, old)
-            self._cleanup()
+        """Serve until SIGINT, SIGTERM or `shutdown()`; then unbind this server's names. A
+        signal that came before (see `miro_gen.lifecycle`) ends it at once; one that comes
+        during the clean-up does not interrupt it."""
+        with lifecycle.signals_stop(self.shutdown) as signals:
+            try:
+                if not signals.pending:
+                    bind_service(self, self.service, background=True)  # a consumer's
+                    self._reactor.run()
+            finally:
+                signals.cleaning_up()
+                self._cleanup()
 
     def shutdown(self) -> None:
         """Make `run()` return (from any thread)."""
         self._reactor.stop()
 
-    def _on_signal(self, signum: int, frame: FrameType | None) -> None:
-        self.shutdown()
-
     def _cleanup(self) -> None:
+        if self._cleaned:
+            return
+        self._cleaned = True
+        lifecycle.forget(self._cleanup)
         self._stop.set()
+        self.service.join()  # a bind of the service object still under way
         if self._renewer is not None:  # its socket must be closed by no one else while in use
             self._renewer.join(RENEW_TIMEOUT + 1)
         with self._names_lock:
@@ -220,6 +264,7 @@ class Server(Client):
 
     def _start_renewing(self) -> None:
         if self._renewer is None:
+            lifecycle.at_interrupt(self._cleanup)  # unbind if interrupted before run()
             self._registry_for_renewal = MiroNaming.Registry(
                 self.naming.registry._ref, self.invoker, timeout=RENEW_TIMEOUT
             )

@@ -23,6 +23,10 @@ import argparse
 import sys
 from pathlib import Path
 
+from miro_gen.lifecycle import defer_signals, run_main
+
+if __name__ == "__main__":
+    defer_signals()  # first: a Ctrl-C while it starts ends it quietly (status 130)
 if __package__ in (None, ""):  # run as a script (python services/camera): the generated code
     _here = Path(__file__).resolve().parent  # beside the checkout, and this folder as the
     sys.path[:0] = [str(_here.parents[1] / "generated"), str(_here.parent)]  # package it is
@@ -31,7 +35,6 @@ if __package__ in (None, ""):  # run as a script (python services/camera): the g
 import Miro
 import Miro__POA
 from Miro.CameraParameters import CameraParameters
-
 from miro_gen import (
     Implementation,
     StructuredPushSupplier,
@@ -116,4 +119,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run_main(main, "camera")

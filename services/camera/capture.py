@@ -18,7 +18,6 @@ from typing import Any
 import cv2
 import Miro
 from Miro.CameraParameters import CameraParameters
-
 from miro_gen import log
 
 _log = log.logger("Camera")

@@ -33,6 +33,10 @@ import sys
 import time
 from pathlib import Path
 
+from miro_gen.lifecycle import defer_signals, run_main
+
+if __name__ == "__main__":
+    defer_signals()  # first: a Ctrl-C while it starts ends it quietly (status 130)
 if __package__ in (None, ""):  # run as a script (python services/gps): the generated code
     _here = Path(__file__).resolve().parent  # beside the checkout, and this folder as the
     sys.path[:0] = [str(_here.parents[1] / "generated"), str(_here.parent)]  # package it is
@@ -41,7 +45,6 @@ if __package__ in (None, ""):  # run as a script (python services/gps): the gene
 import Miro
 import Miro__POA
 from Miro.GpsParameters import GpsParameters
-
 from miro_gen import (
     Implementation,
     StructuredPushSupplier,
@@ -171,4 +174,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run_main(main, "gps")

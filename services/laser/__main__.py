@@ -37,13 +37,16 @@ import threading
 import time
 from pathlib import Path
 
+from miro_gen.lifecycle import defer_signals, run_main
+
+if __name__ == "__main__":
+    defer_signals()  # first: a Ctrl-C while it starts ends it quietly (status 130)
 if __package__ in (None, ""):  # run as a script from a checkout: the generated code beside it
     sys.path[:0] = [str(Path(__file__).resolve().parents[1] / "generated")]
 
 import Miro
 import Miro__POA
 from Miro.LaserParameters import LaserParameters
-
 from miro_gen import (
     Implementation,
     StructuredPushSupplier,
@@ -400,4 +403,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run_main(main, "laser")

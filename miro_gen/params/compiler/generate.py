@@ -71,4 +71,6 @@ def generated_files(modules: list[PyParamsModule], outdir: Path) -> dict[str, st
             .get_template("params/package_init.py.j2")
             .render(namespace=ns.replace(".", "::"), modules=listed)
         )
+        if "." not in pkg:  # PEP 561: mypy checks against it where it is installed
+            files[f"{folder}/py.typed"] = ""
     return files

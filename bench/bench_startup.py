@@ -1,0 +1,246 @@
+"""Benchmark: from process start to "resolvable in the naming service", and the idle memory
+of a service, against Pyro5's equivalent (a daemon registering one object in its name server).
+
+    python bench/bench_startup.py [--runs N]
+
+Each run starts a fresh process and polls the naming service from this one until the name
+resolves; the time is from the start of the process to the first successful lookup. Rows:
+ExampleA (`python services/exampleA.py`), the same through `miro run exampleA` (in the same
+interpreter), a `miro new` server (it reads its run-time parameters, which loads the parameter
+runtime), and the Pyro5 server (`pip install miro-gen[bench]`). The idle resident
+memory (VmRSS) of each is read a second after it became resolvable. Prints the medians and
+the ratio of each to Pyro5. Target (issue "Services that survive their first day"): at most
+2x Pyro5 (aim: equal). The machine's load changes the absolute times: runs are interleaved,
+so that it falls on every row alike.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import signal
+import socket
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path[:0] = [str(ROOT / "generated"), str(ROOT)]
+
+import MiroNaming  # noqa: E402
+import zmq  # noqa: E402
+
+from miro_gen.transport.invoker import ZmqInvoker  # noqa: E402
+from miro_gen.transport.naming import NamingClient  # noqa: E402
+
+TARGET = 2.0
+PYRO = "Pyro5 daemon + name server"
+
+try:
+    import Pyro5.api as pyro
+    import Pyro5.errors as pyro_errors
+except ImportError:  # optional: pip install miro-gen[bench]
+    pyro = None
+
+PYRO_SERVER = """
+import sys
+import Pyro5.api
+
+@Pyro5.api.expose
+class Example:
+    def getData(self):
+        return (1.0, 2.0)
+
+daemon = Pyro5.api.Daemon(host="127.0.0.1")
+ns = Pyro5.api.locate_ns(host="127.0.0.1", port=int(sys.argv[1]))
+ns.register("bench.Example", daemon.register(Example))
+daemon.requestLoop()
+"""
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def rss_mb(pid: int) -> float:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024
+    return float("nan")
+
+
+def env() -> dict[str, str]:
+    e = dict(os.environ)
+    e["PYTHONPATH"] = os.pathsep.join([str(ROOT / "generated"), str(ROOT)])
+    return e
+
+
+def timed_start(
+    args: list[str], resolvable: Callable[[], bool], cwd: Path | None = None
+) -> tuple[float, float]:
+    """Start `args`; seconds until `resolvable()`, and the idle RSS (MB) a second later."""
+    start = time.perf_counter()
+    proc = subprocess.Popen(args, cwd=cwd, env=env(), stdout=subprocess.DEVNULL)
+    try:
+        while not resolvable():
+            if proc.poll() is not None:
+                raise RuntimeError(f"{args} ended with status {proc.returncode}")
+            time.sleep(0.001)
+        took = time.perf_counter() - start
+        time.sleep(1.0)
+        return took, rss_mb(proc.pid)
+    finally:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+class Naming:
+    """`miro naming` in a process, and a client that asks it for a name."""
+
+    def __init__(self) -> None:
+        self.endpoint = f"tcp://127.0.0.1:{free_port()}"
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "miro_gen.cli.main", "naming", "--endpoint", self.endpoint],
+            stdout=subprocess.PIPE,
+            text=True,
+            env=env(),
+        )
+        assert self.proc.stdout is not None
+        self.proc.stdout.readline()
+        self.invoker = ZmqInvoker(zmq.Context())
+        self.client = NamingClient(self.invoker, self.endpoint, "bench")
+
+    def resolver(self, name: str) -> Callable[[], bool]:
+        def resolvable() -> bool:
+            try:
+                self.client.registry.resolve(name)
+            except MiroNaming.NotFound:
+                return False
+            return True
+
+        return resolvable
+
+    def close(self) -> None:
+        self.invoker.close()
+        self.proc.kill()
+        self.proc.wait()
+
+
+class PyroNaming:
+    """Pyro5's name server in a process, and a proxy that asks it for a name."""
+
+    def __init__(self) -> None:
+        self.port = free_port()
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "Pyro5.nameserver", "-n", "127.0.0.1", "-p", str(self.port)],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
+        for _ in range(1000):
+            try:
+                pyro.locate_ns(host="127.0.0.1", port=self.port)._pyroRelease()
+                break
+            except pyro_errors.NamingError:
+                time.sleep(0.01)
+
+    def resolvable(self) -> bool:
+        with pyro.locate_ns(host="127.0.0.1", port=self.port) as ns:
+            try:
+                ns.lookup("bench.Example")
+            except pyro_errors.NamingError:
+                return False
+            with ns:
+                ns.remove("bench.Example")  # for the next run
+            return True
+
+    def close(self) -> None:
+        self.proc.kill()
+        self.proc.wait()
+
+
+def scaffold(folder: Path) -> Path:
+    """A project with a `miro new` server (Miro::Example, bound as BenchServer)."""
+    made = subprocess.run(
+        [sys.executable, "-m", "miro_gen.cli.main", "new", "bench_server", "--pattern", "server"],
+        cwd=folder,
+        env=env(),
+        capture_output=True,
+        text=True,
+    )
+    if made.returncode != 0:
+        raise RuntimeError(made.stderr)
+    return folder
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    ap.add_argument("--runs", type=int, default=10, help="starts per row (default 10)")
+    args = ap.parse_args()
+    naming = Naming()
+    pyro_naming = PyroNaming() if pyro is not None else None
+    project = Path(tempfile.mkdtemp(prefix="bench-startup-"))
+    common = ["--naming", naming.endpoint, "-MNC", "bench"]
+    rows: dict[str, Callable[[], tuple[float, float]]] = {
+        "python services/exampleA.py": lambda: timed_start(
+            [sys.executable, str(ROOT / "services" / "exampleA.py"), *common],
+            naming.resolver("bench/ExampleA"),
+        ),
+        "miro run exampleA": lambda: timed_start(
+            [sys.executable, "-m", "miro_gen.cli.main", "run", "exampleA", *common],
+            naming.resolver("bench/ExampleA"),
+            cwd=project,
+        ),
+        "miro run (a miro new server)": lambda: timed_start(
+            [sys.executable, "-m", "miro_gen.cli.main", "run", "bench_server", *common],
+            naming.resolver("bench/BenchServer"),
+            cwd=project,
+        ),
+    }
+    if pyro_naming is not None:
+        rows[PYRO] = lambda: timed_start(
+            [sys.executable, "-c", PYRO_SERVER, str(pyro_naming.port)], pyro_naming.resolvable
+        )
+    samples: dict[str, list[tuple[float, float]]] = {name: [] for name in rows}
+    try:
+        scaffold(project)
+        for _ in range(args.runs):
+            for name, run in rows.items():
+                samples[name].append(run())
+    finally:
+        naming.close()
+        if pyro_naming is not None:
+            pyro_naming.close()
+        shutil.rmtree(project, ignore_errors=True)
+    medians = {
+        name: (statistics.median(t for t, _ in s), statistics.median(m for _, m in s))
+        for name, s in samples.items()
+    }
+    base = medians.get(PYRO, (float("nan"), float("nan")))[0]
+    print(f"{'start to resolvable (median of ' + str(args.runs) + ')':40} {'ms':>7} "
+          f"{'ratio':>6} {'idle RSS MB':>12}")  # fmt: skip
+    for name, (took, rss) in medians.items():
+        print(f"{name:40} {took * 1000:7.1f} {took / base:6.2f} {rss:12.1f}")
+    if pyro_naming is None:
+        print("Pyro5: skipped (pip install miro-gen[bench])")
+        return 0
+    ratio = medians["python services/exampleA.py"][0] / base
+    verdict = "ok" if ratio <= TARGET else "MISSED"
+    print(f"ExampleA / Pyro5: {ratio:.2f} (target <= {TARGET}: {verdict})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

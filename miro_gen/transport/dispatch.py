@@ -1,0 +1,343 @@
+"""Leader/followers: the threads that take turns owning a server's ROUTER socket.
+
+TAO's default server concurrency, fitted to ZeroMQ, where a socket must be used by one thread
+at a time. One thread, the *leader*, waits on the socket, receives a request and runs its
+servant itself: no hand-off to another thread on the way in, and the reply goes out on the
+same thread that computed it. Meanwhile nobody waits on the socket, so a servant that blocks
+(waits for the next reading, calls a service that calls back) must not keep the leadership:
+
+* a watchdog thread hands the leadership to another thread (an idle follower, or a new one)
+  when a servant has run for `TAKEOVER` seconds; the operation is then known to block, and
+  from then on the leader hands its leadership over *before* running it, as TAO does;
+* a thread whose servant returns after it lost the leadership hands the reply to the current
+  leader (through a queue and a wake-up socket), then serves queued requests or waits, idle,
+  to lead again;
+* tasks marked quick (`@nonblocking`) always run on the leader, never handed over.
+
+The leader waits in a plain blocking receive on the ROUTER, the cheapest wait ZeroMQ has (a
+poll of two sources costs a tenth of a loopback round trip). Whatever else must reach it
+arrives on that same socket: each thread that hands back a reply, or wakes the leader to close,
+sends it over an inproc connection to the ROUTER, prefixed with a random token that remote
+peers cannot know.
+
+At most `workers` threads run servants at once; beyond that, requests wait in a bounded queue
+(the caller is told TRANSIENT when it is full) and those whose callers have stopped waiting by
+the time a thread is free are not run. Sockets change hands only under the dispatcher's lock,
+the memory barrier ZeroMQ asks for.
+"""
+
+from __future__ import annotations
+
+import itertools
+import os
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Hashable
+from typing import Any, Protocol
+
+import zmq
+from zmq.backend import Socket as _Socket
+
+from miro_gen.log import logger
+
+_log = logger("MIRO")
+
+TAKEOVER = 0.005  # seconds a servant may keep the leader before another thread takes over
+WATCH_IDLE = 1.0  # seconds without servants after which the watchdog sleeps until the next one
+
+_send, _recv = _Socket.send, _Socket.recv  # without pyzmq's Python wrappers: a call's cost
+_NOBLOCK = int(zmq.NOBLOCK)
+_MORE = int(zmq.SNDMORE) | _NOBLOCK
+
+Frames = list[bytes]
+
+
+class Task(Protocol):
+    """A request whose servant is to run."""
+
+    kind: Hashable  # what the dispatcher learns "may block" about: (servant class, operation)
+    quick: bool  # @nonblocking: run by the leader, never handed over
+
+    def late(self) -> bool:
+        """Whether its caller has stopped waiting (a queued task is then not run)."""
+        ...
+
+    def run(self) -> Frames | None:
+        """Run it; the reply's frames (None: nothing to send). Never raises."""
+        ...
+
+    def refuse(self) -> Frames | None:
+        """The reply that says the server has too much to do (TRANSIENT)."""
+        ...
+
+
+# What the owner of the socket makes of a message: a task to run, frames to send back at once,
+# or None (dropped, or nothing to answer).
+Receive = Callable[[Frames], "Task | Frames | None"]
+
+
+class _Closed(Exception):
+    pass
+
+
+class _Worker:
+    __slots__ = ("link", "number", "wake")
+
+    def __init__(self, number: int) -> None:
+        self.number = number
+        self.wake = threading.Lock()  # held: released to wake the thread
+        self.wake.acquire()
+        self.link: zmq.Socket[Any] | None = None  # its inproc DEALER to the socket, once used
+
+
+class Dispatcher:
+    """Serves `socket` (a ROUTER) with up to `workers` threads running servants at once;
+    `receive` turns each message into a task or an immediate reply."""
+
+    def __init__(
+        self, socket: zmq.Socket[Any], receive: Receive, workers: int, max_pending: int
+    ) -> None:
+        self.socket = socket
+        self._receive = receive
+        self._workers = max(1, workers)
+        self._max_pending = max_pending
+        self._lock = threading.Lock()
+        self._numbers = itertools.count(1)
+        self._threads = 0
+        self._serving = 0  # threads running servants (the leader's own included)
+        self._idle: list[_Worker] = []
+        self._pending: deque[Task] = deque()
+        self._may_block: set[Hashable] = set()
+        self._inline: tuple[float, Hashable, _Worker] | None = None  # the leader's servant
+        self._last_inline = 0.0
+        self._watch = threading.Lock()
+        self._watch.acquire()
+        self._watch_asleep = False
+        self._watchdog: threading.Thread | None = None
+        self._closed = False
+        self._socket_closed = threading.Event()
+        self._token = os.urandom(16)  # begins what other threads send the leader
+        self._inproc = f"inproc://miro-dispatch-{id(self):x}-{self._token.hex()[:8]}"
+        socket.bind(self._inproc)
+        self._current = threading.local()
+        self._leader: _Worker | None = None
+        with self._lock:
+            self._spawn_leader()
+
+    # ---- threads -------------------------------------------------------------------------------
+
+    def _spawn_leader(self) -> None:
+        """A new thread, to lead (the caller holds the lock)."""
+        worker = self._leader = _Worker(next(self._numbers))
+        self._threads += 1
+        name = f"miro-worker-{worker.number}"
+        threading.Thread(target=self._main, args=(worker,), name=name, daemon=True).start()
+
+    def _main(self, me: _Worker) -> None:
+        self._current.worker = me
+        try:
+            while True:
+                if self._leader is me:
+                    self._lead(me)
+                task = self._next(me)
+                if task is not None:
+                    self._finished(me, self._run(task))
+        except _Closed:
+            pass
+        except Exception:  # pragma: no cover - a defect: say so, keep the process up
+            _log.exception("a dispatch thread failed")
+        finally:
+            if me.link is not None:
+                me.link.close(0)
+            with self._lock:
+                self._threads -= 1
+
+    def _next(self, me: _Worker) -> Task | None:
+        """A queued task to run, or None once this thread is to lead; waits, idle, meanwhile."""
+        while True:
+            with self._lock:
+                if self._closed:
+                    raise _Closed
+                if self._leader is me:
+                    return None
+                while self._pending:
+                    task = self._pending.popleft()
+                    if task.late():
+                        _log.notice("skipped a request: its caller stopped waiting")
+                        continue
+                    self._serving += 1
+                    return task
+                self._idle.append(me)
+            me.wake.acquire()
+
+    def _promote(self) -> None:
+        """Give the leadership to an idle thread, or a new one (the caller holds the lock)."""
+        if self._idle:
+            self._leader = self._idle.pop()
+            self._leader.wake.release()
+        else:
+            self._spawn_leader()
+
+    # ---- the leader ----------------------------------------------------------------------------
+
+    def _lead(self, me: _Worker) -> None:
+        """Serve the socket while this thread is the leader."""
+        token = self._token
+        while True:
+            if self._closed:
+                self._close_socket()
+                raise _Closed
+            parts = self._recv_message()
+            if len(parts) > 1 and parts[1] == token:  # from a thread of ours
+                if len(parts) > 2:
+                    self._send(parts[2:])  # a reply handed back
+                continue
+            out = self._receive(parts)
+            if out is None:
+                continue
+            if isinstance(out, list):
+                self._send(out)
+            elif out.quick:
+                self._send(self._run(out))
+            elif self._start(out, me) and not self._finished(me, self._run(out)):
+                return  # another thread leads now
+
+    def _start(self, task: Task, me: _Worker) -> bool:
+        """Whether the leader is to run `task` now; else it is queued, or refused when the
+        queue is full."""
+        with self._lock:
+            if self._serving < self._workers:
+                self._serving += 1
+                if task.kind in self._may_block:
+                    self._promote()  # known to block: hand over first
+                else:
+                    self._inline = (time.monotonic(), task.kind, me)
+                    self._last_inline = self._inline[0]
+                    self._wake_watchdog()
+                return True
+            if len(self._pending) < self._max_pending:
+                self._pending.append(task)
+                return False
+        self._send(task.refuse())
+        return False
+
+    def _finished(self, me: _Worker, frames: Frames | None) -> bool:
+        """After running a task: send its reply, or hand it to the leader; whether this thread
+        still leads."""
+        with self._lock:
+            self._serving -= 1
+            if self._inline is not None and self._inline[2] is me:
+                self._inline = None
+            leading = self._leader is me
+        if frames is not None:
+            if leading:
+                self._send(frames)
+            else:
+                self._tell_leader(me, frames)
+        return leading
+
+    # ---- the watchdog --------------------------------------------------------------------------
+
+    def _wake_watchdog(self) -> None:
+        """(lock held) Start the watchdog, or wake it from its idle sleep."""
+        if self._watchdog is None:
+            self._watchdog = threading.Thread(
+                target=self._watch_loop, name="miro-watchdog", daemon=True
+            )
+            self._watchdog.start()
+        elif self._watch_asleep:
+            self._watch_asleep = False
+            self._watch.release()
+
+    def _watch_loop(self) -> None:
+        while True:
+            with self._lock:
+                if self._closed:
+                    return
+                now = time.monotonic()
+                inline = self._inline
+                if inline is not None and now - inline[0] >= TAKEOVER:
+                    self._inline = None
+                    if self._leader is inline[2]:
+                        self._may_block.add(inline[1])
+                        self._promote()
+                        _log.debug("%s blocks: handed over before it runs from now on", inline[1])
+                asleep = self._inline is None and now - self._last_inline > WATCH_IDLE
+                self._watch_asleep = asleep
+            if asleep:
+                self._watch.acquire()
+            else:
+                self._watch.acquire(timeout=TAKEOVER)
+
+    # ---- socket I/O (by the leader only) -------------------------------------------------------
+
+    def _recv_message(self) -> Frames:
+        sock = self.socket
+        frame = _recv(sock, 0, False)
+        parts = [frame.bytes]
+        while frame.more:
+            frame = _recv(sock, _NOBLOCK, False)
+            parts.append(frame.bytes)
+        return parts
+
+    def _send(self, frames: Frames | None) -> None:
+        if frames is None or self._closed:
+            return
+        sock = self.socket
+        try:
+            for frame in frames[:-1]:
+                _send(sock, frame, _MORE)
+            _send(sock, frames[-1], _NOBLOCK)
+        except zmq.ZMQError as e:  # the caller is gone: nobody to tell
+            _log.notice("could not send a reply: %s", e)
+
+    def _tell_leader(self, me: _Worker | None, frames: Frames) -> None:
+        """Send `frames` (a reply to forward, or nothing: a wake-up) to the leader, through
+        the inproc link of this thread (`me`; None: a thread of no worker, once)."""
+        if self._socket_closed.is_set():
+            return
+        link = me.link if me is not None else None
+        if link is None:
+            link = self.socket.context.socket(zmq.DEALER)
+            link.setsockopt(zmq.LINGER, 0 if me is not None else 1000)  # a one-off: delivered
+            link.connect(self._inproc)
+            if me is not None:
+                me.link = link
+        try:
+            link.send_multipart([self._token, *frames], zmq.NOBLOCK)
+        except zmq.ZMQError as e:  # pragma: no cover - an inproc queue of 1000 replies is full
+            _log.warning("could not hand a reply to the leader: %s", e)
+        finally:
+            if me is None:
+                link.close()  # with its linger: the wake-up is still delivered
+
+    @staticmethod
+    def _run(task: Task) -> Frames | None:
+        try:
+            return task.run()
+        except Exception:  # pragma: no cover - tasks never raise; a defect if one does
+            _log.exception("a request failed")
+            return None
+
+    # ---- closing -------------------------------------------------------------------------------
+
+    def close(self, timeout: float = 2.0) -> None:
+        """Stop serving: the leader closes the socket (at once, or when its servant returns);
+        idle threads end. Waits up to `timeout` seconds for the socket to be closed."""
+        with self._lock:
+            self._closed = True
+            idle, self._idle = self._idle, []
+            if self._watch_asleep:
+                self._watch_asleep = False
+                self._watch.release()
+        for worker in idle:
+            worker.wake.release()
+        me = getattr(self._current, "worker", None)
+        self._tell_leader(me, [])
+        if me is None:  # not from a servant of ours, which would wait for itself
+            self._socket_closed.wait(timeout)
+
+    def _close_socket(self) -> None:
+        self.socket.close(0)
+        self._socket_closed.set()

@@ -1,0 +1,223 @@
+"""No tracebacks where a user meets the edges: one line saying what failed and what to do,
+status 1 (2 for a bad command line, 130 after Ctrl-C), signals handled from a service's first
+line to the end of its clean-up. Real processes, real signals."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+from loopback import eventually, free_port, run_miro, service_env
+
+SERVICES = Path(__file__).resolve().parents[1] / "services"
+HINT = "is `miro naming` running? see --naming / MIRO_NAMING"
+
+
+def start(
+    script: str, *args: str, ignore_sigint: bool = False, **kw: object
+) -> subprocess.Popen[str]:
+    preexec: Callable[[], object] | None = None
+    if ignore_sigint:  # as a shell starts a background job of a script
+        preexec = lambda: signal.signal(signal.SIGINT, signal.SIG_IGN)  # noqa: E731
+    return subprocess.Popen(
+        [sys.executable, str(SERVICES / script), *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=service_env(),
+        preexec_fn=preexec,
+        **kw,  # type: ignore[call-overload]
+    )
+
+
+def run(script: str, *args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, str(SERVICES / script), *args],
+        capture_output=True,
+        text=True,
+        env=service_env(),
+        timeout=60,
+    )
+
+
+def nobody() -> str:
+    """A naming address where nothing listens."""
+    return f"tcp://127.0.0.1:{free_port()}"
+
+
+def catches_sigterm(pid: int) -> bool:
+    """Whether the process has a handler for SIGTERM: miro_gen.lifecycle's, set on its first
+    line (Python itself handles only SIGINT)."""
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("SigCgt:"):
+            return bool(int(line.split()[1], 16) & (1 << (signal.SIGTERM - 1)))
+    return False
+
+
+def one_line(stderr: str) -> str:
+    lines = stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in stderr, stderr
+    return lines[0]
+
+
+@pytest.mark.parametrize("script", ["exampleA.py", "exampleC.py", "gps_position.py"])
+def test_a_server_without_a_naming_service_says_so_in_one_line(script: str) -> None:
+    done = run(script, "--naming", nobody())
+    assert done.returncode == 1
+    line = one_line(done.stderr)
+    assert line.startswith(script.removesuffix(".py") + ": cannot ")
+    assert "cannot be reached (connection refused)" in line and line.endswith(HINT)
+
+
+@pytest.mark.parametrize(("script", "args"), [("exampleB.py", ()), ("exampleD.py", ())])
+def test_a_client_without_a_naming_service_says_so_in_one_line(
+    script: str, args: tuple[str, ...]
+) -> None:
+    done = run(script, "--naming", nobody(), *args)
+    assert done.returncode == 1
+    assert one_line(done.stderr).endswith(HINT)
+
+
+def test_a_name_not_bound_is_one_line(naming: str) -> None:
+    done = run("exampleB.py", "--naming", naming, "-MNC", "robot")
+    assert done.returncode == 1
+    assert one_line(done.stderr) == (
+        "exampleB: robot/ExampleA is not bound in the naming service: is its server running? "
+        "(`miro nslist` lists what is)"
+    )
+
+
+@pytest.mark.parametrize("script", ["exampleA.py", "exampleB.py", "exampleC.py", "exampleD.py"])
+def test_services_parse_their_own_arguments(script: str) -> None:
+    helped = run(script, "--help")
+    assert helped.returncode == 0 and helped.stdout.startswith("usage: ")
+    assert "common options" in helped.stdout and "-MNC NAME" in helped.stdout
+    wrong = run(script, "--no-such-option")
+    assert wrong.returncode == 2
+    assert "unrecognized arguments: --no-such-option" in wrong.stderr
+    assert "Traceback" not in wrong.stderr
+
+
+def test_a_bad_common_option_is_one_line_and_status_2() -> None:
+    done = run("exampleA.py", "-MLL", "eleven")
+    assert done.returncode == 2
+    assert one_line(done.stderr) == "exampleA: -MLL takes a level from 0 to 9, not 'eleven'"
+
+
+@pytest.mark.parametrize("background", [False, True])
+def test_ctrl_c_while_a_service_starts_ends_it_quietly(background: bool) -> None:
+    """From its first line on, SIGINT ends a service with status 130 and no traceback; also a
+    background job of a shell script, which inherits SIGINT ignored, is not left running."""
+    client = start("exampleB.py", "--naming", nobody(), "--wait", "600", ignore_sigint=background)
+    eventually(lambda: catches_sigterm(client.pid))
+    client.send_signal(signal.SIGINT)
+    out, err = client.communicate(timeout=60)
+    assert client.returncode == 130, err
+    assert err == "" and out == ""
+
+
+def test_sigterm_while_a_service_waits_is_status_143() -> None:
+    client = start("exampleB.py", "--naming", nobody(), "--wait", "600")
+    eventually(lambda: catches_sigterm(client.pid))
+    client.send_signal(signal.SIGTERM)
+    _, err = client.communicate(timeout=60)
+    assert client.returncode == 143 and err == ""
+
+
+def test_repeated_ctrl_c_during_the_clean_up_is_no_traceback(naming: str) -> None:
+    server = start("exampleA.py", "--naming", naming)
+    assert server.stdout is not None
+    assert server.stdout.readline().strip() == "ExampleA is ready"
+    for _ in range(20):  # the first stops it, the others come during its clean-up (or later)
+        if server.poll() is not None:
+            break
+        server.send_signal(signal.SIGINT)
+    _, err = server.communicate(timeout=60)
+    assert server.returncode == 0, err
+    assert "Traceback" not in err
+
+
+def test_a_server_interrupted_while_it_imports_binds_nothing(naming: str) -> None:
+    """A signal during the imports (kept, though the shell ignored SIGINT for it) ends the
+    service as its main() begins: status 130, nothing bound."""
+    from miro_gen import Client
+
+    server = start("exampleA.py", "--naming", naming, "-MNC", "early", ignore_sigint=True)
+    eventually(lambda: catches_sigterm(server.pid))
+    server.send_signal(signal.SIGINT)
+    _, err = server.communicate(timeout=60)
+    assert server.returncode == 130 and err == ""
+    client = Client(["t", "--naming", naming])
+    try:
+        assert [e.name for e in client.naming.registry._list("early/")] == []
+    finally:
+        client.close()
+
+
+def test_ctrl_c_while_the_demo_starts(tmp_path: Path) -> None:
+    """Ctrl-C during `miro demo`'s start stops what it started, quietly: status 130 (0 once
+    every example is up and it runs until Ctrl-C)."""
+    env = service_env(MIRO_NAMING=f"tcp://127.0.0.1:{free_port()}")
+    demo = subprocess.Popen(
+        [sys.executable, "-m", "miro_gen.cli.main", "demo", "--colour", "never"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
+    assert demo.stdout is not None
+    assert demo.stdout.readline().startswith("naming   | naming service at")
+    demo.send_signal(signal.SIGINT)
+    out, err = demo.communicate(timeout=60)
+    assert "Traceback" not in out + err and "KeyboardInterrupt" not in out + err
+    started = "exampleD | ExampleD listens" in out
+    assert demo.returncode == (0 if started else 130), out + err
+    assert out.rstrip().endswith("naming   | stopped")
+
+
+def test_miro_nslist_without_a_naming_service_is_one_line() -> None:
+    done = run_miro("nslist", "--naming", nobody())
+    assert done.returncode == 1
+    assert one_line(done.stderr).endswith(HINT)
+
+
+def test_a_server_interrupted_between_binding_and_running_unbinds(naming: str) -> None:
+    """Interrupted after add_to_name_service and before run(): status 130, and its names go at
+    once (not when their lease runs out)."""
+    from miro_gen import Client
+
+    script = (
+        "import sys, time, Miro__POA\n"
+        "from miro_gen import Server\n"
+        "from miro_gen.lifecycle import run_main\n"
+        "class E(Miro__POA.Example):\n"
+        "    def setData(self, a, b): pass\n"
+        "    def getData(self): return None\n"
+        "def main():\n"
+        "    server = Server(sys.argv)\n"
+        "    server.add_to_name_service(E(), 'Between')\n"
+        "    print('bound', flush=True)\n"
+        "    time.sleep(600)\n"
+        "    server.run()\n"
+        "run_main(main, 'between')\n"
+    )
+    proc = subprocess.Popen(
+        [sys.executable, "-c", script, "--naming", naming, "-MNC", "between"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=service_env(),
+    )
+    assert proc.stdout is not None and proc.stdout.readline().strip() == "bound"
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130 and err == ""
+    client = Client(["t", "--naming", naming])
+    try:
+        assert client.naming.registry._list("between/") == []
+    finally:
+        client.close()
