@@ -1,5 +1,6 @@
 """The event viewer (the manual's qtEventImu, for any event type): subscribes to one type of
-event and shows its fields live, with a plot of one numeric field over time.
+event and shows its fields live, with a plot of one numeric field over time, and the image
+when the events hold one (a camera's: see miro_gen.qt.images).
 
     python services/event_viewer.py TYPE [--domain D] [--channel NAME] [--field PATH]
         [--span S] [--import MODULE]... [--screenshot FILE [--after N]] [--duration S]
@@ -34,7 +35,8 @@ try:
     from miro_gen.qt import QtEventBridge, Subscription
     from miro_gen.qt.app import application, no_display
     from miro_gen.qt.fields import FieldError, get_field, is_number, leaves
-    from miro_gen.qt.widgets import FieldsView, PlotWidget
+    from miro_gen.qt.images import find_image, to_qimage
+    from miro_gen.qt.widgets import FieldsView, ImageView, PlotWidget
     from PySide6.QtCore import QTimer, Signal
     from PySide6.QtWidgets import QLabel, QMainWindow, QSplitter, QVBoxLayout, QWidget
 except ImportError as e:  # PySide6 missing (or a system library Qt needs)
@@ -73,11 +75,14 @@ class ViewerWindow(QMainWindow):
         self.status = QLabel("starting")
         self.fields = FieldsView()
         self.plot = PlotWidget(span=span)
+        self.image = ImageView()
+        self.image.hide()  # until an event holds an image
         self.fields.field_chosen.connect(self.choose_field)
         split = QSplitter()
         split.addWidget(self.fields)
         split.addWidget(self.plot)
-        split.setSizes([300, 400])
+        split.addWidget(self.image)
+        split.setSizes([300, 400, 400])
         body = QWidget()
         layout = QVBoxLayout(body)
         layout.addWidget(self.status)
@@ -112,6 +117,12 @@ class ViewerWindow(QMainWindow):
         self.last_event = event
         self.shown += 1
         self.fields.show_payload(payload)
+        image = find_image(payload)
+        if image is not None:
+            shown = to_qimage(image)
+            caption = f"{image.path}: {image.width}x{image.height} {image.encoding or '?'}"
+            self.image.show_image(shown, caption if shown else f"{caption}: cannot show it")
+            self.image.show()
         if self.field is None:  # the first numeric field, until the user picks another
             self.field = next((p for p, v in leaves(payload) if is_number(v)), None)
             self.plot.title = self.field or "(no numeric field)"

@@ -19,6 +19,7 @@ import enum
 import importlib
 import sys
 import types
+from array import array
 from collections.abc import Iterator
 from functools import cache
 from pathlib import Path
@@ -85,6 +86,20 @@ PRIMS = (
     "float",
     "double",
 )
+# The array.array type codes of sequences and arrays of numbers (boolean, char and octet keep
+# their own mapping).
+ARRAY_CODES = {
+    "short": "h",
+    "unsigned short": "H",
+    "long": "i",
+    "unsigned long": "I",
+    "long long": "q",
+    "unsigned long long": "Q",
+    "int8": "b",
+    "uint8": "B",
+    "float": "f",
+    "double": "d",
+}
 INT_RANGES = {
     "short": (-(1 << 15), (1 << 15) - 1),
     "unsigned short": (0, (1 << 16) - 1),
@@ -332,8 +347,40 @@ STRING_CHARS = st.characters(exclude_characters="\0", exclude_categories=("Cs",)
 
 
 def values(ty: Ty, oracle: bool = False, depth: int = 0) -> st.SearchStrategy[Any]:
-    """Values of the generated Python for `ty`."""
+    """Values of the generated Python for `ty`. Sequences and arrays of numbers come as what
+    encoding takes: mostly `array.array`s (what decoding gives), also lists, tuples, numpy
+    arrays and memoryviews."""
     return _values(ty, oracle, depth)
+
+
+def number_code(ty: Ty) -> str | None:
+    """The array type code of a sequence of numbers, or of an array's last dimension."""
+    if ty.kind in ("seq", "array") and ty.elem is not None and ty.elem.kind == "prim":
+        return ARRAY_CODES.get(ty.elem.prim)
+    return None
+
+
+def _numbers(code: str) -> st.SearchStrategy[Any]:
+    """What turns a list of numbers into an input for a field of array type `code`."""
+    import numpy
+
+    dtype = numpy.dtype(code)
+    return st.sampled_from(
+        [
+            lambda v: array(code, v),
+            lambda v: array(code, v),
+            list,
+            tuple,
+            lambda v: numpy.array(v, dtype=dtype),
+            lambda v: memoryview(array(code, v)),
+        ]
+    )
+
+
+def _as_numbers(s: st.SearchStrategy[list[Any]], code: str | None) -> st.SearchStrategy[Any]:
+    if code is None:
+        return s
+    return st.tuples(s, _numbers(code)).map(lambda lv: lv[1](lv[0]))
 
 
 def _values(ty: Ty, oracle: bool, depth: int) -> st.SearchStrategy[Any]:
@@ -351,13 +398,16 @@ def _values(ty: Ty, oracle: bool, depth: int) -> st.SearchStrategy[Any]:
         if ty.elem.kind == "prim" and ty.elem.prim == "octet":
             return st.binary(max_size=size)
         if size == 0:
-            return st.just([]).map(list)
-        return st.lists(_values(ty.elem, oracle, depth + 1), max_size=size)
+            return _as_numbers(st.just([]).map(list), number_code(ty))
+        items = st.lists(_values(ty.elem, oracle, depth + 1), max_size=size)
+        return _as_numbers(items, number_code(ty))
     if k == "array":
         assert ty.elem is not None
         s = _values(ty.elem, oracle, depth + 1)
-        for n in reversed(ty.dims):
+        for i, n in enumerate(reversed(ty.dims)):
             s = st.lists(s, min_size=n, max_size=n)
+            if i == 0:
+                s = _as_numbers(s, number_code(ty))
         return s
     if k == "enum":
         return st.sampled_from(list(pyclass(ty.decl)))
@@ -410,6 +460,8 @@ def plain(v: Any) -> Any:
         return (type(v).__name__, v.value)
     if isinstance(v, list | tuple):
         return [plain(x) for x in v]
+    if hasattr(v, "tolist"):  # array.array, numpy arrays, memoryviews
+        return plain(v.tolist())
     return v
 
 
@@ -533,6 +585,8 @@ class Cyclone:
         k = ty.kind
         if k in ("prim", "string"):
             return v
+        if hasattr(v, "tolist") and number_code(ty) is not None:
+            v = v.tolist()  # numbers as Python numbers
         if k == "seq":
             assert ty.elem is not None
             if ty.elem.kind == "prim" and ty.elem.prim == "octet":

@@ -4,8 +4,9 @@
 from __future__ import annotations
 
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 import zmq
@@ -26,6 +27,24 @@ def naming() -> Iterator[str]:
 
 
 @pytest.fixture
+def servers(naming: str) -> Iterator[Callable[[str], Any]]:
+    """Makes Servers (`servers(naming_context)`) whose reactors run in threads of the test;
+    stopped after it."""
+    from loopback import RunningServer
+
+    started: list[RunningServer] = []
+
+    def make(context: str) -> Any:
+        r = RunningServer(naming, context)
+        started.append(r)
+        return r.server
+
+    yield make
+    for r in reversed(started):
+        r.stop()
+
+
+@pytest.fixture
 def reactor() -> Iterator[object]:
     """A Reactor running in a thread of its own; closed, with its context, after the test."""
     from miro_gen.transport.reactor import Reactor
@@ -38,3 +57,32 @@ def reactor() -> Iterator[object]:
     assert not thread.is_alive(), "the reactor did not stop"
     r.close()
     r.context.term()
+
+
+# ---- the CORBA tests' peers (tests/corba_peers.py) ----------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def peer_bin() -> object:
+    """The C++ omniORB peer, built once (and cached by the hash of its sources)."""
+    from corba_peers import build_peer
+
+    return build_peer()
+
+
+@pytest.fixture(scope="module")
+def omninames() -> Iterator[object]:
+    """omniNames on a free port, for a test module."""
+    from corba_peers import running_omninames
+
+    with running_omninames() as names:
+        yield names
+
+
+@pytest.fixture(scope="module")
+def peer_gen(tmp_path_factory: pytest.TempPathFactory) -> Iterator[object]:
+    """The Python types of tests/corba/Peer.idl, generated and imported for a test module."""
+    from corba_peers import peer_types
+
+    with peer_types(tmp_path_factory.mktemp("peer_generated")) as types:
+        yield types

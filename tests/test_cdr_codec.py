@@ -21,6 +21,7 @@ import shutil
 import struct
 import subprocess
 import sys
+from array import array
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -408,7 +409,9 @@ def test_octet_sequences_are_bytes() -> None:
 
 
 def test_keyword_names() -> None:
-    k = T.Keywords(_from=1, _lambda=2.0, _list=[3], _str="s", l=4, I=5, O=6, _None=True, _class=7)
+    k = T.Keywords(
+        _from=1, _lambda=2.0, _list=array("i", [3]), _str="s", l=4, I=5, O=6, _None=True, _class=7
+    )
     k._def, k._int, k.type, k.self, k._print, k.data, k.cls = 8, 9, 10, 11, 12, 13, 14
     k._serialize, k._deserialize = 15, 16
     assert T.Keywords.deserialize(k.serialize()) == k

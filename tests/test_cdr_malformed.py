@@ -19,6 +19,7 @@ from __future__ import annotations
 import struct
 import time
 import tracemalloc
+from array import array
 from collections.abc import Iterator
 from typing import Any
 
@@ -325,7 +326,7 @@ def test_sequence_over_its_bound_on_the_wire() -> None:
     assert names[1] == "bounded"
     rest = bytes(4 * (len(names) - 2))
     ok = LE + u32(0) + u32(5) + struct.pack("<5i", *range(5)) + rest
-    assert T.Sequences.deserialize(ok).bounded == [0, 1, 2, 3, 4]
+    assert T.Sequences.deserialize(ok).bounded == array("i", [0, 1, 2, 3, 4])
     over = LE + u32(0) + u32(6) + struct.pack("<6i", *range(6)) + rest
     assert decode_quickly(T.Sequences, over) is None
     octets = T.Sequences(octets4=b"abcd").serialize()

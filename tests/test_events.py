@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 
 import Miro
@@ -19,20 +19,6 @@ from miro_gen import (
 )
 
 REPO = Path(__file__).resolve().parents[1]
-
-
-@pytest.fixture
-def servers(naming: str) -> Iterator[Callable[[str], Server]]:
-    started: list[RunningServer] = []
-
-    def make(context: str) -> Server:
-        r = RunningServer(naming, context)
-        started.append(r)
-        return r.server
-
-    yield make
-    for r in reversed(started):
-        r.stop()
 
 
 def event(n: int) -> Miro.ExampleEventIDL:

@@ -78,7 +78,7 @@ class LaserRig:
         eventually(lambda: self.driver.logged("someone subscribes") == 1)
 
     def scans(self) -> list[list[int]]:
-        return [e.payload.range[0] for e in self.events.events]  # type: ignore[attr-defined]
+        return [e.payload.range[0].tolist() for e in self.events.events]  # type: ignore[attr-defined]
 
     def close(self) -> str:
         try:
@@ -153,7 +153,7 @@ def test_polled_scans_over_tcp_and_the_polled_interface(
     assert math.isclose(first.beta, (101 - 540) * 2 * math.pi / 1440)  # the cluster's middle
     assert math.isclose(last.beta, (979.5 - 540) * 2 * math.pi / 1440)
     scan = laser.getWaitFullScan()
-    values = scan.range[0]
+    values = scan.range[0].tolist()
     assert len(values) == 294
     # Two characters a reading: the scene's, clipped to 4095 mm, the nearest of each cluster.
     steps = [s[100:981] for s in rig.scene.scans]
@@ -195,4 +195,4 @@ def test_a_scanner_that_disappears_and_returns(
     eventually(lambda: rig.driver.logged("scanner connected") == 2, 20)
     before = len(rig.events.events)
     eventually(lambda: len(rig.events.events) >= before + 3, 15)
-    assert rig.laser.getWaitFullScan().range[0] in expected(rig.scene, rig.geometry)
+    assert rig.laser.getWaitFullScan().range[0].tolist() in expected(rig.scene, rig.geometry)

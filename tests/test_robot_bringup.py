@@ -19,7 +19,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from loopback import eventually, service_env
+from loopback import eventually
 from miro_cli import REPO
 from test_launch import alive, started_pids
 from test_multihost import Hosts, network
@@ -104,7 +104,7 @@ def test_a_robot_on_two_hosts_found_by_discovery_and_operated_live(
             "--host",
             host,
             cwd=REPO,
-            wrapper=["ip", "netns", "exec", hosts.ns(host)],
+            wrapper=hosts.wrapper(host),
         )
 
     def shell(*args: str) -> subprocess.CompletedProcess[str]:
@@ -114,7 +114,7 @@ def test_a_robot_on_two_hosts_found_by_discovery_and_operated_live(
             [*on_robot, "-m", "miro_gen.cli.main", *args],
             capture_output=True,
             text=True,
-            env=service_env(MIRO_CACHE=str(cache)),
+            env={**hosts.env, "MIRO_CACHE": str(cache)},
             timeout=60,
         )
 

@@ -21,6 +21,7 @@ import subprocess
 import sys
 import threading
 import time
+from array import array
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from types import SimpleNamespace
@@ -430,8 +431,8 @@ def test_inout_struct(gen: SimpleNamespace, modes: tuple[Any, Any]) -> None:
 def test_inout_sequence(modes: tuple[Any, Any], seq: list[int]) -> None:
     stub, servant = modes
     got = stub.inout_seq(seq)
-    assert got == [*seq, sum(seq)] and type(got) is list
-    assert servant.called("inout_seq") == [(seq,)]
+    assert got == array("i", [*seq, sum(seq)])  # numbers arrive as array.array
+    assert servant.called("inout_seq") == [(array("i", seq),)]
 
 
 @pytest.mark.parametrize("text", ["", "x", "héllo wörld ✓", "a" * 1000])
@@ -516,7 +517,7 @@ def test_bounded_values_within_their_bounds(modes: tuple[Any, Any]) -> None:
     stub, servant = modes
     stub.bounded("abcde", [1, 2, 3])
     stub.bounded("", [])
-    assert servant.called("bounded") == [("abcde", [1, 2, 3]), ("", [])]
+    assert servant.called("bounded") == [("abcde", array("i", [1, 2, 3])), ("", array("i"))]
 
 
 # =============================================================================================
@@ -1401,6 +1402,10 @@ TYPED_USAGE = '''\
 
 from __future__ import annotations
 
+from array import array
+from typing import Any
+
+import numpy
 import Rpc
 import Rpc__POA
 from miro_gen.exceptions import UNKNOWN, CompletionStatus, SystemException
@@ -1549,7 +1554,11 @@ def client() -> None:
     n, b = modes.two_outs()
     r, s = modes.inout_only("x")
     point: Rpc.Point = modes.inout_struct(Rpc.Point(1, 2))
-    seq: list[int] = modes.inout_seq([1, 2])
+    seq: Rpc.LongSeq = modes.inout_seq([1, 2])
+    longs: array[int] = modes.inout_seq((1, 2))  # numbers go as any sequence or buffer
+    longs = modes.inout_seq(array("i", longs))
+    longs = modes.inout_seq(numpy.arange(3, dtype=numpy.int32))
+    view: numpy.ndarray[Any, numpy.dtype[numpy.int32]] = numpy.frombuffer(seq, numpy.int32)
     rev: str = modes.inout_string("abc")
     color: Rpc.Color = modes.inout_enum(Rpc.Color.RED)
     shape: Rpc.Shape = modes.inout_union(Rpc.Shape(count=1))
@@ -1592,7 +1601,7 @@ def client() -> None:
     echoed: Rpc.Base | None = node.echo_base(diamond)
     swapped: Rpc.Node | None = node.swap(node)
     print(total, upper, n, b, r, s, point, seq, rev, color, shape, res, col, octet, first, d,
-          raw, label, counter, obj, echoed, swapped)
+          raw, label, counter, obj, echoed, swapped, longs, view)
 '''
 
 TYPE_ERROR_USAGE = """\

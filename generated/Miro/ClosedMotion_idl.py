@@ -41,7 +41,7 @@ class ClosedMotion(_rpc.Stub):
         @throw EOutOfBounds angle is outside -PI < angle <= PI.
         @throw EDevIO The command could not be sent to the device.
         """
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
             try:
@@ -55,7 +55,7 @@ class ClosedMotion(_rpc.Stub):
             raise _cdr.encode_error("Miro::ClosedMotion::rotateToPosition", _x) from None
         self._call(
             "rotateToPosition",
-            bytes(_buf),
+            _buf.value(),
             (_m_Miro_Exception_idl.EOutOfBounds, _m_Miro_Exception_idl.EDevIO),
         )
 
@@ -68,7 +68,7 @@ class ClosedMotion(_rpc.Stub):
         @throw EOutOfBounds angle is outside -2 PI < angle <= 2 PI.
         @throw EDevIO The command could not be sent to the device.
         """
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
             try:
@@ -82,7 +82,7 @@ class ClosedMotion(_rpc.Stub):
             raise _cdr.encode_error("Miro::ClosedMotion::rotateRelative", _x) from None
         self._call(
             "rotateRelative",
-            bytes(_buf),
+            _buf.value(),
             (_m_Miro_Exception_idl.EOutOfBounds, _m_Miro_Exception_idl.EDevIO),
         )
 
@@ -95,7 +95,7 @@ class ClosedMotion(_rpc.Stub):
         drive in one closed motion (a few metres on most bases).
         @throw EDevIO The command could not be sent to the device.
         """
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
             try:
@@ -109,6 +109,6 @@ class ClosedMotion(_rpc.Stub):
             raise _cdr.encode_error("Miro::ClosedMotion::translateRelative", _x) from None
         self._call(
             "translateRelative",
-            bytes(_buf),
+            _buf.value(),
             (_m_Miro_Exception_idl.EOutOfBounds, _m_Miro_Exception_idl.EDevIO),
         )

@@ -45,7 +45,7 @@ class DifferentialMotion(_m_Miro_Motion_idl.Motion):
         @throw EOutOfBounds A velocity is outside the limits of getMinMaxLRVelocity.
         @throw EDevIO The command could not be sent to the device.
         """
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
             try:
@@ -60,7 +60,7 @@ class DifferentialMotion(_m_Miro_Motion_idl.Motion):
             raise _cdr.encode_error("Miro::DifferentialMotion::setLRVelocity", _x) from None
         self._call(
             "setLRVelocity",
-            bytes(_buf),
+            _buf.value(),
             (_m_Miro_Exception_idl.EOutOfBounds, _m_Miro_Exception_idl.EDevIO),
         )
 
@@ -72,8 +72,8 @@ class DifferentialMotion(_m_Miro_Motion_idl.Motion):
         @param minRTranslation Lowest right-wheel velocity in mm/s.
         @param maxRTranslation Highest right-wheel velocity in mm/s.
         """
-        _buf = bytearray(_cdr.HEADER_LE)
-        _data = self._call("getMinMaxLRVelocity", bytes(_buf), ())
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        _data = self._call("getMinMaxLRVelocity", _buf.value(), ())
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
@@ -97,8 +97,8 @@ class DifferentialMotion(_m_Miro_Motion_idl.Motion):
         @param left Commanded left-wheel velocity in mm/s.
         @param right Commanded right-wheel velocity in mm/s.
         """
-        _buf = bytearray(_cdr.HEADER_LE)
-        _data = self._call("getTargetLRVelocity", bytes(_buf), ())
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        _data = self._call("getTargetLRVelocity", _buf.value(), ())
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4

@@ -10,6 +10,7 @@ import typing as _t
 
 import Miro.Exception_idl as _m_Miro_Exception_idl
 import Miro.Time_idl as _m_Miro_Time_idl
+import miro_gen.runtime.arrays as _arrays
 import miro_gen.runtime.cdr as _cdr
 import miro_gen.runtime.rpc as _rpc
 
@@ -115,7 +116,7 @@ GPS_MODE_2D: _t.Final = GpsFixModeIDL.GPS_MODE_2D
 GPS_MODE_3D: _t.Final = GpsFixModeIDL.GPS_MODE_3D
 
 
-GpsSatelliteSeqIDL: _t.TypeAlias = list[int]
+GpsSatelliteSeqIDL: _t.TypeAlias = _arrays.Array[int]
 """PRN numbers of satellites."""
 
 
@@ -170,7 +171,7 @@ class GpsDataIDL(_cdr.IdlType):
     """
     satellitesUsed: int = 0
     """Number of satellites used in the fix (GGA)."""
-    satellites: GpsSatelliteSeqIDL = _dc.field(default_factory=list)
+    satellites: GpsSatelliteSeqIDL = _dc.field(default_factory=lambda: _arrays.zeros("H"))
     """PRN numbers of the satellites used in the fix (GSA); empty when unknown."""
     hdop: float = 0.0
     """Horizontal dilution of precision, dimensionless (GSA, or GGA)."""
@@ -257,12 +258,16 @@ class GpsDataIDL(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_GpsDataIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::GpsDataIDL", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> GpsDataIDL:
@@ -317,7 +322,7 @@ def _enc_GpsDataIDL(_buf: bytearray, _v: GpsDataIDL) -> None:
             ("Miro::GpsDataIDL.geoidSeparation", "f", lambda: (_v.geoidSeparation,)),
             ("Miro::GpsDataIDL.satellitesUsed", "H", lambda: (_v.satellitesUsed,)),
         ) from None
-    _cdr.put_primitives(
+    _arrays.put_sequence(
         _buf,
         _v.satellites,
         "H",
@@ -362,7 +367,7 @@ def _dec_GpsDataIDL(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[GpsDataIDL,
     _off += (4 - _off) & 7
     _t4 = _U2[_e](_data, _off)
     _off += 30
-    _f5, _off = _cdr.get_primitives(
+    _f5, _off = _arrays.get_sequence(
         _data,
         _off,
         _e,
@@ -433,12 +438,16 @@ class GpsSentenceEventIDL(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_GpsSentenceEventIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::GpsSentenceEventIDL", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> GpsSentenceEventIDL:
@@ -494,8 +503,8 @@ class Gps(_rpc.Stub):
 
         Fields not received yet are NaN or 0 (see GpsDataIDL).
         """
-        _buf = bytearray(_cdr.HEADER_LE)
-        _data = self._call("getData", bytes(_buf), ())
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        _data = self._call("getData", _buf.value(), ())
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
@@ -511,8 +520,8 @@ class Gps(_rpc.Stub):
         @throw ETimeOut No new reading arrived within the server's timeout
         (a few seconds; receivers report at about 1 Hz).
         """
-        _buf = bytearray(_cdr.HEADER_LE)
-        _data = self._call("getWaitData", bytes(_buf), (_m_Miro_Exception_idl.ETimeOut,))
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        _data = self._call("getWaitData", _buf.value(), (_m_Miro_Exception_idl.ETimeOut,))
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4

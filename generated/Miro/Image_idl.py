@@ -101,12 +101,16 @@ class ImageFormatIDL(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ImageFormatIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::ImageFormatIDL", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ImageFormatIDL:
@@ -219,12 +223,16 @@ class ImageEventIDL(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ImageEventIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::ImageEventIDL", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ImageEventIDL:
@@ -285,8 +293,8 @@ class Camera(_rpc.Stub):
 
     def getFormat(self) -> ImageFormatIDL:
         """The size and layout of the images the camera delivers."""
-        _buf = bytearray(_cdr.HEADER_LE)
-        _data = self._call("getFormat", bytes(_buf), ())
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        _data = self._call("getFormat", _buf.value(), ())
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
@@ -298,8 +306,8 @@ class Camera(_rpc.Stub):
 
     def getImage(self) -> ImageEventIDL:
         """Return the latest image (an empty one before the first)."""
-        _buf = bytearray(_cdr.HEADER_LE)
-        _data = self._call("getImage", bytes(_buf), ())
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        _data = self._call("getImage", _buf.value(), ())
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
@@ -314,8 +322,8 @@ class Camera(_rpc.Stub):
 
         @throw ETimeOut No image arrived within the server's timeout.
         """
-        _buf = bytearray(_cdr.HEADER_LE)
-        _data = self._call("getWaitImage", bytes(_buf), (_m_Miro_Exception_idl.ETimeOut,))
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        _data = self._call("getWaitImage", _buf.value(), (_m_Miro_Exception_idl.ETimeOut,))
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4

@@ -45,8 +45,8 @@ class Motion(_rpc.Stub):
 
         @throw EDevIO The command could not be sent to the device.
         """
-        _buf = bytearray(_cdr.HEADER_LE)
-        self._call("limp", bytes(_buf), (_m_Miro_Exception_idl.EDevIO,))
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._call("limp", _buf.value(), (_m_Miro_Exception_idl.EDevIO,))
 
     def setVelocity(self, velocity: _m_Miro_Velocity_idl.VelocityIDL) -> None:
         """Command a translational and rotational velocity and start moving.
@@ -57,7 +57,7 @@ class Motion(_rpc.Stub):
         by getMinMaxVelocity.
         @throw EDevIO The command could not be sent to the device.
         """
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _m_Miro_Velocity_idl._enc_VelocityIDL(_buf, velocity)
@@ -67,7 +67,7 @@ class Motion(_rpc.Stub):
             raise _cdr.encode_error("Miro::Motion::setVelocity", _x) from None
         self._call(
             "setVelocity",
-            bytes(_buf),
+            _buf.value(),
             (_m_Miro_Exception_idl.EOutOfBounds, _m_Miro_Exception_idl.EDevIO),
         )
 
@@ -85,8 +85,8 @@ class Motion(_rpc.Stub):
         @param minRotation Lowest rotational velocity in rad/s (negative: clockwise).
         @param maxRotation Highest rotational velocity in rad/s.
         """
-        _buf = bytearray(_cdr.HEADER_LE)
-        _data = self._call("getMinMaxVelocity", bytes(_buf), ())
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        _data = self._call("getMinMaxVelocity", _buf.value(), ())
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
@@ -112,8 +112,8 @@ class Motion(_rpc.Stub):
         getMinMaxVelocity (mm/s, rad/s). It is the target, not a
         measurement: see Odometry::getVelocity for that.
         """
-        _buf = bytearray(_cdr.HEADER_LE)
-        _data = self._call("getTargetVelocity", bytes(_buf), ())
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        _data = self._call("getTargetVelocity", _buf.value(), ())
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4

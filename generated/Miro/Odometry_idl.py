@@ -44,7 +44,7 @@ class Odometry(_rpc.Stub):
 
         @param position The robot's pose in world coordinates (mm, rad).
         """
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _m_Miro_Position_idl._enc_PositionIDL(_buf, position)
@@ -52,7 +52,7 @@ class Odometry(_rpc.Stub):
                 raise _cdr.nested_error("Miro::Odometry::setPosition(position)", _x) from None
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::Odometry::setPosition", _x) from None
-        self._call("setPosition", bytes(_buf), ())
+        self._call("setPosition", _buf.value(), ())
 
     def updatePosition(self, deltaPosition: _m_Miro_Position_idl.PositionIDL) -> None:
         """Correct the current pose by a relative amount.
@@ -63,7 +63,7 @@ class Odometry(_rpc.Stub):
 
         @param deltaPosition Correction in world coordinates (mm, rad).
         """
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _m_Miro_Position_idl._enc_PositionIDL(_buf, deltaPosition)
@@ -71,12 +71,12 @@ class Odometry(_rpc.Stub):
                 raise _cdr.nested_error("Miro::Odometry::updatePosition(deltaPosition)", _x) from None
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::Odometry::updatePosition", _x) from None
-        self._call("updatePosition", bytes(_buf), ())
+        self._call("updatePosition", _buf.value(), ())
 
     def getPosition(self) -> _m_Miro_Position_idl.PositionIDL:
         """Return the latest pose of the robot (mm, rad)."""
-        _buf = bytearray(_cdr.HEADER_LE)
-        _data = self._call("getPosition", bytes(_buf), ())
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        _data = self._call("getPosition", _buf.value(), ())
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
@@ -91,8 +91,8 @@ class Odometry(_rpc.Stub):
 
         @throw ETimeOut No report arrived in time.
         """
-        _buf = bytearray(_cdr.HEADER_LE)
-        _data = self._call("getWaitPosition", bytes(_buf), (_m_Miro_Exception_idl.ETimeOut,))
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        _data = self._call("getWaitPosition", _buf.value(), (_m_Miro_Exception_idl.ETimeOut,))
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
@@ -110,8 +110,8 @@ class Odometry(_rpc.Stub):
         It gives a frame that does not jump, for stamping locally
         perceived data; it only drifts with the odometry error.
         """
-        _buf = bytearray(_cdr.HEADER_LE)
-        _data = self._call("getRawPosition", bytes(_buf), ())
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        _data = self._call("getRawPosition", _buf.value(), ())
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
@@ -126,8 +126,8 @@ class Odometry(_rpc.Stub):
 
         @throw ETimeOut No report arrived in time.
         """
-        _buf = bytearray(_cdr.HEADER_LE)
-        _data = self._call("getWaitRawPosition", bytes(_buf), (_m_Miro_Exception_idl.ETimeOut,))
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        _data = self._call("getWaitRawPosition", _buf.value(), (_m_Miro_Exception_idl.ETimeOut,))
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
@@ -139,8 +139,8 @@ class Odometry(_rpc.Stub):
 
     def getVelocity(self) -> _m_Miro_Velocity_idl.VelocityIDL:
         """Return the latest measured velocity (mm/s, rad/s)."""
-        _buf = bytearray(_cdr.HEADER_LE)
-        _data = self._call("getVelocity", bytes(_buf), ())
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        _data = self._call("getVelocity", _buf.value(), ())
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
@@ -155,8 +155,8 @@ class Odometry(_rpc.Stub):
 
         @throw ETimeOut No report arrived in time.
         """
-        _buf = bytearray(_cdr.HEADER_LE)
-        _data = self._call("getWaitVelocity", bytes(_buf), (_m_Miro_Exception_idl.ETimeOut,))
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        _data = self._call("getWaitVelocity", _buf.value(), (_m_Miro_Exception_idl.ETimeOut,))
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
@@ -168,8 +168,8 @@ class Odometry(_rpc.Stub):
 
     def getStatus(self) -> _m_Miro_MotionStatus_idl.MotionStatusIDL:
         """Return the latest complete report: time stamp, pose and velocity."""
-        _buf = bytearray(_cdr.HEADER_LE)
-        _data = self._call("getStatus", bytes(_buf), ())
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        _data = self._call("getStatus", _buf.value(), ())
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
@@ -184,8 +184,8 @@ class Odometry(_rpc.Stub):
 
         @throw ETimeOut No report arrived in time.
         """
-        _buf = bytearray(_cdr.HEADER_LE)
-        _data = self._call("getWaitStatus", bytes(_buf), (_m_Miro_Exception_idl.ETimeOut,))
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        _data = self._call("getWaitStatus", _buf.value(), (_m_Miro_Exception_idl.ETimeOut,))
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4

@@ -10,6 +10,7 @@ import typing as _t
 
 import Miro.Exception_idl as _m_Miro_Exception_idl
 import Miro.Time_idl as _m_Miro_Time_idl
+import miro_gen.runtime.arrays as _arrays
 import miro_gen.runtime.cdr as _cdr
 import miro_gen.runtime.rpc as _rpc
 
@@ -70,12 +71,16 @@ class Range3dPointIDL(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Range3dPointIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::Range3dPointIDL", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Range3dPointIDL:
@@ -111,7 +116,7 @@ Range3dPointSeqIDL: _t.TypeAlias = list[Range3dPointIDL]
 """The points of one scan."""
 
 
-Range3dIntensitySeqIDL: _t.TypeAlias = list[float]
+Range3dIntensitySeqIDL: _t.TypeAlias = _arrays.Array[float]
 """Return strengths of the points of one scan."""
 
 
@@ -156,12 +161,16 @@ class Range3dMountingIDL(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Range3dMountingIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::Range3dMountingIDL", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Range3dMountingIDL:
@@ -251,12 +260,16 @@ class Range3dDescriptionIDL(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Range3dDescriptionIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::Range3dDescriptionIDL", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Range3dDescriptionIDL:
@@ -340,7 +353,7 @@ class Range3dScanEventIDL(_cdr.IdlType):
     """Time the scan was acquired (completed)."""
     point: Range3dPointSeqIDL = _dc.field(default_factory=list)
     """The measured points, in millimetres, in the sensor's frame."""
-    intensity: Range3dIntensitySeqIDL = _dc.field(default_factory=list)
+    intensity: Range3dIntensitySeqIDL = _dc.field(default_factory=lambda: _arrays.zeros("f"))
     """Return strength of each point, in the device's own units.
 
     Either empty (the device does not measure it) or as long as point,
@@ -381,12 +394,16 @@ class Range3dScanEventIDL(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Range3dScanEventIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::Range3dScanEventIDL", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Range3dScanEventIDL:
@@ -413,7 +430,7 @@ def _enc_Range3dScanEventIDL(_buf: bytearray, _v: Range3dScanEventIDL) -> None:
         None,
         "Miro::Range3dScanEventIDL.point",
     )
-    _cdr.put_primitives(
+    _arrays.put_sequence(
         _buf,
         _v.intensity,
         "f",
@@ -438,7 +455,7 @@ def _dec_Range3dScanEventIDL(
         None,
         "Miro::Range3dScanEventIDL.point",
     )
-    _f2, _off = _cdr.get_primitives(
+    _f2, _off = _arrays.get_sequence(
         _data,
         _off,
         _e,
@@ -459,8 +476,8 @@ class Range3dSensor(_rpc.Stub):
 
     def getDescription(self) -> Range3dDescriptionIDL:
         """Return the properties and mounting of the sensor."""
-        _buf = bytearray(_cdr.HEADER_LE)
-        _data = self._call("getDescription", bytes(_buf), ())
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        _data = self._call("getDescription", _buf.value(), ())
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
@@ -472,8 +489,8 @@ class Range3dSensor(_rpc.Stub):
 
     def getScan(self) -> Range3dScanEventIDL:
         """Return the latest scan."""
-        _buf = bytearray(_cdr.HEADER_LE)
-        _data = self._call("getScan", bytes(_buf), ())
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        _data = self._call("getScan", _buf.value(), ())
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
@@ -488,8 +505,8 @@ class Range3dSensor(_rpc.Stub):
 
         @throw ETimeOut No new scan arrived within about five scan periods.
         """
-        _buf = bytearray(_cdr.HEADER_LE)
-        _data = self._call("getWaitScan", bytes(_buf), (_m_Miro_Exception_idl.ETimeOut,))
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        _data = self._call("getWaitScan", _buf.value(), (_m_Miro_Exception_idl.ETimeOut,))
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4

@@ -8,6 +8,7 @@ import dataclasses as _dc
 import typing as _t
 
 import Miro.Time_idl as _m_Miro_Time_idl
+import miro_gen.runtime.arrays as _arrays
 import miro_gen.runtime.cdr as _cdr
 
 __all__ = [
@@ -31,7 +32,7 @@ _P2 = _S2[0].pack
 _U2 = (_S2[0].unpack_from, _S2[1].unpack_from)
 
 
-RangeGroupIDL: _t.TypeAlias = list[int]
+RangeGroupIDL: _t.TypeAlias = _arrays.Array[int]
 """The readings of one sensor group, in millimetres, in the order of its ScanDescription.
 
 Besides distances, an entry can hold RangeSensor::HORIZON_RANGE
@@ -80,12 +81,16 @@ class RangeScanEventIDL(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_RangeScanEventIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::RangeScanEventIDL", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> RangeScanEventIDL:
@@ -104,7 +109,7 @@ def _enc_RangeScanEventIDL(_buf: bytearray, _v: RangeScanEventIDL) -> None:
         raise _cdr.nested_error("Miro::RangeScanEventIDL.time", _x) from None
     _cdr.put_count(_buf, _v.range, None, "Miro::RangeScanEventIDL.range")
     for _x0 in _v.range:
-        _cdr.put_primitives(
+        _arrays.put_sequence(
             _buf,
             _x0,
             "i",
@@ -126,7 +131,7 @@ def _dec_RangeScanEventIDL(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Rang
     )
     _f2 = []
     for _ in range(_n4):
-        _x3, _off = _cdr.get_primitives(
+        _x3, _off = _arrays.get_sequence(
             _data,
             _off,
             _e,
@@ -149,7 +154,7 @@ class RangeGroupEventIDL(_cdr.IdlType):
     """Time the group was read."""
     group: int = 0
     """Number of the group, an index into ScanDescriptionIDL::group."""
-    range: RangeGroupIDL = _dc.field(default_factory=list)
+    range: RangeGroupIDL = _dc.field(default_factory=lambda: _arrays.zeros("i"))
     """The readings of the group, in millimetres (see RangeGroupIDL)."""
 
     _repo_id = "IDL:Miro/RangeGroupEventIDL:1.0"
@@ -176,12 +181,16 @@ class RangeGroupEventIDL(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_RangeGroupEventIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::RangeGroupEventIDL", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> RangeGroupEventIDL:
@@ -206,7 +215,7 @@ def _enc_RangeGroupEventIDL(_buf: bytearray, _v: RangeGroupEventIDL) -> None:
             _x,
             ("Miro::RangeGroupEventIDL.group", "H", lambda: (_v.group,)),
         ) from None
-    _cdr.put_primitives(
+    _arrays.put_sequence(
         _buf,
         _v.range,
         "i",
@@ -223,7 +232,7 @@ def _dec_RangeGroupEventIDL(
     _off += (4 - _off) & 1
     _t1 = _U0[_e](_data, _off)
     _off += 2
-    _f2, _off = _cdr.get_primitives(
+    _f2, _off = _arrays.get_sequence(
         _data,
         _off,
         _e,
@@ -261,12 +270,16 @@ class RangeSensorIDL(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_RangeSensorIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::RangeSensorIDL", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> RangeSensorIDL:
@@ -353,12 +366,16 @@ class RangeBunchEventIDL(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_RangeBunchEventIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::RangeBunchEventIDL", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> RangeBunchEventIDL:

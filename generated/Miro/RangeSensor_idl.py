@@ -73,8 +73,8 @@ class RangeSensor(_rpc.Stub):
 
     def getScanDescription(self) -> _m_Miro_ScanDescription_idl.ScanDescriptionIDL:
         """Return the layout of the sensor: its groups, positions and ranges."""
-        _buf = bytearray(_cdr.HEADER_LE)
-        _data = self._call("getScanDescription", bytes(_buf), ())
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        _data = self._call("getScanDescription", _buf.value(), ())
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
@@ -86,8 +86,8 @@ class RangeSensor(_rpc.Stub):
 
     def getFullScan(self) -> _m_Miro_RangeEvent_idl.RangeScanEventIDL:
         """Return the latest readings of all groups."""
-        _buf = bytearray(_cdr.HEADER_LE)
-        _data = self._call("getFullScan", bytes(_buf), ())
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        _data = self._call("getFullScan", _buf.value(), ())
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
@@ -102,8 +102,8 @@ class RangeSensor(_rpc.Stub):
 
         @throw ETimeOut No new scan arrived within about five report periods.
         """
-        _buf = bytearray(_cdr.HEADER_LE)
-        _data = self._call("getWaitFullScan", bytes(_buf), (_m_Miro_Exception_idl.ETimeOut,))
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        _data = self._call("getWaitFullScan", _buf.value(), (_m_Miro_Exception_idl.ETimeOut,))
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
@@ -120,7 +120,7 @@ class RangeSensor(_rpc.Stub):
 
         @throw EOutOfBounds There is no group with that number.
         """
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
             try:
@@ -132,7 +132,7 @@ class RangeSensor(_rpc.Stub):
                 ) from None
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::RangeSensor::getGroup", _x) from None
-        _data = self._call("getGroup", bytes(_buf), (_m_Miro_Exception_idl.EOutOfBounds,))
+        _data = self._call("getGroup", _buf.value(), (_m_Miro_Exception_idl.EOutOfBounds,))
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
@@ -151,7 +151,7 @@ class RangeSensor(_rpc.Stub):
         @throw ETimeOut No new readings of the group arrived within about
         five report periods.
         """
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
             try:
@@ -165,7 +165,7 @@ class RangeSensor(_rpc.Stub):
             raise _cdr.encode_error("Miro::RangeSensor::getWaitGroup", _x) from None
         _data = self._call(
             "getWaitGroup",
-            bytes(_buf),
+            _buf.value(),
             (_m_Miro_Exception_idl.EOutOfBounds, _m_Miro_Exception_idl.ETimeOut),
         )
         try:

@@ -66,12 +66,16 @@ class SensorDescriptionIDL(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_SensorDescriptionIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::SensorDescriptionIDL", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> SensorDescriptionIDL:
@@ -163,12 +167,16 @@ class SensorPositionIDL(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_SensorPositionIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::SensorPositionIDL", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> SensorPositionIDL:
@@ -264,12 +272,16 @@ class SensorGroupIDL(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_SensorGroupIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::SensorGroupIDL", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> SensorGroupIDL:
@@ -379,12 +391,16 @@ class ScanDescriptionIDL(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ScanDescriptionIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::ScanDescriptionIDL", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ScanDescriptionIDL:

@@ -50,8 +50,8 @@ class Stall(_rpc.Stub):
 
     def isStalled(self) -> bool:
         """Return TRUE when the drive is stalled."""
-        _buf = bytearray(_cdr.HEADER_LE)
-        _data = self._call("isStalled", bytes(_buf), ())
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        _data = self._call("isStalled", _buf.value(), ())
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
@@ -67,5 +67,5 @@ class Stall(_rpc.Stub):
 
         @throw EDevIO The command could not be sent to the device.
         """
-        _buf = bytearray(_cdr.HEADER_LE)
-        self._call("unstall", bytes(_buf), (_m_Miro_Exception_idl.EDevIO,))
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._call("unstall", _buf.value(), (_m_Miro_Exception_idl.EDevIO,))

@@ -37,8 +37,8 @@ class SynchroMotion(_m_Miro_Motion_idl.Motion):
 
         @throw EDevIO The command could not be sent to the device.
         """
-        _buf = bytearray(_cdr.HEADER_LE)
-        self._call("rotateLimp", bytes(_buf), (_m_Miro_Exception_idl.EDevIO,))
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._call("rotateLimp", _buf.value(), (_m_Miro_Exception_idl.EDevIO,))
 
     def rotate(self, velocity: float) -> None:
         """Set the rotational velocity only and start turning.
@@ -50,7 +50,7 @@ class SynchroMotion(_m_Miro_Motion_idl.Motion):
         @throw EOutOfBounds The velocity is outside the limits of getMinMaxVelocity.
         @throw EDevIO The command could not be sent to the device.
         """
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
             try:
@@ -64,7 +64,7 @@ class SynchroMotion(_m_Miro_Motion_idl.Motion):
             raise _cdr.encode_error("Miro::SynchroMotion::rotate", _x) from None
         self._call(
             "rotate",
-            bytes(_buf),
+            _buf.value(),
             (_m_Miro_Exception_idl.EOutOfBounds, _m_Miro_Exception_idl.EDevIO),
         )
 
@@ -73,8 +73,8 @@ class SynchroMotion(_m_Miro_Motion_idl.Motion):
 
         @throw EDevIO The command could not be sent to the device.
         """
-        _buf = bytearray(_cdr.HEADER_LE)
-        self._call("translateLimp", bytes(_buf), (_m_Miro_Exception_idl.EDevIO,))
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._call("translateLimp", _buf.value(), (_m_Miro_Exception_idl.EDevIO,))
 
     def translate(self, velocity: int) -> None:
         """Set the translational velocity only and start driving.
@@ -86,7 +86,7 @@ class SynchroMotion(_m_Miro_Motion_idl.Motion):
         @throw EOutOfBounds The velocity is outside the limits of getMinMaxVelocity.
         @throw EDevIO The command could not be sent to the device.
         """
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
             try:
@@ -100,6 +100,6 @@ class SynchroMotion(_m_Miro_Motion_idl.Motion):
             raise _cdr.encode_error("Miro::SynchroMotion::translate", _x) from None
         self._call(
             "translate",
-            bytes(_buf),
+            _buf.value(),
             (_m_Miro_Exception_idl.EOutOfBounds, _m_Miro_Exception_idl.EDevIO),
         )

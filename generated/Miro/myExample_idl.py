@@ -54,12 +54,16 @@ class myExampleIDL(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_myExampleIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Miro::myExampleIDL", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> myExampleIDL:
@@ -112,8 +116,8 @@ class myExample(_rpc.Stub):
 
         @return The characters and their count.
         """
-        _buf = bytearray(_cdr.HEADER_LE)
-        _data = self._call("getString", bytes(_buf), ())
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        _data = self._call("getString", _buf.value(), ())
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4

@@ -16,6 +16,7 @@ __all__ = [
     "Entry",
     "EntrySeq",
     "InvalidName",
+    "NameSeq",
     "NotFound",
     "Registry",
 ]
@@ -23,9 +24,6 @@ __all__ = [
 _S0 = _cdr.pair("I")
 _P0 = _S0[0].pack
 _U0 = (_S0[0].unpack_from, _S0[1].unpack_from)
-_S1 = _cdr.pair("?")
-_P1 = _S1[0].pack
-_U1 = (_S1[0].unpack_from, _S1[1].unpack_from)
 
 
 @_dc.dataclass(slots=True)
@@ -60,12 +58,16 @@ class Entry(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Entry(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroNaming::Entry", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Entry:
@@ -128,6 +130,10 @@ EntrySeq: _t.TypeAlias = list[Entry]
 """Entries, in name order."""
 
 
+NameSeq: _t.TypeAlias = list[str]
+"""Full names."""
+
+
 @_dc.dataclass(eq=False)
 class NotFound(_exc.UserException, _cdr.IdlType):
     """No entry has this name."""
@@ -151,12 +157,16 @@ class NotFound(_exc.UserException, _cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_NotFound(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroNaming::NotFound", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> NotFound:
@@ -185,7 +195,7 @@ def _dec_NotFound(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[NotFound, int
 
 @_dc.dataclass(eq=False)
 class AlreadyBound(_exc.UserException, _cdr.IdlType):
-    """The name is taken by another server's live entry."""
+    """The name is held by another owner's live entry."""
 
     name: str = ""
     """The name asked for."""
@@ -206,12 +216,16 @@ class AlreadyBound(_exc.UserException, _cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_AlreadyBound(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroNaming::AlreadyBound", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> AlreadyBound:
@@ -261,12 +275,16 @@ class InvalidName(_exc.UserException, _cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_InvalidName(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroNaming::InvalidName", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> InvalidName:
@@ -298,7 +316,7 @@ class Registry(_rpc.Stub):
 
     __slots__ = ()
     _repo_id = "IDL:MiroNaming/Registry:1.0"
-    _interface_hash = "3e5906eb5b3a765a612dda86029b12b2b4a1879062cc5d12e4f6c131c6b3388b"
+    _interface_hash = "8e04bda82db4843215481ad4c6bd697217660d1231736a247aa2a9af5868bee7"
 
     def bind(self, binding: Entry, owner: str, lease_ms: int) -> None:
         """Bind a name that is free (or already held by the same owner).
@@ -307,7 +325,7 @@ class Registry(_rpc.Stub):
         @param owner The binding server's unique id; its leases are renewed together.
         @param lease_ms How long the entry lives unless renewed.
         """
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _enc_Entry(_buf, binding)
@@ -324,11 +342,13 @@ class Registry(_rpc.Stub):
                 ) from None
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroNaming::Registry::bind", _x) from None
-        self._call("bind", bytes(_buf), (AlreadyBound, InvalidName))
+        self._call("bind", _buf.value(), (AlreadyBound, InvalidName))
 
     def rebind(self, binding: Entry, owner: str, lease_ms: int) -> None:
-        """Bind a name, replacing whatever it was bound to (Miro's addToNameService)."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        """Bind a name, replacing what the same owner bound before (Miro's addToNameService);
+        a name that another owner holds live is refused.
+        """
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _enc_Entry(_buf, binding)
@@ -350,16 +370,16 @@ class Registry(_rpc.Stub):
                 ) from None
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroNaming::Registry::rebind", _x) from None
-        self._call("rebind", bytes(_buf), (InvalidName,))
+        self._call("rebind", _buf.value(), (AlreadyBound, InvalidName))
 
     def resolve(self, name: str) -> Entry:
         """The entry bound to a full name."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _cdr.put_string(_buf, name, None, "MiroNaming::Registry::resolve(name)")
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroNaming::Registry::resolve", _x) from None
-        _data = self._call("resolve", bytes(_buf), (NotFound, InvalidName))
+        _data = self._call("resolve", _buf.value(), (NotFound, InvalidName))
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
@@ -369,18 +389,24 @@ class Registry(_rpc.Stub):
             raise _cdr.marshal_error("MiroNaming::Registry::resolve", _x) from None
         return _r
 
-    def unbind(self, name: str) -> None:
-        """Remove a name."""
-        _buf = bytearray(_cdr.HEADER_LE)
+    def unbind(self, name: str, owner: str) -> None:
+        """Remove a name that `owner` bound (NotFound if `owner` holds no such live entry)."""
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _cdr.put_string(_buf, name, None, "MiroNaming::Registry::unbind(name)")
+            _cdr.put_string(
+                _buf,
+                owner,
+                None,
+                "MiroNaming::Registry::unbind(owner)",
+            )
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroNaming::Registry::unbind", _x) from None
-        self._call("unbind", bytes(_buf), (NotFound, InvalidName))
+        self._call("unbind", _buf.value(), (NotFound, InvalidName))
 
     def _list(self, prefix: str) -> EntrySeq:
         """The entries whose names start with `prefix` (all for an empty prefix), in name order."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _cdr.put_string(
                 _buf,
@@ -390,7 +416,7 @@ class Registry(_rpc.Stub):
             )
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroNaming::Registry::list", _x) from None
-        _data = self._call("list", bytes(_buf), ())
+        _data = self._call("list", _buf.value(), ())
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
@@ -411,15 +437,19 @@ class Registry(_rpc.Stub):
             raise _cdr.marshal_error("MiroNaming::Registry::list", _x) from None
         return _r
 
-    def renew(self, owner: str, lease_ms: int) -> bool:
-        """Extend every lease of `owner` by `lease_ms`.
+    def renew(self, owner: str, names: NameSeq, lease_ms: int) -> NameSeq:
+        """Extend the leases of the entries `names` of `owner` by `lease_ms`.
 
-        @return false when the service holds no entry of this owner (it has restarted, or the
-        leases ran out): the owner then binds its names again.
+        @return the names of `names` that the service does not hold for `owner` (it has
+        restarted, a lease ran out, another owner holds the name now): the owner binds them
+        again.
         """
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _cdr.put_string(_buf, owner, None, "MiroNaming::Registry::renew(owner)")
+            _cdr.put_count(_buf, names, None, "MiroNaming::Registry::renew(names)")
+            for _x0 in names:
+                _cdr.put_string(_buf, _x0, None, "MiroNaming::Registry::renew(names)")
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
             try:
                 _buf += _P0(lease_ms)
@@ -430,13 +460,29 @@ class Registry(_rpc.Stub):
                 ) from None
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroNaming::Registry::renew", _x) from None
-        _data = self._call("renew", bytes(_buf), ())
+        _data = self._call("renew", _buf.value(), ())
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
-            _t2 = _U1[_e](_data, _off)
-            _off += 1
-            _r: bool = _t2[0]
+            _n9, _off = _cdr.get_length(
+                _data,
+                _off,
+                _e,
+                None,
+                4,
+                "MiroNaming::Registry::renew result",
+            )
+            _f7 = []
+            for _ in range(_n9):
+                _x8, _off = _cdr.get_string(
+                    _data,
+                    _off,
+                    _e,
+                    None,
+                    "MiroNaming::Registry::renew result",
+                )
+                _f7.append(_x8)
+            _r: NameSeq = _f7
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("MiroNaming::Registry::renew", _x) from None
         return _r

@@ -18,16 +18,13 @@ __all__ = [
 _S0 = _cdr.pair("I")
 _P0 = _S0[0].pack
 _U0 = (_S0[0].unpack_from, _S0[1].unpack_from)
-_S1 = _cdr.pair("?")
-_P1 = _S1[0].pack
-_U1 = (_S1[0].unpack_from, _S1[1].unpack_from)
 
 
 class Registry(_rpc.Servant):
     """The naming service: one per robot or per network of robots."""
 
     _repo_id = "IDL:MiroNaming/Registry:1.0"
-    _interface_hash = "3e5906eb5b3a765a612dda86029b12b2b4a1879062cc5d12e4f6c131c6b3388b"
+    _interface_hash = "8e04bda82db4843215481ad4c6bd697217660d1231736a247aa2a9af5868bee7"
     _interface_schema = (
         "module MiroNaming {\n"
         "  struct Entry {\n"
@@ -57,6 +54,9 @@ class Registry(_rpc.Servant):
         "  typedef sequence<MiroNaming::Entry> EntrySeq;\n"
         "};\n"
         "module MiroNaming {\n"
+        "  typedef sequence<string> NameSeq;\n"
+        "};\n"
+        "module MiroNaming {\n"
         "  interface Registry {\n"
         "    void bind(\n"
         "        in MiroNaming::Entry binding,\n"
@@ -67,15 +67,19 @@ class Registry(_rpc.Servant):
         "        in MiroNaming::Entry binding,\n"
         "        in string owner,\n"
         "        in unsigned long lease_ms)\n"
-        "        raises (MiroNaming::InvalidName);\n"
+        "        raises (MiroNaming::AlreadyBound, MiroNaming::InvalidName);\n"
         "    MiroNaming::Entry resolve(\n"
         "        in string name)\n"
         "        raises (MiroNaming::NotFound, MiroNaming::InvalidName);\n"
         "    void unbind(\n"
-        "        in string name)\n"
+        "        in string name,\n"
+        "        in string owner)\n"
         "        raises (MiroNaming::NotFound, MiroNaming::InvalidName);\n"
         "    MiroNaming::EntrySeq list(in string prefix);\n"
-        "    boolean renew(in string owner, in unsigned long lease_ms);\n"
+        "    MiroNaming::NameSeq renew(\n"
+        "        in string owner,\n"
+        "        in MiroNaming::NameSeq names,\n"
+        "        in unsigned long lease_ms);\n"
         "  };\n"
         "};\n"
     )
@@ -111,8 +115,8 @@ class Registry(_rpc.Servant):
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("MiroNaming::Registry::bind", _x) from None
         self.bind(binding, owner, lease_ms)
-        _buf = bytearray(_cdr.HEADER_LE)
-        return bytes(_buf)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        return _buf.value()
 
     @_abc.abstractmethod
     def rebind(
@@ -121,7 +125,9 @@ class Registry(_rpc.Servant):
         owner: str,
         lease_ms: int,
     ) -> None:
-        """Bind a name, replacing whatever it was bound to (Miro's addToNameService)."""
+        """Bind a name, replacing what the same owner bound before (Miro's addToNameService);
+        a name that another owner holds live is refused.
+        """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_rebind(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
@@ -145,8 +151,8 @@ class Registry(_rpc.Servant):
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("MiroNaming::Registry::rebind", _x) from None
         self.rebind(binding, owner, lease_ms)
-        _buf = bytearray(_cdr.HEADER_LE)
-        return bytes(_buf)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        return _buf.value()
 
     @_abc.abstractmethod
     def resolve(self, name: str) -> _m_MiroNaming_MiroNaming_idl.Entry:
@@ -168,7 +174,7 @@ class Registry(_rpc.Servant):
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("MiroNaming::Registry::resolve", _x) from None
         _r = self.resolve(name)
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _m_MiroNaming_MiroNaming_idl._enc_Entry(_buf, _r)
@@ -176,11 +182,11 @@ class Registry(_rpc.Servant):
                 raise _cdr.nested_error("MiroNaming::Registry::resolve result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("MiroNaming::Registry::resolve", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @_abc.abstractmethod
-    def unbind(self, name: str) -> None:
-        """Remove a name."""
+    def unbind(self, name: str, owner: str) -> None:
+        """Remove a name that `owner` bound (NotFound if `owner` holds no such live entry)."""
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_unbind(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
@@ -194,12 +200,20 @@ class Registry(_rpc.Servant):
                 None,
                 "MiroNaming::Registry::unbind(name)",
             )
+            _f1, _off = _cdr.get_string(
+                _data,
+                _off,
+                _e,
+                None,
+                "MiroNaming::Registry::unbind(owner)",
+            )
             name = _f0
+            owner = _f1
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("MiroNaming::Registry::unbind", _x) from None
-        self.unbind(name)
-        _buf = bytearray(_cdr.HEADER_LE)
-        return bytes(_buf)
+        self.unbind(name, owner)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        return _buf.value()
 
     @_abc.abstractmethod
     def _list(self, prefix: str) -> _m_MiroNaming_MiroNaming_idl.EntrySeq:
@@ -221,7 +235,7 @@ class Registry(_rpc.Servant):
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("MiroNaming::Registry::list", _x) from None
         _r = self._list(prefix)
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _cdr.put_count(_buf, _r, None, "MiroNaming::Registry::list result")
             for _x1 in _r:
@@ -231,14 +245,20 @@ class Registry(_rpc.Servant):
                     raise _cdr.nested_error("MiroNaming::Registry::list result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("MiroNaming::Registry::list", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @_abc.abstractmethod
-    def renew(self, owner: str, lease_ms: int) -> bool:
-        """Extend every lease of `owner` by `lease_ms`.
+    def renew(
+        self,
+        owner: str,
+        names: _m_MiroNaming_MiroNaming_idl.NameSeq,
+        lease_ms: int,
+    ) -> _m_MiroNaming_MiroNaming_idl.NameSeq:
+        """Extend the leases of the entries `names` of `owner` by `lease_ms`.
 
-        @return false when the service holds no entry of this owner (it has restarted, or the
-        leases ran out): the owner then binds its names again.
+        @return the names of `names` that the service does not hold for `owner` (it has
+        restarted, a lease ran out, another owner holds the name now): the owner binds them
+        again.
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
@@ -246,33 +266,48 @@ class Registry(_rpc.Servant):
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
-            _f0, _off = _cdr.get_string(
+            _f1, _off = _cdr.get_string(
                 _data,
                 _off,
                 _e,
                 None,
                 "MiroNaming::Registry::renew(owner)",
             )
+            _n4, _off = _cdr.get_length(
+                _data,
+                _off,
+                _e,
+                None,
+                4,
+                "MiroNaming::Registry::renew(names)",
+            )
+            _f2 = []
+            for _ in range(_n4):
+                _x3, _off = _cdr.get_string(
+                    _data,
+                    _off,
+                    _e,
+                    None,
+                    "MiroNaming::Registry::renew(names)",
+                )
+                _f2.append(_x3)
             _off += (4 - _off) & 3
-            _t1 = _U0[_e](_data, _off)
+            _t5 = _U0[_e](_data, _off)
             _off += 4
-            owner = _f0
-            lease_ms = _t1[0]
+            owner = _f1
+            names = _f2
+            lease_ms = _t5[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("MiroNaming::Registry::renew", _x) from None
-        _r = self.renew(owner, lease_ms)
-        _buf = bytearray(_cdr.HEADER_LE)
+        _r = self.renew(owner, names, lease_ms)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
-            try:
-                _buf += _P1(_r)
-            except _cdr.EncodeErrors as _x:
-                raise _cdr.pack_error(
-                    _x,
-                    ("MiroNaming::Registry::renew result", "?", lambda: (_r,)),
-                ) from None
+            _cdr.put_count(_buf, _r, None, "MiroNaming::Registry::renew result")
+            for _x6 in _r:
+                _cdr.put_string(_buf, _x6, None, "MiroNaming::Registry::renew result")
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("MiroNaming::Registry::renew", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     _dispatch = _rpc.merge_dispatch(
         {

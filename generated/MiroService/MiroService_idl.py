@@ -64,12 +64,16 @@ class ServedObject(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ServedObject(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroService::ServedObject", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ServedObject:
@@ -165,12 +169,16 @@ class Offer(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Offer(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroService::Offer", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Offer:
@@ -265,12 +273,16 @@ class Subscription(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Subscription(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroService::Subscription", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Subscription:
@@ -358,12 +370,16 @@ class ParameterSet(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ParameterSet(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroService::ParameterSet", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ParameterSet:
@@ -523,12 +539,16 @@ class Description(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Description(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroService::Description", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Description:
@@ -720,12 +740,16 @@ class NotFound(_exc.UserException, _cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_NotFound(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroService::NotFound", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> NotFound:
@@ -776,12 +800,16 @@ class InvalidParameters(_exc.UserException, _cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_InvalidParameters(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroService::InvalidParameters", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> InvalidParameters:
@@ -859,12 +887,16 @@ class ParametersChanged(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ParametersChanged(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroService::ParametersChanged", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ParametersChanged:
@@ -944,8 +976,8 @@ class Service(_rpc.Stub):
 
     def describe(self) -> Description:
         """The process, its objects, events and parameter objects."""
-        _buf = bytearray(_cdr.HEADER_LE)
-        _data = self._call("describe", bytes(_buf), ())
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        _data = self._call("describe", _buf.value(), ())
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
@@ -957,7 +989,7 @@ class Service(_rpc.Stub):
 
     def interface_schema(self, repo_id: str) -> str:
         """The interface schema (self-contained IDL) of an interface this process serves."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _cdr.put_string(
                 _buf,
@@ -967,7 +999,7 @@ class Service(_rpc.Stub):
             )
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroService::Service::interface_schema", _x) from None
-        _data = self._call("interface_schema", bytes(_buf), (NotFound,))
+        _data = self._call("interface_schema", _buf.value(), (NotFound,))
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
@@ -985,7 +1017,7 @@ class Service(_rpc.Stub):
 
     def type_schema(self, type_hash: str) -> str:
         """The data schema of a type this process knows, by its type hash."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _cdr.put_string(
                 _buf,
@@ -995,7 +1027,7 @@ class Service(_rpc.Stub):
             )
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroService::Service::type_schema", _x) from None
-        _data = self._call("type_schema", bytes(_buf), (NotFound,))
+        _data = self._call("type_schema", _buf.value(), (NotFound,))
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
@@ -1015,7 +1047,7 @@ class Service(_rpc.Stub):
         """A parameter set's values: a run-time <parameter name="CATEGORY"> element. An empty
         section means the only set of that category.
         """
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _cdr.put_string(
                 _buf,
@@ -1031,7 +1063,7 @@ class Service(_rpc.Stub):
             )
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroService::Service::get_parameters", _x) from None
-        _data = self._call("get_parameters", bytes(_buf), (NotFound,))
+        _data = self._call("get_parameters", _buf.value(), (NotFound,))
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
@@ -1051,7 +1083,7 @@ class Service(_rpc.Stub):
         """Change parameters as a run-time document would (the element's values only; the others
         stay), all or nothing; the new values, as get_parameters gives them.
         """
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _cdr.put_string(
                 _buf,
@@ -1073,7 +1105,7 @@ class Service(_rpc.Stub):
             )
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroService::Service::set_parameters", _x) from None
-        _data = self._call("set_parameters", bytes(_buf), (NotFound, InvalidParameters))
+        _data = self._call("set_parameters", _buf.value(), (NotFound, InvalidParameters))
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
@@ -1091,8 +1123,8 @@ class Service(_rpc.Stub):
 
     def dump_parameters(self) -> str:
         """Every parameter set, as a run-time document that -MiroConfigFile reads back."""
-        _buf = bytearray(_cdr.HEADER_LE)
-        _data = self._call("dump_parameters", bytes(_buf), ())
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        _data = self._call("dump_parameters", _buf.value(), ())
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4

@@ -120,7 +120,7 @@ class Service(_rpc.Servant):
 
     def _op_describe(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.describe()
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _m_MiroService_MiroService_idl._enc_Description(_buf, _r)
@@ -128,7 +128,7 @@ class Service(_rpc.Servant):
                 raise _cdr.nested_error("MiroService::Service::describe result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("MiroService::Service::describe", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @_abc.abstractmethod
     def interface_schema(self, repo_id: str) -> str:
@@ -150,7 +150,7 @@ class Service(_rpc.Servant):
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("MiroService::Service::interface_schema", _x) from None
         _r = self.interface_schema(repo_id)
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _cdr.put_string(
                 _buf,
@@ -160,7 +160,7 @@ class Service(_rpc.Servant):
             )
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("MiroService::Service::interface_schema", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @_abc.abstractmethod
     def type_schema(self, type_hash: str) -> str:
@@ -182,7 +182,7 @@ class Service(_rpc.Servant):
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("MiroService::Service::type_schema", _x) from None
         _r = self.type_schema(type_hash)
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _cdr.put_string(
                 _buf,
@@ -192,7 +192,7 @@ class Service(_rpc.Servant):
             )
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("MiroService::Service::type_schema", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @_abc.abstractmethod
     def get_parameters(self, section: str, category: str) -> str:
@@ -224,7 +224,7 @@ class Service(_rpc.Servant):
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("MiroService::Service::get_parameters", _x) from None
         _r = self.get_parameters(section, category)
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _cdr.put_string(
                 _buf,
@@ -234,7 +234,7 @@ class Service(_rpc.Servant):
             )
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("MiroService::Service::get_parameters", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @_abc.abstractmethod
     def set_parameters(self, section: str, category: str, element: str) -> str:
@@ -274,7 +274,7 @@ class Service(_rpc.Servant):
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("MiroService::Service::set_parameters", _x) from None
         _r = self.set_parameters(section, category, element)
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _cdr.put_string(
                 _buf,
@@ -284,7 +284,7 @@ class Service(_rpc.Servant):
             )
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("MiroService::Service::set_parameters", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @_abc.abstractmethod
     def dump_parameters(self) -> str:
@@ -293,7 +293,7 @@ class Service(_rpc.Servant):
 
     def _op_dump_parameters(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.dump_parameters()
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _cdr.put_string(
                 _buf,
@@ -303,7 +303,7 @@ class Service(_rpc.Servant):
             )
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("MiroService::Service::dump_parameters", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     _dispatch = _rpc.merge_dispatch(
         {

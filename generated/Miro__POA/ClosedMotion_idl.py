@@ -80,8 +80,8 @@ class ClosedMotion(_rpc.Servant):
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::ClosedMotion::rotateToPosition", _x) from None
         self.rotateToPosition(angle)
-        _buf = bytearray(_cdr.HEADER_LE)
-        return bytes(_buf)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        return _buf.value()
 
     @_abc.abstractmethod
     def rotateRelative(self, angle: float) -> None:
@@ -106,8 +106,8 @@ class ClosedMotion(_rpc.Servant):
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::ClosedMotion::rotateRelative", _x) from None
         self.rotateRelative(angle)
-        _buf = bytearray(_cdr.HEADER_LE)
-        return bytes(_buf)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        return _buf.value()
 
     @_abc.abstractmethod
     def translateRelative(self, distance: int) -> None:
@@ -132,8 +132,8 @@ class ClosedMotion(_rpc.Servant):
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::ClosedMotion::translateRelative", _x) from None
         self.translateRelative(distance)
-        _buf = bytearray(_cdr.HEADER_LE)
-        return bytes(_buf)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        return _buf.value()
 
     _dispatch = _rpc.merge_dispatch(
         {

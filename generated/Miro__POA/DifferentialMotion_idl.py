@@ -108,8 +108,8 @@ class DifferentialMotion(_m_Miro__POA_Motion_idl.Motion):
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::DifferentialMotion::setLRVelocity", _x) from None
         self.setLRVelocity(left, right)
-        _buf = bytearray(_cdr.HEADER_LE)
-        return bytes(_buf)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        return _buf.value()
 
     @_abc.abstractmethod
     def getMinMaxLRVelocity(self) -> tuple[int, int, int, int]:
@@ -124,7 +124,7 @@ class DifferentialMotion(_m_Miro__POA_Motion_idl.Motion):
 
     def _op_getMinMaxLRVelocity(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _results = self.getMinMaxLRVelocity()
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             (
                 _o_minLTranslation,
@@ -150,7 +150,7 @@ class DifferentialMotion(_m_Miro__POA_Motion_idl.Motion):
                 ) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::DifferentialMotion::getMinMaxLRVelocity", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @_abc.abstractmethod
     def getTargetLRVelocity(self) -> tuple[int, int]:
@@ -166,7 +166,7 @@ class DifferentialMotion(_m_Miro__POA_Motion_idl.Motion):
 
     def _op_getTargetLRVelocity(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _results = self.getTargetLRVelocity()
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _o_left, _o_right = _results
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
@@ -180,7 +180,7 @@ class DifferentialMotion(_m_Miro__POA_Motion_idl.Motion):
                 ) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::DifferentialMotion::getTargetLRVelocity", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     _dispatch = _rpc.merge_dispatch(
         _m_Miro__POA_Motion_idl.Motion._dispatch,

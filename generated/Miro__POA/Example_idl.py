@@ -57,8 +57,8 @@ class Example(_rpc.Servant):
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::Example::setData", _x) from None
         self.setData(a, b)
-        _buf = bytearray(_cdr.HEADER_LE)
-        return bytes(_buf)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        return _buf.value()
 
     @_abc.abstractmethod
     def getData(self) -> _m_Miro_Example_idl.ExampleStructIDL:
@@ -67,7 +67,7 @@ class Example(_rpc.Servant):
 
     def _op_getData(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getData()
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _m_Miro_Example_idl._enc_ExampleStructIDL(_buf, _r)
@@ -75,7 +75,7 @@ class Example(_rpc.Servant):
                 raise _cdr.nested_error("Miro::Example::getData result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Example::getData", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     _dispatch = _rpc.merge_dispatch(
         {

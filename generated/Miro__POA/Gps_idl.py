@@ -103,7 +103,7 @@ class Gps(_rpc.Servant):
 
     def _op_getData(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getData()
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _m_Miro_Gps_idl._enc_GpsDataIDL(_buf, _r)
@@ -111,7 +111,7 @@ class Gps(_rpc.Servant):
                 raise _cdr.nested_error("Miro::Gps::getData result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Gps::getData", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @_abc.abstractmethod
     def getWaitData(self) -> _m_Miro_Gps_idl.GpsDataIDL:
@@ -124,7 +124,7 @@ class Gps(_rpc.Servant):
 
     def _op_getWaitData(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getWaitData()
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _m_Miro_Gps_idl._enc_GpsDataIDL(_buf, _r)
@@ -132,7 +132,7 @@ class Gps(_rpc.Servant):
                 raise _cdr.nested_error("Miro::Gps::getWaitData result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Gps::getWaitData", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     _dispatch = _rpc.merge_dispatch(
         {

@@ -81,7 +81,7 @@ class Camera(_rpc.Servant):
 
     def _op_getFormat(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getFormat()
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _m_Miro_Image_idl._enc_ImageFormatIDL(_buf, _r)
@@ -89,7 +89,7 @@ class Camera(_rpc.Servant):
                 raise _cdr.nested_error("Miro::Camera::getFormat result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Camera::getFormat", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @_abc.abstractmethod
     def getImage(self) -> _m_Miro_Image_idl.ImageEventIDL:
@@ -98,7 +98,7 @@ class Camera(_rpc.Servant):
 
     def _op_getImage(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getImage()
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _m_Miro_Image_idl._enc_ImageEventIDL(_buf, _r)
@@ -106,7 +106,7 @@ class Camera(_rpc.Servant):
                 raise _cdr.nested_error("Miro::Camera::getImage result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Camera::getImage", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @_abc.abstractmethod
     def getWaitImage(self) -> _m_Miro_Image_idl.ImageEventIDL:
@@ -118,7 +118,7 @@ class Camera(_rpc.Servant):
 
     def _op_getWaitImage(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getWaitImage()
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _m_Miro_Image_idl._enc_ImageEventIDL(_buf, _r)
@@ -126,7 +126,7 @@ class Camera(_rpc.Servant):
                 raise _cdr.nested_error("Miro::Camera::getWaitImage result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Camera::getWaitImage", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     _dispatch = _rpc.merge_dispatch(
         {

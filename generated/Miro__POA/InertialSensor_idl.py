@@ -85,7 +85,7 @@ class InertialSensor(_rpc.Servant):
 
     def _op_getData(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getData()
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _m_Miro_InertialSensor_idl._enc_InertialDataIDL(_buf, _r)
@@ -93,7 +93,7 @@ class InertialSensor(_rpc.Servant):
                 raise _cdr.nested_error("Miro::InertialSensor::getData result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::InertialSensor::getData", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @_abc.abstractmethod
     def getWaitData(self) -> _m_Miro_InertialSensor_idl.InertialDataIDL:
@@ -106,7 +106,7 @@ class InertialSensor(_rpc.Servant):
 
     def _op_getWaitData(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getWaitData()
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _m_Miro_InertialSensor_idl._enc_InertialDataIDL(_buf, _r)
@@ -114,7 +114,7 @@ class InertialSensor(_rpc.Servant):
                 raise _cdr.nested_error("Miro::InertialSensor::getWaitData result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::InertialSensor::getWaitData", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     _dispatch = _rpc.merge_dispatch(
         {

@@ -84,8 +84,8 @@ class Motion(_rpc.Servant):
 
     def _op_limp(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         self.limp()
-        _buf = bytearray(_cdr.HEADER_LE)
-        return bytes(_buf)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        return _buf.value()
 
     @_abc.abstractmethod
     def setVelocity(self, velocity: _m_Miro_Velocity_idl.VelocityIDL) -> None:
@@ -108,8 +108,8 @@ class Motion(_rpc.Servant):
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::Motion::setVelocity", _x) from None
         self.setVelocity(velocity)
-        _buf = bytearray(_cdr.HEADER_LE)
-        return bytes(_buf)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        return _buf.value()
 
     @_abc.abstractmethod
     def getMinMaxVelocity(self) -> tuple[int, int, float, float]:
@@ -130,7 +130,7 @@ class Motion(_rpc.Servant):
 
     def _op_getMinMaxVelocity(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _results = self.getMinMaxVelocity()
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _o_minTranslation, _o_maxTranslation, _o_minRotation, _o_maxRotation = _results
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
@@ -153,7 +153,7 @@ class Motion(_rpc.Servant):
                 ) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Motion::getMinMaxVelocity", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @_abc.abstractmethod
     def getTargetVelocity(self) -> _m_Miro_Velocity_idl.VelocityIDL:
@@ -168,7 +168,7 @@ class Motion(_rpc.Servant):
 
     def _op_getTargetVelocity(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getTargetVelocity()
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _m_Miro_Velocity_idl._enc_VelocityIDL(_buf, _r)
@@ -176,7 +176,7 @@ class Motion(_rpc.Servant):
                 raise _cdr.nested_error("Miro::Motion::getTargetVelocity result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Motion::getTargetVelocity", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     _dispatch = _rpc.merge_dispatch(
         {

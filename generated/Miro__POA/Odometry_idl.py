@@ -110,8 +110,8 @@ class Odometry(_rpc.Servant):
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::Odometry::setPosition", _x) from None
         self.setPosition(position)
-        _buf = bytearray(_cdr.HEADER_LE)
-        return bytes(_buf)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        return _buf.value()
 
     @_abc.abstractmethod
     def updatePosition(self, deltaPosition: _m_Miro_Position_idl.PositionIDL) -> None:
@@ -134,8 +134,8 @@ class Odometry(_rpc.Servant):
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::Odometry::updatePosition", _x) from None
         self.updatePosition(deltaPosition)
-        _buf = bytearray(_cdr.HEADER_LE)
-        return bytes(_buf)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        return _buf.value()
 
     @_abc.abstractmethod
     def getPosition(self) -> _m_Miro_Position_idl.PositionIDL:
@@ -144,7 +144,7 @@ class Odometry(_rpc.Servant):
 
     def _op_getPosition(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getPosition()
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _m_Miro_Position_idl._enc_PositionIDL(_buf, _r)
@@ -152,7 +152,7 @@ class Odometry(_rpc.Servant):
                 raise _cdr.nested_error("Miro::Odometry::getPosition result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Odometry::getPosition", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @_abc.abstractmethod
     def getWaitPosition(self) -> _m_Miro_Position_idl.PositionIDL:
@@ -164,7 +164,7 @@ class Odometry(_rpc.Servant):
 
     def _op_getWaitPosition(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getWaitPosition()
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _m_Miro_Position_idl._enc_PositionIDL(_buf, _r)
@@ -172,7 +172,7 @@ class Odometry(_rpc.Servant):
                 raise _cdr.nested_error("Miro::Odometry::getWaitPosition result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Odometry::getWaitPosition", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @_abc.abstractmethod
     def getRawPosition(self) -> _m_Miro_Position_idl.PositionIDL:
@@ -187,7 +187,7 @@ class Odometry(_rpc.Servant):
 
     def _op_getRawPosition(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getRawPosition()
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _m_Miro_Position_idl._enc_PositionIDL(_buf, _r)
@@ -195,7 +195,7 @@ class Odometry(_rpc.Servant):
                 raise _cdr.nested_error("Miro::Odometry::getRawPosition result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Odometry::getRawPosition", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @_abc.abstractmethod
     def getWaitRawPosition(self) -> _m_Miro_Position_idl.PositionIDL:
@@ -207,7 +207,7 @@ class Odometry(_rpc.Servant):
 
     def _op_getWaitRawPosition(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getWaitRawPosition()
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _m_Miro_Position_idl._enc_PositionIDL(_buf, _r)
@@ -215,7 +215,7 @@ class Odometry(_rpc.Servant):
                 raise _cdr.nested_error("Miro::Odometry::getWaitRawPosition result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Odometry::getWaitRawPosition", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @_abc.abstractmethod
     def getVelocity(self) -> _m_Miro_Velocity_idl.VelocityIDL:
@@ -224,7 +224,7 @@ class Odometry(_rpc.Servant):
 
     def _op_getVelocity(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getVelocity()
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _m_Miro_Velocity_idl._enc_VelocityIDL(_buf, _r)
@@ -232,7 +232,7 @@ class Odometry(_rpc.Servant):
                 raise _cdr.nested_error("Miro::Odometry::getVelocity result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Odometry::getVelocity", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @_abc.abstractmethod
     def getWaitVelocity(self) -> _m_Miro_Velocity_idl.VelocityIDL:
@@ -244,7 +244,7 @@ class Odometry(_rpc.Servant):
 
     def _op_getWaitVelocity(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getWaitVelocity()
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _m_Miro_Velocity_idl._enc_VelocityIDL(_buf, _r)
@@ -252,7 +252,7 @@ class Odometry(_rpc.Servant):
                 raise _cdr.nested_error("Miro::Odometry::getWaitVelocity result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Odometry::getWaitVelocity", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @_abc.abstractmethod
     def getStatus(self) -> _m_Miro_MotionStatus_idl.MotionStatusIDL:
@@ -261,7 +261,7 @@ class Odometry(_rpc.Servant):
 
     def _op_getStatus(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getStatus()
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _m_Miro_MotionStatus_idl._enc_MotionStatusIDL(_buf, _r)
@@ -269,7 +269,7 @@ class Odometry(_rpc.Servant):
                 raise _cdr.nested_error("Miro::Odometry::getStatus result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Odometry::getStatus", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @_abc.abstractmethod
     def getWaitStatus(self) -> _m_Miro_MotionStatus_idl.MotionStatusIDL:
@@ -281,7 +281,7 @@ class Odometry(_rpc.Servant):
 
     def _op_getWaitStatus(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getWaitStatus()
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _m_Miro_MotionStatus_idl._enc_MotionStatusIDL(_buf, _r)
@@ -289,7 +289,7 @@ class Odometry(_rpc.Servant):
                 raise _cdr.nested_error("Miro::Odometry::getWaitStatus result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Odometry::getWaitStatus", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     _dispatch = _rpc.merge_dispatch(
         {

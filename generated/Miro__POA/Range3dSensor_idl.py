@@ -92,7 +92,7 @@ class Range3dSensor(_rpc.Servant):
 
     def _op_getDescription(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getDescription()
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _m_Miro_Range3dSensor_idl._enc_Range3dDescriptionIDL(_buf, _r)
@@ -100,7 +100,7 @@ class Range3dSensor(_rpc.Servant):
                 raise _cdr.nested_error("Miro::Range3dSensor::getDescription result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Range3dSensor::getDescription", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @_abc.abstractmethod
     def getScan(self) -> _m_Miro_Range3dSensor_idl.Range3dScanEventIDL:
@@ -109,7 +109,7 @@ class Range3dSensor(_rpc.Servant):
 
     def _op_getScan(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getScan()
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _m_Miro_Range3dSensor_idl._enc_Range3dScanEventIDL(_buf, _r)
@@ -117,7 +117,7 @@ class Range3dSensor(_rpc.Servant):
                 raise _cdr.nested_error("Miro::Range3dSensor::getScan result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Range3dSensor::getScan", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @_abc.abstractmethod
     def getWaitScan(self) -> _m_Miro_Range3dSensor_idl.Range3dScanEventIDL:
@@ -129,7 +129,7 @@ class Range3dSensor(_rpc.Servant):
 
     def _op_getWaitScan(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getWaitScan()
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _m_Miro_Range3dSensor_idl._enc_Range3dScanEventIDL(_buf, _r)
@@ -137,7 +137,7 @@ class Range3dSensor(_rpc.Servant):
                 raise _cdr.nested_error("Miro::Range3dSensor::getWaitScan result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Range3dSensor::getWaitScan", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     _dispatch = _rpc.merge_dispatch(
         {

@@ -129,7 +129,7 @@ class RangeSensor(_rpc.Servant):
 
     def _op_getScanDescription(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getScanDescription()
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _m_Miro_ScanDescription_idl._enc_ScanDescriptionIDL(_buf, _r)
@@ -137,7 +137,7 @@ class RangeSensor(_rpc.Servant):
                 raise _cdr.nested_error("Miro::RangeSensor::getScanDescription result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::RangeSensor::getScanDescription", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @_abc.abstractmethod
     def getFullScan(self) -> _m_Miro_RangeEvent_idl.RangeScanEventIDL:
@@ -146,7 +146,7 @@ class RangeSensor(_rpc.Servant):
 
     def _op_getFullScan(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getFullScan()
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _m_Miro_RangeEvent_idl._enc_RangeScanEventIDL(_buf, _r)
@@ -154,7 +154,7 @@ class RangeSensor(_rpc.Servant):
                 raise _cdr.nested_error("Miro::RangeSensor::getFullScan result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::RangeSensor::getFullScan", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @_abc.abstractmethod
     def getWaitFullScan(self) -> _m_Miro_RangeEvent_idl.RangeScanEventIDL:
@@ -166,7 +166,7 @@ class RangeSensor(_rpc.Servant):
 
     def _op_getWaitFullScan(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getWaitFullScan()
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _m_Miro_RangeEvent_idl._enc_RangeScanEventIDL(_buf, _r)
@@ -174,7 +174,7 @@ class RangeSensor(_rpc.Servant):
                 raise _cdr.nested_error("Miro::RangeSensor::getWaitFullScan result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::RangeSensor::getWaitFullScan", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @_abc.abstractmethod
     def getGroup(self, id: int) -> _m_Miro_RangeEvent_idl.RangeGroupEventIDL:
@@ -197,7 +197,7 @@ class RangeSensor(_rpc.Servant):
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::RangeSensor::getGroup", _x) from None
         _r = self.getGroup(id)
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _m_Miro_RangeEvent_idl._enc_RangeGroupEventIDL(_buf, _r)
@@ -205,7 +205,7 @@ class RangeSensor(_rpc.Servant):
                 raise _cdr.nested_error("Miro::RangeSensor::getGroup result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::RangeSensor::getGroup", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @_abc.abstractmethod
     def getWaitGroup(self, id: int) -> _m_Miro_RangeEvent_idl.RangeGroupEventIDL:
@@ -230,7 +230,7 @@ class RangeSensor(_rpc.Servant):
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::RangeSensor::getWaitGroup", _x) from None
         _r = self.getWaitGroup(id)
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _m_Miro_RangeEvent_idl._enc_RangeGroupEventIDL(_buf, _r)
@@ -238,7 +238,7 @@ class RangeSensor(_rpc.Servant):
                 raise _cdr.nested_error("Miro::RangeSensor::getWaitGroup result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::RangeSensor::getWaitGroup", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     _dispatch = _rpc.merge_dispatch(
         {

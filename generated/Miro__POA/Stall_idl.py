@@ -53,7 +53,7 @@ class Stall(_rpc.Servant):
 
     def _op_isStalled(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.isStalled()
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _buf += _P0(_r)
@@ -64,7 +64,7 @@ class Stall(_rpc.Servant):
                 ) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Stall::isStalled", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @_abc.abstractmethod
     def unstall(self) -> None:
@@ -76,8 +76,8 @@ class Stall(_rpc.Servant):
 
     def _op_unstall(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         self.unstall()
-        _buf = bytearray(_cdr.HEADER_LE)
-        return bytes(_buf)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        return _buf.value()
 
     _dispatch = _rpc.merge_dispatch(
         {

@@ -87,8 +87,8 @@ class SynchroMotion(_m_Miro__POA_Motion_idl.Motion):
 
     def _op_rotateLimp(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         self.rotateLimp()
-        _buf = bytearray(_cdr.HEADER_LE)
-        return bytes(_buf)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        return _buf.value()
 
     @_abc.abstractmethod
     def rotate(self, velocity: float) -> None:
@@ -114,8 +114,8 @@ class SynchroMotion(_m_Miro__POA_Motion_idl.Motion):
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::SynchroMotion::rotate", _x) from None
         self.rotate(velocity)
-        _buf = bytearray(_cdr.HEADER_LE)
-        return bytes(_buf)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        return _buf.value()
 
     @_abc.abstractmethod
     def translateLimp(self) -> None:
@@ -127,8 +127,8 @@ class SynchroMotion(_m_Miro__POA_Motion_idl.Motion):
 
     def _op_translateLimp(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         self.translateLimp()
-        _buf = bytearray(_cdr.HEADER_LE)
-        return bytes(_buf)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        return _buf.value()
 
     @_abc.abstractmethod
     def translate(self, velocity: int) -> None:
@@ -154,8 +154,8 @@ class SynchroMotion(_m_Miro__POA_Motion_idl.Motion):
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::SynchroMotion::translate", _x) from None
         self.translate(velocity)
-        _buf = bytearray(_cdr.HEADER_LE)
-        return bytes(_buf)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        return _buf.value()
 
     _dispatch = _rpc.merge_dispatch(
         _m_Miro__POA_Motion_idl.Motion._dispatch,

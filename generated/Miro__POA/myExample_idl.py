@@ -45,7 +45,7 @@ class myExample(_rpc.Servant):
 
     def _op_getString(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getString()
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _m_Miro_myExample_idl._enc_myExampleIDL(_buf, _r)
@@ -53,7 +53,7 @@ class myExample(_rpc.Servant):
                 raise _cdr.nested_error("Miro::myExample::getString result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::myExample::getString", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     _dispatch = _rpc.merge_dispatch(
         {

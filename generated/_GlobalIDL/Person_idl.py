@@ -55,12 +55,16 @@ class PersonTraitsIDL(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_PersonTraitsIDL(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("PersonTraitsIDL", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> PersonTraitsIDL:
@@ -108,7 +112,7 @@ class Person(_rpc.Stub):
         @param hair Hair colour as a one-letter code.
         @param age Age in whole years.
         """
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
             try:
@@ -123,12 +127,12 @@ class Person(_rpc.Stub):
                 ) from None
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("Person::setTraits", _x) from None
-        self._call("setTraits", bytes(_buf), ())
+        self._call("setTraits", _buf.value(), ())
 
     def getHeight(self) -> float:
         """Return the height in metres."""
-        _buf = bytearray(_cdr.HEADER_LE)
-        _data = self._call("getHeight", bytes(_buf), ())
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        _data = self._call("getHeight", _buf.value(), ())
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
@@ -142,8 +146,8 @@ class Person(_rpc.Stub):
 
     def getWaist(self) -> float:
         """Return the waist circumference in metres."""
-        _buf = bytearray(_cdr.HEADER_LE)
-        _data = self._call("getWaist", bytes(_buf), ())
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        _data = self._call("getWaist", _buf.value(), ())
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
@@ -157,8 +161,8 @@ class Person(_rpc.Stub):
 
     def getHair(self) -> str:
         """Return the hair colour code."""
-        _buf = bytearray(_cdr.HEADER_LE)
-        _data = self._call("getHair", bytes(_buf), ())
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        _data = self._call("getHair", _buf.value(), ())
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
@@ -171,8 +175,8 @@ class Person(_rpc.Stub):
 
     def getAge(self) -> int:
         """Return the age in whole years."""
-        _buf = bytearray(_cdr.HEADER_LE)
-        _data = self._call("getAge", bytes(_buf), ())
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        _data = self._call("getAge", _buf.value(), ())
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
@@ -186,8 +190,8 @@ class Person(_rpc.Stub):
 
     def getTraits(self) -> PersonTraitsIDL:
         """Return all traits at once."""
-        _buf = bytearray(_cdr.HEADER_LE)
-        _data = self._call("getTraits", bytes(_buf), ())
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        _data = self._call("getTraits", _buf.value(), ())
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4

@@ -80,8 +80,8 @@ class Person(_rpc.Servant):
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Person::setTraits", _x) from None
         self.setTraits(height, waist, hair, age)
-        _buf = bytearray(_cdr.HEADER_LE)
-        return bytes(_buf)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        return _buf.value()
 
     @_abc.abstractmethod
     def getHeight(self) -> float:
@@ -90,7 +90,7 @@ class Person(_rpc.Servant):
 
     def _op_getHeight(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getHeight()
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
             try:
@@ -102,7 +102,7 @@ class Person(_rpc.Servant):
                 ) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Person::getHeight", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @_abc.abstractmethod
     def getWaist(self) -> float:
@@ -111,7 +111,7 @@ class Person(_rpc.Servant):
 
     def _op_getWaist(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getWaist()
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
             try:
@@ -123,7 +123,7 @@ class Person(_rpc.Servant):
                 ) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Person::getWaist", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @_abc.abstractmethod
     def getHair(self) -> str:
@@ -132,7 +132,7 @@ class Person(_rpc.Servant):
 
     def _op_getHair(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getHair()
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _buf += _P2(ord(_r))
@@ -143,7 +143,7 @@ class Person(_rpc.Servant):
                 ) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Person::getHair", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @_abc.abstractmethod
     def getAge(self) -> int:
@@ -152,7 +152,7 @@ class Person(_rpc.Servant):
 
     def _op_getAge(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getAge()
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
             try:
@@ -164,7 +164,7 @@ class Person(_rpc.Servant):
                 ) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Person::getAge", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     @_abc.abstractmethod
     def getTraits(self) -> _m__GlobalIDL_Person_idl.PersonTraitsIDL:
@@ -173,7 +173,7 @@ class Person(_rpc.Servant):
 
     def _op_getTraits(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         _r = self.getTraits()
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _m__GlobalIDL_Person_idl._enc_PersonTraitsIDL(_buf, _r)
@@ -181,7 +181,7 @@ class Person(_rpc.Servant):
                 raise _cdr.nested_error("Person::getTraits result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Person::getTraits", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     _dispatch = _rpc.merge_dispatch(
         {

@@ -2,6 +2,7 @@
 
 - `miro sim nmea`: a GPS receiver on a pseudo-terminal (services/gps);
 - `miro sim scip`: a Hokuyo laser scanner on a pseudo-terminal or a TCP port (services/laser);
+- `miro sim laser`: a laser scanner's events on a channel, no driver needed (cli/sim_laser.py);
 """
 
 from __future__ import annotations
@@ -43,6 +44,7 @@ KINDS = {
     "nmea": "a GPS receiver (NMEA 0183) on a pseudo-terminal",
     "scip": "a Hokuyo laser scanner (SCIP 2.0) on a pseudo-terminal or a TCP port",
     "camera": "a camera: a video file, or an MJPEG stream over HTTP",
+    "laser": "a laser scanner's scans as events on a channel (1,081 beams at 40 Hz)",
 }
 
 
@@ -54,6 +56,10 @@ def sim_main(argv: Sequence[str]) -> int:
         return scip_main(argv[1:])
     if kind == "camera":
         return camera_main(argv[1:])
+    if kind == "laser":
+        from miro_gen.cli.sim_laser import laser_main
+
+        return laser_main(argv[1:])
     usage = "usage: miro sim KIND [OPTIONS]   (miro sim KIND --help for its options)\n\n"
     usage += "\n".join(f"  {k:8s}{what}" for k, what in KINDS.items())
     if kind in ("-h", "--help"):

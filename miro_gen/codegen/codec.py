@@ -27,10 +27,12 @@ from miro_gen.codegen.steps import (
     GetArray,
     GetBooleans,
     GetChars,
+    GetEnums,
     GetFlat,
+    GetNumberArray,
+    GetNumbers,
     GetObject,
     GetOctets,
-    GetPrimitives,
     GetSequence,
     GetString,
     Pack,
@@ -40,9 +42,10 @@ from miro_gen.codegen.steps import (
     PutChars,
     PutEnums,
     PutFlat,
+    PutNumberArray,
+    PutNumbers,
     PutObject,
     PutOctets,
-    PutPrimitives,
     PutSequence,
     PutString,
     Unpack,
@@ -195,6 +198,12 @@ class CodecPlanner:
             case "seq":
                 return [self._encode_sequence(shape, expr, what, inv)]
             case "array":
+                numbers = shape.numbers
+                if numbers is not None:
+                    self.m.use("arrays")
+                    code, size = numbers.code, numbers.size
+                    count = shape.dims[0]
+                    return [PutNumberArray(expr, code, size, count, what)]
                 var = self.temps.name("x")
                 body = self.encode_value(shape.row, var, what, inv)
                 return [PutArray(expr=expr, count=shape.dims[0], what=what, var=var, body=body)]
@@ -207,10 +216,10 @@ class CodecPlanner:
         if elem.kind == "enum":
             table = self._enum_table(elem.enum, "W")
             return PutEnums(bound=bound, expr=expr, table=table, what=what)
-        if elem.prim is not None and elem.prim.array:
-            u = elem.unit
-            code = u.array or "I"
-            return PutPrimitives(bound=bound, expr=expr, code=code, size=u.size, what=what)
+        numbers = shape.numbers
+        if numbers is not None:
+            self.m.use("arrays")
+            return PutNumbers(bound, expr, numbers.code, numbers.size, what)
         if elem.prim is not None:
             if elem.prim.idl == "boolean":
                 return PutBooleans(bound=bound, expr=expr, what=what)
@@ -268,6 +277,12 @@ class CodecPlanner:
             part = f"{tup}[{first}:{first + n}]"
             if elem.kind == "enum":
                 part = f"_cdr.enums({self._enum_table(elem.enum, 'T')}, {part}, {what!r})"
+            elif elem.prim is not None and elem.prim.number:
+                self.m.use("arrays")
+                code = f'"{elem.prim.number}"'
+                if len(shape.dims) > 1:
+                    return f"_arrays.to_rows({code}, {part}, {shape.dims})"
+                return f"_arrays.to_array({code}, {part})"
             elif elem.prim is not None and elem.prim.from_wire:
                 part = f"list(map({elem.prim.from_wire}, {part}))"
             else:
@@ -308,6 +323,11 @@ class CodecPlanner:
             case "seq":
                 return self._decode_sequence(shape, var, what, inv)
             case "array":
+                numbers = shape.numbers
+                if numbers is not None:
+                    self.m.use("arrays")
+                    code, size = numbers.code, numbers.size
+                    return [GetNumberArray(var, code, size, shape.dims[0], what)]
                 item = self.temps.name("x")
                 body = self.decode_value(shape.row, item, what, inv)
                 return [GetArray(var=var, count=shape.dims[0], item=item, body=body)]
@@ -321,13 +341,11 @@ class CodecPlanner:
         bound = shape.bound
         if elem.kind == "enum":
             table = self._enum_table(elem.enum, "T")
-            return [
-                GetPrimitives(bound=bound, var=var, code="I", size=4, what=what),
-                Assign(var=var, expr=f"_cdr.enums({table}, {var}, {what!r})"),
-            ]
-        if elem.prim is not None and elem.prim.array:
-            code, size = elem.prim.array, elem.prim.size
-            return [GetPrimitives(bound=bound, var=var, code=code, size=size, what=what)]
+            return [GetEnums(bound=bound, var=var, table=table, what=what)]
+        numbers = shape.numbers
+        if numbers is not None:
+            self.m.use("arrays")
+            return [GetNumbers(bound, var, numbers.code, numbers.size, what)]
         if elem.prim is not None:
             if elem.prim.idl == "boolean":
                 return [GetBooleans(bound=bound, var=var, what=what)]

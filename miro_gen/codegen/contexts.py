@@ -35,6 +35,7 @@ STDLIB_IMPORTS = {
 # The miro_gen modules generated code may use, and their aliases.
 RUNTIME_IMPORTS = {
     "exc": ("miro_gen.exceptions", "_exc"),
+    "arrays": ("miro_gen.runtime.arrays", "_arrays"),
     "cdr": ("miro_gen.runtime.cdr", "_cdr"),
     "rpc": ("miro_gen.runtime.rpc", "_rpc"),
 }

@@ -1,9 +1,9 @@
 """Python type hints and default values of IDL-typed values, as spelled in a generated module.
 
 `TypeHints.annotation` and `TypeHints.default` are the one place that decides how a shape
-(`shapes.py`) looks in Python: `int`, `list[Miro.Pose]`, `_cdr.ObjectRef`; `0`, a default
-factory. A new mapping (say numeric sequences as `array.array`) changes these two methods and
-the codec steps (`codec.py`) for the same shapes.
+(`shapes.py`) looks in Python: `int`, `list[Miro.Pose]`, `_arrays.Array[float]`,
+`_cdr.ObjectRef`; `0`, a default factory. A new mapping changes these two methods and the codec
+steps (`codec.py`) for the same shapes.
 """
 
 from __future__ import annotations
@@ -57,13 +57,20 @@ class TypeHints:
         results arrive as stubs, but as `ObjectRef` inside data types; so a typedef holding
         references is spelled out there rather than named (its alias says `ObjectRef`). What is
         being sent (a stub's arguments, a servant's results) may be any sequence, and for an
-        object reference a local servant."""
+        object reference a local servant; numbers, any sequence or buffer of them."""
+        numbers = shape.numbers
+        if numbers is not None and sending:  # any sequence or buffer of numbers, typedef'd too
+            m.use("arrays", "typing")
+            return f"_t.Sequence[{numbers.py}] | _arrays.NumberBuffer"
         if (
             use_alias
             and shape.alias is not None
             and not (in_op and shape.innermost.kind == "object")
         ):
             return self.scope.ref(shape.alias, m)
+        if numbers is not None:  # what arrives: an array.array
+            m.use("arrays")
+            return f"_arrays.Array[{numbers.py}]"
         match shape.kind:
             case "prim":
                 assert shape.prim is not None
@@ -117,6 +124,8 @@ class TypeHints:
             case "struct" | "union" | "exception":
                 assert shape.decl is not None
                 return Default(factory=self.scope.ref(shape.decl, m))
+            case "seq" if shape.numbers is not None:
+                return Default(factory=f"lambda: {self._zeros(shape, m)}")
             case "seq":
                 return Default(factory="list")
             case "array":
@@ -130,6 +139,8 @@ class TypeHints:
         elem = shape.elem
         assert elem is not None
         n = shape.dims[0]
+        if shape.numbers is not None:
+            return self._zeros(shape, m)
         if shape.row.kind == "array":
             return f"[{self._array_value(shape.row, m)} for _ in range({n})]"
         if elem.kind == "object":
@@ -138,9 +149,17 @@ class TypeHints:
         if elem.kind in ("prim", "string", "octets", "enum"):
             return f"[{self.default(elem, m).value}] * {n}"
         if elem.kind == "seq":
-            return f"[[] for _ in range({n})]"
+            fresh = self._zeros(elem, m) if elem.numbers is not None else "[]"
+            return f"[{fresh} for _ in range({n})]"
         assert elem.kind in DATA_KINDS and elem.decl is not None
         return f"[{self.scope.ref(elem.decl, m)}() for _ in range({n})]"
+
+    def _zeros(self, shape: Shape, m: ModuleContext) -> str:
+        """A new value of a sequence (empty) or an array (zeros) of numbers."""
+        assert shape.numbers is not None
+        m.use("arrays")
+        n = f", {shape.dims[0]}" if shape.kind == "array" else ""
+        return f'_arrays.zeros("{shape.numbers.code}"{n})'
 
     def enumerator(self, enum: ast.Enum, name: str, m: ModuleContext) -> str:
         """An enumerator as a value: `Color.RED`, through the enum's class."""

@@ -37,6 +37,12 @@ class Prim:
     to_wire: str = ""  # conversion applied when encoding ("ord" for char)
     from_wire: str = ""  # conversion applied when decoding ("chr" for char)
 
+    @property
+    def number(self) -> str | None:
+        """The `array.array` type code of sequences and arrays of this primitive: the integer
+        and floating-point types have one; boolean, char and octet keep their own mapping."""
+        return self.array if self.idl != "octet" else None
+
 
 PRIMS: dict[str, Prim] = {
     p.idl: p
@@ -65,6 +71,9 @@ UNSUPPORTED_BASE = {
 }
 # Shape kinds whose values are instances of a generated data class.
 DATA_KINDS = ("struct", "union", "exception")
+# Arrays of numbers with more elements than this are copied in bulk rather than packed with
+# the fixed-size values around them (each packed element is a Python object on the way).
+PACKED_NUMBERS_MAX = 16
 
 
 @dataclass
@@ -86,10 +95,27 @@ class Shape:
 
     @property
     def fixed(self) -> bool:
-        """Whether values have a fixed size and layout (packable with one Struct)."""
+        """Whether values have a fixed size and layout, and are packed with one Struct (long
+        arrays of numbers are fixed-size too, but are copied in bulk)."""
         if self.kind in ("prim", "enum"):
             return True
-        return self.kind == "array" and self.elem is not None and self.elem.kind in ("prim", "enum")
+        if self.kind != "array" or self.elem is None or self.elem.kind not in ("prim", "enum"):
+            return False
+        return (
+            self.elem.prim is None
+            or not self.elem.prim.number
+            or (self.count <= PACKED_NUMBERS_MAX)
+        )
+
+    @property
+    def numbers(self) -> Prim | None:
+        """The primitive of a value that is an `array.array`: a sequence of numbers, or the last
+        dimension of an array of numbers (`long a[2][3]` is a list of two arrays of three)."""
+        if self.kind == "seq" or (self.kind == "array" and len(self.dims) == 1):
+            elem = self.elem
+            if elem is not None and elem.kind == "prim" and elem.prim and elem.prim.number:
+                return elem.prim
+        return None
 
     @property
     def unit(self) -> Prim:

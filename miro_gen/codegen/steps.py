@@ -100,14 +100,27 @@ class PutChars(PutBounded):
 
 
 @dataclass
-class PutPrimitives(EncodeStep, Bounded):
-    """A sequence of one numeric primitive, in bulk."""
+class PutNumbers(EncodeStep, Bounded):
+    """A sequence of one numeric primitive (an `array.array` or any buffer), in bulk."""
 
-    macro = "put_primitives"
+    macro = "put_numbers"
 
     expr: str
     code: str  # array type code
     size: int
+    what: str
+
+
+@dataclass
+class PutNumberArray(EncodeStep):
+    """An array of numbers too long to pack with the values around it, in bulk."""
+
+    macro = "put_number_array"
+
+    expr: str
+    code: str  # array type code
+    size: int
+    count: int
     what: str
 
 
@@ -250,12 +263,38 @@ class GetChars(GetBounded):
 
 
 @dataclass
-class GetPrimitives(DecodeStep, Bounded):
-    macro = "get_primitives"
+class GetNumbers(DecodeStep, Bounded):
+    """A sequence of one numeric primitive, as an `array.array`."""
+
+    macro = "get_numbers"
 
     var: str
     code: str
     size: int
+    what: str
+
+
+@dataclass
+class GetNumberArray(DecodeStep):
+    """An array of numbers too long to pack, as an `array.array`."""
+
+    macro = "get_number_array"
+
+    var: str
+    code: str
+    size: int
+    count: int
+    what: str
+
+
+@dataclass
+class GetEnums(DecodeStep, Bounded):
+    """A sequence of enumerators, checked against the enum's members by ordinal (`table`)."""
+
+    macro = "get_enums"
+
+    var: str
+    table: str
     what: str
 
 

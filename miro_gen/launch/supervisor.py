@@ -204,10 +204,23 @@ class NameWatcher:
 
         from miro_gen.exceptions import SystemException
         from miro_gen.runtime.cdr import ObjectRef
+        from miro_gen.transport import sockets
         from miro_gen.transport.invoker import ZmqInvoker
         from miro_gen.transport.naming import NAMING_KEY
+        from miro_gen.transport.options import UsageError
 
-        invoker = ZmqInvoker(zmq.Context.instance())
+        context: zmq.Context[Any] = zmq.Context()
+        try:  # the key its services get ($MIRO_KEYS, or the default key file)
+            policy = sockets.policy_for(
+                keys=os.environ.get("MIRO_KEYS") or None,
+                insecure=False,
+                max_message_size=None,
+                talks_to=sockets.endpoint_host(self.url),
+            )
+            sockets.configure(context, policy)
+        except UsageError:
+            pass  # no key where one is needed: the services say so, and fail
+        invoker = ZmqInvoker(context)
         ref = ObjectRef(MiroNaming.Registry._repo_id, self.url, NAMING_KEY)
         registry = MiroNaming.Registry(ref, invoker, timeout=1.0)
         try:
@@ -224,6 +237,7 @@ class NameWatcher:
                 self._stop.wait(NAMES_POLL if answering else FIRST_POLL)
         finally:
             invoker.close()
+            context.destroy(linger=0)
 
     def bound(self, name: str, context: str) -> bool:
         if "/" in name:

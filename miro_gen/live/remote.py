@@ -48,6 +48,13 @@ class Robot:
     def __init__(self, argv: list[str], timeout: float = 10.0) -> None:
         self.client = Client(argv)
         self.timeout = timeout
+        if self.client.corba is not None and self.client.corba.naming is not None:
+            url = self.client.options.naming_url
+            self.client.close()
+            raise LiveError(
+                f"{url} is a CORBA naming service: the live tools need miro's (--naming "
+                "tcp://HOST:PORT); `miro nslist` lists a CORBA one"
+            )
 
     @property
     def options(self) -> Any:
@@ -66,7 +73,8 @@ class Robot:
 
     def resolve(self, name: str) -> MiroNaming.Entry:
         try:
-            return self.client.naming.resolve(name)
+            entry: MiroNaming.Entry = self.client.naming.resolve(name)
+            return entry
         except MiroNaming.NotFound as e:
             raise LiveError(f"{e.name} is not bound in the naming service") from None
         except MiroNaming.InvalidName:

@@ -11,10 +11,12 @@ import dataclasses
 import enum
 import math
 import re
+from array import array
 from collections.abc import Iterator
 from typing import Any
 
 MAX_ITEMS = 16  # elements of a sequence listed, at most; the rest is summarised
+_INDEXED = (list, tuple, bytes, array)  # sequences (numbers are array.array) and octets
 _PART = re.compile(r"[A-Za-z_][A-Za-z0-9_]*|\d+")
 
 
@@ -46,8 +48,8 @@ def get_field(value: Any, path: str | list[str | int]) -> Any:
     for i, part in enumerate(parts):
         where = format_path(parts[:i]) or type(value).__name__
         if isinstance(part, int):
-            if not isinstance(value, list | tuple | bytes) or part >= len(value):
-                size = len(value) if isinstance(value, list | tuple | bytes) else "no"
+            if not isinstance(value, _INDEXED) or part >= len(value):
+                size = len(value) if isinstance(value, _INDEXED) else "no"
                 raise FieldError(f"{where} has {size} elements, no [{part}]")
             value = value[part]
         else:
@@ -81,7 +83,7 @@ def leaves(value: Any, prefix: str = "") -> Iterator[tuple[str, Any]]:
     if names:
         for name in names:
             yield from leaves(getattr(value, name), f"{prefix}.{name}" if prefix else name)
-    elif isinstance(value, list | tuple):
+    elif isinstance(value, list | tuple | array):
         for i, item in enumerate(value[:MAX_ITEMS]):
             yield from leaves(item, f"{prefix}[{i}]")
         if len(value) > MAX_ITEMS:

@@ -1,5 +1,5 @@
 """Reusable widgets for Miro GUIs (the manual's §11.2 "widgets library"): a live view of an
-event's fields and a plot of one numeric field over time. Both are plain QWidgets, so Qt
+event's fields, a plot of one numeric field over time, and an image. Both are plain QWidgets, so Qt
 Designer forms can use them ("Promote to...", header `miro_gen.qt.widgets`) once
 `miro_gen.qt.designer.load_ui` has registered them with the loader.
 """
@@ -12,7 +12,7 @@ from collections import deque
 from typing import Any
 
 from PySide6.QtCore import QPointF, QRectF, Qt, Signal
-from PySide6.QtGui import QColor, QPainter, QPaintEvent, QPen, QPolygonF
+from PySide6.QtGui import QColor, QImage, QPainter, QPaintEvent, QPen, QPolygonF
 from PySide6.QtWidgets import QHeaderView, QTreeWidget, QTreeWidgetItem, QWidget
 
 from miro_gen.qt.fields import is_number, leaves, show
@@ -130,5 +130,40 @@ class PlotWidget(QWidget):
                 int(Qt.AlignmentFlag.AlignLeft | Qt.AlignmentFlag.AlignVCenter),
                 f"latest {shown[-1][1]:g}, over {now - x0:.1f} s",
             )
+        finally:
+            p.end()
+
+
+class ImageView(QWidget):
+    """An image scaled to fit (keeping its proportions), with a caption above it;
+    `show_image(image)` replaces it (None: the caption says why there is none)."""
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.image: QImage | None = None
+        self.caption = ""
+        self.setMinimumSize(160, 120)
+
+    def show_image(self, image: QImage | None, caption: str = "") -> None:
+        self.image, self.caption = image, caption
+        self.update()
+
+    def paintEvent(self, event: QPaintEvent) -> None:
+        p = QPainter(self)
+        try:
+            p.fillRect(self.rect(), QColor(30, 30, 30))
+            metrics = p.fontMetrics()
+            pad = metrics.height() + 4
+            p.setPen(QPen(QColor(230, 230, 230)))
+            p.drawText(6, metrics.ascent() + 2, self.caption or "no image yet")
+            if self.image is None or self.image.isNull():
+                return
+            area = QRectF(self.rect()).adjusted(4, pad, -4, -4)
+            keep = Qt.AspectRatioMode.KeepAspectRatio
+            size = self.image.size().toSizeF().scaled(area.size(), keep)
+            x = area.left() + (area.width() - size.width()) / 2
+            y = area.top() + (area.height() - size.height()) / 2
+            p.setRenderHint(QPainter.RenderHint.SmoothPixmapTransform)
+            p.drawImage(QRectF(x, y, size.width(), size.height()), self.image)
         finally:
             p.end()

@@ -1,9 +1,10 @@
 """Support for the CDR codecs that `miro-idl` generates (OMG CDR, XCDR1, as Cyclone DDS writes it).
 
 Generated code does the fixed-layout work itself with precompiled `struct.Struct`s; this module
-holds what is shared: the encapsulation header, strings, bulk sequences of primitives, unions,
-object references, and the checks that make decoding of malformed input fail at once with
-`MARSHAL` (every length is compared with the bytes that remain before anything is allocated).
+holds what is shared: the encapsulation header, strings, sequences, unions, object references,
+and the checks that make decoding of malformed input fail at once with `MARSHAL` (every length
+is compared with the bytes that remain before anything is allocated). Sequences and arrays of
+numbers, which are `array.array`s, are in `arrays.py`.
 
 Offsets count from the start of the buffer, which begins with the 4-byte encapsulation header;
 alignment is relative to the end of that header, so the padding before a value of alignment `a`
@@ -65,6 +66,64 @@ _XCDR2_KINDS: Final = {6, 7, 8, 9, 10, 11}
 # struct format letters whose array type code differs ("i" is a C int in both on every platform
 # this runs on; "?" has no array type: booleans travel as bytes).
 _ARRAY_CODES: Final = {"?": "B"}
+
+
+class Encoder(bytearray):
+    """What generated encoders append to: a bytearray that starts with the encapsulation header
+    (alignment counts from its length), and keeps large payloads (sequences of numbers or
+    octets, `put_bulk`) aside rather than copy them in, so that `value()` copies each byte of
+    the encoded value once."""
+
+    parts: list[Any] | None = None  # what came before the last payload set aside, and payloads
+    skip = 0  # bytes at the start that only keep the alignment of what follows a payload
+
+    def set_aside(self, data: Any, nbytes: int) -> None:
+        """Append `data` (`nbytes` bytes, any buffer) without copying it yet."""
+        if self.parts is None:
+            self.parts = []
+        self.parts += (self[self.skip :], data)
+        # Only the length modulo 8 matters to what follows: keep that many placeholder bytes.
+        self.skip = (len(self) + nbytes) & 7
+        self[:] = ZEROS[self.skip]
+
+    def value(self) -> bytes:
+        """The encoded value."""
+        if self.parts is None:
+            return bytes(self)
+        return b"".join((*self.parts, memoryview(self)[self.skip :]))
+
+    @property
+    def size(self) -> int:
+        """Bytes encoded so far."""
+        kept = sum(memoryview(p).nbytes for p in self.parts) if self.parts is not None else 0
+        return kept + len(self) - self.skip
+
+    def overwrite(self, at: int, data: bytes) -> None:
+        """Replace bytes at offset `at`, before the first payload set aside (a header's)."""
+        first = self if self.parts is None else self.parts[0]
+        first[at : at + len(data)] = data
+
+
+def encode_after(head: bytes, value: IdlType) -> Encoder:
+    """`value` encoded after `head` and the encapsulation header: a frame put together in one
+    copy. `head` must be a multiple of 8 bytes long, so that the CDR is aligned as usual."""
+    if len(head) & 7:
+        raise ValueError(f"a head of {len(head)} bytes would misalign the CDR after it")
+    buf = Encoder(head + HEADER_LE)
+    value._encode(buf)
+    return buf
+
+
+# Payloads from this size on are set aside by an Encoder; smaller ones are cheaper to copy in.
+LARGE: Final = 1 << 16
+
+
+def put_bulk(buf: bytearray, data: Any, nbytes: int) -> None:
+    """Append `data` (`nbytes` bytes, any buffer): set aside when large, else copied in."""
+    if nbytes >= LARGE and type(buf) is Encoder:
+        buf.set_aside(data, nbytes)
+    else:
+        buf += data
 
 
 def pair(fmt: str) -> tuple[Struct, Struct]:
@@ -178,11 +237,20 @@ def put_count(buf: bytearray, values: Sequence[Any], bound: int | None, what: st
     put_length(buf, count(values, what), bound, what)
 
 
-def put_octets(buf: bytearray, value: bytes | bytearray, bound: int | None, what: str) -> None:
-    if not isinstance(value, bytes | bytearray | memoryview):
-        raise BAD_PARAM(f"{what}: expected bytes, got {type(value).__name__}")
-    put_length(buf, len(value), bound, what)
-    buf += value
+def put_octets(
+    buf: bytearray, value: bytes | bytearray | memoryview, bound: int | None, what: str
+) -> None:
+    """Octets: `bytes`, or any other buffer (a bytearray, a memoryview, a numpy image), as
+    the bytes it holds in row order."""
+    data: Any = value
+    if not isinstance(value, bytes):
+        try:
+            view = memoryview(value)
+        except TypeError:
+            raise BAD_PARAM(f"{what}: expected bytes, got {type(value).__name__}") from None
+        data = view.cast("B") if view.c_contiguous else view.tobytes()
+    put_length(buf, len(data), bound, what)
+    put_bulk(buf, data, len(data))
 
 
 def get_octets(
@@ -190,24 +258,6 @@ def get_octets(
 ) -> tuple[bytes, int]:
     n, off = get_length(data, off, e, bound, 1, what)
     return bytes(data[off : off + n]), off + n
-
-
-def put_primitives(
-    buf: bytearray, values: Sequence[Any], code: str, size: int, bound: int | None, what: str
-) -> None:
-    """A sequence of one primitive type (`code`: a struct format letter), in bulk."""
-    try:
-        n = len(values)
-        packed = struct_pack(f"<{n}{code}", *values)
-    except EncodeErrors as exc:
-        raise encode_error(what, exc) from None
-    if bound is not None and n > bound:
-        raise BAD_PARAM(f"{what}: {n} elements is more than the bound {bound}")
-    buf += ZEROS[-len(buf) & 3]
-    buf += _U32_LE.pack(n)
-    if n:
-        buf += ZEROS[(4 - len(buf)) & (size - 1)]
-        buf += packed
 
 
 def put_enums(
@@ -218,26 +268,23 @@ def put_enums(
         ordinals = [wire[v] for v in values]
     except (KeyError, TypeError) as exc:
         raise encode_error(what, exc) from None
-    put_primitives(buf, ordinals, "I", 4, bound, what)
+    put_length(buf, len(ordinals), bound, what)
+    if ordinals:
+        buf += struct_pack(f"<{len(ordinals)}I", *ordinals)
 
 
-def get_primitives(
+def get_enums(
     data: bytes | bytearray | memoryview,
     off: int,
     e: int,
-    code: str,
-    size: int,
+    table: tuple[Any, ...],
     bound: int | None,
     what: str,
 ) -> tuple[list[Any], int]:
-    n, off = get_length(data, off, e, bound, size, what)
-    if not n:
-        return [], off
-    off += (4 - off) & (size - 1)
-    end = off + n * size
-    if end > len(data):
-        raise MARSHAL(f"{what}: {n} elements cannot fit in the {len(data) - off} bytes left")
-    return _values(data, off, end, e, code), end
+    """A sequence of enumerators (`table`: the enum's members by ordinal)."""
+    n, off = get_length(data, off, e, bound, 4, what)  # checks that the n ulongs are there
+    end = off + 4 * n
+    return enums(table, _values(data, off, end, e, "I"), what), end
 
 
 def _values(
@@ -329,6 +376,9 @@ class IdlType:
     def serialize(self) -> bytes:
         raise NotImplementedError  # pragma: no cover - generated classes implement it
 
+    def _encode(self, buf: Encoder) -> None:
+        raise NotImplementedError  # pragma: no cover - generated classes implement it
+
 
 # Every generated type imported so far, by type hash: what event consumers decode payloads with.
 _TYPES_BY_HASH: dict[str, type[IdlType]] = {}
@@ -345,6 +395,24 @@ def type_for_hash(type_hash: str) -> type[IdlType] | None:
     if found is None and _import_generated_packages():
         found = _listed(type_hash)
     return found
+
+
+def type_for_repo_id(repo_id: str) -> type[IdlType] | None:
+    """The generated class with this repository id among those imported (and, the first time
+    one is unknown, those of the generated packages on the path); for CORBA `any` values,
+    which name their type by repository id."""
+    for attempt in range(2):
+        for cls in list(_TYPES_BY_HASH.values()):
+            if cls._repo_id == repo_id:
+                return cls
+        if attempt or not _import_generated_packages():
+            break
+    return None
+
+
+def imported_types() -> list[type[IdlType]]:
+    """Every generated struct, union and exception class imported so far."""
+    return list(_TYPES_BY_HASH.values())
 
 
 def _listed(type_hash: str) -> type[IdlType] | None:
@@ -512,10 +580,32 @@ class ObjectRef(NamedTuple):
         return bool(self.endpoint or self.key)
 
 
+class EncodedRef(NamedTuple):
+    """An object reference already encoded for the protocol its message goes over (an IOR in
+    CDR, for a GIOP peer): what `miro_gen.runtime.rpc.to_ref` returns for an invoker that
+    encodes references its own way. `data` is written as it is, at a 4-aligned offset."""
+
+    data: bytes
+
+
+class ForeignBody(bytes):
+    """A request or reply body that came over a protocol whose object references are not
+    (repository id, endpoint, key) triples: `get_object` decodes them (GIOP bodies hold IORs)."""
+
+    __slots__ = ()
+
+    def get_object(self, off: int, e: int, what: str) -> tuple[ObjectRef, int]:
+        raise NotImplementedError  # pragma: no cover - subclasses implement it
+
+
 def put_object(buf: bytearray, ref: Any, what: str) -> None:
-    """An object reference: an `ObjectRef`, a stub (its `_ref`), or None (nil)."""
+    """An object reference: an `ObjectRef`, a stub (its `_ref`), an `EncodedRef`, or None."""
     if ref is None:
         ref = ObjectRef()
+    elif isinstance(ref, EncodedRef):
+        buf += ZEROS[-len(buf) & 3]
+        buf += ref.data
+        return
     elif not isinstance(ref, ObjectRef):
         ref = getattr(ref, "_ref", None)
         if not isinstance(ref, ObjectRef):
@@ -528,6 +618,8 @@ def put_object(buf: bytearray, ref: Any, what: str) -> None:
 def get_object(
     data: bytes | bytearray | memoryview, off: int, e: int, what: str
 ) -> tuple[ObjectRef, int]:
+    if isinstance(data, ForeignBody):
+        return data.get_object(off, e, what)
     repo_id, off = get_string(data, off, e, None, what)
     endpoint, off = get_string(data, off, e, None, what)
     key, off = get_octets(data, off, e, None, what)
@@ -623,7 +715,7 @@ def put_flat(
         except EncodeErrors as exc:
             raise encode_error(what, exc) from None
         buf += ZEROS[(4 - len(buf)) & (size - 1)]
-        buf += packed
+        put_bulk(buf, packed, len(packed))
 
 
 def get_flat(

@@ -3,12 +3,17 @@ skeleton class, with Python spellings of their types and a default value for eac
 
 from __future__ import annotations
 
+import array
 import dataclasses
 import enum
 import importlib
 import types
 import typing
 from dataclasses import dataclass
+
+from miro_gen.runtime.arrays import NumberBuffer
+
+_NUMBER_BUFFERS = frozenset(typing.get_args(NumberBuffer))
 
 
 @dataclass
@@ -121,7 +126,12 @@ def _spell(t: object, used: set[str]) -> str:
         return "None"
     origin, args = typing.get_origin(t), typing.get_args(t)
     if origin in (typing.Union, types.UnionType):
-        return " | ".join(_spell(a, used) for a in args)
+        # Numbers are sent as any sequence or buffer: a scaffold returns a list.
+        kept = [a for a in args if a not in _NUMBER_BUFFERS]
+        return " | ".join(_spell(a, used) for a in kept)
+    if origin is array.array:  # numbers arrive as arrays
+        used.add("array")
+        return f"array.array[{', '.join(_spell(a, used) for a in args)}]"
     if origin is not None:
         name = "list" if origin is list else "tuple" if origin is tuple else "list"
         return f"{name}[{', '.join(_spell(a, used) for a in args)}]"
@@ -142,6 +152,9 @@ def _default(t: object, used: set[str]) -> str:
     if origin is tuple:
         items = [_default(a, used) for a in args]
         return f"({', '.join(items)}{',' if len(items) == 1 else ''})"
+    if origin is array.array:
+        used.add("array")
+        return f'array.array("{"d" if args == (float,) else "q"}")'
     if origin is not None:
         return "[]"
     simple = {int: "0", float: "0.0", bool: "False", str: '""', bytes: 'b""'}

@@ -206,8 +206,8 @@ def bind_service(server: Server, impl: ServiceImpl, background: bool = False) ->
     restart: the name is this process's now). A process whose naming service does not answer
     is left unbound. `background`: from a thread of its own, with sockets of its own, which the
     server's clean-up waits for (`ServiceImpl.join`)."""
-    if impl.bound:
-        return
+    if impl.bound or (server.corba is not None and server.corba.naming is not None):
+        return  # (names in a CORBA naming service are CORBA objects': no service object)
     impl.bound = True
     if not background:
         _bind(server, impl, server.invoker)
@@ -243,9 +243,15 @@ def _bind(server: Server, impl: ServiceImpl, invoker: Any) -> None:
                 registry.bind(entry, server.owner, lease)
             except MiroNaming.AlreadyBound:
                 entry.name = f"{full}-{os.getpid()}"
-        registry.rebind(entry, server.owner, lease)
+        try:
+            registry.rebind(entry, server.owner, lease)
+        except MiroNaming.AlreadyBound:
+            # $MIRO_SERVICE's name, still under the lease of the process this one replaces:
+            # the lease renewal binds it when that lease ends.
+            server.keep_entry(entry)
+            return
         if not server.keep_entry(entry):  # the server stopped meanwhile: leave nothing behind
-            registry.unbind(entry.name)
+            registry.unbind(entry.name, server.owner)
             return
         _log.notice("bound %s in the naming service", entry.name)
     except (SystemException, MiroNaming.InvalidName, MiroNaming.NotFound) as e:

@@ -34,6 +34,7 @@ from miro_gen import lifecycle, log
 from miro_gen.exceptions import TRANSIENT, SystemException
 from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.runtime.rpc import Servant, Stub
+from miro_gen.transport import sockets
 from miro_gen.transport.adapter import ObjectAdapter
 from miro_gen.transport.addresses import server_addresses
 from miro_gen.transport.introspection import SERVICE_KEY, ServiceImpl, bind_service, service_name
@@ -44,8 +45,20 @@ from miro_gen.transport.reactor import Reactor
 
 StubT = TypeVar("StubT", bound=Stub)
 RENEW_TIMEOUT = 2.0  # seconds a lease renewal may take
+RETRY_BIND = 0.2  # seconds between attempts to bind a name another owner's lease still holds
 WAIT_STEP = 0.5  # at most this many seconds between two looks for a name being waited for
 _log = log.logger("MIRO")
+
+
+def _corba_side(client: Client) -> Any:
+    """The CORBA side of a process whose options name a CORBA naming service or an IIOP
+    endpoint (miro_gen.transport.iiop), else None; the CORBA code loads only then."""
+    o = client.options
+    if o.naming_url is None and o.iiop_endpoint is None:
+        return None
+    from miro_gen.transport.iiop import corba_for
+
+    return corba_for(client)
 
 
 def _take_options(argv: Sequence[str] | None) -> tuple[CommonOptions, list[str]]:
@@ -71,8 +84,14 @@ class Client:
 
             self.options.naming = naming_for(self.options.naming)
         self.context = context if context is not None else zmq.Context.instance()
+        self._configure_sockets(None)
         self.invoker = ZmqInvoker(self.context)
-        self.naming = NamingClient(self.invoker, self.options.naming, self.options.naming_context)
+        self.corba = _corba_side(self)  # the CORBA world: a CORBA naming service, IIOP
+        self.naming: Any = (
+            self.corba.naming
+            if self.corba is not None and self.corba.naming is not None
+            else NamingClient(self.invoker, self.options.naming, self.options.naming_context)
+        )
 
     def resolve_name(
         self, name: str, stub: type[StubT], *, wait: float = 0.0, rebind: bool = True
@@ -83,7 +102,10 @@ class Client:
         `wait`: seconds to wait for the name to be bound (and the naming service to answer),
         as ROS 2's wait_for_service; then MiroNaming.NotFound (or TRANSIENT). `rebind`: the
         stub looks the name up again when its server has moved (`Stub._set_rebind`)."""
-        entry = self._resolve(name, wait)
+        try:
+            entry = self._resolve(name, wait)
+        except TRANSIENT as e:
+            raise self._unreachable(e) from None
         if entry.repo_id != stub._repo_id:
             _log.debug("%s is a %s, used as a %s", entry.name, entry.repo_id, stub._repo_id)
         elif entry.type_hash and stub._interface_hash and entry.type_hash != stub._interface_hash:
@@ -95,7 +117,10 @@ class Client:
                 entry.type_hash[:12],
                 stub._interface_hash[:12],
             )
-        found = stub(ObjectRef(entry.repo_id, entry.endpoint, entry.key), self.invoker)
+        if self.corba is not None:  # a CORBA object, or any reached through the IIOP invoker
+            found: StubT = self.corba.stub(entry, stub)
+        else:
+            found = stub(ObjectRef(entry.repo_id, entry.endpoint, entry.key), self.invoker)
         if rebind:
             found._set_rebind(lambda: self._lookup_again(name))
         return found
@@ -106,7 +131,8 @@ class Client:
         said = False
         while True:
             try:
-                return self.naming.resolve(name)
+                entry: MiroNaming.Entry = self.naming.resolve(name)
+                return entry
             except (MiroNaming.NotFound, TRANSIENT) as e:
                 left = deadline - time.monotonic()
                 if left <= 0:
@@ -120,11 +146,37 @@ class Client:
 
     def _lookup_again(self, name: str) -> ObjectRef:
         entry = self.naming.resolve(name)
-        ref = ObjectRef(entry.repo_id, entry.endpoint, entry.key)
+        # A CORBA naming service's entries carry the reference as it came (its whole IOR).
+        ref: ObjectRef = getattr(entry, "ref", None) or ObjectRef(
+            entry.repo_id, entry.endpoint, entry.key
+        )
         _log.debug("%s looked up again: %s", entry.name, entry.endpoint)
         return ref
 
+    def _configure_sockets(self, binds: str | None) -> None:
+        """The limits and security of this process's sockets (transport.sockets), from its
+        options, what it binds on and where its naming service is."""
+        o = self.options
+        policy = sockets.policy_for(
+            keys=o.keys,
+            insecure=o.insecure,
+            max_message_size=o.max_message_size,
+            binds=binds,
+            talks_to=sockets.endpoint_host(o.naming),
+        )
+        sockets.configure(self.context, policy)
+
+    def _unreachable(self, error: TRANSIENT) -> TRANSIENT:
+        """The naming service did not answer: say so clearly when it is a CORBA one."""
+        if self.corba is not None:
+            return error
+        from miro_gen.corba.naming import explain_unreachable
+
+        return explain_unreachable(self.options.naming, error)
+
     def close(self) -> None:
+        if self.corba is not None:
+            self.corba.close()
         self.invoker.close()
 
 
@@ -141,9 +193,10 @@ class Server(Client):
     ) -> None:
         super().__init__(argv, context=context)
         # Before any socket exists: a --host that is not ours is a UsageError, nothing to close.
-        self.addresses = server_addresses(self.options.naming, self.options.host)
+        self.addresses = server_addresses(self.options.naming, self.options.host, self.options.bind)
         if bind_host is not None:
             self.addresses = dataclasses.replace(self.addresses, bind=bind_host)
+        self._configure_sockets(self.addresses.bind)
         clock = None
         if self.options.clock != "wall":  # --clock log: timers and now() follow a log player
             from miro_gen.clock import LogClock, use
@@ -158,6 +211,8 @@ class Server(Client):
             host=self.addresses.advertise,
         )
         self.invoker.adapter = self.adapter
+        if self.corba is not None:
+            self.corba.serve(self.addresses.bind, self.addresses.advertise)
         self.owner = uuid.uuid4().hex
         self.lease = lease
         self._names: dict[str, MiroNaming.Entry] = {}
@@ -182,15 +237,46 @@ class Server(Client):
         """Serve `servant` and bind it as `name` under this server's naming context (or at the
         path given); its reference. Replaces an older binding of the name, as Miro does."""
         full = self.naming.full_name(name)
+        if self.corba is not None:  # served over IIOP (and bound in a CORBA naming service)
+            corba_ref: ObjectRef = self.corba.add(servant, full)
+            if self.corba.naming is not None:
+                self._unbind_if_interrupted()
+                return corba_ref
         ref = self.adapter.reference_for(servant)
         entry = MiroNaming.Entry(full, ref.repo_id, ref.endpoint, ref.key, servant._interface_hash)
         self.bind_entry(entry)
         return ref
 
     def bind_entry(self, entry: MiroNaming.Entry) -> None:
-        """Bind a naming entry under this server's lease (objects, event channels)."""
-        with naming_errors(self.options.naming, f"bind {entry.name}"):
-            self.naming.registry.rebind(entry, self.owner, int(self.lease * 1000))
+        """Bind a naming entry under this server's lease (objects, event channels). A name
+        that another server holds is waited for, up to a lease (the entry of a server killed
+        without unbinding lives that long); AlreadyBound after that."""
+        if self.corba is not None and self.corba.naming is not None:
+            self.corba.bind(entry)  # CosNaming: no lease; unbound when the server stops
+            self._unbind_if_interrupted()
+            _log.notice("bound %s in the naming service", entry.name)
+            return
+        lease_ms = int(self.lease * 1000)
+        deadline = time.monotonic() + max(self.lease, DEFAULT_LEASE) + 0.5
+        told = False
+        while True:
+            try:
+                with naming_errors(self.options.naming, f"bind {entry.name}"):
+                    self.naming.registry.rebind(entry, self.owner, lease_ms)
+                break
+            except TRANSIENT as e:
+                raise self._unreachable(e) from None
+            except MiroNaming.AlreadyBound:
+                if time.monotonic() >= deadline:
+                    raise
+                if not told:
+                    told = True
+                    _log.notice(
+                        "%s is bound by another server (one killed without unbinding?): "
+                        "waiting for its lease to end",
+                        entry.name,
+                    )
+                time.sleep(RETRY_BIND)
         self.keep_entry(entry)
         _log.notice("bound %s in the naming service", entry.name)
         bind_service(self, self.service)  # with its first name: nothing can come between
@@ -210,9 +296,15 @@ class Server(Client):
         with self._names_lock:
             return list(self._names.values())
 
+    def _unbind_if_interrupted(self) -> None:
+        """A server whose names live in a CORBA naming service (no leases there) unbinds them
+        when interrupted before it runs, as `_start_renewing` arranges for leased names."""
+        lifecycle.forget(self._cleanup)
+        lifecycle.at_interrupt(self._cleanup)
+
     def resolve_channel(self, name: str = "EventChannel") -> Any:
         """The event channel bound as `name` (see EventChannelFactory.create_channel)."""
-        from miro_gen.transport.events import resolve_channel
+        from miro_gen.transport.channels import resolve_channel
 
         return resolve_channel(self, name)
 
@@ -250,7 +342,7 @@ class Server(Client):
             names, self._names = list(self._names), {}
         for name in names:
             with contextlib.suppress(SystemException, MiroNaming.NotFound):
-                self.naming.registry.unbind(name)
+                self.naming.registry.unbind(name, self.owner)
         for fn in reversed(self._on_shutdown):
             try:
                 fn()
@@ -274,18 +366,30 @@ class Server(Client):
             self._renewer.start()
 
     def _renew_loop(self) -> None:
+        held_elsewhere: set[str] = set()  # lost names another server holds now (said once)
         while not self._stop.wait(self.lease / 3):
+            lease_ms = int(self.lease * 1000)
+            with self._names_lock:
+                entries = dict(self._names)
             try:
-                known = self._registry_for_renewal.renew(self.owner, int(self.lease * 1000))
-                if not known:  # the naming service restarted (or we were cut off too long)
-                    self._rebind_all()
+                # The naming service says, name by name, which it does not hold for us (it
+                # restarted, a lease ran out while we were cut off): those are bound again.
+                lost = self._registry_for_renewal.renew(self.owner, list(entries), lease_ms)
+                for name in lost:
+                    if name not in entries:
+                        continue
+                    try:
+                        self._registry_for_renewal.rebind(entries[name], self.owner, lease_ms)
+                    except MiroNaming.AlreadyBound:
+                        if name not in held_elsewhere:
+                            held_elsewhere.add(name)
+                            _log.warning(
+                                "%s is bound by another server now; it is bound again here "
+                                "when that one's lease ends",
+                                name,
+                            )
+                        continue
+                    held_elsewhere.discard(name)
+                    _log.notice("bound %s again in the naming service", name)
             except SystemException as e:
                 _log.warning("cannot renew names: %s", e)
-
-    def _rebind_all(self) -> None:
-        with self._names_lock:
-            entries = list(self._names.values())
-        for entry in entries:
-            self._registry_for_renewal.rebind(entry, self.owner, int(self.lease * 1000))
-        if entries:
-            _log.notice("bound %d names again in a restarted naming service", len(entries))

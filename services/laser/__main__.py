@@ -35,6 +35,7 @@ import re
 import sys
 import threading
 import time
+from array import array
 from pathlib import Path
 
 from miro_gen.lifecycle import defer_signals, run_main
@@ -153,7 +154,7 @@ class LaserImpl(Miro__POA.RangeSensor, Implementation[Miro.RangeScanEventIDL]):
     def _group(id: int, scan: Miro.RangeScanEventIDL) -> Miro.RangeGroupEventIDL:
         if id != 0:
             raise Miro.EOutOfBounds(what=f"group {id}: a laser scanner has one group, 0")
-        return Miro.RangeGroupEventIDL(scan.time, 0, scan.range[0] if scan.range else [])
+        return Miro.RangeGroupEventIDL(scan.time, 0, scan.range[0] if scan.range else array("i"))
 
 
 def to_time(seconds: float) -> Miro.TimeIDL:
@@ -338,10 +339,13 @@ class ScipConsumer(DevConsumer):
                 return
         self._last_stamp = device_stamp
         g = self.geometry
-        ranges = [
-            RS.INVALID_RANGE if v < g.dmin else RS.HORIZON_RANGE if v > g.dmax else v
-            for v in values
-        ]
+        ranges = array(
+            "i",
+            [
+                RS.INVALID_RANGE if v < g.dmin else RS.HORIZON_RANGE if v > g.dmax else v
+                for v in values
+            ],
+        )
         self.counts["scans"] += 1
         self.impl.integrate_data(Miro.RangeScanEventIDL(to_time(stamp), [ranges]), stamp)
         if not self.scan.continuous:

@@ -15,6 +15,7 @@ import json
 import sys
 import threading
 import time
+from array import array
 from pathlib import Path
 from typing import Any
 
@@ -64,7 +65,7 @@ def plain(value: Any) -> Any:
         return {f.name: plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
     if isinstance(value, bytes):
         return list(value)
-    if isinstance(value, list):
+    if isinstance(value, list | array):
         return [plain(v) for v in value]
     return value
 

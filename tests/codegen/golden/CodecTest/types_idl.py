@@ -15,6 +15,7 @@ import CodecOther.Util.base_idl as _m_CodecOther_Util_base_idl
 import CodecTest.base_idl as _m_CodecTest_base_idl
 import CodecTest.Util.base_idl as _m_CodecTest_Util_base_idl
 import miro_gen.exceptions as _exc
+import miro_gen.runtime.arrays as _arrays
 import miro_gen.runtime.cdr as _cdr
 import miro_gen.runtime.rpc as _rpc
 
@@ -38,6 +39,7 @@ __all__ = [
     "ExprSeq",
     "Failure",
     "FlatSeqs",
+    "Floats8",
     "HasEmpty",
     "Holder",
     "Holder_Choice",
@@ -59,6 +61,8 @@ __all__ = [
     "Node",
     "NodeSeq",
     "Nothing",
+    "NumberTypedefs",
+    "Numbers",
     "OctetLongLong",
     "Outer",
     "Outer_Kind",
@@ -76,6 +80,7 @@ __all__ = [
     "Strings",
     "Traps",
     "Typedefs",
+    "Vec3",
     "Words",
     "_None",
     "_from",
@@ -123,18 +128,33 @@ _U19 = (_S19[0].unpack_from, _S19[1].unpack_from)
 _S2 = _cdr.pair("qQbBBB?3xf4xdhHiI4xqQ")
 _P2 = _S2[0].pack
 _U2 = (_S2[0].unpack_from, _S2[1].unpack_from)
-_S20 = _cdr.pair("?")
+_S20 = _cdr.pair("q")
 _P20 = _S20[0].pack
 _U20 = (_S20[0].unpack_from, _S20[1].unpack_from)
-_S21 = _cdr.pair("q")
+_S21 = _cdr.pair("3B")
 _P21 = _S21[0].pack
 _U21 = (_S21[0].unpack_from, _S21[1].unpack_from)
-_S22 = _cdr.pair("dB")
+_S22 = _cdr.pair("4h")
 _P22 = _S22[0].pack
 _U22 = (_S22[0].unpack_from, _S22[1].unpack_from)
-_S23 = _cdr.pair("2d?")
+_S23 = _cdr.pair("b")
 _P23 = _S23[0].pack
 _U23 = (_S23[0].unpack_from, _S23[1].unpack_from)
+_S24 = _cdr.pair("3d?")
+_P24 = _S24[0].pack
+_U24 = (_S24[0].unpack_from, _S24[1].unpack_from)
+_S25 = _cdr.pair("3d")
+_P25 = _S25[0].pack
+_U25 = (_S25[0].unpack_from, _S25[1].unpack_from)
+_S26 = _cdr.pair("?")
+_P26 = _S26[0].pack
+_U26 = (_S26[0].unpack_from, _S26[1].unpack_from)
+_S27 = _cdr.pair("dB")
+_P27 = _S27[0].pack
+_U27 = (_S27[0].unpack_from, _S27[1].unpack_from)
+_S28 = _cdr.pair("2d?")
+_P28 = _S28[0].pack
+_U28 = (_S28[0].unpack_from, _S28[1].unpack_from)
 _S3 = _cdr.pair("III")
 _P3 = _S3[0].pack
 _U3 = (_S3[0].unpack_from, _S3[1].unpack_from)
@@ -257,12 +277,16 @@ class Primitives(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Primitives(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Primitives", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Primitives:
@@ -413,12 +437,16 @@ class Enums(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Enums(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Enums", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Enums:
@@ -494,12 +522,16 @@ class Strings(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Strings(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Strings", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Strings:
@@ -579,12 +611,16 @@ class Mixed(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Mixed(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Mixed", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Mixed:
@@ -646,12 +682,16 @@ class Point3(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Point3(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Point3", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Point3:
@@ -687,10 +727,10 @@ def _dec_Point3(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Point3, int]:
 class Sequences(_cdr.IdlType):
     """struct CodecTest::Sequences"""
 
-    longs: list[int] = _dc.field(default_factory=list)
-    bounded: list[int] = _dc.field(default_factory=list)
-    nested: list[list[int]] = _dc.field(default_factory=list)
-    nested_bounded: list[list[int]] = _dc.field(default_factory=list)
+    longs: _arrays.Array[int] = _dc.field(default_factory=lambda: _arrays.zeros("i"))
+    bounded: _arrays.Array[int] = _dc.field(default_factory=lambda: _arrays.zeros("i"))
+    nested: list[_arrays.Array[int]] = _dc.field(default_factory=list)
+    nested_bounded: list[_arrays.Array[int]] = _dc.field(default_factory=list)
     strings: list[str] = _dc.field(default_factory=list)
     bounded_strings: list[str] = _dc.field(default_factory=list)
     points: list[_m_CodecTest_base_idl.Point] = _dc.field(default_factory=list)
@@ -702,15 +742,15 @@ class Sequences(_cdr.IdlType):
     chars: list[str] = _dc.field(default_factory=list)
     octets: bytes = b""
     octets4: bytes = b""
-    doubles: list[float] = _dc.field(default_factory=list)
-    floats: list[float] = _dc.field(default_factory=list)
-    i8s: list[int] = _dc.field(default_factory=list)
-    u8s: list[int] = _dc.field(default_factory=list)
-    shorts: list[int] = _dc.field(default_factory=list)
-    ushorts: list[int] = _dc.field(default_factory=list)
-    ulongs: list[int] = _dc.field(default_factory=list)
-    llongs: list[int] = _dc.field(default_factory=list)
-    ullongs: list[int] = _dc.field(default_factory=list)
+    doubles: _arrays.Array[float] = _dc.field(default_factory=lambda: _arrays.zeros("d"))
+    floats: _arrays.Array[float] = _dc.field(default_factory=lambda: _arrays.zeros("f"))
+    i8s: _arrays.Array[int] = _dc.field(default_factory=lambda: _arrays.zeros("b"))
+    u8s: _arrays.Array[int] = _dc.field(default_factory=lambda: _arrays.zeros("B"))
+    shorts: _arrays.Array[int] = _dc.field(default_factory=lambda: _arrays.zeros("h"))
+    ushorts: _arrays.Array[int] = _dc.field(default_factory=lambda: _arrays.zeros("H"))
+    ulongs: _arrays.Array[int] = _dc.field(default_factory=lambda: _arrays.zeros("I"))
+    llongs: _arrays.Array[int] = _dc.field(default_factory=lambda: _arrays.zeros("q"))
+    ullongs: _arrays.Array[int] = _dc.field(default_factory=lambda: _arrays.zeros("Q"))
     blobs: list[bytes] = _dc.field(default_factory=list)
     point_rows: list[list[_m_CodecTest_base_idl.Point]] = _dc.field(default_factory=list)
 
@@ -778,12 +818,16 @@ class Sequences(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Sequences(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Sequences", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Sequences:
@@ -796,7 +840,7 @@ class Sequences(_cdr.IdlType):
 
 
 def _enc_Sequences(_buf: bytearray, _v: Sequences) -> None:
-    _cdr.put_primitives(
+    _arrays.put_sequence(
         _buf,
         _v.longs,
         "i",
@@ -804,7 +848,7 @@ def _enc_Sequences(_buf: bytearray, _v: Sequences) -> None:
         None,
         "CodecTest::Sequences.longs",
     )
-    _cdr.put_primitives(
+    _arrays.put_sequence(
         _buf,
         _v.bounded,
         "i",
@@ -814,7 +858,7 @@ def _enc_Sequences(_buf: bytearray, _v: Sequences) -> None:
     )
     _cdr.put_count(_buf, _v.nested, None, "CodecTest::Sequences.nested")
     for _x0 in _v.nested:
-        _cdr.put_primitives(
+        _arrays.put_sequence(
             _buf,
             _x0,
             "h",
@@ -829,7 +873,7 @@ def _enc_Sequences(_buf: bytearray, _v: Sequences) -> None:
         "CodecTest::Sequences.nested_bounded",
     )
     for _x1 in _v.nested_bounded:
-        _cdr.put_primitives(
+        _arrays.put_sequence(
             _buf,
             _x1,
             "h",
@@ -892,7 +936,7 @@ def _enc_Sequences(_buf: bytearray, _v: Sequences) -> None:
     _cdr.put_chars(_buf, _v.chars, None, "CodecTest::Sequences.chars")
     _cdr.put_octets(_buf, _v.octets, None, "CodecTest::Sequences.octets")
     _cdr.put_octets(_buf, _v.octets4, 4, "CodecTest::Sequences.octets4")
-    _cdr.put_primitives(
+    _arrays.put_sequence(
         _buf,
         _v.doubles,
         "d",
@@ -900,7 +944,7 @@ def _enc_Sequences(_buf: bytearray, _v: Sequences) -> None:
         None,
         "CodecTest::Sequences.doubles",
     )
-    _cdr.put_primitives(
+    _arrays.put_sequence(
         _buf,
         _v.floats,
         "f",
@@ -908,7 +952,7 @@ def _enc_Sequences(_buf: bytearray, _v: Sequences) -> None:
         None,
         "CodecTest::Sequences.floats",
     )
-    _cdr.put_primitives(
+    _arrays.put_sequence(
         _buf,
         _v.i8s,
         "b",
@@ -916,7 +960,7 @@ def _enc_Sequences(_buf: bytearray, _v: Sequences) -> None:
         None,
         "CodecTest::Sequences.i8s",
     )
-    _cdr.put_primitives(
+    _arrays.put_sequence(
         _buf,
         _v.u8s,
         "B",
@@ -924,7 +968,7 @@ def _enc_Sequences(_buf: bytearray, _v: Sequences) -> None:
         None,
         "CodecTest::Sequences.u8s",
     )
-    _cdr.put_primitives(
+    _arrays.put_sequence(
         _buf,
         _v.shorts,
         "h",
@@ -932,7 +976,7 @@ def _enc_Sequences(_buf: bytearray, _v: Sequences) -> None:
         None,
         "CodecTest::Sequences.shorts",
     )
-    _cdr.put_primitives(
+    _arrays.put_sequence(
         _buf,
         _v.ushorts,
         "H",
@@ -940,7 +984,7 @@ def _enc_Sequences(_buf: bytearray, _v: Sequences) -> None:
         None,
         "CodecTest::Sequences.ushorts",
     )
-    _cdr.put_primitives(
+    _arrays.put_sequence(
         _buf,
         _v.ulongs,
         "I",
@@ -948,7 +992,7 @@ def _enc_Sequences(_buf: bytearray, _v: Sequences) -> None:
         None,
         "CodecTest::Sequences.ulongs",
     )
-    _cdr.put_primitives(
+    _arrays.put_sequence(
         _buf,
         _v.llongs,
         "q",
@@ -956,7 +1000,7 @@ def _enc_Sequences(_buf: bytearray, _v: Sequences) -> None:
         None,
         "CodecTest::Sequences.llongs",
     )
-    _cdr.put_primitives(
+    _arrays.put_sequence(
         _buf,
         _v.ullongs,
         "Q",
@@ -987,7 +1031,7 @@ def _enc_Sequences(_buf: bytearray, _v: Sequences) -> None:
 
 
 def _dec_Sequences(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Sequences, int]:
-    _f7, _off = _cdr.get_primitives(
+    _f7, _off = _arrays.get_sequence(
         _data,
         _off,
         _e,
@@ -996,7 +1040,7 @@ def _dec_Sequences(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Sequences, i
         None,
         "CodecTest::Sequences.longs",
     )
-    _f8, _off = _cdr.get_primitives(
+    _f8, _off = _arrays.get_sequence(
         _data,
         _off,
         _e,
@@ -1015,7 +1059,7 @@ def _dec_Sequences(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Sequences, i
     )
     _f9 = []
     for _ in range(_n11):
-        _x10, _off = _cdr.get_primitives(
+        _x10, _off = _arrays.get_sequence(
             _data,
             _off,
             _e,
@@ -1035,7 +1079,7 @@ def _dec_Sequences(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Sequences, i
     )
     _f12 = []
     for _ in range(_n14):
-        _x13, _off = _cdr.get_primitives(
+        _x13, _off = _arrays.get_sequence(
             _data,
             _off,
             _e,
@@ -1115,26 +1159,22 @@ def _dec_Sequences(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Sequences, i
     for _ in range(_n25):
         _x24, _off = _dec_Mixed(_data, _off, _e)
         _f23.append(_x24)
-    _f26, _off = _cdr.get_primitives(
+    _f26, _off = _cdr.get_enums(
         _data,
         _off,
         _e,
-        "I",
-        4,
+        _m_CodecTest_base_idl._Color_T,
         None,
         "CodecTest::Sequences.colors",
     )
-    _f26 = _cdr.enums(_m_CodecTest_base_idl._Color_T, _f26, 'CodecTest::Sequences.colors')
-    _f27, _off = _cdr.get_primitives(
+    _f27, _off = _cdr.get_enums(
         _data,
         _off,
         _e,
-        "I",
-        4,
+        _m_CodecTest_base_idl._Color_T,
         2,
         "CodecTest::Sequences.colors2",
     )
-    _f27 = _cdr.enums(_m_CodecTest_base_idl._Color_T, _f27, 'CodecTest::Sequences.colors2')
     _f28, _off = _cdr.get_booleans(
         _data,
         _off,
@@ -1163,7 +1203,7 @@ def _dec_Sequences(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Sequences, i
         4,
         "CodecTest::Sequences.octets4",
     )
-    _f32, _off = _cdr.get_primitives(
+    _f32, _off = _arrays.get_sequence(
         _data,
         _off,
         _e,
@@ -1172,7 +1212,7 @@ def _dec_Sequences(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Sequences, i
         None,
         "CodecTest::Sequences.doubles",
     )
-    _f33, _off = _cdr.get_primitives(
+    _f33, _off = _arrays.get_sequence(
         _data,
         _off,
         _e,
@@ -1181,7 +1221,7 @@ def _dec_Sequences(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Sequences, i
         None,
         "CodecTest::Sequences.floats",
     )
-    _f34, _off = _cdr.get_primitives(
+    _f34, _off = _arrays.get_sequence(
         _data,
         _off,
         _e,
@@ -1190,7 +1230,7 @@ def _dec_Sequences(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Sequences, i
         None,
         "CodecTest::Sequences.i8s",
     )
-    _f35, _off = _cdr.get_primitives(
+    _f35, _off = _arrays.get_sequence(
         _data,
         _off,
         _e,
@@ -1199,7 +1239,7 @@ def _dec_Sequences(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Sequences, i
         None,
         "CodecTest::Sequences.u8s",
     )
-    _f36, _off = _cdr.get_primitives(
+    _f36, _off = _arrays.get_sequence(
         _data,
         _off,
         _e,
@@ -1208,7 +1248,7 @@ def _dec_Sequences(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Sequences, i
         None,
         "CodecTest::Sequences.shorts",
     )
-    _f37, _off = _cdr.get_primitives(
+    _f37, _off = _arrays.get_sequence(
         _data,
         _off,
         _e,
@@ -1217,7 +1257,7 @@ def _dec_Sequences(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Sequences, i
         None,
         "CodecTest::Sequences.ushorts",
     )
-    _f38, _off = _cdr.get_primitives(
+    _f38, _off = _arrays.get_sequence(
         _data,
         _off,
         _e,
@@ -1226,7 +1266,7 @@ def _dec_Sequences(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Sequences, i
         None,
         "CodecTest::Sequences.ulongs",
     )
-    _f39, _off = _cdr.get_primitives(
+    _f39, _off = _arrays.get_sequence(
         _data,
         _off,
         _e,
@@ -1235,7 +1275,7 @@ def _dec_Sequences(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Sequences, i
         None,
         "CodecTest::Sequences.llongs",
     )
-    _f40, _off = _cdr.get_primitives(
+    _f40, _off = _arrays.get_sequence(
         _data,
         _off,
         _e,
@@ -1321,10 +1361,12 @@ def _dec_Sequences(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Sequences, i
 class Arrays(_cdr.IdlType):
     """struct CodecTest::Arrays"""
 
-    a1: list[int] = _dc.field(default_factory=lambda: [0] * 3)
-    m23: list[list[int]] = _dc.field(default_factory=lambda: [[0] * 3 for _ in range(2)])
-    cube: list[list[list[float]]] = _dc.field(
-        default_factory=lambda: [[[0.0] * 2 for _ in range(2)] for _ in range(2)]
+    a1: _arrays.Array[int] = _dc.field(default_factory=lambda: _arrays.zeros("i", 3))
+    m23: list[_arrays.Array[int]] = _dc.field(
+        default_factory=lambda: [_arrays.zeros("h", 3) for _ in range(2)]
+    )
+    cube: list[list[_arrays.Array[float]]] = _dc.field(
+        default_factory=lambda: [[_arrays.zeros("d", 2) for _ in range(2)] for _ in range(2)]
     )
     c4: list[str] = _dc.field(default_factory=lambda: ["\x00"] * 4)
     cm: list[list[str]] = _dc.field(default_factory=lambda: [["\x00"] * 2 for _ in range(2)])
@@ -1345,11 +1387,13 @@ class Arrays(_cdr.IdlType):
     b3: list[bool] = _dc.field(default_factory=lambda: [False] * 3)
     o5: list[int] = _dc.field(default_factory=lambda: [0] * 5)
     om: list[list[int]] = _dc.field(default_factory=lambda: [[0] * 3 for _ in range(2)])
-    u2: list[int] = _dc.field(default_factory=lambda: [0] * 2)
-    i2: list[int] = _dc.field(default_factory=lambda: [0] * 2)
-    f3: list[float] = _dc.field(default_factory=lambda: [0.0] * 3)
-    u64: list[int] = _dc.field(default_factory=lambda: [0] * 2)
-    sa: list[list[int]] = _dc.field(default_factory=lambda: [[] for _ in range(2)])
+    u2: _arrays.Array[int] = _dc.field(default_factory=lambda: _arrays.zeros("B", 2))
+    i2: _arrays.Array[int] = _dc.field(default_factory=lambda: _arrays.zeros("b", 2))
+    f3: _arrays.Array[float] = _dc.field(default_factory=lambda: _arrays.zeros("f", 3))
+    u64: _arrays.Array[int] = _dc.field(default_factory=lambda: _arrays.zeros("Q", 2))
+    sa: list[_arrays.Array[int]] = _dc.field(
+        default_factory=lambda: [_arrays.zeros("i") for _ in range(2)]
+    )
     blobs: list[bytes] = _dc.field(default_factory=lambda: [b""] * 2)
 
     _repo_id = "IDL:CodecTest/Arrays:1.0"
@@ -1403,12 +1447,16 @@ class Arrays(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Arrays(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Arrays", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Arrays:
@@ -1508,7 +1556,7 @@ def _enc_Arrays(_buf: bytearray, _v: Arrays) -> None:
         ) from None
     _cdr.check_length(_v.sa, 2, "CodecTest::Arrays.sa")
     for _x6 in _v.sa:
-        _cdr.put_primitives(_buf, _x6, "i", 4, None, "CodecTest::Arrays.sa")
+        _arrays.put_sequence(_buf, _x6, "i", 4, None, "CodecTest::Arrays.sa")
     _cdr.check_length(_v.blobs, 2, "CodecTest::Arrays.blobs")
     for _x7 in _v.blobs:
         _cdr.put_octets(_buf, _x7, None, "CodecTest::Arrays.blobs")
@@ -1565,7 +1613,7 @@ def _dec_Arrays(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Arrays, int]:
     _off += 16
     _f23 = []
     for _ in range(2):
-        _x24, _off = _cdr.get_primitives(
+        _x24, _off = _arrays.get_sequence(
             _data,
             _off,
             _e,
@@ -1587,9 +1635,9 @@ def _dec_Arrays(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Arrays, int]:
         _f25.append(_x26)
     return (
         Arrays(
-            list(_t8[0:3]),
-            _cdr.reshape(list(_t8[3:9]), (2, 3)),
-            _cdr.reshape(list(_t9[0:8]), (2, 2, 2)),
+            _arrays.to_array("i", _t8[0:3]),
+            _arrays.to_rows("h", _t8[3:9], (2, 3)),
+            _arrays.to_rows("d", _t9[0:8], (2, 2, 2)),
             list(map(chr, _t9[8:12])),
             _cdr.reshape(list(map(chr, _t9[12:16])), (2, 2)),
             _cdr.enums(_m_CodecTest_base_idl._Color_T, _t9[16:19], 'CodecTest::Arrays.e3'),
@@ -1601,10 +1649,10 @@ def _dec_Arrays(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Arrays, int]:
             list(_t20[0:3]),
             list(_t20[3:8]),
             _cdr.reshape(list(_t20[8:14]), (2, 3)),
-            list(_t20[14:16]),
-            list(_t20[16:18]),
-            list(_t21[0:3]),
-            list(_t22[0:2]),
+            _arrays.to_array("B", _t20[14:16]),
+            _arrays.to_array("b", _t20[16:18]),
+            _arrays.to_array("f", _t21[0:3]),
+            _arrays.to_array("Q", _t22[0:2]),
             _f23,
             _f25,
         ),
@@ -1637,12 +1685,16 @@ class Point3D(_m_CodecTest_base_idl.Point):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Point3D(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Point3D", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Point3D:
@@ -1695,12 +1747,16 @@ class Bytes2(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Bytes2(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Bytes2", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Bytes2:
@@ -1752,12 +1808,16 @@ class Shorts3(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Shorts3(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Shorts3", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Shorts3:
@@ -1844,12 +1904,16 @@ class FlatSeqs(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_FlatSeqs(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::FlatSeqs", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> FlatSeqs:
@@ -2004,12 +2068,16 @@ class Line(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Line(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Line", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Line:
@@ -2112,12 +2180,16 @@ class Deep(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Deep(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Deep", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Deep:
@@ -2193,12 +2265,16 @@ class Base3(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Base3(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Base3", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Base3:
@@ -2252,12 +2328,16 @@ class Derived(Base3):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Derived(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Derived", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Derived:
@@ -2326,12 +2406,16 @@ class Derived2(Derived):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Derived2(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Derived2", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Derived2:
@@ -2417,12 +2501,16 @@ class Empty(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Empty(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Empty", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Empty:
@@ -2471,12 +2559,16 @@ class HasEmpty(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_HasEmpty(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::HasEmpty", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> HasEmpty:
@@ -2560,12 +2652,16 @@ class EmptyRows(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_EmptyRows(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::EmptyRows", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> EmptyRows:
@@ -2647,12 +2743,16 @@ class Failure(_exc.UserException, _cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Failure(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Failure", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Failure:
@@ -2730,12 +2830,16 @@ class Nothing(_exc.UserException, _cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Nothing(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Nothing", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Nothing:
@@ -2755,7 +2859,7 @@ def _dec_Nothing(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Nothing, int]:
     return Nothing(), _off
 
 
-LongSeq: _t.TypeAlias = list[int]
+LongSeq: _t.TypeAlias = _arrays.Array[int]
 
 
 LongSeq2: _t.TypeAlias = LongSeq
@@ -2764,7 +2868,7 @@ LongSeq2: _t.TypeAlias = LongSeq
 LongSeq3: _t.TypeAlias = LongSeq2
 
 
-Matrix: _t.TypeAlias = list[list[int]]
+Matrix: _t.TypeAlias = list[_arrays.Array[int]]
 
 
 MatrixPair: _t.TypeAlias = list[Matrix]
@@ -2786,17 +2890,19 @@ PointSeq: _t.TypeAlias = list[PointAlias2]
 class Typedefs(_cdr.IdlType):
     """struct CodecTest::Typedefs"""
 
-    s: LongSeq3 = _dc.field(default_factory=list)
-    m: Matrix = _dc.field(default_factory=lambda: [[0] * 2 for _ in range(2)])
+    s: LongSeq3 = _dc.field(default_factory=lambda: _arrays.zeros("i"))
+    m: Matrix = _dc.field(default_factory=lambda: [_arrays.zeros("i", 2) for _ in range(2)])
     mp: MatrixPair = _dc.field(
-        default_factory=lambda: [[[0] * 2 for _ in range(2)] for _ in range(2)]
+        default_factory=lambda: [[_arrays.zeros("i", 2) for _ in range(2)] for _ in range(2)]
     )
     n: Name8 = ""
     ss: list[LongSeq2] = _dc.field(default_factory=list)
     p: PointAlias2 = _dc.field(default_factory=_m_CodecTest_base_idl.Point)
     ps: PointSeq = _dc.field(default_factory=list)
     c: ColorAlias = _m_CodecTest_base_idl.Color.RED
-    arr_of_seq: list[LongSeq3] = _dc.field(default_factory=lambda: [[] for _ in range(2)])
+    arr_of_seq: list[LongSeq3] = _dc.field(
+        default_factory=lambda: [_arrays.zeros("i") for _ in range(2)]
+    )
 
     _repo_id = "IDL:CodecTest/Typedefs:1.0"
     _type_name = "CodecTest::Typedefs"
@@ -2862,12 +2968,16 @@ class Typedefs(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Typedefs(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Typedefs", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Typedefs:
@@ -2880,7 +2990,7 @@ class Typedefs(_cdr.IdlType):
 
 
 def _enc_Typedefs(_buf: bytearray, _v: Typedefs) -> None:
-    _cdr.put_primitives(_buf, _v.s, "i", 4, None, "CodecTest::Typedefs.s")
+    _arrays.put_sequence(_buf, _v.s, "i", 4, None, "CodecTest::Typedefs.s")
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
     try:
         _buf += _P16(*_cdr.flatten(_v.m, (2, 2), 'CodecTest::Typedefs.m'))
@@ -2902,7 +3012,7 @@ def _enc_Typedefs(_buf: bytearray, _v: Typedefs) -> None:
     _cdr.put_string(_buf, _v.n, 8, "CodecTest::Typedefs.n")
     _cdr.put_count(_buf, _v.ss, None, "CodecTest::Typedefs.ss")
     for _x1 in _v.ss:
-        _cdr.put_primitives(_buf, _x1, "i", 4, None, "CodecTest::Typedefs.ss")
+        _arrays.put_sequence(_buf, _x1, "i", 4, None, "CodecTest::Typedefs.ss")
     try:
         _m_CodecTest_base_idl._enc_Point(_buf, _v.p)
     except _cdr.NestedErrors as _x:
@@ -2927,7 +3037,7 @@ def _enc_Typedefs(_buf: bytearray, _v: Typedefs) -> None:
         ) from None
     _cdr.check_length(_v.arr_of_seq, 2, "CodecTest::Typedefs.arr_of_seq")
     for _x2 in _v.arr_of_seq:
-        _cdr.put_primitives(
+        _arrays.put_sequence(
             _buf,
             _x2,
             "i",
@@ -2938,7 +3048,7 @@ def _enc_Typedefs(_buf: bytearray, _v: Typedefs) -> None:
 
 
 def _dec_Typedefs(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Typedefs, int]:
-    _f3, _off = _cdr.get_primitives(
+    _f3, _off = _arrays.get_sequence(
         _data,
         _off,
         _e,
@@ -2955,7 +3065,7 @@ def _dec_Typedefs(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Typedefs, int
         _off += (4 - _off) & 3
         _t7 = _U16[_e](_data, _off)
         _off += 16
-        _x6 = _cdr.reshape(list(_t7[0:4]), (2, 2))
+        _x6 = _arrays.to_rows("i", _t7[0:4], (2, 2))
         _f5.append(_x6)
     _f8, _off = _cdr.get_string(_data, _off, _e, 8, "CodecTest::Typedefs.n")
     _n11, _off = _cdr.get_length(
@@ -2968,7 +3078,7 @@ def _dec_Typedefs(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Typedefs, int
     )
     _f9 = []
     for _ in range(_n11):
-        _x10, _off = _cdr.get_primitives(
+        _x10, _off = _arrays.get_sequence(
             _data,
             _off,
             _e,
@@ -2995,7 +3105,7 @@ def _dec_Typedefs(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Typedefs, int
     _off += 4
     _f15 = []
     for _ in range(2):
-        _x16, _off = _cdr.get_primitives(
+        _x16, _off = _arrays.get_sequence(
             _data,
             _off,
             _e,
@@ -3008,7 +3118,7 @@ def _dec_Typedefs(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Typedefs, int
     return (
         Typedefs(
             _f3,
-            _cdr.reshape(list(_t4[0:4]), (2, 2)),
+            _arrays.to_rows("i", _t4[0:4], (2, 2)),
             _f5,
             _f8,
             _f9,
@@ -3051,12 +3161,16 @@ class Node(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Node(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Node", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Node:
@@ -3166,12 +3280,16 @@ class Expr(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Expr(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Expr", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Expr:
@@ -3263,12 +3381,16 @@ class Holder_Inner(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Holder_Inner(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Holder::Inner", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Holder_Inner:
@@ -3382,12 +3504,16 @@ class Holder_Choice(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Holder_Choice(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Holder::Choice", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Holder_Choice:
@@ -3469,12 +3595,16 @@ class Holder_Oops(_exc.UserException, _cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Holder_Oops(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Holder::Oops", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Holder_Oops:
@@ -3517,7 +3647,7 @@ class Holder(_rpc.Stub):
 
     def get(self, m: Holder_Mode) -> Holder_Inner:
         """CodecTest::Holder::get"""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
             try:
@@ -3529,7 +3659,7 @@ class Holder(_rpc.Stub):
                 ) from None
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Holder::get", _x) from None
-        _data = self._call("get", bytes(_buf), (Holder_Oops,))
+        _data = self._call("get", _buf.value(), (Holder_Oops,))
         try:
             _e = _cdr.header_endianness(_data)
             _off = 4
@@ -3561,12 +3691,16 @@ class Outer_Nested(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Outer_Nested(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Outer::Nested", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Outer_Nested:
@@ -3679,12 +3813,16 @@ class Outer(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Outer(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Outer", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Outer:
@@ -3765,7 +3903,7 @@ class Keywords(_cdr.IdlType):
 
     _from: int = 0
     _lambda: float = 0.0
-    _list: list[int] = _dc.field(default_factory=list)
+    _list: _arrays.Array[int] = _dc.field(default_factory=lambda: _arrays.zeros("i"))
     _str: str = ""
     l: int = 0
     I: int = 0
@@ -3812,12 +3950,16 @@ class Keywords(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Keywords(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Keywords", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Keywords:
@@ -3846,7 +3988,7 @@ def _enc_Keywords(_buf: bytearray, _v: Keywords) -> None:
             _x,
             ("CodecTest::Keywords.lambda", "d", lambda: (_v._lambda,)),
         ) from None
-    _cdr.put_primitives(
+    _arrays.put_sequence(
         _buf,
         _v._list,
         "i",
@@ -3900,7 +4042,7 @@ def _dec_Keywords(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Keywords, int
     _off += (4 - _off) & 7
     _t1 = _U5[_e](_data, _off)
     _off += 8
-    _f2, _off = _cdr.get_primitives(
+    _f2, _off = _arrays.get_sequence(
         _data,
         _off,
         _e,
@@ -4047,12 +4189,16 @@ class KeywordUnion(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_KeywordUnion(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::KeywordUnion", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> KeywordUnion:
@@ -4134,6 +4280,569 @@ def _dec_KeywordUnion(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[KeywordUn
     return KeywordUnion(_d, _x), _off
 
 
+Floats8: _t.TypeAlias = _arrays.Array[float]
+
+
+Vec3: _t.TypeAlias = _arrays.Array[float]
+
+
+@_dc.dataclass(slots=True)
+class Numbers(_cdr.IdlType):
+    """Sequences and arrays of numbers (array.array): odd lengths and the alignment of what
+    follows them; arrays longer than the packed limit (16) are copied in bulk, row by row.
+    """
+
+    lead: int = 0
+    i8s: _arrays.Array[int] = _dc.field(default_factory=lambda: _arrays.zeros("b"))
+    after_i8s: float = 0.0
+    u16s: _arrays.Array[int] = _dc.field(default_factory=lambda: _arrays.zeros("H"))
+    after_u16s: int = 0
+    floats: _arrays.Array[float] = _dc.field(default_factory=lambda: _arrays.zeros("f"))
+    after_floats: float = 0.0
+    big: _arrays.Array[float] = _dc.field(default_factory=lambda: _arrays.zeros("f", 17))
+    gap: int = 0
+    bigd: _arrays.Array[float] = _dc.field(default_factory=lambda: _arrays.zeros("d", 40))
+    c: str = "\x00"
+    grid: list[_arrays.Array[int]] = _dc.field(
+        default_factory=lambda: [_arrays.zeros("h", 20) for _ in range(3)]
+    )
+    small: _arrays.Array[int] = _dc.field(default_factory=lambda: _arrays.zeros("B", 3))
+    pair: list[_arrays.Array[int]] = _dc.field(
+        default_factory=lambda: [_arrays.zeros("h", 2) for _ in range(2)]
+    )
+    rows: list[_arrays.Array[float]] = _dc.field(default_factory=list)
+    bounded64: _arrays.Array[int] = _dc.field(default_factory=lambda: _arrays.zeros("Q"))
+    i64s: _arrays.Array[int] = _dc.field(default_factory=lambda: _arrays.zeros("q"))
+    tail: int = 0
+
+    _repo_id = "IDL:CodecTest/Numbers:1.0"
+    _type_name = "CodecTest::Numbers"
+    _type_hash = "ea39b9e9aa82d457a73dbb72d65dccd57cf1f20e6bfe1dd41642470b89b7aae6"
+    _data_schema = (
+        "module CodecTest {\n"
+        "  struct Numbers {\n"
+        "    octet lead;\n"
+        "    sequence<int8> i8s;\n"
+        "    double after_i8s;\n"
+        "    sequence<unsigned short> u16s;\n"
+        "    long long after_u16s;\n"
+        "    sequence<float> floats;\n"
+        "    double after_floats;\n"
+        "    float big[17];\n"
+        "    octet gap;\n"
+        "    double bigd[40];\n"
+        "    char c;\n"
+        "    short grid[3][20];\n"
+        "    uint8 small[3];\n"
+        "    short pair[2][2];\n"
+        "    sequence<sequence<double>> rows;\n"
+        "    sequence<unsigned long long, 3> bounded64;\n"
+        "    sequence<long long> i64s;\n"
+        "    int8 tail;\n"
+        "  };\n"
+        "};\n"
+    )
+
+    def serialize(self) -> bytes:
+        """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
+        try:
+            _enc_Numbers(_buf, self)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.encode_error("CodecTest::Numbers", _x) from None
+
+    @classmethod
+    def deserialize(cls, data: _cdr.Buffer) -> Numbers:
+        """A value from CDR (either byte order); MARSHAL if the data is malformed."""
+        _e = _cdr.header_endianness(data)
+        try:
+            return _dec_Numbers(data, 4, _e)[0]
+        except _cdr.DecodeErrors as _x:
+            raise _cdr.marshal_error("CodecTest::Numbers", _x) from None
+
+
+def _enc_Numbers(_buf: bytearray, _v: Numbers) -> None:
+    try:
+        _buf += _P4(_v.lead)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Numbers.lead", "B", lambda: (_v.lead,)),
+        ) from None
+    _arrays.put_sequence(
+        _buf,
+        _v.i8s,
+        "b",
+        1,
+        None,
+        "CodecTest::Numbers.i8s",
+    )
+    _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
+    try:
+        _buf += _P5(_v.after_i8s)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Numbers.after_i8s", "d", lambda: (_v.after_i8s,)),
+        ) from None
+    _arrays.put_sequence(
+        _buf,
+        _v.u16s,
+        "H",
+        2,
+        None,
+        "CodecTest::Numbers.u16s",
+    )
+    _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
+    try:
+        _buf += _P20(_v.after_u16s)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Numbers.after_u16s", "q", lambda: (_v.after_u16s,)),
+        ) from None
+    _arrays.put_sequence(
+        _buf,
+        _v.floats,
+        "f",
+        4,
+        None,
+        "CodecTest::Numbers.floats",
+    )
+    _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
+    try:
+        _buf += _P5(_v.after_floats)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Numbers.after_floats", "d", lambda: (_v.after_floats,)),
+        ) from None
+    _arrays.put_array(_buf, _v.big, "f", 4, 17, "CodecTest::Numbers.big")
+    try:
+        _buf += _P4(_v.gap)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Numbers.gap", "B", lambda: (_v.gap,)),
+        ) from None
+    _arrays.put_array(_buf, _v.bigd, "d", 8, 40, "CodecTest::Numbers.bigd")
+    try:
+        _buf += _P4(ord(_v.c))
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Numbers.c", "B", lambda: (ord(_v.c),)),
+        ) from None
+    _cdr.check_length(_v.grid, 3, "CodecTest::Numbers.grid")
+    for _x0 in _v.grid:
+        _arrays.put_array(_buf, _x0, "h", 2, 20, "CodecTest::Numbers.grid")
+    try:
+        _buf += _P21(*_v.small)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Numbers.small", "3B", lambda: (*_v.small,)),
+        ) from None
+    _buf += _cdr.ZEROS[(4 - len(_buf)) & 1]
+    try:
+        _buf += _P22(*_cdr.flatten(_v.pair, (2, 2), 'CodecTest::Numbers.pair'))
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Numbers.pair", "4h", lambda: (*_cdr.flatten(_v.pair, (2, 2), 'CodecTest::Numbers.pair'),)),
+        ) from None
+    _cdr.put_count(_buf, _v.rows, None, "CodecTest::Numbers.rows")
+    for _x1 in _v.rows:
+        _arrays.put_sequence(_buf, _x1, "d", 8, None, "CodecTest::Numbers.rows")
+    _arrays.put_sequence(
+        _buf,
+        _v.bounded64,
+        "Q",
+        8,
+        3,
+        "CodecTest::Numbers.bounded64",
+    )
+    _arrays.put_sequence(
+        _buf,
+        _v.i64s,
+        "q",
+        8,
+        None,
+        "CodecTest::Numbers.i64s",
+    )
+    try:
+        _buf += _P23(_v.tail)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::Numbers.tail", "b", lambda: (_v.tail,)),
+        ) from None
+
+
+def _dec_Numbers(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Numbers, int]:
+    _t2 = _U4[_e](_data, _off)
+    _off += 1
+    _f3, _off = _arrays.get_sequence(
+        _data,
+        _off,
+        _e,
+        "b",
+        1,
+        None,
+        "CodecTest::Numbers.i8s",
+    )
+    _off += (4 - _off) & 7
+    _t4 = _U5[_e](_data, _off)
+    _off += 8
+    _f5, _off = _arrays.get_sequence(
+        _data,
+        _off,
+        _e,
+        "H",
+        2,
+        None,
+        "CodecTest::Numbers.u16s",
+    )
+    _off += (4 - _off) & 7
+    _t6 = _U20[_e](_data, _off)
+    _off += 8
+    _f7, _off = _arrays.get_sequence(
+        _data,
+        _off,
+        _e,
+        "f",
+        4,
+        None,
+        "CodecTest::Numbers.floats",
+    )
+    _off += (4 - _off) & 7
+    _t8 = _U5[_e](_data, _off)
+    _off += 8
+    _f9, _off = _arrays.get_array(
+        _data,
+        _off,
+        _e,
+        "f",
+        4,
+        17,
+        "CodecTest::Numbers.big",
+    )
+    _t10 = _U4[_e](_data, _off)
+    _off += 1
+    _f11, _off = _arrays.get_array(
+        _data,
+        _off,
+        _e,
+        "d",
+        8,
+        40,
+        "CodecTest::Numbers.bigd",
+    )
+    _t12 = _U4[_e](_data, _off)
+    _off += 1
+    _f13 = []
+    for _ in range(3):
+        _x14, _off = _arrays.get_array(
+            _data,
+            _off,
+            _e,
+            "h",
+            2,
+            20,
+            "CodecTest::Numbers.grid",
+        )
+        _f13.append(_x14)
+    _t15 = _U21[_e](_data, _off)
+    _off += 3
+    _off += (4 - _off) & 1
+    _t16 = _U22[_e](_data, _off)
+    _off += 8
+    _n19, _off = _cdr.get_length(
+        _data,
+        _off,
+        _e,
+        None,
+        4,
+        "CodecTest::Numbers.rows",
+    )
+    _f17 = []
+    for _ in range(_n19):
+        _x18, _off = _arrays.get_sequence(
+            _data,
+            _off,
+            _e,
+            "d",
+            8,
+            None,
+            "CodecTest::Numbers.rows",
+        )
+        _f17.append(_x18)
+    _f20, _off = _arrays.get_sequence(
+        _data,
+        _off,
+        _e,
+        "Q",
+        8,
+        3,
+        "CodecTest::Numbers.bounded64",
+    )
+    _f21, _off = _arrays.get_sequence(
+        _data,
+        _off,
+        _e,
+        "q",
+        8,
+        None,
+        "CodecTest::Numbers.i64s",
+    )
+    _t22 = _U23[_e](_data, _off)
+    _off += 1
+    return (
+        Numbers(
+            _t2[0],
+            _f3,
+            _t4[0],
+            _f5,
+            _t6[0],
+            _f7,
+            _t8[0],
+            _f9,
+            _t10[0],
+            _f11,
+            chr(_t12[0]),
+            _f13,
+            _arrays.to_array("B", _t15[0:3]),
+            _arrays.to_rows("h", _t16[0:4], (2, 2)),
+            _f17,
+            _f20,
+            _f21,
+            _t22[0],
+        ),
+        _off,
+    )
+
+
+@_dc.dataclass(slots=True)
+class NumberTypedefs(_cdr.IdlType):
+    """struct CodecTest::NumberTypedefs"""
+
+    f8: Floats8 = _dc.field(default_factory=lambda: _arrays.zeros("f"))
+    f8s: list[Floats8] = _dc.field(default_factory=list)
+    v: Vec3 = _dc.field(default_factory=lambda: _arrays.zeros("d", 3))
+    flag: bool = False
+    vs: list[Vec3] = _dc.field(default_factory=lambda: [_arrays.zeros("d", 3) for _ in range(2)])
+    vseq: list[Vec3] = _dc.field(default_factory=list)
+    ul: list[_arrays.Array[int]] = _dc.field(
+        default_factory=lambda: [_arrays.zeros("I", 1) for _ in range(20)]
+    )
+    i32: _arrays.Array[int] = _dc.field(default_factory=lambda: _arrays.zeros("i", 18))
+
+    _repo_id = "IDL:CodecTest/NumberTypedefs:1.0"
+    _type_name = "CodecTest::NumberTypedefs"
+    _type_hash = "04111c64025a3e6be88ac4d175b919b38bac40e5b91ada6e10e947e14a10f084"
+    _data_schema = (
+        "module CodecTest {\n"
+        "  typedef sequence<float, 8> Floats8;\n"
+        "};\n"
+        "module CodecTest {\n"
+        "  typedef double Vec3[3];\n"
+        "};\n"
+        "module CodecTest {\n"
+        "  struct NumberTypedefs {\n"
+        "    CodecTest::Floats8 f8;\n"
+        "    sequence<CodecTest::Floats8> f8s;\n"
+        "    CodecTest::Vec3 v;\n"
+        "    boolean flag;\n"
+        "    CodecTest::Vec3 vs[2];\n"
+        "    sequence<CodecTest::Vec3> vseq;\n"
+        "    unsigned long ul[20][1];\n"
+        "    long i32[18];\n"
+        "  };\n"
+        "};\n"
+    )
+
+    def serialize(self) -> bytes:
+        """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
+        try:
+            _enc_NumberTypedefs(_buf, self)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.encode_error("CodecTest::NumberTypedefs", _x) from None
+
+    @classmethod
+    def deserialize(cls, data: _cdr.Buffer) -> NumberTypedefs:
+        """A value from CDR (either byte order); MARSHAL if the data is malformed."""
+        _e = _cdr.header_endianness(data)
+        try:
+            return _dec_NumberTypedefs(data, 4, _e)[0]
+        except _cdr.DecodeErrors as _x:
+            raise _cdr.marshal_error("CodecTest::NumberTypedefs", _x) from None
+
+
+def _enc_NumberTypedefs(_buf: bytearray, _v: NumberTypedefs) -> None:
+    _arrays.put_sequence(
+        _buf,
+        _v.f8,
+        "f",
+        4,
+        8,
+        "CodecTest::NumberTypedefs.f8",
+    )
+    _cdr.put_count(_buf, _v.f8s, None, "CodecTest::NumberTypedefs.f8s")
+    for _x0 in _v.f8s:
+        _arrays.put_sequence(
+            _buf,
+            _x0,
+            "f",
+            4,
+            8,
+            "CodecTest::NumberTypedefs.f8s",
+        )
+    _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
+    try:
+        _buf += _P24(*_v.v, _v.flag)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("CodecTest::NumberTypedefs.v", "3d", lambda: (*_v.v,)),
+            ("CodecTest::NumberTypedefs.flag", "?", lambda: (_v.flag,)),
+        ) from None
+    _cdr.check_length(_v.vs, 2, "CodecTest::NumberTypedefs.vs")
+    for _x1 in _v.vs:
+        _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
+        try:
+            _buf += _P25(*_x1)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecTest::NumberTypedefs.vs", "3d", lambda: (*_x1,)),  # noqa: B023
+            ) from None
+    _cdr.put_count(_buf, _v.vseq, None, "CodecTest::NumberTypedefs.vseq")
+    for _x2 in _v.vseq:
+        _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
+        try:
+            _buf += _P25(*_x2)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecTest::NumberTypedefs.vseq", "3d", lambda: (*_x2,)),  # noqa: B023
+            ) from None
+    _cdr.check_length(_v.ul, 20, "CodecTest::NumberTypedefs.ul")
+    for _x3 in _v.ul:
+        _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
+        try:
+            _buf += _P17(*_x3)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecTest::NumberTypedefs.ul", "I", lambda: (*_x3,)),  # noqa: B023
+            ) from None
+    _arrays.put_array(
+        _buf,
+        _v.i32,
+        "i",
+        4,
+        18,
+        "CodecTest::NumberTypedefs.i32",
+    )
+
+
+def _dec_NumberTypedefs(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[NumberTypedefs, int]:
+    _f4, _off = _arrays.get_sequence(
+        _data,
+        _off,
+        _e,
+        "f",
+        4,
+        8,
+        "CodecTest::NumberTypedefs.f8",
+    )
+    _n7, _off = _cdr.get_length(
+        _data,
+        _off,
+        _e,
+        None,
+        4,
+        "CodecTest::NumberTypedefs.f8s",
+    )
+    _f5 = []
+    for _ in range(_n7):
+        _x6, _off = _arrays.get_sequence(
+            _data,
+            _off,
+            _e,
+            "f",
+            4,
+            8,
+            "CodecTest::NumberTypedefs.f8s",
+        )
+        _f5.append(_x6)
+    _off += (4 - _off) & 7
+    _t8 = _U24[_e](_data, _off)
+    _off += 25
+    _f9 = []
+    for _ in range(2):
+        _off += (4 - _off) & 7
+        _t11 = _U25[_e](_data, _off)
+        _off += 24
+        _x10 = _arrays.to_array("d", _t11[0:3])
+        _f9.append(_x10)
+    _n14, _off = _cdr.get_length(
+        _data,
+        _off,
+        _e,
+        None,
+        24,
+        "CodecTest::NumberTypedefs.vseq",
+    )
+    _f12 = []
+    for _ in range(_n14):
+        _off += (4 - _off) & 7
+        _t15 = _U25[_e](_data, _off)
+        _off += 24
+        _x13 = _arrays.to_array("d", _t15[0:3])
+        _f12.append(_x13)
+    _f16 = []
+    for _ in range(20):
+        _off += (4 - _off) & 3
+        _t18 = _U17[_e](_data, _off)
+        _off += 4
+        _x17 = _arrays.to_array("I", _t18[0:1])
+        _f16.append(_x17)
+    _f19, _off = _arrays.get_array(
+        _data,
+        _off,
+        _e,
+        "i",
+        4,
+        18,
+        "CodecTest::NumberTypedefs.i32",
+    )
+    return (
+        NumberTypedefs(
+            _f4,
+            _f5,
+            _arrays.to_array("d", _t8[0:3]),
+            _t8[3],
+            _f9,
+            _f12,
+            _f16,
+            _f19,
+        ),
+        _off,
+    )
+
+
 @_dc.dataclass(slots=True)
 class BoolDouble(_cdr.IdlType):
     """struct CodecTest::BoolDouble"""
@@ -4155,12 +4864,16 @@ class BoolDouble(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_BoolDouble(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::BoolDouble", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> BoolDouble:
@@ -4174,7 +4887,7 @@ class BoolDouble(_cdr.IdlType):
 
 def _enc_BoolDouble(_buf: bytearray, _v: BoolDouble) -> None:
     try:
-        _buf += _P20(_v.b)
+        _buf += _P26(_v.b)
     except _cdr.EncodeErrors as _x:
         raise _cdr.pack_error(
             _x,
@@ -4191,7 +4904,7 @@ def _enc_BoolDouble(_buf: bytearray, _v: BoolDouble) -> None:
 
 
 def _dec_BoolDouble(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[BoolDouble, int]:
-    _t0 = _U20[_e](_data, _off)
+    _t0 = _U26[_e](_data, _off)
     _off += 1
     _off += (4 - _off) & 7
     _t1 = _U5[_e](_data, _off)
@@ -4220,12 +4933,16 @@ class OctetLongLong(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_OctetLongLong(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::OctetLongLong", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> OctetLongLong:
@@ -4247,7 +4964,7 @@ def _enc_OctetLongLong(_buf: bytearray, _v: OctetLongLong) -> None:
         ) from None
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
     try:
-        _buf += _P21(_v.ll)
+        _buf += _P20(_v.ll)
     except _cdr.EncodeErrors as _x:
         raise _cdr.pack_error(
             _x,
@@ -4259,7 +4976,7 @@ def _dec_OctetLongLong(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[OctetLon
     _t0 = _U4[_e](_data, _off)
     _off += 1
     _off += (4 - _off) & 7
-    _t1 = _U21[_e](_data, _off)
+    _t1 = _U20[_e](_data, _off)
     _off += 8
     return OctetLongLong(_t0[0], _t1[0]), _off
 
@@ -4285,12 +5002,16 @@ class EndsInChar(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_EndsInChar(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::EndsInChar", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> EndsInChar:
@@ -4305,7 +5026,7 @@ class EndsInChar(_cdr.IdlType):
 def _enc_EndsInChar(_buf: bytearray, _v: EndsInChar) -> None:
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
     try:
-        _buf += _P22(_v.d, ord(_v.c))
+        _buf += _P27(_v.d, ord(_v.c))
     except _cdr.EncodeErrors as _x:
         raise _cdr.pack_error(
             _x,
@@ -4316,7 +5037,7 @@ def _enc_EndsInChar(_buf: bytearray, _v: EndsInChar) -> None:
 
 def _dec_EndsInChar(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[EndsInChar, int]:
     _off += (4 - _off) & 7
-    _t0 = _U22[_e](_data, _off)
+    _t0 = _U27[_e](_data, _off)
     _off += 9
     return EndsInChar(_t0[0], chr(_t0[1])), _off
 
@@ -4348,12 +5069,16 @@ class SeqEndsInChar(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_SeqEndsInChar(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::SeqEndsInChar", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> SeqEndsInChar:
@@ -4405,9 +5130,9 @@ def _dec_SeqEndsInChar(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[SeqEndsI
 class EmptySeqs(_cdr.IdlType):
     """struct CodecTest::EmptySeqs"""
 
-    a: list[int] = _dc.field(default_factory=list)
+    a: _arrays.Array[int] = _dc.field(default_factory=lambda: _arrays.zeros("i"))
     d: float = 0.0
-    b: list[float] = _dc.field(default_factory=list)
+    b: _arrays.Array[float] = _dc.field(default_factory=lambda: _arrays.zeros("d"))
     c: list[_m_CodecTest_base_idl.Point] = _dc.field(default_factory=list)
     e: float = 0.0
     f: list[str] = _dc.field(default_factory=list)
@@ -4448,12 +5173,16 @@ class EmptySeqs(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_EmptySeqs(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::EmptySeqs", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> EmptySeqs:
@@ -4466,7 +5195,7 @@ class EmptySeqs(_cdr.IdlType):
 
 
 def _enc_EmptySeqs(_buf: bytearray, _v: EmptySeqs) -> None:
-    _cdr.put_primitives(_buf, _v.a, "i", 4, None, "CodecTest::EmptySeqs.a")
+    _arrays.put_sequence(_buf, _v.a, "i", 4, None, "CodecTest::EmptySeqs.a")
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
     try:
         _buf += _P5(_v.d)
@@ -4475,7 +5204,7 @@ def _enc_EmptySeqs(_buf: bytearray, _v: EmptySeqs) -> None:
             _x,
             ("CodecTest::EmptySeqs.d", "d", lambda: (_v.d,)),
         ) from None
-    _cdr.put_primitives(_buf, _v.b, "d", 8, None, "CodecTest::EmptySeqs.b")
+    _arrays.put_sequence(_buf, _v.b, "d", 8, None, "CodecTest::EmptySeqs.b")
     _cdr.put_flat(
         _buf,
         _v.c,
@@ -4499,7 +5228,7 @@ def _enc_EmptySeqs(_buf: bytearray, _v: EmptySeqs) -> None:
         _cdr.put_string(_buf, _x0, None, "CodecTest::EmptySeqs.f")
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
     try:
-        _buf += _P21(_v.g)
+        _buf += _P20(_v.g)
     except _cdr.EncodeErrors as _x:
         raise _cdr.pack_error(
             _x,
@@ -4522,7 +5251,7 @@ def _enc_EmptySeqs(_buf: bytearray, _v: EmptySeqs) -> None:
 
 
 def _dec_EmptySeqs(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[EmptySeqs, int]:
-    _f2, _off = _cdr.get_primitives(
+    _f2, _off = _arrays.get_sequence(
         _data,
         _off,
         _e,
@@ -4534,7 +5263,7 @@ def _dec_EmptySeqs(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[EmptySeqs, i
     _off += (4 - _off) & 7
     _t3 = _U5[_e](_data, _off)
     _off += 8
-    _f4, _off = _cdr.get_primitives(
+    _f4, _off = _arrays.get_sequence(
         _data,
         _off,
         _e,
@@ -4576,7 +5305,7 @@ def _dec_EmptySeqs(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[EmptySeqs, i
         )
         _f7.append(_x8)
     _off += (4 - _off) & 7
-    _t10 = _U21[_e](_data, _off)
+    _t10 = _U20[_e](_data, _off)
     _off += 8
     _n13, _off = _cdr.get_length(
         _data,
@@ -4601,9 +5330,9 @@ class Traps(_cdr.IdlType):
     """struct CodecTest::Traps"""
 
     c: str = "\x00"
-    ds: list[float] = _dc.field(default_factory=list)
+    ds: _arrays.Array[float] = _dc.field(default_factory=lambda: _arrays.zeros("d"))
     o: int = 0
-    arr: list[float] = _dc.field(default_factory=lambda: [0.0] * 2)
+    arr: _arrays.Array[float] = _dc.field(default_factory=lambda: _arrays.zeros("d", 2))
     b: bool = False
     p: _m_CodecTest_base_idl.Point = _dc.field(default_factory=_m_CodecTest_base_idl.Point)
     s: int = 0
@@ -4657,12 +5386,16 @@ class Traps(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Traps(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecTest::Traps", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Traps:
@@ -4682,7 +5415,7 @@ def _enc_Traps(_buf: bytearray, _v: Traps) -> None:
             _x,
             ("CodecTest::Traps.c", "B", lambda: (ord(_v.c),)),
         ) from None
-    _cdr.put_primitives(_buf, _v.ds, "d", 8, None, "CodecTest::Traps.ds")
+    _arrays.put_sequence(_buf, _v.ds, "d", 8, None, "CodecTest::Traps.ds")
     try:
         _buf += _P4(_v.o)
     except _cdr.EncodeErrors as _x:
@@ -4692,7 +5425,7 @@ def _enc_Traps(_buf: bytearray, _v: Traps) -> None:
         ) from None
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
     try:
-        _buf += _P23(*_v.arr, _v.b)
+        _buf += _P28(*_v.arr, _v.b)
     except _cdr.EncodeErrors as _x:
         raise _cdr.pack_error(
             _x,
@@ -4721,7 +5454,7 @@ def _enc_Traps(_buf: bytearray, _v: Traps) -> None:
         ) from None
     _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
     try:
-        _buf += _P21(_v.ll)
+        _buf += _P20(_v.ll)
     except _cdr.EncodeErrors as _x:
         raise _cdr.pack_error(
             _x,
@@ -4747,7 +5480,7 @@ def _enc_Traps(_buf: bytearray, _v: Traps) -> None:
 def _dec_Traps(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Traps, int]:
     _t0 = _U4[_e](_data, _off)
     _off += 1
-    _f1, _off = _cdr.get_primitives(
+    _f1, _off = _arrays.get_sequence(
         _data,
         _off,
         _e,
@@ -4759,7 +5492,7 @@ def _dec_Traps(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Traps, int]:
     _t2 = _U4[_e](_data, _off)
     _off += 1
     _off += (4 - _off) & 7
-    _t3 = _U23[_e](_data, _off)
+    _t3 = _U28[_e](_data, _off)
     _off += 17
     _f4, _off = _m_CodecTest_base_idl._dec_Point(_data, _off, _e)
     _off += (4 - _off) & 1
@@ -4769,7 +5502,7 @@ def _dec_Traps(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Traps, int]:
     _t7 = _U4[_e](_data, _off)
     _off += 1
     _off += (4 - _off) & 7
-    _t8 = _U21[_e](_data, _off)
+    _t8 = _U20[_e](_data, _off)
     _off += 8
     _f9, _off = _dec_BoolDouble(_data, _off, _e)
     _t10 = _U4[_e](_data, _off)
@@ -4780,7 +5513,7 @@ def _dec_Traps(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Traps, int]:
             chr(_t0[0]),
             _f1,
             _t2[0],
-            list(_t3[0:2]),
+            _arrays.to_array("d", _t3[0:2]),
             _t3[2],
             _f4,
             _t5[0],

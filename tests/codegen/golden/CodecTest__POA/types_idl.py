@@ -69,7 +69,7 @@ class Holder(_rpc.Servant):
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::Holder::get", _x) from None
         _r = self.get(m)
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _m_CodecTest_types_idl._enc_Holder_Inner(_buf, _r)
@@ -77,7 +77,7 @@ class Holder(_rpc.Servant):
                 raise _cdr.nested_error("CodecTest::Holder::get result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("CodecTest::Holder::get", _x) from None
-        return bytes(_buf)
+        return _buf.value()
 
     _dispatch = _rpc.merge_dispatch(
         {

@@ -43,11 +43,10 @@ _EXPORTS: dict[str, str] = {
 # type hash -> the data type that has it: how event consumers find the class of a payload
 _TYPE_HASHES: dict[str, str] = {
     "044c659dc74645957c807685616573fac8de05188d933d25e52577de82aa747c": "ByUShort",
+    "0e61b5a975874aff3d28982b0e63618e3133eaf3228a42e829490e04a6f3c63d": "Holder",
     "1507e61095f1bd49b2e4db5ee06b302f435f58706e93f1a968816cef4f3797c3": "ByEnumDefault",
     "190a5682049369b2a536aacc870ac34934099a05f8ca12bdb05f1117742fee5f": "ByTypedef",
-    "21bf8b233351ed0b3c22960381ddec46ec84bcb2e2b18af1f86894c3f815825e": "Branches",
     "2bd1f0b33894ff4df0bf1ff2aca26d5c19bc817b69404885c8d46f366f1544c6": "ByChar",
-    "30bff8560b0adc5ae2c17a076ccdea61ad5f3ee257432434abfb9420df7ddbf8": "Holder",
     "32dcd9e9757287cf30e2d957c0b78e1c57d8255576ab17cda001bda281330bef": "ByULongLong",
     "46dfdbf34f741dcd0057ec9fe7819851795c09cf5a774812c7770ee4ec425fd8": "ByBool",
     "65eeb0e98f889a4d02da3e70e7cfec6c9c3c39a6a2ea5e5d529c3db858d85892": "ByTypedefEnum",
@@ -59,6 +58,7 @@ _TYPE_HASHES: dict[str, str] = {
     "c3749d8914c9b8f29a36ea9cb7b522c8e6c0a168099c69f4059922c9c4c5efba": "ByULong",
     "df7989801e35751cca87f5305c19e8ae21b205e86504e0ef79fe1cdda5f8c31a": "ByLong",
     "dff3bc49142e243b59d675f6496e7a87845b9aaa8d6ebbd9bf25320a32d229bc": "ByOctet",
+    "e15cf99c2aaf5c0c52bd637e99a346b8e57576751f94cfe2bc26fbcf51320eff": "Branches",
     "e8fad4dde4dc03e8ce07d4059c0510a484ae06bf0d9717ee22b2ecb25c0e3c8d": "ByCharNul",
     "f0c8ac591744d251a706c94a98dca32baa1661e6b56d60dcf904b24066be83de": "ByBoolTrue",
     "f208401f9807f0bdc1af3a63018e967c29b7fdf970da00d50aab44ed7bc62946": "ByEnum",

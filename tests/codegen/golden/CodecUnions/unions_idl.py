@@ -12,6 +12,7 @@ import typing as _t
 import CodecTest.base_idl as _m_CodecTest_base_idl
 import CodecTest.types_idl as _m_CodecTest_types_idl
 
+import miro_gen.runtime.arrays as _arrays
 import miro_gen.runtime.cdr as _cdr
 
 __all__ = [
@@ -53,6 +54,9 @@ _U10 = (_S10[0].unpack_from, _S10[1].unpack_from)
 _S11 = _cdr.pair("4i")
 _P11 = _S11[0].pack
 _U11 = (_S11[0].unpack_from, _S11[1].unpack_from)
+_S12 = _cdr.pair("3d")
+_P12 = _S12[0].pack
+_U12 = (_S12[0].unpack_from, _S12[1].unpack_from)
 _S2 = _cdr.pair("d")
 _P2 = _S2[0].pack
 _U2 = (_S2[0].unpack_from, _S2[1].unpack_from)
@@ -152,12 +156,16 @@ class ByEnum(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ByEnum(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByEnum", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByEnum:
@@ -277,12 +285,16 @@ class ByEnumDefault(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ByEnumDefault(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByEnumDefault", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByEnumDefault:
@@ -403,12 +415,16 @@ class ByEnumPartial(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ByEnumPartial(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByEnumPartial", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByEnumPartial:
@@ -537,12 +553,16 @@ class ByChar(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ByChar(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByChar", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByChar:
@@ -677,12 +697,16 @@ class ByCharNul(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ByCharNul(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByCharNul", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByCharNul:
@@ -806,12 +830,16 @@ class ByBool(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ByBool(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByBool", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByBool:
@@ -922,12 +950,16 @@ class ByBoolDefault(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ByBoolDefault(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByBoolDefault", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByBoolDefault:
@@ -1025,12 +1057,16 @@ class ByBoolTrue(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ByBoolTrue(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByBoolTrue", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByBoolTrue:
@@ -1149,12 +1185,16 @@ class ByShort(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ByShort(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByShort", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByShort:
@@ -1291,12 +1331,16 @@ class ByUShort(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ByUShort(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByUShort", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByUShort:
@@ -1399,7 +1443,7 @@ class ByLong(_cdr.IdlUnion):
     _default_discriminator = -1
     _zero = {
         "min": lambda: 0,
-        "seven": list,
+        "seven": lambda: _arrays.zeros("i"),
         "other": lambda: "\x00",
     }
     _d: int
@@ -1414,12 +1458,12 @@ class ByLong(_cdr.IdlUnion):
         self._set("min", value)
 
     @property
-    def seven(self) -> list[int]:
+    def seven(self) -> _arrays.Array[int]:
         """Branch seven."""
-        return _t.cast("list[int]", self._get("seven"))
+        return _t.cast("_arrays.Array[int]", self._get("seven"))
 
     @seven.setter
-    def seven(self, value: list[int]) -> None:
+    def seven(self, value: _arrays.Array[int]) -> None:
         self._set("seven", value)
 
     @property
@@ -1433,12 +1477,16 @@ class ByLong(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ByLong(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByLong", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByLong:
@@ -1470,7 +1518,7 @@ def _enc_ByLong(_buf: bytearray, _v: ByLong) -> None:
                 ("CodecUnions::ByLong.min", "i", lambda: (_v._v,)),
             ) from None
     elif _d in (7,):
-        _cdr.put_primitives(
+        _arrays.put_sequence(
             _buf,
             _v._v,
             "i",
@@ -1500,7 +1548,7 @@ def _dec_ByLong(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[ByLong, int]:
         _off += 4
         _x = _t1[0]
     elif _d in (7,):
-        _x, _off = _cdr.get_primitives(
+        _x, _off = _arrays.get_sequence(
             _data,
             _off,
             _e,
@@ -1569,12 +1617,16 @@ class ByULong(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ByULong(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByULong", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByULong:
@@ -1701,12 +1753,16 @@ class ByLongLong(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ByLongLong(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByLongLong", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByLongLong:
@@ -1847,12 +1903,16 @@ class ByULongLong(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ByULongLong(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByULongLong", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByULongLong:
@@ -1996,12 +2056,16 @@ class ByOctet(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ByOctet(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByOctet", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByOctet:
@@ -2142,12 +2206,16 @@ class ByInt8(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ByInt8(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByInt8", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByInt8:
@@ -2282,12 +2350,16 @@ class ByUInt8(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ByUInt8(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByUInt8", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByUInt8:
@@ -2436,12 +2508,16 @@ class ByTypedef(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ByTypedef(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByTypedef", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByTypedef:
@@ -2580,12 +2656,16 @@ class ByTypedefEnum(_cdr.IdlUnion):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_ByTypedefEnum(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::ByTypedefEnum", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByTypedefEnum:
@@ -2648,7 +2728,7 @@ class Branches(_cdr.IdlUnion):
     __slots__ = ()
     _repo_id = "IDL:CodecUnions/Branches:1.0"
     _type_name = "CodecUnions::Branches"
-    _type_hash = "21bf8b233351ed0b3c22960381ddec46ec84bcb2e2b18af1f86894c3f815825e"
+    _type_hash = "e15cf99c2aaf5c0c52bd637e99a346b8e57576751f94cfe2bc26fbcf51320eff"
     _data_schema = (
         "module CodecTest {\n"
         "  struct Point {\n"
@@ -2723,6 +2803,9 @@ class Branches(_cdr.IdlUnion):
         "    char tail;\n"
         "  };\n"
         "};\n"
+        "module CodecTest {\n"
+        "  typedef double Vec3[3];\n"
+        "};\n"
         "module CodecUnions {\n"
         "  union Branches switch (long) {\n"
         "    case 1:\n"
@@ -2759,6 +2842,12 @@ class Branches(_cdr.IdlUnion):
         "      CodecTest::FlatSeqs flat;\n"
         "    case 17:\n"
         "      double d2;\n"
+        "    case 18:\n"
+        "      sequence<float> floats;\n"
+        "    case 19:\n"
+        "      double bigd[20];\n"
+        "    case 20:\n"
+        "      CodecTest::Vec3 v;\n"
         "  };\n"
         "};\n"
     )
@@ -2780,6 +2869,9 @@ class Branches(_cdr.IdlUnion):
         "nothing": (15, ),
         "flat": (16, ),
         "d2": (17, ),
+        "floats": (18, ),
+        "bigd": (19, ),
+        "v": (20, ),
     }
     _labels = {
         1: "p",
@@ -2799,13 +2891,16 @@ class Branches(_cdr.IdlUnion):
         15: "nothing",
         16: "flat",
         17: "d2",
+        18: "floats",
+        19: "bigd",
+        20: "v",
     }
     _default_branch = None
     _default_discriminator = None
     _zero = {
         "p": _m_CodecTest_base_idl.Point,
         "ps": list,
-        "arr": lambda: [0] * 3,
+        "arr": lambda: _arrays.zeros("i", 3),
         "inner": ByEnum,
         "c": lambda: _m_CodecTest_base_idl.Color.RED,
         "ch": lambda: "\x00",
@@ -2814,12 +2909,15 @@ class Branches(_cdr.IdlUnion):
         "m": _m_CodecTest_types_idl.Mixed,
         "d": lambda: 0.0,
         "s2": lambda: [""] * 2,
-        "ls": list,
+        "ls": lambda: _arrays.zeros("i"),
         "o": lambda: 0,
-        "mat": lambda: [[0] * 2 for _ in range(2)],
+        "mat": lambda: [_arrays.zeros("i", 2) for _ in range(2)],
         "nothing": _m_CodecTest_types_idl.Empty,
         "flat": _m_CodecTest_types_idl.FlatSeqs,
         "d2": lambda: 0.0,
+        "floats": lambda: _arrays.zeros("f"),
+        "bigd": lambda: _arrays.zeros("d", 20),
+        "v": lambda: _arrays.zeros("d", 3),
     }
     _d: int
 
@@ -2842,12 +2940,12 @@ class Branches(_cdr.IdlUnion):
         self._set("ps", value)
 
     @property
-    def arr(self) -> list[int]:
+    def arr(self) -> _arrays.Array[int]:
         """Branch arr."""
-        return _t.cast("list[int]", self._get("arr"))
+        return _t.cast("_arrays.Array[int]", self._get("arr"))
 
     @arr.setter
-    def arr(self, value: list[int]) -> None:
+    def arr(self, value: _arrays.Array[int]) -> None:
         self._set("arr", value)
 
     @property
@@ -2976,14 +3074,45 @@ class Branches(_cdr.IdlUnion):
     def d2(self, value: float) -> None:
         self._set("d2", value)
 
+    @property
+    def floats(self) -> _arrays.Array[float]:
+        """Branch floats."""
+        return _t.cast("_arrays.Array[float]", self._get("floats"))
+
+    @floats.setter
+    def floats(self, value: _arrays.Array[float]) -> None:
+        self._set("floats", value)
+
+    @property
+    def bigd(self) -> _arrays.Array[float]:
+        """Branch bigd."""
+        return _t.cast("_arrays.Array[float]", self._get("bigd"))
+
+    @bigd.setter
+    def bigd(self, value: _arrays.Array[float]) -> None:
+        self._set("bigd", value)
+
+    @property
+    def v(self) -> _m_CodecTest_types_idl.Vec3:
+        """Branch v."""
+        return _t.cast("_m_CodecTest_types_idl.Vec3", self._get("v"))
+
+    @v.setter
+    def v(self, value: _m_CodecTest_types_idl.Vec3) -> None:
+        self._set("v", value)
+
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Branches(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::Branches", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Branches:
@@ -3081,7 +3210,7 @@ def _enc_Branches(_buf: bytearray, _v: Branches) -> None:
         for _x6 in _v._v:
             _cdr.put_string(_buf, _x6, None, "CodecUnions::Branches.s2")
     elif _d in (12,):
-        _cdr.put_primitives(
+        _arrays.put_sequence(
             _buf,
             _v._v,
             "i",
@@ -3125,6 +3254,26 @@ def _enc_Branches(_buf: bytearray, _v: Branches) -> None:
                 _x,
                 ("CodecUnions::Branches.d2", "d", lambda: (_v._v,)),
             ) from None
+    elif _d in (18,):
+        _arrays.put_sequence(
+            _buf,
+            _v._v,
+            "f",
+            4,
+            None,
+            "CodecUnions::Branches.floats",
+        )
+    elif _d in (19,):
+        _arrays.put_array(_buf, _v._v, "d", 8, 20, "CodecUnions::Branches.bigd")
+    elif _d in (20,):
+        _buf += _cdr.ZEROS[(4 - len(_buf)) & 7]
+        try:
+            _buf += _P12(*_v._v)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.pack_error(
+                _x,
+                ("CodecUnions::Branches.v", "3d", lambda: (*_v._v,)),
+            ) from None
     else:
         _cdr.check_no_branch(_v._v, _d, "CodecUnions::Branches")
 
@@ -3153,7 +3302,7 @@ def _dec_Branches(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Branches, int
         _off += (4 - _off) & 3
         _t1 = _U10[_e](_data, _off)
         _off += 12
-        _x = list(_t1[0:3])
+        _x = _arrays.to_array("i", _t1[0:3])
     elif _d in (4,):
         _x, _off = _dec_ByEnum(_data, _off, _e)
     elif _d in (5,):
@@ -3196,7 +3345,7 @@ def _dec_Branches(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Branches, int
             )
             _x.append(_x7)
     elif _d in (12,):
-        _x, _off = _cdr.get_primitives(
+        _x, _off = _arrays.get_sequence(
             _data,
             _off,
             _e,
@@ -3213,7 +3362,7 @@ def _dec_Branches(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Branches, int
         _off += (4 - _off) & 3
         _t9 = _U11[_e](_data, _off)
         _off += 16
-        _x = _cdr.reshape(list(_t9[0:4]), (2, 2))
+        _x = _arrays.to_rows("i", _t9[0:4], (2, 2))
     elif _d in (15,):
         _x, _off = _m_CodecTest_types_idl._dec_Empty(_data, _off, _e)
     elif _d in (16,):
@@ -3223,6 +3372,31 @@ def _dec_Branches(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Branches, int
         _t10 = _U2[_e](_data, _off)
         _off += 8
         _x = _t10[0]
+    elif _d in (18,):
+        _x, _off = _arrays.get_sequence(
+            _data,
+            _off,
+            _e,
+            "f",
+            4,
+            None,
+            "CodecUnions::Branches.floats",
+        )
+    elif _d in (19,):
+        _x, _off = _arrays.get_array(
+            _data,
+            _off,
+            _e,
+            "d",
+            8,
+            20,
+            "CodecUnions::Branches.bigd",
+        )
+    elif _d in (20,):
+        _off += (4 - _off) & 7
+        _t11 = _U12[_e](_data, _off)
+        _off += 24
+        _x = _arrays.to_array("d", _t11[0:3])
     else:
         _x = None
     return Branches(_d, _x), _off
@@ -3242,7 +3416,7 @@ class Holder(_cdr.IdlType):
 
     _repo_id = "IDL:CodecUnions/Holder:1.0"
     _type_name = "CodecUnions::Holder"
-    _type_hash = "30bff8560b0adc5ae2c17a076ccdea61ad5f3ee257432434abfb9420df7ddbf8"
+    _type_hash = "0e61b5a975874aff3d28982b0e63618e3133eaf3228a42e829490e04a6f3c63d"
     _data_schema = (
         "module CodecTest {\n"
         "  struct Point {\n"
@@ -3317,6 +3491,9 @@ class Holder(_cdr.IdlType):
         "    char tail;\n"
         "  };\n"
         "};\n"
+        "module CodecTest {\n"
+        "  typedef double Vec3[3];\n"
+        "};\n"
         "module CodecUnions {\n"
         "  union Branches switch (long) {\n"
         "    case 1:\n"
@@ -3353,6 +3530,12 @@ class Holder(_cdr.IdlType):
         "      CodecTest::FlatSeqs flat;\n"
         "    case 17:\n"
         "      double d2;\n"
+        "    case 18:\n"
+        "      sequence<float> floats;\n"
+        "    case 19:\n"
+        "      double bigd[20];\n"
+        "    case 20:\n"
+        "      CodecTest::Vec3 v;\n"
         "  };\n"
         "};\n"
         "module CodecUnions {\n"
@@ -3397,12 +3580,16 @@ class Holder(_cdr.IdlType):
 
     def serialize(self) -> bytes:
         """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
-        _buf = bytearray(_cdr.HEADER_LE)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
         try:
             _enc_Holder(_buf, self)
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("CodecUnions::Holder", _x) from None
-        return bytes(_buf)
 
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Holder:
