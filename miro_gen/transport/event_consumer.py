@@ -17,7 +17,7 @@ import zmq
 
 from miro_gen.log import logger
 from miro_gen.runtime import registry
-from miro_gen.transport import sockets
+from miro_gen.transport import offers, sockets
 from miro_gen.transport.channel_link import ChannelLink
 from miro_gen.transport.channels import EventChannel
 from miro_gen.transport.event_frames import (
@@ -124,6 +124,7 @@ class StructuredPushConsumer:
         """Receive the events of these (domain, type) pairs, `*` for any; replaces the last."""
         subs = [(d, t) for d, t in subscriptions]
         prefixes = {subscription_prefix(d, t) for d, t in subs}
+        offers.subscribed(self, self.channel.name, subs)
 
         def apply() -> None:
             for p in self._prefixes - prefixes:
@@ -312,4 +313,5 @@ class StructuredPushConsumer:
             self._deliver()
 
     def close(self) -> None:
+        offers.unsubscribed(self)
         self.link.close_socket()
