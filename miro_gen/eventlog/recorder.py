@@ -11,14 +11,15 @@ from __future__ import annotations
 import signal
 import time
 from collections.abc import Sequence
-from typing import Any
 
 from miro_gen.eventlog.progress import StatusLine, human_bytes
 from miro_gen.eventlog.tap import RawEventTap
 from miro_gen.eventlog.writer import LogWriter
 from miro_gen.runtime import registry
+from miro_gen.transport.channels import EventChannel
 from miro_gen.transport.event_frames import RawEvent
 from miro_gen.transport.log_clock import CLOCK_TYPE  # a player's clock: never recorded
+from miro_gen.transport.server import Server
 
 TICK = 0.25  # seconds between chunk checks and progress updates
 
@@ -28,8 +29,8 @@ class Recorder:
 
     def __init__(
         self,
-        server: Any,
-        channel: Any,
+        server: Server,
+        channel: EventChannel,
         subscriptions: Sequence[tuple[str, str]],
         writer: LogWriter,
         status: StatusLine,

@@ -17,6 +17,7 @@ import zmq
 
 from miro_gen.log import logger
 from miro_gen.runtime import registry
+from miro_gen.runtime.datatypes import IdlType
 from miro_gen.transport import offers, sockets
 from miro_gen.transport.channel_link import ChannelLink
 from miro_gen.transport.channels import EventChannel
@@ -98,7 +99,7 @@ class StructuredPushConsumer:
         self._prefixes: set[bytes] = set()
         self._gaps = GapCounter()  # per (supplier, type name), bounded
         self._topics: dict[bytes, tuple[str, str, bool]] = {}
-        self._classes: dict[bytes, type[Any]] = {}
+        self._classes: dict[bytes, type[IdlType]] = {}
         self._unknown: set[tuple[str, str]] = set()
         self._held: list[list[zmq.Frame]] = []  # frames waiting for the search for their types
         self._held_hashes: set[bytes] = set()
@@ -205,7 +206,7 @@ class StructuredPushConsumer:
             self._topics[head] = known
         return known
 
-    def _class(self, raw_hash: bytes, domain: str, type_name: str) -> type[Any] | None:
+    def _class(self, raw_hash: bytes, domain: str, type_name: str) -> type[IdlType] | None:
         """The generated type of payloads with this type hash; None (reported once) if none."""
         cls = self._classes.get(raw_hash)
         if cls is None:
