@@ -1,11 +1,12 @@
 """Malformed CDR: decoding must fail with MARSHAL at once, never with another exception, never
-after a long time or a big allocation.
+after much work or a big allocation.
 
 Covered, on the types of tests/codegen/*.idl: every truncation of encoded values; wrong and XCDR2
 encapsulation headers; sequence and string lengths that are 0xFFFFFFFF or larger than the bytes
-left (with the Python steps and the peak of traced allocations of each decoding bounded); strings without their NUL or not
-UTF-8; bounds exceeded on the wire; enum values and enum discriminators out of range; random bytes
-and random mutations of valid encodings, for every type; data nested deeper than Python recursion.
+left (with the Python steps and the peak of traced allocations of each decoding bounded);
+strings without their NUL or not UTF-8; bounds exceeded on the wire; enum values and enum
+discriminators out of range; random bytes and random mutations of valid encodings, for every
+type; data nested deeper than Python recursion.
 
 Truncation: our encoder writes no trailing bytes and the decoder reads every byte it is given up
 to the last field, so a strict prefix of an encoding is never a complete encoding; a prefix that
