@@ -8,6 +8,7 @@ in order, paced as recorded.
 
 from __future__ import annotations
 
+import contextlib
 import signal
 import subprocess
 import sys
@@ -19,7 +20,7 @@ from typing import Any
 import Miro
 import pytest
 from eventlog_helpers import proc, read_events, start_recorder, stop, supply
-from loopback import NamingProcess, run_miro, service_env
+from loopback import NamingProcess, eventually, run_miro, service_env
 from mcap.exceptions import EndOfFile
 from mcap.reader import NonSeekingReader, make_reader
 from miro_cli import REPO, run_miro_idl
@@ -112,11 +113,21 @@ def test_a_replay_looks_live_to_a_consumer_process(naming: str, recorded: Path) 
     assert received == sorted(received)
 
 
+def readable(path: Path) -> list[Any]:
+    """The messages of a log being written, as far as they can be read now."""
+    messages: list[Any] = []
+    with open(path, "rb") as f, contextlib.suppress(Exception):
+        for _, _, m in NonSeekingReader(f).iter_messages(log_time_order=False):
+            messages.append(m)
+    return messages
+
+
 def test_a_killed_recorder_leaves_a_readable_file(naming: str, tmp_path: Path) -> None:
     path = tmp_path / "killed.mcap"
     rec = start_recorder(naming, path, "robot2/ExampleEvent")
     supply(naming, 40, 10, context="robot2")
-    time.sleep(1.6)  # a chunk is closed once it is a second old
+    # A chunk is closed once it is a second old: wait until the file holds all 40.
+    eventually(lambda: len(readable(path)) == 40, 30)
     stop(rec, signal.SIGKILL)
     messages = []
     # The mcap library reads it up to the cut, then says so.
