@@ -283,6 +283,8 @@ def naming_errors(endpoint: str, what: str) -> Iterator[None]:
     try:
         yield
     except (TRANSIENT, COMM_FAILURE, TIMEOUT) as e:
+        if "refused the connection" in e.message:  # it runs, but will not have us: say why
+            raise TRANSIENT(f"cannot {what}: {e.message}", e.minor, e.completed) from None
         reason = e.message.rsplit(": ", 1)[-1] if ": " in e.message else e.message
         raise TRANSIENT(
             f"cannot {what}: the naming service at {endpoint} cannot be reached ({reason}): "

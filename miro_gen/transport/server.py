@@ -263,6 +263,22 @@ class Server(Client):
         self._start_renewing()
         _log.notice("bound %s in the naming service", entry.name)
 
+    def remove_from_name_service(self, name: str) -> None:
+        """Unbind `name`, bound by this server, and stop renewing it. Its object is still
+        served until deactivated (`adapter.deactivate`); another server may bind the name now
+        instead of waiting for this one's lease."""
+        full = self.naming.full_name(name)
+        if self.corba is not None and self.corba.naming is not None:
+            self.corba.unbind(full)
+            return
+        with self._names_lock:
+            self._names.pop(full, None)
+        with (
+            contextlib.suppress(MiroNaming.NotFound),
+            naming_errors(self.options.naming, f"unbind {full}"),
+        ):
+            self.naming.registry.unbind(full, self.owner)
+
     def _unbind_if_interrupted(self) -> None:
         """A server whose names live in a CORBA naming service (no leases there) unbinds them
         when interrupted before it runs, as `_start_renewing` arranges for leased names."""
@@ -342,10 +358,12 @@ class Server(Client):
                 # restarted, a lease ran out while we were cut off): those are bound again.
                 lost = self._registry_for_renewal.renew(self.owner, list(entries), lease_ms)
                 for name in lost:
-                    if name not in entries:
+                    with self._names_lock:  # (not one removed meanwhile)
+                        entry = self._names.get(name)
+                    if entry is None:
                         continue
                     try:
-                        self._registry_for_renewal.rebind(entries[name], self.owner, lease_ms)
+                        self._registry_for_renewal.rebind(entry, self.owner, lease_ms)
                     except MiroNaming.AlreadyBound:
                         if name not in held_elsewhere:
                             held_elsewhere.add(name)
