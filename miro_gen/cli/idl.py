@@ -192,6 +192,12 @@ def _generate(args: argparse.Namespace, specs: list[Any], defines: dict[str, str
             f"compile the IDL file it comes from too",
             file=sys.stderr,
         )
+    for package in generate.shadowed_modules(modules):
+        print(
+            f"miro-idl: warning: IDL module {package} is the Python package {package}, which hides "
+            f"the standard library's {package} module from programs with {outdir} on sys.path",
+            file=sys.stderr,
+        )
     changed = generate.changed_files(files, outdir)
     if args.check:
         for rel in changed:
