@@ -127,10 +127,12 @@ import Planner.PlannerParameters, Rover, _GlobalIDL
 assert Planner.PlannerParameters.PlannerParameters().drive.maxSpeed == 1.5
 assert Rover.Drive.__module__ == "Rover.rover_idl"
 assert _GlobalIDL.Heartbeat.__module__ == "_GlobalIDL.jobs_idl"
+assert _GlobalIDL.Person.__module__ == "_GlobalIDL.Person_idl"  # the installed _GlobalIDL's
 """
 
 
 def test_every_module_imports_beside_the_installed_packages(project: Project) -> None:
+    """The project's `_GlobalIDL` and the one the wheel carries are one package."""
     cmd = [sys.executable, "-c", _IMPORT_ALL, *project.packages]
     out = _run(cmd, project.root, PYTHONPATH=project.out)
     assert out.returncode == 0, out.stdout + out.stderr

@@ -5,11 +5,14 @@
 
 Its names come from the `*_idl` modules, each imported when one of its names is first used:
 importing a package never imports other packages, so packages that refer to each other (through
-IDL modules reopened in several files) import in any order.
+IDL modules reopened in several files) import in any order. The package may be spread over
+several output folders (of miro-idl, of miro-params): the modules of all of them import, and
+their names are served here.
 """
 
-import importlib as _importlib
 import typing as _t
+
+import miro_gen.runtime.packages as _packages
 
 if _t.TYPE_CHECKING:
     from Miro.ClosedMotion_idl import *
@@ -280,18 +283,7 @@ __all__ = [
     "myExampleIDL",
 ]
 
+__path__ = _packages.package_path(__path__, __name__)
+
 if not _t.TYPE_CHECKING:
-
-    def __getattr__(name: str) -> object:
-        """Import what a name needs on first use, and keep it here for the next."""
-        if name in _EXPORTS:
-            value = getattr(_importlib.import_module(_EXPORTS[name]), name)
-        elif name in _SUBMODULES:
-            value = _importlib.import_module(f"{__name__}.{name}")
-        else:
-            raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-        globals()[name] = value
-        return value
-
-    def __dir__() -> list[str]:
-        return sorted({*globals(), *__all__})
+    __getattr__, __dir__ = _packages.lazy_names(globals())

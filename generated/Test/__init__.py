@@ -4,8 +4,14 @@
 """Parameter classes of namespace Test: import them from their modules
 (`Test.Body`, `Test.Parameters`).
 
-The package may be spread over several output folders: all of them are searched."""
+The package may be spread over several output folders, of miro-params and of miro-idl: the
+modules of all of them import, and the names of miro-idl's modules are served here too."""
 
-import miro_gen.params.runtime as _rt
+import typing as _t
 
-__path__ = _rt.package_path(__path__, __name__)
+import miro_gen.runtime.packages as _packages
+
+__path__ = _packages.package_path(__path__, __name__)
+
+if not _t.TYPE_CHECKING:
+    __getattr__, __dir__ = _packages.lazy_names(globals())
