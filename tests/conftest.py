@@ -57,3 +57,32 @@ def reactor() -> Iterator[object]:
     assert not thread.is_alive(), "the reactor did not stop"
     r.close()
     r.context.term()
+
+
+# ---- the CORBA tests' peers (tests/corba_peers.py) ----------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def peer_bin() -> object:
+    """The C++ omniORB peer, built once (and cached by the hash of its sources)."""
+    from corba_peers import build_peer
+
+    return build_peer()
+
+
+@pytest.fixture(scope="module")
+def omninames() -> Iterator[object]:
+    """omniNames on a free port, for a test module."""
+    from corba_peers import running_omninames
+
+    with running_omninames() as names:
+        yield names
+
+
+@pytest.fixture(scope="module")
+def peer_gen(tmp_path_factory: pytest.TempPathFactory) -> Iterator[object]:
+    """The Python types of tests/corba/Peer.idl, generated and imported for a test module."""
+    from corba_peers import peer_types
+
+    with peer_types(tmp_path_factory.mktemp("peer_generated")) as types:
+        yield types

@@ -40,6 +40,9 @@ def build_parser() -> argparse.ArgumentParser:
     sub.add_parser("log", help="record, replay and inspect event logs (MCAP)", add_help=False)
     sub.add_parser("echo", help="print the events of a topic as they arrive", add_help=False)
     sub.add_parser("hz", help="print the rate of the events of a topic", add_help=False)
+    sub.add_parser(
+        "bridge", help="relay events with a CORBA event channel (bridge corba)", add_help=False
+    )
     return p
 
 
@@ -96,6 +99,10 @@ def dispatch(args: list[str]) -> int:
         from miro_gen.cli.eventargs import piped
 
         return piped(live.echo_main if args[0] == "echo" else live.hz_main, args[1:])
+    if args and args[0] == "bridge":
+        from miro_gen.cli import bridge
+
+        return bridge.bridge_main(args[1:])
     parser = build_parser()
     ns = parser.parse_args(args)
     if ns.command is None:

@@ -122,7 +122,9 @@ def nslist_main(argv: Sequence[str]) -> int:
     ns = p.parse_args(client.argv[1:])
     try:
         with naming_errors(client.options.naming, "list names"):
-            entries = client.naming.registry._list(ns.prefix)
+            # A CORBA naming service's names are walked (miro_gen.corba.naming.CorbaNaming).
+            list_names = getattr(client.naming, "entries", None) or client.naming.registry._list
+            entries = list_names(ns.prefix)
     except SystemException as e:
         print(f"miro nslist: {e.message}", file=sys.stderr)
         return 1

@@ -237,7 +237,9 @@ def put_count(buf: bytearray, values: Sequence[Any], bound: int | None, what: st
     put_length(buf, count(values, what), bound, what)
 
 
-def put_octets(buf: bytearray, value: bytes | bytearray, bound: int | None, what: str) -> None:
+def put_octets(
+    buf: bytearray, value: bytes | bytearray | memoryview, bound: int | None, what: str
+) -> None:
     """Octets: `bytes`, or any other buffer (a bytearray, a memoryview, a numpy image), as
     the bytes it holds in row order."""
     data: Any = value
@@ -393,6 +395,24 @@ def type_for_hash(type_hash: str) -> type[IdlType] | None:
     if found is None and _import_generated_packages():
         found = _listed(type_hash)
     return found
+
+
+def type_for_repo_id(repo_id: str) -> type[IdlType] | None:
+    """The generated class with this repository id among those imported (and, the first time
+    one is unknown, those of the generated packages on the path); for CORBA `any` values,
+    which name their type by repository id."""
+    for attempt in range(2):
+        for cls in list(_TYPES_BY_HASH.values()):
+            if cls._repo_id == repo_id:
+                return cls
+        if attempt or not _import_generated_packages():
+            break
+    return None
+
+
+def imported_types() -> list[type[IdlType]]:
+    """Every generated struct, union and exception class imported so far."""
+    return list(_TYPES_BY_HASH.values())
 
 
 def _listed(type_hash: str) -> type[IdlType] | None:
@@ -560,10 +580,32 @@ class ObjectRef(NamedTuple):
         return bool(self.endpoint or self.key)
 
 
+class EncodedRef(NamedTuple):
+    """An object reference already encoded for the protocol its message goes over (an IOR in
+    CDR, for a GIOP peer): what `miro_gen.runtime.rpc.to_ref` returns for an invoker that
+    encodes references its own way. `data` is written as it is, at a 4-aligned offset."""
+
+    data: bytes
+
+
+class ForeignBody(bytes):
+    """A request or reply body that came over a protocol whose object references are not
+    (repository id, endpoint, key) triples: `get_object` decodes them (GIOP bodies hold IORs)."""
+
+    __slots__ = ()
+
+    def get_object(self, off: int, e: int, what: str) -> tuple[ObjectRef, int]:
+        raise NotImplementedError  # pragma: no cover - subclasses implement it
+
+
 def put_object(buf: bytearray, ref: Any, what: str) -> None:
-    """An object reference: an `ObjectRef`, a stub (its `_ref`), or None (nil)."""
+    """An object reference: an `ObjectRef`, a stub (its `_ref`), an `EncodedRef`, or None."""
     if ref is None:
         ref = ObjectRef()
+    elif isinstance(ref, EncodedRef):
+        buf += ZEROS[-len(buf) & 3]
+        buf += ref.data
+        return
     elif not isinstance(ref, ObjectRef):
         ref = getattr(ref, "_ref", None)
         if not isinstance(ref, ObjectRef):
@@ -576,6 +618,8 @@ def put_object(buf: bytearray, ref: Any, what: str) -> None:
 def get_object(
     data: bytes | bytearray | memoryview, off: int, e: int, what: str
 ) -> tuple[ObjectRef, int]:
+    if isinstance(data, ForeignBody):
+        return data.get_object(off, e, what)
     repo_id, off = get_string(data, off, e, None, what)
     endpoint, off = get_string(data, off, e, None, what)
     key, off = get_octets(data, off, e, None, what)

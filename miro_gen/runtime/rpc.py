@@ -252,7 +252,11 @@ def make_stub(cls: type[Any], ref: ObjectRef, invoker: Invoker) -> Any:
 
 def to_ref(value: Any, invoker: Invoker) -> Any:
     """What an object-reference argument travels as: stubs and references as they are, a local
-    servant as a reference the invoker makes for it."""
+    servant as a reference the invoker makes for it; for an invoker that encodes references
+    its own way (IIOP: as IORs), what its `encode_reference(value)` makes of the value."""
+    encode = getattr(invoker, "encode_reference", None)
+    if encode is not None:
+        return encode(value)
     if isinstance(value, Servant):
         return invoker.reference_for(value)
     return value

@@ -3,9 +3,14 @@
 As in Miro, a service's `main(argc, argv)` hands its arguments to the middleware first, which
 takes what it knows and leaves the service's own ones. The contract (DESIGN.md, "Command line"):
 
-* `--naming tcp://HOST:PORT` (env `MIRO_NAMING`), or the manual's
-  `-ORBInitRef NameService=iioploc://HOST:PORT/NameService` and `...=corbaloc:iiop:HOST:PORT/...`
-  (env `NameServiceIOR`): where the naming service is; default `tcp://127.0.0.1:2809`;
+* `--naming URL` (env `MIRO_NAMING`), or the manual's `-ORBInitRef NameService=URL` (env
+  `NameServiceIOR`): where the naming service is; default `tcp://127.0.0.1:2809`. `tcp://` is
+  `miro naming` (ZeroMQ); `IOR:...` a CORBA naming service; `corbaloc:iiop:HOST:PORT/...`,
+  `iioploc://HOST:PORT/...` and `corbaname:...` whichever of the two answers there
+  (`miro_gen.corba.naming.decide`, docs/CORBA.md);
+* `--iiop-endpoint HOST:PORT` or `-ORBEndpoint iiop://HOST:PORT` (TAO's spelling; omniORB's
+  `-ORBendPoint giop:tcp:HOST:PORT` too): where a server listens for IIOP (a fixed port keeps
+  its IORs valid across restarts);
 * other `-ORB*` options (TAO's) are accepted and ignored, with a one-line notice each;
 * `-MNC NAME` / `-MiroNamingContext NAME`: the naming context, default the host name;
 * `-MLL N` / `-MiroLogLevel N`: Miro's log level, 0 emergency ... 4 warning (default) ... 9 prattle;
@@ -58,6 +63,8 @@ class CommonOptions:
     config_file: str | None = None
     host: str | None = None
     clock: str = "wall"  # or "log" (the channel LogClock), or "log:CHANNEL"
+    naming_url: str | None = None  # the naming service's CORBA URL, when one was given
+    iiop_endpoint: str | None = None  # HOST:PORT to serve IIOP on (--iiop-endpoint)
     ignored: list[str] = field(default_factory=list)  # -ORB options given, for the notice
 
 
@@ -71,10 +78,52 @@ def naming_endpoint(text: str) -> str:
     if m:
         port = m.group("port") or str(_IIOP_DEFAULT_PORT)
         return f"tcp://{m.group('host')}:{port}"
+    address = _corba_address(text)
+    if address is not None:
+        return address
     raise UsageError(
-        f"cannot read the naming service address {text!r}: expected tcp://HOST:PORT or "
-        "iioploc://HOST:PORT/NameService"
+        f"cannot read the naming service address {text!r}: expected tcp://HOST:PORT, "
+        "iioploc://HOST:PORT/NameService, corbaloc:iiop:HOST:PORT/NameService, "
+        "corbaname:iiop:HOST:PORT or IOR:..."
     )
+
+
+def _corba_address(text: str) -> str | None:
+    """`tcp://HOST:PORT` of the first IIOP address of an IOR or corbaname URL."""
+    from miro_gen.corba.ior import CorbaName, UrlError, parse_url
+
+    try:
+        parsed = parse_url(text.removeprefix("NameService="))
+    except UrlError:
+        return None
+    ior = parsed.context if isinstance(parsed, CorbaName) else parsed
+    profile = ior.iiop_profile()
+    if profile is None:
+        return None
+    host = f"[{profile.host}]" if ":" in profile.host else profile.host
+    return f"tcp://{host}:{profile.port}"
+
+
+def _naming(opts: CommonOptions, text: str) -> None:
+    """Set where the naming service is (and, for a CORBA URL, the URL itself)."""
+    opts.naming = naming_endpoint(text)
+    bare = text.strip().removeprefix("NameService=")
+    opts.naming_url = None if bare.startswith("tcp://") else bare
+
+
+def iiop_endpoint(text: str, option: str) -> str:
+    """HOST:PORT (HOST may be empty: every interface) of an IIOP endpoint option."""
+    t = text.strip()
+    for prefix in ("iiop://", "giop:tcp:", "iiop:"):
+        if t.startswith(prefix):
+            t = t[len(prefix) :]
+    t = t.split("/")[0].removeprefix("1.2@").removeprefix("1.1@").removeprefix("1.0@")
+    host, sep, port = t.rpartition(":")
+    if not sep:
+        host, port = t, "0"
+    if not port.isdigit() or int(port) > 65535:
+        raise UsageError(f"{option} takes HOST:PORT (iiop://HOST:PORT), not {text!r}")
+    return f"{host}:{int(port or 0)}"
 
 
 def parse_common_options(
@@ -84,9 +133,9 @@ def parse_common_options(
     env = os.environ if environ is None else environ
     opts = CommonOptions()
     if env.get("NameServiceIOR"):
-        opts.naming = naming_endpoint(env["NameServiceIOR"])
+        _naming(opts, env["NameServiceIOR"])
     if env.get("MIRO_NAMING"):
-        opts.naming = naming_endpoint(env["MIRO_NAMING"])
+        _naming(opts, env["MIRO_NAMING"])
     if env.get("MIRO_HOST"):
         opts.host = env["MIRO_HOST"]
     rest: list[str] = []
@@ -108,10 +157,13 @@ def parse_common_options(
             break
         if name == "--clock":
             opts.clock = _clock(inline if eq else value(name))
+        elif name == "--iiop-endpoint" or arg in ("-ORBEndpoint", "-ORBendPoint"):
+            text = inline if eq else value(arg if arg.startswith("-ORB") else name)
+            opts.iiop_endpoint = iiop_endpoint(text, name)
         elif name in ("--naming", "--host") or arg in ("-MNC", "-MiroNamingContext", "-MCF"):
             text = inline if eq else value(name)
             if name == "--naming":
-                opts.naming = naming_endpoint(text)
+                _naming(opts, text)
             elif name == "--host":
                 opts.host = text
             elif name == "-MCF":
@@ -133,7 +185,7 @@ def parse_common_options(
         elif arg == "-ORBInitRef":
             ref = value(arg)
             if ref.startswith("NameService="):
-                opts.naming = naming_endpoint(ref)
+                _naming(opts, ref)
             else:
                 opts.ignored.append(f"{arg} {ref}")
         elif arg.startswith("-ORB"):
@@ -174,8 +226,9 @@ def _context(text: str) -> str:
 
 COMMON_HELP = (
     ("--naming URL", "where the naming service is: tcp://HOST:PORT (env MIRO_NAMING; default "
-     f"{DEFAULT_NAMING})"),
+     f"{DEFAULT_NAMING}), or a CORBA one: IOR:..., corbaloc:iiop:HOST:PORT/NameService"),
     ("-ORBInitRef NameService=iioploc://HOST:PORT/NameService", "the same, as Miro wrote it"),
+    ("--iiop-endpoint HOST:PORT", "where to serve IIOP (-ORBEndpoint iiop://HOST:PORT)"),
     ("-MNC NAME", "naming context (-MiroNamingContext; default: the host name)"),
     ("-MLL N", "log level, 0 emergency ... 4 warning (default) ... 9 prattle (-MiroLogLevel)"),
     ("-MLF CAT [CAT ...]", "log categories to show (-MiroLogFilter; default: all)"),

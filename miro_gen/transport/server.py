@@ -46,6 +46,17 @@ WAIT_STEP = 0.5  # at most this many seconds between two looks for a name being 
 _log = log.logger("MIRO")
 
 
+def _corba_side(client: Client) -> Any:
+    """The CORBA side of a process whose options name a CORBA naming service or an IIOP
+    endpoint (miro_gen.transport.iiop), else None; the CORBA code loads only then."""
+    o = client.options
+    if o.naming_url is None and o.iiop_endpoint is None:
+        return None
+    from miro_gen.transport.iiop import corba_for
+
+    return corba_for(client)
+
+
 def _take_options(argv: Sequence[str] | None) -> tuple[CommonOptions, list[str]]:
     """Parse the common options of `argv` (sys.argv by default; [0] is the program) and, when
     it is a mutable list, remove them from it as Miro does."""
@@ -66,7 +77,12 @@ class Client:
         self.options, self.argv = _take_options(argv)
         self.context = context if context is not None else zmq.Context.instance()
         self.invoker = ZmqInvoker(self.context)
-        self.naming = NamingClient(self.invoker, self.options.naming, self.options.naming_context)
+        self.corba = _corba_side(self)  # the CORBA world: a CORBA naming service, IIOP
+        self.naming: Any = (
+            self.corba.naming
+            if self.corba is not None and self.corba.naming is not None
+            else NamingClient(self.invoker, self.options.naming, self.options.naming_context)
+        )
 
     def resolve_name(
         self, name: str, stub: type[StubT], *, wait: float = 0.0, rebind: bool = True
@@ -77,10 +93,16 @@ class Client:
         `wait`: seconds to wait for the name to be bound (and the naming service to answer),
         as ROS 2's wait_for_service; then MiroNaming.NotFound (or TRANSIENT). `rebind`: the
         stub looks the name up again when its server has moved (`Stub._set_rebind`)."""
-        entry = self._resolve(name, wait)
+        try:
+            entry = self._resolve(name, wait)
+        except TRANSIENT as e:
+            raise self._unreachable(e) from None
         if entry.repo_id != stub._repo_id:
             _log.debug("%s is a %s, used as a %s", entry.name, entry.repo_id, stub._repo_id)
-        found = stub(ObjectRef(entry.repo_id, entry.endpoint, entry.key), self.invoker)
+        if self.corba is not None:  # a CORBA object, or any reached through the IIOP invoker
+            found: StubT = self.corba.stub(entry, stub)
+        else:
+            found = stub(ObjectRef(entry.repo_id, entry.endpoint, entry.key), self.invoker)
         if rebind:
             found._set_rebind(lambda: self._lookup_again(name))
         return found
@@ -91,7 +113,8 @@ class Client:
         said = False
         while True:
             try:
-                return self.naming.resolve(name)
+                entry: MiroNaming.Entry = self.naming.resolve(name)
+                return entry
             except (MiroNaming.NotFound, TRANSIENT) as e:
                 left = deadline - time.monotonic()
                 if left <= 0:
@@ -105,11 +128,24 @@ class Client:
 
     def _lookup_again(self, name: str) -> ObjectRef:
         entry = self.naming.resolve(name)
-        ref = ObjectRef(entry.repo_id, entry.endpoint, entry.key)
+        # A CORBA naming service's entries carry the reference as it came (its whole IOR).
+        ref: ObjectRef = getattr(entry, "ref", None) or ObjectRef(
+            entry.repo_id, entry.endpoint, entry.key
+        )
         _log.debug("%s looked up again: %s", entry.name, entry.endpoint)
         return ref
 
+    def _unreachable(self, error: TRANSIENT) -> TRANSIENT:
+        """The naming service did not answer: say so clearly when it is a CORBA one."""
+        if self.corba is not None:
+            return error
+        from miro_gen.corba.naming import explain_unreachable
+
+        return explain_unreachable(self.options.naming, error)
+
     def close(self) -> None:
+        if self.corba is not None:
+            self.corba.close()
         self.invoker.close()
 
 
@@ -143,6 +179,8 @@ class Server(Client):
             host=self.addresses.advertise,
         )
         self.invoker.adapter = self.adapter
+        if self.corba is not None:
+            self.corba.serve(self.addresses.bind, self.addresses.advertise)
         self.owner = uuid.uuid4().hex
         self.lease = lease
         self._names: dict[str, MiroNaming.Entry] = {}
@@ -164,18 +202,37 @@ class Server(Client):
         """Serve `servant` and bind it as `name` under this server's naming context (or at the
         path given); its reference. Replaces an older binding of the name, as Miro does."""
         full = self.naming.full_name(name)
+        if self.corba is not None:  # served over IIOP (and bound in a CORBA naming service)
+            corba_ref: ObjectRef = self.corba.add(servant, full)
+            if self.corba.naming is not None:
+                self._unbind_if_interrupted()
+                return corba_ref
         ref = self.adapter.reference_for(servant)
         self.bind_entry(MiroNaming.Entry(full, ref.repo_id, ref.endpoint, ref.key, ""))
         return ref
 
     def bind_entry(self, entry: MiroNaming.Entry) -> None:
         """Bind a naming entry under this server's lease (objects, event channels)."""
-        with naming_errors(self.options.naming, f"bind {entry.name}"):
-            self.naming.registry.rebind(entry, self.owner, int(self.lease * 1000))
+        if self.corba is not None and self.corba.naming is not None:
+            self.corba.bind(entry)  # CosNaming: no lease; unbound when the server stops
+            self._unbind_if_interrupted()
+            _log.notice("bound %s in the naming service", entry.name)
+            return
+        try:
+            with naming_errors(self.options.naming, f"bind {entry.name}"):
+                self.naming.registry.rebind(entry, self.owner, int(self.lease * 1000))
+        except TRANSIENT as e:
+            raise self._unreachable(e) from None
         with self._names_lock:
             self._names[entry.name] = entry
         self._start_renewing()
         _log.notice("bound %s in the naming service", entry.name)
+
+    def _unbind_if_interrupted(self) -> None:
+        """A server whose names live in a CORBA naming service (no leases there) unbinds them
+        when interrupted before it runs, as `_start_renewing` arranges for leased names."""
+        lifecycle.forget(self._cleanup)
+        lifecycle.at_interrupt(self._cleanup)
 
     def resolve_channel(self, name: str = "EventChannel") -> Any:
         """The event channel bound as `name` (see EventChannelFactory.create_channel)."""

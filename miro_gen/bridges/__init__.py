@@ -1,0 +1,1 @@
+"""Processes that relay events between miro-gen's channels and other middleware's."""
