@@ -1,7 +1,8 @@
 """Generated code is product code in a user's own project too: what miro-idl and miro-params
 make of a user's IDL and parameter files (tests/codegen/project: several files, modules reopened
 across files, two modules named `Util`, a module named like the standard library's `sched`, the
-global scope, parameters in an IDL module's package and in a package of their own) passes ruff,
+global scope, parameters in an IDL module's package and in a package of their own, an
+included IDL file of the installed project's and its module Miro reopened) passes ruff,
 with its default rules and with typical settings, and mypy --strict, in a fresh project that has
 none of this repository's settings; with the generated packages at the project's root
 (`-o .`, where isort calls them first-party) or in a folder on sys.path (`-o generated`,
@@ -61,9 +62,10 @@ def project(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFac
     )
     out = str(request.param)
     idl = sorted(f"idl/{p.name}" for p in (root / "idl").glob("*.idl"))
-    result = run_miro_idl("-I", "idl", "-o", out, *idl, cwd=root)
+    result = run_miro_idl("-I", "idl", "-I", str(REPO / "idl"), "-o", out, *idl, cwd=root)
     assert result.returncode == 0, result.stderr
     assert "IDL module sched is the Python package sched, which hides" in result.stderr
+    assert "not generated" not in result.stderr  # Miro.Time_idl: the installed miro-gen's
     params = sorted(f"params/{p.name}" for p in (root / "params").glob("*.xml"))
     result = run_miro_params("-o", out, *params, cwd=root)
     assert result.returncode == 0, result.stderr
@@ -84,6 +86,8 @@ def _run(cmd: list[str], cwd: Path, **env: str) -> subprocess.CompletedProcess[s
 def test_the_project_holds_what_both_tools_generate(project: Project) -> None:
     assert project.packages == [
         "Geometry",
+        "Miro",
+        "Miro__POA",
         "Planner",
         "Rover",
         "Rover__POA",
@@ -128,11 +132,15 @@ assert Planner.PlannerParameters.PlannerParameters().drive.maxSpeed == 1.5
 assert Rover.Drive.__module__ == "Rover.rover_idl"
 assert _GlobalIDL.Heartbeat.__module__ == "_GlobalIDL.jobs_idl"
 assert _GlobalIDL.Person.__module__ == "_GlobalIDL.Person_idl"  # the installed _GlobalIDL's
+import Miro, Miro.SvcParameters
+assert Miro.RoverStatus().stamp == Miro.TimeIDL()  # the project's Miro and the installed one
+assert Miro.TimeIDL.__module__ == "Miro.Time_idl"
 """
 
 
 def test_every_module_imports_beside_the_installed_packages(project: Project) -> None:
-    """The project's `_GlobalIDL` and the one the wheel carries are one package."""
+    """The project's `_GlobalIDL` and `Miro` and the ones the wheel carries are one package
+    each."""
     cmd = [sys.executable, "-c", _IMPORT_ALL, *project.packages]
     out = _run(cmd, project.root, PYTHONPATH=project.out)
     assert out.returncode == 0, out.stdout + out.stderr

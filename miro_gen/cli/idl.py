@@ -174,7 +174,9 @@ def _generate(args: argparse.Namespace, specs: list[Any], defines: dict[str, str
     if too_long:
         return 1
     files = generate.generated_files(modules, outdir)
-    missing = generate.missing_imports(modules, files, outdir)
+    missing = [
+        m for m in generate.missing_imports(modules, files, outdir) if not checks.installed(m)
+    ]
     if missing:
 
         def compile_dependency(path: str, into: Diagnostics) -> Any:
