@@ -76,8 +76,7 @@ class DifferentialMotion(_m_Miro_Motion_idl.Motion):
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         _data = self._call("getMinMaxLRVelocity", _buf.value(), ())
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _off += (4 - _off) & 3
             _t0 = _U1[_e](_data, _off)
             _off += 16
@@ -101,8 +100,7 @@ class DifferentialMotion(_m_Miro_Motion_idl.Motion):
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         _data = self._call("getTargetLRVelocity", _buf.value(), ())
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _off += (4 - _off) & 3
             _t0 = _U0[_e](_data, _off)
             _off += 8

@@ -69,9 +69,9 @@ class ExampleStructIDL(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ExampleStructIDL:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_ExampleStructIDL(data, 4, _e)[0]
+            return _dec_ExampleStructIDL(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::ExampleStructIDL", _x) from None
 
@@ -143,9 +143,9 @@ class ExampleGroupIDL(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ExampleGroupIDL:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_ExampleGroupIDL(data, 4, _e)[0]
+            return _dec_ExampleGroupIDL(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::ExampleGroupIDL", _x) from None
 
@@ -232,9 +232,9 @@ class ExampleEventIDL(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ExampleEventIDL:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_ExampleEventIDL(data, 4, _e)[0]
+            return _dec_ExampleEventIDL(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::ExampleEventIDL", _x) from None
 
@@ -290,8 +290,7 @@ class Example(_rpc.Stub):
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         _data = self._call("getData", _buf.value(), ())
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _f0, _off = _dec_ExampleStructIDL(_data, _off, _e)
             _r: ExampleStructIDL = _f0
         except _cdr.DecodeErrors as _x:

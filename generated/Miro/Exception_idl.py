@@ -61,9 +61,9 @@ class ETimeOut(_exc.UserException, _cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ETimeOut:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_ETimeOut(data, 4, _e)[0]
+            return _dec_ETimeOut(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::ETimeOut", _x) from None
 
@@ -125,9 +125,9 @@ class EOutOfBounds(_exc.UserException, _cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> EOutOfBounds:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_EOutOfBounds(data, 4, _e)[0]
+            return _dec_EOutOfBounds(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::EOutOfBounds", _x) from None
 
@@ -189,9 +189,9 @@ class EDevIO(_exc.UserException, _cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> EDevIO:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_EDevIO(data, 4, _e)[0]
+            return _dec_EDevIO(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::EDevIO", _x) from None
 

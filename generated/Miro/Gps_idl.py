@@ -274,9 +274,9 @@ class GpsDataIDL(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> GpsDataIDL:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_GpsDataIDL(data, 4, _e)[0]
+            return _dec_GpsDataIDL(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::GpsDataIDL", _x) from None
 
@@ -454,9 +454,9 @@ class GpsSentenceEventIDL(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> GpsSentenceEventIDL:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_GpsSentenceEventIDL(data, 4, _e)[0]
+            return _dec_GpsSentenceEventIDL(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::GpsSentenceEventIDL", _x) from None
 
@@ -507,8 +507,7 @@ class Gps(_rpc.Stub):
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         _data = self._call("getData", _buf.value(), ())
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _f0, _off = _dec_GpsDataIDL(_data, _off, _e)
             _r: GpsDataIDL = _f0
         except _cdr.DecodeErrors as _x:
@@ -524,8 +523,7 @@ class Gps(_rpc.Stub):
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         _data = self._call("getWaitData", _buf.value(), (_m_Miro_Exception_idl.ETimeOut,))
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _f0, _off = _dec_GpsDataIDL(_data, _off, _e)
             _r: GpsDataIDL = _f0
         except _cdr.DecodeErrors as _x:

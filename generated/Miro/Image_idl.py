@@ -117,9 +117,9 @@ class ImageFormatIDL(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ImageFormatIDL:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_ImageFormatIDL(data, 4, _e)[0]
+            return _dec_ImageFormatIDL(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::ImageFormatIDL", _x) from None
 
@@ -239,9 +239,9 @@ class ImageEventIDL(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ImageEventIDL:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_ImageEventIDL(data, 4, _e)[0]
+            return _dec_ImageEventIDL(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::ImageEventIDL", _x) from None
 
@@ -297,8 +297,7 @@ class Camera(_rpc.Stub):
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         _data = self._call("getFormat", _buf.value(), ())
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _f0, _off = _dec_ImageFormatIDL(_data, _off, _e)
             _r: ImageFormatIDL = _f0
         except _cdr.DecodeErrors as _x:
@@ -310,8 +309,7 @@ class Camera(_rpc.Stub):
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         _data = self._call("getImage", _buf.value(), ())
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _f0, _off = _dec_ImageEventIDL(_data, _off, _e)
             _r: ImageEventIDL = _f0
         except _cdr.DecodeErrors as _x:
@@ -326,8 +324,7 @@ class Camera(_rpc.Stub):
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         _data = self._call("getWaitImage", _buf.value(), (_m_Miro_Exception_idl.ETimeOut,))
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _f0, _off = _dec_ImageEventIDL(_data, _off, _e)
             _r: ImageEventIDL = _f0
         except _cdr.DecodeErrors as _x:

@@ -69,9 +69,9 @@ class Vector3IDL(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Vector3IDL:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_Vector3IDL(data, 4, _e)[0]
+            return _dec_Vector3IDL(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::Vector3IDL", _x) from None
 
@@ -144,9 +144,9 @@ class QuaternionIDL(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> QuaternionIDL:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_QuaternionIDL(data, 4, _e)[0]
+            return _dec_QuaternionIDL(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::QuaternionIDL", _x) from None
 
@@ -218,9 +218,9 @@ class EulerAnglesIDL(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> EulerAnglesIDL:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_EulerAnglesIDL(data, 4, _e)[0]
+            return _dec_EulerAnglesIDL(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::EulerAnglesIDL", _x) from None
 
@@ -346,9 +346,9 @@ class InertialDataIDL(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> InertialDataIDL:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_InertialDataIDL(data, 4, _e)[0]
+            return _dec_InertialDataIDL(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::InertialDataIDL", _x) from None
 
@@ -406,8 +406,7 @@ class InertialSensor(_rpc.Stub):
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         _data = self._call("getData", _buf.value(), ())
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _f0, _off = _dec_InertialDataIDL(_data, _off, _e)
             _r: InertialDataIDL = _f0
         except _cdr.DecodeErrors as _x:
@@ -423,8 +422,7 @@ class InertialSensor(_rpc.Stub):
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         _data = self._call("getWaitData", _buf.value(), (_m_Miro_Exception_idl.ETimeOut,))
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _f0, _off = _dec_InertialDataIDL(_data, _off, _e)
             _r: InertialDataIDL = _f0
         except _cdr.DecodeErrors as _x:

@@ -91,9 +91,9 @@ class MotionStatusIDL(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> MotionStatusIDL:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_MotionStatusIDL(data, 4, _e)[0]
+            return _dec_MotionStatusIDL(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::MotionStatusIDL", _x) from None
 
@@ -181,9 +181,9 @@ class RawPositionIDL(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> RawPositionIDL:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_RawPositionIDL(data, 4, _e)[0]
+            return _dec_RawPositionIDL(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::RawPositionIDL", _x) from None
 

@@ -89,8 +89,7 @@ class Motion(_rpc.Stub):
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         _data = self._call("getMinMaxVelocity", _buf.value(), ())
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _off += (4 - _off) & 3
             _t0 = _U0[_e](_data, _off)
             _off += 8
@@ -116,8 +115,7 @@ class Motion(_rpc.Stub):
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         _data = self._call("getTargetVelocity", _buf.value(), ())
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _f0, _off = _m_Miro_Velocity_idl._dec_VelocityIDL(_data, _off, _e)
             _r: _m_Miro_Velocity_idl.VelocityIDL = _f0
         except _cdr.DecodeErrors as _x:

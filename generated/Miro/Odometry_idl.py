@@ -78,8 +78,7 @@ class Odometry(_rpc.Stub):
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         _data = self._call("getPosition", _buf.value(), ())
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _f0, _off = _m_Miro_Position_idl._dec_PositionIDL(_data, _off, _e)
             _r: _m_Miro_Position_idl.PositionIDL = _f0
         except _cdr.DecodeErrors as _x:
@@ -94,8 +93,7 @@ class Odometry(_rpc.Stub):
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         _data = self._call("getWaitPosition", _buf.value(), (_m_Miro_Exception_idl.ETimeOut,))
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _f0, _off = _m_Miro_Position_idl._dec_PositionIDL(_data, _off, _e)
             _r: _m_Miro_Position_idl.PositionIDL = _f0
         except _cdr.DecodeErrors as _x:
@@ -113,8 +111,7 @@ class Odometry(_rpc.Stub):
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         _data = self._call("getRawPosition", _buf.value(), ())
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _f0, _off = _m_Miro_Position_idl._dec_PositionIDL(_data, _off, _e)
             _r: _m_Miro_Position_idl.PositionIDL = _f0
         except _cdr.DecodeErrors as _x:
@@ -129,8 +126,7 @@ class Odometry(_rpc.Stub):
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         _data = self._call("getWaitRawPosition", _buf.value(), (_m_Miro_Exception_idl.ETimeOut,))
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _f0, _off = _m_Miro_Position_idl._dec_PositionIDL(_data, _off, _e)
             _r: _m_Miro_Position_idl.PositionIDL = _f0
         except _cdr.DecodeErrors as _x:
@@ -142,8 +138,7 @@ class Odometry(_rpc.Stub):
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         _data = self._call("getVelocity", _buf.value(), ())
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _f0, _off = _m_Miro_Velocity_idl._dec_VelocityIDL(_data, _off, _e)
             _r: _m_Miro_Velocity_idl.VelocityIDL = _f0
         except _cdr.DecodeErrors as _x:
@@ -158,8 +153,7 @@ class Odometry(_rpc.Stub):
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         _data = self._call("getWaitVelocity", _buf.value(), (_m_Miro_Exception_idl.ETimeOut,))
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _f0, _off = _m_Miro_Velocity_idl._dec_VelocityIDL(_data, _off, _e)
             _r: _m_Miro_Velocity_idl.VelocityIDL = _f0
         except _cdr.DecodeErrors as _x:
@@ -171,8 +165,7 @@ class Odometry(_rpc.Stub):
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         _data = self._call("getStatus", _buf.value(), ())
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _f0, _off = _m_Miro_MotionStatus_idl._dec_MotionStatusIDL(_data, _off, _e)
             _r: _m_Miro_MotionStatus_idl.MotionStatusIDL = _f0
         except _cdr.DecodeErrors as _x:
@@ -187,8 +180,7 @@ class Odometry(_rpc.Stub):
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         _data = self._call("getWaitStatus", _buf.value(), (_m_Miro_Exception_idl.ETimeOut,))
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _f0, _off = _m_Miro_MotionStatus_idl._dec_MotionStatusIDL(_data, _off, _e)
             _r: _m_Miro_MotionStatus_idl.MotionStatusIDL = _f0
         except _cdr.DecodeErrors as _x:

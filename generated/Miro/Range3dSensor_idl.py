@@ -87,9 +87,9 @@ class Range3dPointIDL(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Range3dPointIDL:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_Range3dPointIDL(data, 4, _e)[0]
+            return _dec_Range3dPointIDL(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::Range3dPointIDL", _x) from None
 
@@ -177,9 +177,9 @@ class Range3dMountingIDL(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Range3dMountingIDL:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_Range3dMountingIDL(data, 4, _e)[0]
+            return _dec_Range3dMountingIDL(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::Range3dMountingIDL", _x) from None
 
@@ -276,9 +276,9 @@ class Range3dDescriptionIDL(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Range3dDescriptionIDL:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_Range3dDescriptionIDL(data, 4, _e)[0]
+            return _dec_Range3dDescriptionIDL(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::Range3dDescriptionIDL", _x) from None
 
@@ -410,9 +410,9 @@ class Range3dScanEventIDL(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Range3dScanEventIDL:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_Range3dScanEventIDL(data, 4, _e)[0]
+            return _dec_Range3dScanEventIDL(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::Range3dScanEventIDL", _x) from None
 
@@ -480,8 +480,7 @@ class Range3dSensor(_rpc.Stub):
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         _data = self._call("getDescription", _buf.value(), ())
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _f0, _off = _dec_Range3dDescriptionIDL(_data, _off, _e)
             _r: Range3dDescriptionIDL = _f0
         except _cdr.DecodeErrors as _x:
@@ -493,8 +492,7 @@ class Range3dSensor(_rpc.Stub):
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         _data = self._call("getScan", _buf.value(), ())
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _f0, _off = _dec_Range3dScanEventIDL(_data, _off, _e)
             _r: Range3dScanEventIDL = _f0
         except _cdr.DecodeErrors as _x:
@@ -509,8 +507,7 @@ class Range3dSensor(_rpc.Stub):
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         _data = self._call("getWaitScan", _buf.value(), (_m_Miro_Exception_idl.ETimeOut,))
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _f0, _off = _dec_Range3dScanEventIDL(_data, _off, _e)
             _r: Range3dScanEventIDL = _f0
         except _cdr.DecodeErrors as _x:

@@ -97,9 +97,9 @@ class RangeScanEventIDL(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> RangeScanEventIDL:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_RangeScanEventIDL(data, 4, _e)[0]
+            return _dec_RangeScanEventIDL(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::RangeScanEventIDL", _x) from None
 
@@ -197,9 +197,9 @@ class RangeGroupEventIDL(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> RangeGroupEventIDL:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_RangeGroupEventIDL(data, 4, _e)[0]
+            return _dec_RangeGroupEventIDL(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::RangeGroupEventIDL", _x) from None
 
@@ -286,9 +286,9 @@ class RangeSensorIDL(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> RangeSensorIDL:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_RangeSensorIDL(data, 4, _e)[0]
+            return _dec_RangeSensorIDL(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::RangeSensorIDL", _x) from None
 
@@ -382,9 +382,9 @@ class RangeBunchEventIDL(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> RangeBunchEventIDL:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_RangeBunchEventIDL(data, 4, _e)[0]
+            return _dec_RangeBunchEventIDL(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::RangeBunchEventIDL", _x) from None
 

@@ -77,8 +77,7 @@ class RangeSensor(_rpc.Stub):
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         _data = self._call("getScanDescription", _buf.value(), ())
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _f0, _off = _m_Miro_ScanDescription_idl._dec_ScanDescriptionIDL(_data, _off, _e)
             _r: _m_Miro_ScanDescription_idl.ScanDescriptionIDL = _f0
         except _cdr.DecodeErrors as _x:
@@ -90,8 +89,7 @@ class RangeSensor(_rpc.Stub):
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         _data = self._call("getFullScan", _buf.value(), ())
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _f0, _off = _m_Miro_RangeEvent_idl._dec_RangeScanEventIDL(_data, _off, _e)
             _r: _m_Miro_RangeEvent_idl.RangeScanEventIDL = _f0
         except _cdr.DecodeErrors as _x:
@@ -106,8 +104,7 @@ class RangeSensor(_rpc.Stub):
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         _data = self._call("getWaitFullScan", _buf.value(), (_m_Miro_Exception_idl.ETimeOut,))
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _f0, _off = _m_Miro_RangeEvent_idl._dec_RangeScanEventIDL(_data, _off, _e)
             _r: _m_Miro_RangeEvent_idl.RangeScanEventIDL = _f0
         except _cdr.DecodeErrors as _x:
@@ -135,8 +132,7 @@ class RangeSensor(_rpc.Stub):
             raise _cdr.encode_error("Miro::RangeSensor::getGroup", _x) from None
         _data = self._call("getGroup", _buf.value(), (_m_Miro_Exception_idl.EOutOfBounds,))
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _f1, _off = _m_Miro_RangeEvent_idl._dec_RangeGroupEventIDL(_data, _off, _e)
             _r: _m_Miro_RangeEvent_idl.RangeGroupEventIDL = _f1
         except _cdr.DecodeErrors as _x:
@@ -170,8 +166,7 @@ class RangeSensor(_rpc.Stub):
             (_m_Miro_Exception_idl.EOutOfBounds, _m_Miro_Exception_idl.ETimeOut),
         )
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _f1, _off = _m_Miro_RangeEvent_idl._dec_RangeGroupEventIDL(_data, _off, _e)
             _r: _m_Miro_RangeEvent_idl.RangeGroupEventIDL = _f1
         except _cdr.DecodeErrors as _x:

@@ -82,9 +82,9 @@ class SensorDescriptionIDL(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> SensorDescriptionIDL:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_SensorDescriptionIDL(data, 4, _e)[0]
+            return _dec_SensorDescriptionIDL(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::SensorDescriptionIDL", _x) from None
 
@@ -183,9 +183,9 @@ class SensorPositionIDL(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> SensorPositionIDL:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_SensorPositionIDL(data, 4, _e)[0]
+            return _dec_SensorPositionIDL(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::SensorPositionIDL", _x) from None
 
@@ -288,9 +288,9 @@ class SensorGroupIDL(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> SensorGroupIDL:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_SensorGroupIDL(data, 4, _e)[0]
+            return _dec_SensorGroupIDL(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::SensorGroupIDL", _x) from None
 
@@ -407,9 +407,9 @@ class ScanDescriptionIDL(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ScanDescriptionIDL:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_ScanDescriptionIDL(data, 4, _e)[0]
+            return _dec_ScanDescriptionIDL(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::ScanDescriptionIDL", _x) from None
 

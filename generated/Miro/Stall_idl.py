@@ -54,8 +54,7 @@ class Stall(_rpc.Stub):
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         _data = self._call("isStalled", _buf.value(), ())
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _t0 = _U0[_e](_data, _off)
             _off += 1
             _r: bool = _t0[0]

@@ -65,9 +65,9 @@ class TimeIDL(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> TimeIDL:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_TimeIDL(data, 4, _e)[0]
+            return _dec_TimeIDL(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::TimeIDL", _x) from None
 

@@ -69,9 +69,9 @@ class myExampleIDL(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> myExampleIDL:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_myExampleIDL(data, 4, _e)[0]
+            return _dec_myExampleIDL(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("Miro::myExampleIDL", _x) from None
 
@@ -119,8 +119,7 @@ class myExample(_rpc.Stub):
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         _data = self._call("getString", _buf.value(), ())
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _f0, _off = _dec_myExampleIDL(_data, _off, _e)
             _r: myExampleIDL = _f0
         except _cdr.DecodeErrors as _x:

@@ -65,9 +65,9 @@ class Clock(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Clock:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_Clock(data, 4, _e)[0]
+            return _dec_Clock(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("MiroLog::Clock", _x) from None
 

@@ -76,9 +76,9 @@ class Entry(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Entry:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_Entry(data, 4, _e)[0]
+            return _dec_Entry(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("MiroNaming::Entry", _x) from None
 
@@ -171,9 +171,9 @@ class NotFound(_exc.UserException, _cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> NotFound:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_NotFound(data, 4, _e)[0]
+            return _dec_NotFound(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("MiroNaming::NotFound", _x) from None
 
@@ -230,9 +230,9 @@ class AlreadyBound(_exc.UserException, _cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> AlreadyBound:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_AlreadyBound(data, 4, _e)[0]
+            return _dec_AlreadyBound(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("MiroNaming::AlreadyBound", _x) from None
 
@@ -289,9 +289,9 @@ class InvalidName(_exc.UserException, _cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> InvalidName:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_InvalidName(data, 4, _e)[0]
+            return _dec_InvalidName(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("MiroNaming::InvalidName", _x) from None
 
@@ -378,8 +378,7 @@ class Registry(_rpc.Stub):
             raise _cdr.encode_error("MiroNaming::Registry::resolve", _x) from None
         _data = self._call("resolve", _buf.value(), (NotFound, InvalidName))
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _f1, _off = _dec_Entry(_data, _off, _e)
             _r: Entry = _f1
         except _cdr.DecodeErrors as _x:
@@ -409,8 +408,7 @@ class Registry(_rpc.Stub):
             raise _cdr.encode_error("MiroNaming::Registry::list", _x) from None
         _data = self._call("list", _buf.value(), ())
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _n4, _off = _cdr.get_length(
                 _data,
                 _off,
@@ -449,8 +447,7 @@ class Registry(_rpc.Stub):
             raise _cdr.encode_error("MiroNaming::Registry::renew", _x) from None
         _data = self._call("renew", _buf.value(), ())
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _t2 = _U1[_e](_data, _off)
             _off += 1
             _r: bool = _t2[0]

@@ -42,8 +42,7 @@ class Registry(_rpc.Servant):
 
     def _op_bind(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _f0, _off = _m_MiroNaming_MiroNaming_idl._dec_Entry(_data, _off, _e)
             _f1, _off = _cdr.get_string(
                 _data,
@@ -76,8 +75,7 @@ class Registry(_rpc.Servant):
 
     def _op_rebind(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _f0, _off = _m_MiroNaming_MiroNaming_idl._dec_Entry(_data, _off, _e)
             _f1, _off = _cdr.get_string(
                 _data,
@@ -105,8 +103,7 @@ class Registry(_rpc.Servant):
 
     def _op_resolve(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _f0, _off = _cdr.get_string(
                 _data,
                 _off,
@@ -135,8 +132,7 @@ class Registry(_rpc.Servant):
 
     def _op_unbind(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _f0, _off = _cdr.get_string(
                 _data,
                 _off,
@@ -158,8 +154,7 @@ class Registry(_rpc.Servant):
 
     def _op_list(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _f0, _off = _cdr.get_string(
                 _data,
                 _off,
@@ -194,8 +189,7 @@ class Registry(_rpc.Servant):
 
     def _op_renew(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _f0, _off = _cdr.get_string(
                 _data,
                 _off,

@@ -47,8 +47,7 @@ class ClosedMotion(_rpc.Servant):
 
     def _op_rotateToPosition(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _off += (4 - _off) & 7
             _t0 = _U0[_e](_data, _off)
             _off += 8
@@ -73,8 +72,7 @@ class ClosedMotion(_rpc.Servant):
 
     def _op_rotateRelative(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _off += (4 - _off) & 7
             _t0 = _U0[_e](_data, _off)
             _off += 8
@@ -99,8 +97,7 @@ class ClosedMotion(_rpc.Servant):
 
     def _op_translateRelative(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _off += (4 - _off) & 3
             _t0 = _U1[_e](_data, _off)
             _off += 4

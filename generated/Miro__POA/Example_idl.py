@@ -34,8 +34,7 @@ class Example(_rpc.Servant):
 
     def _op_setData(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _off += (4 - _off) & 7
             _t0 = _U0[_e](_data, _off)
             _off += 16

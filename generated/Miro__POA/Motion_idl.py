@@ -69,8 +69,7 @@ class Motion(_rpc.Servant):
 
     def _op_setVelocity(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _f0, _off = _m_Miro_Velocity_idl._dec_VelocityIDL(_data, _off, _e)
             velocity = _f0
         except _cdr.DecodeErrors as _x:

@@ -50,8 +50,7 @@ class Odometry(_rpc.Servant):
 
     def _op_setPosition(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _f0, _off = _m_Miro_Position_idl._dec_PositionIDL(_data, _off, _e)
             position = _f0
         except _cdr.DecodeErrors as _x:
@@ -74,8 +73,7 @@ class Odometry(_rpc.Servant):
 
     def _op_updatePosition(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _f0, _off = _m_Miro_Position_idl._dec_PositionIDL(_data, _off, _e)
             deltaPosition = _f0
         except _cdr.DecodeErrors as _x:

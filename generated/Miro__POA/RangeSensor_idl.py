@@ -101,8 +101,7 @@ class RangeSensor(_rpc.Servant):
 
     def _op_getGroup(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _off += (4 - _off) & 3
             _t0 = _U0[_e](_data, _off)
             _off += 4
@@ -134,8 +133,7 @@ class RangeSensor(_rpc.Servant):
 
     def _op_getWaitGroup(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _off += (4 - _off) & 3
             _t0 = _U0[_e](_data, _off)
             _off += 4

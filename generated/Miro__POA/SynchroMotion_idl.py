@@ -62,8 +62,7 @@ class SynchroMotion(_m_Miro__POA_Motion_idl.Motion):
 
     def _op_rotate(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _off += (4 - _off) & 7
             _t0 = _U0[_e](_data, _off)
             _off += 8
@@ -102,8 +101,7 @@ class SynchroMotion(_m_Miro__POA_Motion_idl.Motion):
 
     def _op_translate(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _off += (4 - _off) & 3
             _t0 = _U1[_e](_data, _off)
             _off += 4

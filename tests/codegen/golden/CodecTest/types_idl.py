@@ -292,9 +292,9 @@ class Primitives(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Primitives:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_Primitives(data, 4, _e)[0]
+            return _dec_Primitives(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::Primitives", _x) from None
 
@@ -452,9 +452,9 @@ class Enums(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Enums:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_Enums(data, 4, _e)[0]
+            return _dec_Enums(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::Enums", _x) from None
 
@@ -537,9 +537,9 @@ class Strings(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Strings:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_Strings(data, 4, _e)[0]
+            return _dec_Strings(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::Strings", _x) from None
 
@@ -626,9 +626,9 @@ class Mixed(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Mixed:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_Mixed(data, 4, _e)[0]
+            return _dec_Mixed(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::Mixed", _x) from None
 
@@ -697,9 +697,9 @@ class Point3(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Point3:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_Point3(data, 4, _e)[0]
+            return _dec_Point3(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::Point3", _x) from None
 
@@ -833,9 +833,9 @@ class Sequences(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Sequences:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_Sequences(data, 4, _e)[0]
+            return _dec_Sequences(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::Sequences", _x) from None
 
@@ -1462,9 +1462,9 @@ class Arrays(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Arrays:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_Arrays(data, 4, _e)[0]
+            return _dec_Arrays(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::Arrays", _x) from None
 
@@ -1700,9 +1700,9 @@ class Point3D(_m_CodecTest_base_idl.Point):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Point3D:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_Point3D(data, 4, _e)[0]
+            return _dec_Point3D(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::Point3D", _x) from None
 
@@ -1762,9 +1762,9 @@ class Bytes2(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Bytes2:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_Bytes2(data, 4, _e)[0]
+            return _dec_Bytes2(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::Bytes2", _x) from None
 
@@ -1823,9 +1823,9 @@ class Shorts3(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Shorts3:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_Shorts3(data, 4, _e)[0]
+            return _dec_Shorts3(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::Shorts3", _x) from None
 
@@ -1919,9 +1919,9 @@ class FlatSeqs(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> FlatSeqs:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_FlatSeqs(data, 4, _e)[0]
+            return _dec_FlatSeqs(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::FlatSeqs", _x) from None
 
@@ -2083,9 +2083,9 @@ class Line(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Line:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_Line(data, 4, _e)[0]
+            return _dec_Line(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::Line", _x) from None
 
@@ -2195,9 +2195,9 @@ class Deep(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Deep:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_Deep(data, 4, _e)[0]
+            return _dec_Deep(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::Deep", _x) from None
 
@@ -2280,9 +2280,9 @@ class Base3(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Base3:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_Base3(data, 4, _e)[0]
+            return _dec_Base3(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::Base3", _x) from None
 
@@ -2343,9 +2343,9 @@ class Derived(Base3):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Derived:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_Derived(data, 4, _e)[0]
+            return _dec_Derived(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::Derived", _x) from None
 
@@ -2421,9 +2421,9 @@ class Derived2(Derived):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Derived2:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_Derived2(data, 4, _e)[0]
+            return _dec_Derived2(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::Derived2", _x) from None
 
@@ -2516,9 +2516,9 @@ class Empty(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Empty:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_Empty(data, 4, _e)[0]
+            return _dec_Empty(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::Empty", _x) from None
 
@@ -2574,9 +2574,9 @@ class HasEmpty(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> HasEmpty:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_HasEmpty(data, 4, _e)[0]
+            return _dec_HasEmpty(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::HasEmpty", _x) from None
 
@@ -2667,9 +2667,9 @@ class EmptyRows(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> EmptyRows:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_EmptyRows(data, 4, _e)[0]
+            return _dec_EmptyRows(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::EmptyRows", _x) from None
 
@@ -2758,9 +2758,9 @@ class Failure(_exc.UserException, _cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Failure:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_Failure(data, 4, _e)[0]
+            return _dec_Failure(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::Failure", _x) from None
 
@@ -2845,9 +2845,9 @@ class Nothing(_exc.UserException, _cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Nothing:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_Nothing(data, 4, _e)[0]
+            return _dec_Nothing(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::Nothing", _x) from None
 
@@ -2983,9 +2983,9 @@ class Typedefs(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Typedefs:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_Typedefs(data, 4, _e)[0]
+            return _dec_Typedefs(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::Typedefs", _x) from None
 
@@ -3176,9 +3176,9 @@ class Node(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Node:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_Node(data, 4, _e)[0]
+            return _dec_Node(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::Node", _x) from None
 
@@ -3295,9 +3295,9 @@ class Expr(_cdr.IdlUnion):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Expr:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_Expr(data, 4, _e)[0]
+            return _dec_Expr(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::Expr", _x) from None
 
@@ -3396,9 +3396,9 @@ class Holder_Inner(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Holder_Inner:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_Holder_Inner(data, 4, _e)[0]
+            return _dec_Holder_Inner(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::Holder::Inner", _x) from None
 
@@ -3519,9 +3519,9 @@ class Holder_Choice(_cdr.IdlUnion):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Holder_Choice:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_Holder_Choice(data, 4, _e)[0]
+            return _dec_Holder_Choice(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::Holder::Choice", _x) from None
 
@@ -3610,9 +3610,9 @@ class Holder_Oops(_exc.UserException, _cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Holder_Oops:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_Holder_Oops(data, 4, _e)[0]
+            return _dec_Holder_Oops(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::Holder::Oops", _x) from None
 
@@ -3661,8 +3661,7 @@ class Holder(_rpc.Stub):
             raise _cdr.encode_error("CodecTest::Holder::get", _x) from None
         _data = self._call("get", _buf.value(), (Holder_Oops,))
         try:
-            _e = _cdr.header_endianness(_data)
-            _off = 4
+            _e, _off = _cdr.body_header(_data)
             _f1, _off = _dec_Holder_Inner(_data, _off, _e)
             _r: Holder_Inner = _f1
         except _cdr.DecodeErrors as _x:
@@ -3705,9 +3704,9 @@ class Outer_Nested(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Outer_Nested:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_Outer_Nested(data, 4, _e)[0]
+            return _dec_Outer_Nested(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::Outer::Nested", _x) from None
 
@@ -3827,9 +3826,9 @@ class Outer(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Outer:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_Outer(data, 4, _e)[0]
+            return _dec_Outer(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::Outer", _x) from None
 
@@ -3964,9 +3963,9 @@ class Keywords(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Keywords:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_Keywords(data, 4, _e)[0]
+            return _dec_Keywords(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::Keywords", _x) from None
 
@@ -4203,9 +4202,9 @@ class KeywordUnion(_cdr.IdlUnion):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> KeywordUnion:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_KeywordUnion(data, 4, _e)[0]
+            return _dec_KeywordUnion(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::KeywordUnion", _x) from None
 
@@ -4359,9 +4358,9 @@ class Numbers(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Numbers:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_Numbers(data, 4, _e)[0]
+            return _dec_Numbers(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::Numbers", _x) from None
 
@@ -4682,9 +4681,9 @@ class NumberTypedefs(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> NumberTypedefs:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_NumberTypedefs(data, 4, _e)[0]
+            return _dec_NumberTypedefs(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::NumberTypedefs", _x) from None
 
@@ -4878,9 +4877,9 @@ class BoolDouble(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> BoolDouble:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_BoolDouble(data, 4, _e)[0]
+            return _dec_BoolDouble(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::BoolDouble", _x) from None
 
@@ -4947,9 +4946,9 @@ class OctetLongLong(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> OctetLongLong:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_OctetLongLong(data, 4, _e)[0]
+            return _dec_OctetLongLong(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::OctetLongLong", _x) from None
 
@@ -5016,9 +5015,9 @@ class EndsInChar(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> EndsInChar:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_EndsInChar(data, 4, _e)[0]
+            return _dec_EndsInChar(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::EndsInChar", _x) from None
 
@@ -5083,9 +5082,9 @@ class SeqEndsInChar(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> SeqEndsInChar:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_SeqEndsInChar(data, 4, _e)[0]
+            return _dec_SeqEndsInChar(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::SeqEndsInChar", _x) from None
 
@@ -5187,9 +5186,9 @@ class EmptySeqs(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> EmptySeqs:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_EmptySeqs(data, 4, _e)[0]
+            return _dec_EmptySeqs(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::EmptySeqs", _x) from None
 
@@ -5400,9 +5399,9 @@ class Traps(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Traps:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_Traps(data, 4, _e)[0]
+            return _dec_Traps(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecTest::Traps", _x) from None
 

@@ -171,9 +171,9 @@ class ByEnum(_cdr.IdlUnion):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByEnum:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_ByEnum(data, 4, _e)[0]
+            return _dec_ByEnum(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecUnions::ByEnum", _x) from None
 
@@ -300,9 +300,9 @@ class ByEnumDefault(_cdr.IdlUnion):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByEnumDefault:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_ByEnumDefault(data, 4, _e)[0]
+            return _dec_ByEnumDefault(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecUnions::ByEnumDefault", _x) from None
 
@@ -430,9 +430,9 @@ class ByEnumPartial(_cdr.IdlUnion):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByEnumPartial:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_ByEnumPartial(data, 4, _e)[0]
+            return _dec_ByEnumPartial(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecUnions::ByEnumPartial", _x) from None
 
@@ -568,9 +568,9 @@ class ByChar(_cdr.IdlUnion):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByChar:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_ByChar(data, 4, _e)[0]
+            return _dec_ByChar(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecUnions::ByChar", _x) from None
 
@@ -712,9 +712,9 @@ class ByCharNul(_cdr.IdlUnion):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByCharNul:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_ByCharNul(data, 4, _e)[0]
+            return _dec_ByCharNul(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecUnions::ByCharNul", _x) from None
 
@@ -845,9 +845,9 @@ class ByBool(_cdr.IdlUnion):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByBool:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_ByBool(data, 4, _e)[0]
+            return _dec_ByBool(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecUnions::ByBool", _x) from None
 
@@ -965,9 +965,9 @@ class ByBoolDefault(_cdr.IdlUnion):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByBoolDefault:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_ByBoolDefault(data, 4, _e)[0]
+            return _dec_ByBoolDefault(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecUnions::ByBoolDefault", _x) from None
 
@@ -1072,9 +1072,9 @@ class ByBoolTrue(_cdr.IdlUnion):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByBoolTrue:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_ByBoolTrue(data, 4, _e)[0]
+            return _dec_ByBoolTrue(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecUnions::ByBoolTrue", _x) from None
 
@@ -1200,9 +1200,9 @@ class ByShort(_cdr.IdlUnion):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByShort:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_ByShort(data, 4, _e)[0]
+            return _dec_ByShort(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecUnions::ByShort", _x) from None
 
@@ -1346,9 +1346,9 @@ class ByUShort(_cdr.IdlUnion):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByUShort:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_ByUShort(data, 4, _e)[0]
+            return _dec_ByUShort(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecUnions::ByUShort", _x) from None
 
@@ -1492,9 +1492,9 @@ class ByLong(_cdr.IdlUnion):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByLong:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_ByLong(data, 4, _e)[0]
+            return _dec_ByLong(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecUnions::ByLong", _x) from None
 
@@ -1632,9 +1632,9 @@ class ByULong(_cdr.IdlUnion):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByULong:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_ByULong(data, 4, _e)[0]
+            return _dec_ByULong(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecUnions::ByULong", _x) from None
 
@@ -1768,9 +1768,9 @@ class ByLongLong(_cdr.IdlUnion):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByLongLong:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_ByLongLong(data, 4, _e)[0]
+            return _dec_ByLongLong(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecUnions::ByLongLong", _x) from None
 
@@ -1918,9 +1918,9 @@ class ByULongLong(_cdr.IdlUnion):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByULongLong:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_ByULongLong(data, 4, _e)[0]
+            return _dec_ByULongLong(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecUnions::ByULongLong", _x) from None
 
@@ -2071,9 +2071,9 @@ class ByOctet(_cdr.IdlUnion):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByOctet:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_ByOctet(data, 4, _e)[0]
+            return _dec_ByOctet(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecUnions::ByOctet", _x) from None
 
@@ -2221,9 +2221,9 @@ class ByInt8(_cdr.IdlUnion):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByInt8:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_ByInt8(data, 4, _e)[0]
+            return _dec_ByInt8(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecUnions::ByInt8", _x) from None
 
@@ -2365,9 +2365,9 @@ class ByUInt8(_cdr.IdlUnion):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByUInt8:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_ByUInt8(data, 4, _e)[0]
+            return _dec_ByUInt8(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecUnions::ByUInt8", _x) from None
 
@@ -2523,9 +2523,9 @@ class ByTypedef(_cdr.IdlUnion):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByTypedef:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_ByTypedef(data, 4, _e)[0]
+            return _dec_ByTypedef(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecUnions::ByTypedef", _x) from None
 
@@ -2671,9 +2671,9 @@ class ByTypedefEnum(_cdr.IdlUnion):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> ByTypedefEnum:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_ByTypedefEnum(data, 4, _e)[0]
+            return _dec_ByTypedefEnum(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecUnions::ByTypedefEnum", _x) from None
 
@@ -3118,9 +3118,9 @@ class Branches(_cdr.IdlUnion):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Branches:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_Branches(data, 4, _e)[0]
+            return _dec_Branches(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecUnions::Branches", _x) from None
 
@@ -3595,9 +3595,9 @@ class Holder(_cdr.IdlType):
     @classmethod
     def deserialize(cls, data: _cdr.Buffer) -> Holder:
         """A value from CDR (either byte order); MARSHAL if the data is malformed."""
-        _e = _cdr.header_endianness(data)
+        _e, _off = _cdr.body_header(data)
         try:
-            return _dec_Holder(data, 4, _e)[0]
+            return _dec_Holder(data, _off, _e)[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("CodecUnions::Holder", _x) from None
 
