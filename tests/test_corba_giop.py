@@ -437,6 +437,27 @@ def _be_reply(request_id: int, status: int, body: bytes) -> bytes:
     return b"GIOP\x01\x02\x00\x01" + struct.pack(">I", len(head) + len(body)) + head + body
 
 
+@pytest.mark.parametrize("principal", range(8))
+def test_a_giop_1_0_body_is_read_wherever_it_begins(
+    served: tuple[IIOPServer, IIOPInvoker], principal: int
+) -> None:
+    """A GIOP 1.0 body follows the request header at once (here after a principal of 0 to 7
+    octets), its values aligned to the message's start: decoded where it is, not forwarded."""
+    server, invoker = served
+    key, op = b"robot/Example", b"setData\0"
+    head = struct.pack(">IIB", 0, 5, 1) + b"\0" * 3 + struct.pack(">I", len(key)) + key
+    head += b"\0" * (-len(head) % 4) + struct.pack(">I", len(op)) + op
+    head += b"\0" * (-len(head) % 4) + struct.pack(">I", principal) + b"p" * principal
+    body = b"\0" * (-(12 + len(head)) % 8) + struct.pack(">dd", 0.5, 1e10)
+    msg = b"GIOP\x01\x00\x00\x00" + struct.pack(">I", len(head) + len(body)) + head + body
+    answer = _exchange(server, msg)
+    assert answer is not None
+    h, reply = answer
+    assert giop.decode_reply(reply, h).status == ReplyStatus.NO_EXCEPTION
+    stub = Miro.Example(server.reference(key, Miro.Example._repo_id), invoker)
+    assert stub.getData() == Miro.ExampleStructIDL(0.5, 1e10)
+
+
 @pytest.fixture
 def invoker() -> Iterator[IIOPInvoker]:
     inv = IIOPInvoker()
