@@ -14,8 +14,8 @@ builds. Each folder holds an `__init__.py`, and Python runs only the first one i
   winning a name both define. Importing the package imports none of its modules: each is
   imported when one of its names is first used.
 
-Type checkers do not follow a `__path__` computed at run time: mypy sees the package in the
-folder it finds first.
+Type checkers do not run this: mypy finds each module file in whichever folder on its search
+path holds it, and takes a package's `__init__` (its names) from the first folder.
 """
 
 from __future__ import annotations
