@@ -428,7 +428,8 @@ class OursBench(Bench):
                     bench.counter.latencies.append(time.monotonic() - value.data.a)
                 bench.counter.hit()
 
-        self.consumer = Consumer(self.server.resolve_channel(self.supplier.where))
+        # Every event, as the raw consumer gets it (a default consumer keeps the newest 10).
+        self.consumer = Consumer(self.server.resolve_channel(self.supplier.where), depth=0)
         self.consumer.set_subscriptions([("bench", EVENT)])
         self.thread = threading.Thread(target=self.server.run, daemon=True)
         self.thread.start()

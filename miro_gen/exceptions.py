@@ -102,6 +102,12 @@ class NO_IMPLEMENT(SystemException):
     _repo_id = "IDL:omg.org/CORBA/NO_IMPLEMENT:1.0"
 
 
+class NO_RESOURCES(SystemException):
+    """The server has run out of a resource it limits (a quota, a table's size)."""
+
+    _repo_id = "IDL:omg.org/CORBA/NO_RESOURCES:1.0"
+
+
 class UNKNOWN(SystemException):
     """The servant raised an exception that is not declared in IDL."""
 
@@ -119,6 +125,7 @@ SYSTEM_EXCEPTIONS: dict[str, type[SystemException]] = {
         BAD_OPERATION,
         BAD_PARAM,
         NO_IMPLEMENT,
+        NO_RESOURCES,
         UNKNOWN,
     )
 }
@@ -129,6 +136,7 @@ __all__ = [
     "COMM_FAILURE",
     "MARSHAL",
     "NO_IMPLEMENT",
+    "NO_RESOURCES",
     "OBJECT_NOT_EXIST",
     "SYSTEM_EXCEPTIONS",
     "TIMEOUT",

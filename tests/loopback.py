@@ -16,6 +16,7 @@ import zmq
 from miro_cli import REPO
 
 from miro_gen import Server, StructuredEvent, StructuredPushConsumer
+from miro_gen.transport.events import KEEP_ALL
 
 
 def free_port() -> int:
@@ -73,10 +74,12 @@ def run_miro(*args: str, timeout: float = 30) -> subprocess.CompletedProcess[str
 
 
 class RunningServer:
-    """A Server (naming context `context`) whose reactor runs in a thread of the test."""
+    """A Server (naming context `context`, more common `options`) whose reactor runs in a
+    thread of the test."""
 
-    def __init__(self, naming: str, context: str) -> None:
-        self.server = Server(["t", "--naming", naming, "-MNC", context], context=zmq.Context())
+    def __init__(self, naming: str, context: str, *options: str) -> None:
+        argv = ["t", "--naming", naming, "-MNC", context, *options]
+        self.server = Server(argv, context=zmq.Context())
         self.thread = threading.Thread(target=self.server.run, daemon=True)
         self.thread.start()
 
@@ -86,10 +89,13 @@ class RunningServer:
 
 
 class Recorder(StructuredPushConsumer):
-    """A consumer that keeps what it receives (`events`), taking `delay` s over each."""
+    """A consumer that keeps what it receives (`events`), taking `delay` s over each; it keeps
+    every event waiting unless given another `depth` (or `latest_only`)."""
 
-    def __init__(self, *args: object, delay: float = 0.0) -> None:
-        super().__init__(*args)  # type: ignore[arg-type]
+    def __init__(
+        self, *args: object, delay: float = 0.0, depth: int = KEEP_ALL, latest_only: bool = False
+    ) -> None:
+        super().__init__(*args, depth=depth, latest_only=latest_only)  # type: ignore[arg-type]
         self.events: list[StructuredEvent] = []
         self.delay = delay
 
@@ -97,6 +103,15 @@ class Recorder(StructuredPushConsumer):
         if self.delay:
             time.sleep(self.delay)
         self.events.append(event)
+
+
+def rss_mb(pid: int) -> float:
+    """The resident memory of process `pid`, in MiB."""
+    with open(f"/proc/{pid}/status") as f:
+        for line in f:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+    raise AssertionError(f"no VmRSS for process {pid}")
 
 
 def eventually(check: Callable[[], bool], seconds: float = 10) -> None:

@@ -69,14 +69,15 @@ def test_hz_prints_the_rate_and_period_spread(naming: str, supplier: ReplaySuppl
     assert hz.returncode == 0, err
     reports = re.findall(
         r"robot5/ExampleEvent: ([\d.]+) Hz  min ([\d.]+) s  max ([\d.]+) s  std ([\d.]+) s  "
-        r"window (\d+)  missed (\d+)",
+        r"window (\d+)  lag ([\d.]+) ms \(max ([\d.]+)\)  missed (\d+)",
         out,
     )
     assert reports, out
-    rate, low, high, std, window, missed = reports[-1]
+    rate, low, high, std, window, lag, lag_max, missed = reports[-1]
     assert 40 < float(rate) < 60
     assert float(low) <= 0.02 <= float(high) and float(std) < 0.01
     assert int(window) >= 50 and missed == "0"
+    assert 0 <= float(lag) <= float(lag_max)
 
 
 def test_a_topic_is_required() -> None:

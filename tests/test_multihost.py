@@ -3,9 +3,11 @@ joined by veth links to a bridge (in a fourth, hub namespace), with addresses in
 
 Each namespace has its own interfaces, routes and loopback, so a server that advertised
 127.0.0.1, or bound only loopback, could not be reached from the others; that is what these
-tests would catch. Creating namespaces needs root and iproute2 (`ip netns`); without them, or
-where `ip netns add` is refused (a container without CAP_SYS_ADMIN), the tests are skipped and
-say why.
+tests would catch. Beyond loopback the transport needs the robot's or fleet's key (CURVE): every
+process here gets one made by `miro keys new` (MIRO_KEYS), and a process without it is
+refused. Creating namespaces needs root and iproute2 (`ip netns`); without them, or where
+`ip netns add` is refused (a container without CAP_SYS_ADMIN), the tests are skipped and say
+why.
 """
 
 from __future__ import annotations
@@ -36,12 +38,14 @@ def ip(*args: str) -> None:
 
 
 class Hosts:
-    """Namespaces named after this test run (`miro-<pid>-<host>`) and the processes in them."""
+    """Namespaces named after this test run (`miro-<pid>-<host>`) and the processes in them,
+    which hold the fleet's key `key` (MIRO_KEYS)."""
 
-    def __init__(self) -> None:
+    def __init__(self, key: Path) -> None:
         self.prefix = f"miro-{os.getpid()}-"
         self.created: list[str] = []
         self.procs: list[subprocess.Popen[str]] = []
+        self.env = service_env(MIRO_KEYS=str(key))
 
     def ns(self, host: str) -> str:
         return self.prefix + host
@@ -75,17 +79,19 @@ class Hosts:
                 stdout=subprocess.PIPE,
                 stderr=err,
                 text=True,
-                env=service_env(),
+                env=self.env,
             )
         self.procs.append(proc)
         return proc
 
-    def run(self, host: str, *argv: str) -> subprocess.CompletedProcess[str]:
+    def run(
+        self, host: str, *argv: str, env: dict[str, str] | None = None
+    ) -> subprocess.CompletedProcess[str]:
         return subprocess.run(
             ["ip", "netns", "exec", self.ns(host), sys.executable, *argv],
             capture_output=True,
             text=True,
-            env=service_env(),
+            env=self.env if env is None else env,
             timeout=60,
         )
 
@@ -105,14 +111,23 @@ class Hosts:
 
 
 @pytest.fixture(scope="module")
-def hosts() -> Iterator[Hosts]:
+def hosts(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Hosts]:
     if not sys.platform.startswith("linux"):
         pytest.skip("network namespaces are a Linux feature")
     if os.geteuid() != 0:
         pytest.skip("creating network namespaces (ip netns add) needs root")
     if shutil.which("ip") is None:
         pytest.skip("the ip command (iproute2) is not installed")
-    h = Hosts()
+    key = tmp_path_factory.mktemp("keys") / "fleet"
+    made = subprocess.run(
+        [sys.executable, "-m", "miro_gen.cli.main", "keys", "new", str(key)],
+        capture_output=True,
+        text=True,
+        env=service_env(),
+        timeout=60,
+    )
+    assert made.returncode == 0, made.stderr
+    h = Hosts(Path(str(key) + ".key_secret"))
     try:
         for host in ("hub", *ADDRESSES):
             done = h.add(host)
@@ -136,7 +151,7 @@ def naming(hosts: Hosts, tmp_path_factory: pytest.TempPathFactory) -> subprocess
     )
     assert proc.stdout is not None
     line = proc.stdout.readline().strip()
-    assert line == f"naming service at {NAMING}", log.read_text()
+    assert line.startswith(f"naming service at {NAMING}; CURVE with the key "), log.read_text()
     return proc
 
 
@@ -217,6 +232,19 @@ def test_example_d_on_a_laptop_receives_example_c_on_a_robot(net: Hosts, tmp_pat
     assert got[0] == f"Received ExampleEvent #{k} from robot1: a = {k}, b = {10 + k}"
     stop(d, d_log)
     stop(c, c_log)
+
+
+def test_a_laptop_without_the_key_is_refused(net: Hosts, tmp_path: Path) -> None:
+    """The fleet's naming service, and everything else beyond loopback, speaks CURVE: a process
+    without the key (here one that insists on --insecure) cannot even list the names."""
+    env = service_env(HOME=str(tmp_path))  # no default key either
+    done = net.run(
+        "laptop", "-m", "miro_gen.cli.main", "nslist", "--naming", NAMING, "--insecure", env=env
+    )
+    assert done.returncode == 1
+    assert "refused the connection" in done.stderr, done.stderr
+    no_key = net.run("laptop", "-m", "miro_gen.cli.main", "nslist", "--naming", NAMING, env=env)
+    assert no_key.returncode == 2 and "--keys" in no_key.stderr, no_key.stderr
 
 
 def test_a_server_told_to_advertise_loopback_is_unreachable_from_another_host(

@@ -18,6 +18,7 @@ __all__ = [
     "Entry",
     "EntrySeq",
     "InvalidName",
+    "NameSeq",
     "NotFound",
     "Registry",
 ]
@@ -25,9 +26,6 @@ __all__ = [
 _S0 = _cdr.pair("I")
 _P0 = _S0[0].pack
 _U0 = (_S0[0].unpack_from, _S0[1].unpack_from)
-_S1 = _cdr.pair("?")
-_P1 = _S1[0].pack
-_U1 = (_S1[0].unpack_from, _S1[1].unpack_from)
 
 
 @_dc.dataclass(slots=True)
@@ -134,6 +132,10 @@ EntrySeq: _t.TypeAlias = list[Entry]
 """Entries, in name order."""
 
 
+NameSeq: _t.TypeAlias = list[str]
+"""Full names."""
+
+
 @_dc.dataclass(eq=False)
 class NotFound(_exc.UserException, _cdr.IdlType):
     """No entry has this name."""
@@ -195,7 +197,7 @@ def _dec_NotFound(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[NotFound, int
 
 @_dc.dataclass(eq=False)
 class AlreadyBound(_exc.UserException, _cdr.IdlType):
-    """The name is taken by another server's live entry."""
+    """The name is held by another owner's live entry."""
 
     name: str = ""
     """The name asked for."""
@@ -344,7 +346,9 @@ class Registry(_rpc.Stub):
         self._call("bind", _buf.value(), (AlreadyBound, InvalidName))
 
     def rebind(self, binding: Entry, owner: str, lease_ms: int) -> None:
-        """Bind a name, replacing whatever it was bound to (Miro's addToNameService)."""
+        """Bind a name, replacing what the same owner bound before (Miro's addToNameService);
+        a name that another owner holds live is refused.
+        """
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
@@ -367,7 +371,7 @@ class Registry(_rpc.Stub):
                 ) from None
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroNaming::Registry::rebind", _x) from None
-        self._call("rebind", _buf.value(), (InvalidName,))
+        self._call("rebind", _buf.value(), (AlreadyBound, InvalidName))
 
     def resolve(self, name: str) -> Entry:
         """The entry bound to a full name."""
@@ -385,11 +389,17 @@ class Registry(_rpc.Stub):
             raise _cdr.marshal_error("MiroNaming::Registry::resolve", _x) from None
         return _r
 
-    def unbind(self, name: str) -> None:
-        """Remove a name."""
+    def unbind(self, name: str, owner: str) -> None:
+        """Remove a name that `owner` bound (NotFound if `owner` holds no such live entry)."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _cdr.put_string(_buf, name, None, "MiroNaming::Registry::unbind(name)")
+            _cdr.put_string(
+                _buf,
+                owner,
+                None,
+                "MiroNaming::Registry::unbind(owner)",
+            )
         except _cdr.EncodeErrors as _x:
             raise _cdr.encode_error("MiroNaming::Registry::unbind", _x) from None
         self._call("unbind", _buf.value(), (NotFound, InvalidName))
@@ -426,15 +436,19 @@ class Registry(_rpc.Stub):
             raise _cdr.marshal_error("MiroNaming::Registry::list", _x) from None
         return _r
 
-    def renew(self, owner: str, lease_ms: int) -> bool:
-        """Extend every lease of `owner` by `lease_ms`.
+    def renew(self, owner: str, names: NameSeq, lease_ms: int) -> NameSeq:
+        """Extend the leases of the entries `names` of `owner` by `lease_ms`.
 
-        @return false when the service holds no entry of this owner (it has restarted, or the
-        leases ran out): the owner then binds its names again.
+        @return the names of `names` that the service does not hold for `owner` (it has
+        restarted, a lease ran out, another owner holds the name now): the owner binds them
+        again.
         """
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _cdr.put_string(_buf, owner, None, "MiroNaming::Registry::renew(owner)")
+            _cdr.put_count(_buf, names, None, "MiroNaming::Registry::renew(names)")
+            for _x0 in names:
+                _cdr.put_string(_buf, _x0, None, "MiroNaming::Registry::renew(names)")
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
             try:
                 _buf += _P0(lease_ms)
@@ -448,9 +462,25 @@ class Registry(_rpc.Stub):
         _data = self._call("renew", _buf.value(), ())
         try:
             _e, _off = _cdr.body_header(_data)
-            _t2 = _U1[_e](_data, _off)
-            _off += 1
-            _r: bool = _t2[0]
+            _n9, _off = _cdr.get_length(
+                _data,
+                _off,
+                _e,
+                None,
+                4,
+                "MiroNaming::Registry::renew result",
+            )
+            _f7 = []
+            for _ in range(_n9):
+                _x8, _off = _cdr.get_string(
+                    _data,
+                    _off,
+                    _e,
+                    None,
+                    "MiroNaming::Registry::renew result",
+                )
+                _f7.append(_x8)
+            _r: NameSeq = _f7
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("MiroNaming::Registry::renew", _x) from None
         return _r

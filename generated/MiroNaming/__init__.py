@@ -23,6 +23,7 @@ _EXPORTS: dict[str, str] = {
     "Entry": "MiroNaming.MiroNaming_idl",
     "EntrySeq": "MiroNaming.MiroNaming_idl",
     "InvalidName": "MiroNaming.MiroNaming_idl",
+    "NameSeq": "MiroNaming.MiroNaming_idl",
     "NotFound": "MiroNaming.MiroNaming_idl",
     "Registry": "MiroNaming.MiroNaming_idl",
 }
@@ -45,6 +46,7 @@ __all__ = [
     "Entry",
     "EntrySeq",
     "InvalidName",
+    "NameSeq",
     "NotFound",
     "Registry",
 ]

@@ -20,9 +20,6 @@ __all__ = [
 _S0 = _cdr.pair("I")
 _P0 = _S0[0].pack
 _U0 = (_S0[0].unpack_from, _S0[1].unpack_from)
-_S1 = _cdr.pair("?")
-_P1 = _S1[0].pack
-_U1 = (_S1[0].unpack_from, _S1[1].unpack_from)
 
 
 class Registry(_rpc.Servant):
@@ -70,7 +67,9 @@ class Registry(_rpc.Servant):
         owner: str,
         lease_ms: int,
     ) -> None:
-        """Bind a name, replacing whatever it was bound to (Miro's addToNameService)."""
+        """Bind a name, replacing what the same owner bound before (Miro's addToNameService);
+        a name that another owner holds live is refused.
+        """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_rebind(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
@@ -126,8 +125,8 @@ class Registry(_rpc.Servant):
         return _buf.value()
 
     @_abc.abstractmethod
-    def unbind(self, name: str) -> None:
-        """Remove a name."""
+    def unbind(self, name: str, owner: str) -> None:
+        """Remove a name that `owner` bound (NotFound if `owner` holds no such live entry)."""
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_unbind(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
@@ -140,10 +139,18 @@ class Registry(_rpc.Servant):
                 None,
                 "MiroNaming::Registry::unbind(name)",
             )
+            _f1, _off = _cdr.get_string(
+                _data,
+                _off,
+                _e,
+                None,
+                "MiroNaming::Registry::unbind(owner)",
+            )
             name = _f0
+            owner = _f1
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("MiroNaming::Registry::unbind", _x) from None
-        self.unbind(name)
+        self.unbind(name, owner)
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         return _buf.value()
 
@@ -179,41 +186,62 @@ class Registry(_rpc.Servant):
         return _buf.value()
 
     @_abc.abstractmethod
-    def renew(self, owner: str, lease_ms: int) -> bool:
-        """Extend every lease of `owner` by `lease_ms`.
+    def renew(
+        self,
+        owner: str,
+        names: _m_MiroNaming_MiroNaming_idl.NameSeq,
+        lease_ms: int,
+    ) -> _m_MiroNaming_MiroNaming_idl.NameSeq:
+        """Extend the leases of the entries `names` of `owner` by `lease_ms`.
 
-        @return false when the service holds no entry of this owner (it has restarted, or the
-        leases ran out): the owner then binds its names again.
+        @return the names of `names` that the service does not hold for `owner` (it has
+        restarted, a lease ran out, another owner holds the name now): the owner binds them
+        again.
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
     def _op_renew(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         try:
             _e, _off = _cdr.body_header(_data)
-            _f0, _off = _cdr.get_string(
+            _f1, _off = _cdr.get_string(
                 _data,
                 _off,
                 _e,
                 None,
                 "MiroNaming::Registry::renew(owner)",
             )
+            _n4, _off = _cdr.get_length(
+                _data,
+                _off,
+                _e,
+                None,
+                4,
+                "MiroNaming::Registry::renew(names)",
+            )
+            _f2 = []
+            for _ in range(_n4):
+                _x3, _off = _cdr.get_string(
+                    _data,
+                    _off,
+                    _e,
+                    None,
+                    "MiroNaming::Registry::renew(names)",
+                )
+                _f2.append(_x3)
             _off += (4 - _off) & 3
-            _t1 = _U0[_e](_data, _off)
+            _t5 = _U0[_e](_data, _off)
             _off += 4
-            owner = _f0
-            lease_ms = _t1[0]
+            owner = _f1
+            names = _f2
+            lease_ms = _t5[0]
         except _cdr.DecodeErrors as _x:
             raise _cdr.marshal_error("MiroNaming::Registry::renew", _x) from None
-        _r = self.renew(owner, lease_ms)
+        _r = self.renew(owner, names, lease_ms)
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
-            try:
-                _buf += _P1(_r)
-            except _cdr.EncodeErrors as _x:
-                raise _cdr.pack_error(
-                    _x,
-                    ("MiroNaming::Registry::renew result", "?", lambda: (_r,)),
-                ) from None
+            _cdr.put_count(_buf, _r, None, "MiroNaming::Registry::renew result")
+            for _x6 in _r:
+                _cdr.put_string(_buf, _x6, None, "MiroNaming::Registry::renew result")
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("MiroNaming::Registry::renew", _x) from None
         return _buf.value()

@@ -19,6 +19,7 @@ from typing import Any
 from miro_gen.corba.events import CosEventConsumer, CosEventSupplier, EventChannel
 from miro_gen.log import logger
 from miro_gen.transport.events import (
+    KEEP_ALL,
     StructuredEvent,
     StructuredPushConsumer,
     StructuredPushSupplier,
@@ -51,24 +52,24 @@ class _ToCorba(StructuredPushConsumer):
     that pushes them into the CORBA channel, so that a slow channel never blocks the reactor."""
 
     def __init__(self, channel: Any, supplier: CosEventSupplier) -> None:
-        super().__init__(channel)
+        super().__init__(channel, depth=KEEP_ALL)  # every event is relayed, none skipped
         self.supplier = supplier
-        self.queue: queue.SimpleQueue[Any] = queue.SimpleQueue()
+        self.outbox: queue.SimpleQueue[Any] = queue.SimpleQueue()
         self.waiting = 0
-        self.dropped = 0
+        self.overflowed = 0  # events not relayed because the CORBA side fell QUEUE behind
         self.thread = threading.Thread(target=self._run, name="miro-bridge", daemon=True)
         self.thread.start()
 
     def push_structured_event(self, event: StructuredEvent) -> None:
         if self.waiting >= QUEUE:
-            self.dropped += 1
+            self.overflowed += 1
             return
         self.waiting += 1
-        self.queue.put(event.payload)
+        self.outbox.put(event.payload)
 
     def _run(self) -> None:
         while True:
-            payload = self.queue.get()
+            payload = self.outbox.get()
             self.waiting -= 1
             if payload is None:
                 return
@@ -80,7 +81,7 @@ class _ToCorba(StructuredPushConsumer):
                 )
 
     def stop(self) -> None:
-        self.queue.put(None)
+        self.outbox.put(None)
         self.thread.join(5)
         self.close()
 

@@ -99,14 +99,11 @@ def read_status(path: str, log: Any, error: object) -> int:
     if error is not None:
         print(f"{path}: error: {error}", file=sys.stderr)
         return 1
-    if log.unfinished:
-        unfinished_warning(path)
+    log_warning(path, log)
     return 0
 
 
-def unfinished_warning(path: str) -> None:
-    print(
-        f"{path}: warning: the file is unfinished (no summary: its recorder was killed?); "
-        "read up to its last complete chunk",
-        file=sys.stderr,
-    )
+def log_warning(path: str, log: Any) -> None:
+    """Warn about an unfinished file, or one whose summary is damaged."""
+    if log.warning is not None:
+        print(f"{path}: warning: {log.warning}", file=sys.stderr)

@@ -8,6 +8,8 @@ from typing import Any
 
 from miro_gen.cli.eventargs import COMMON, server_and_channel, split_common, topic_arg
 
+MAX_TOPICS = 1000  # topics `miro hz` keeps statistics of
+
 
 def _parser(prog: str, description: str) -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog=prog, description=description + " " + COMMON)
@@ -35,9 +37,9 @@ def echo_main(argv: Sequence[str]) -> int:
     p = _parser(prog, "Print the events of TOPIC as they arrive, decoded, and sequence gaps.")
     p.add_argument("-n", "--count", type=int, default=0, help="exit after N events")
     ns = p.parse_args(split_common(p, argv))
-    from miro_gen.eventlog.gaps import GapCounter
     from miro_gen.eventlog.show import clock_text, payload_text
     from miro_gen.eventlog.wire import RawEvent
+    from miro_gen.transport.gaps import GapCounter
 
     found = server_and_channel(p, prog, argv, ns.channel)
     if found is None:
@@ -73,16 +75,18 @@ def hz_main(argv: Sequence[str]) -> int:
     p = _parser(
         prog,
         "Print, every second, the rate at which the events of TOPIC arrive, the min, max and "
-        "standard deviation of the period, the events missed (sequence gaps) and the bandwidth "
+        "standard deviation of the period, their lag (how long after their push they arrive: "
+        "a consumer that falls behind sees it grow), the events missed (sequence gaps: "
+        "dropped on the way, or by a supplier while its channel was gone) and the bandwidth "
         "(payload bytes a second).",
     )
     p.add_argument("-w", "--window", type=int, default=100, help="periods averaged (default 100)")
     ns = p.parse_args(split_common(p, argv))
     if ns.window < 1:
         p.error("--window must be 1 or more")
-    from miro_gen.eventlog.gaps import GapCounter
     from miro_gen.eventlog.rates import RateWindow, data_rate
     from miro_gen.eventlog.wire import RawEvent
+    from miro_gen.transport.gaps import GapCounter
 
     found = server_and_channel(p, prog, argv, ns.channel)
     if found is None:
@@ -97,9 +101,11 @@ def hz_main(argv: Sequence[str]) -> int:
             topic = f"{e.domain}/{e.type_name}"
             window = windows.get(topic)
             if window is None:
+                if len(windows) >= MAX_TOPICS:  # a bounded table, whatever the channel carries
+                    continue
                 window = windows[topic] = RateWindow(ns.window)
                 gaps[topic] = GapCounter()
-            window.add(t, len(e.data))
+            window.add(t, len(e.data), (received_ns - e.publish_ns) / 1e9)
             gaps[topic].observe(e.supplier, e.type_name, e.seq)
 
     def report(_: object = None) -> None:
@@ -113,10 +119,12 @@ def hz_main(argv: Sequence[str]) -> int:
                 print(f"{topic}: 1 event", flush=True)
                 continue
             rate, low, high, std = stats
+            lag_mean, lag_max = windows[topic].lag() or (0.0, 0.0)
             bandwidth = data_rate(windows[topic].bandwidth() or 0.0)
             print(
                 f"{topic}: {rate:.2f} Hz  min {low:.4f} s  max {high:.4f} s  "
-                f"std {std:.4f} s  window {len(windows[topic].periods)}  missed {missed}  "
+                f"std {std:.4f} s  window {len(windows[topic].periods)}  "
+                f"lag {lag_mean * 1000:.1f} ms (max {lag_max * 1000:.1f})  missed {missed}  "
                 f"{bandwidth}",
                 flush=True,
             )

@@ -9,11 +9,11 @@ from collections.abc import Sequence
 from typing import Any
 
 from miro_gen.cli.eventargs import (
+    log_warning,
     open_log,
     piped,
     read_status,
     topic_arg,
-    unfinished_warning,
 )
 
 
@@ -75,7 +75,9 @@ def info_main(argv: Sequence[str]) -> int:
         topics = log.topics()
     total = sum(counts.values())
     duration = (last - first) / 1e9 if first is not None and last is not None else 0.0
-    state = "unfinished (no summary)" if log.unfinished else "finished"
+    state = "finished"
+    if log.unfinished or log.damaged_summary:
+        state = "unfinished (no summary)" if log.unfinished else "summary damaged"
     print(f"file:      {ns.file} ({state})")
     print(f"events:    {total}")
     if first is not None and last is not None:
@@ -150,8 +152,7 @@ def echo_main(argv: Sequence[str]) -> int:
             sys.stdout.flush()
             print(f"{ns.file}: error: {e}", file=sys.stderr)
             return 1
-    if log.unfinished:
-        unfinished_warning(ns.file)
+    log_warning(ns.file, log)
     return 0
 
 

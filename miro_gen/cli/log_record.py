@@ -67,6 +67,13 @@ def record_main(argv: Sequence[str]) -> int:
             f"{type_hash[:12]}; recorded without a schema (Foxglove cannot decode it)",
             file=sys.stderr,
         )
+    if writer.refused:
+        print(
+            f"{prog}: warning: {writer.refused} events of topics past the 65,535th not "
+            f"recorded (an MCAP file numbers its channels with 16 bits), such as "
+            f"{min(writer.refused_topics)}",
+            file=sys.stderr,
+        )
     missed = f", {recorder.tap.missed} missed (sequence gaps)" if recorder.tap.missed else ""
     status.done(
         f"{ns.output}: {writer.messages} events{missed} in "

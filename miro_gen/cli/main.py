@@ -40,6 +40,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub.add_parser("log", help="record, replay and inspect event logs (MCAP)", add_help=False)
     sub.add_parser("echo", help="print the events of a topic as they arrive", add_help=False)
     sub.add_parser("hz", help="print the rate of the events of a topic", add_help=False)
+    sub.add_parser("keys", help="make the key of a robot or fleet (CURVE)", add_help=False)
     sub.add_parser(
         "bridge", help="relay events with a CORBA event channel (bridge corba)", add_help=False
     )
@@ -86,6 +87,10 @@ def dispatch(args: list[str]) -> int:
         from miro_gen.cli import sim
 
         return sim.sim_main(args[1:])
+    if args and args[0] == "keys":
+        from miro_gen.cli import keys
+
+        return keys.keys_main(args[1:])
     if args and args[0] == "demo":
         from miro_gen.cli import demo
 

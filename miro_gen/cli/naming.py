@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import re
 import signal
@@ -15,11 +16,18 @@ import zmq
 
 from miro_gen import log
 from miro_gen.exceptions import SystemException
+from miro_gen.transport import sockets
 from miro_gen.transport.addresses import server_addresses
-from miro_gen.transport.events import CHANNEL_REPO_ID, ChannelHost
+from miro_gen.transport.channels import CHANNEL_REPO_ID, ChannelHost
 from miro_gen.transport.invoker import ZmqInvoker
-from miro_gen.transport.naming import NamingService, check_name, naming_errors
-from miro_gen.transport.options import DEFAULT_NAMING, UsageError, naming_endpoint
+from miro_gen.transport.naming import (
+    DEFAULT_MAX_NAMES,
+    DEFAULT_QUOTA,
+    NamingService,
+    check_name,
+    naming_errors,
+)
+from miro_gen.transport.options import DEFAULT_NAMING, UsageError, byte_size, naming_endpoint
 from miro_gen.transport.reactor import Reactor
 
 
@@ -49,8 +57,52 @@ def naming_main(argv: Sequence[str]) -> int:
         help="the address to advertise for hosted channels when --endpoint listens on all "
         "interfaces",
     )
+    p.add_argument(
+        "--keys",
+        default=os.environ.get("MIRO_KEYS") or None,
+        metavar="FILE",
+        help="the robot's or fleet's key (`miro keys new`; default $MIRO_KEYS): only processes "
+        "holding it may connect, and everything is encrypted (CURVE). Needed when --endpoint "
+        f"is not loopback, unless {sockets.DEFAULT_KEY} exists or --insecure is given",
+    )
+    p.add_argument(
+        "--insecure",
+        action="store_true",
+        help="serve beyond loopback without a key: anyone who can connect may bind, resolve, "
+        "publish and subscribe (docs/SECURITY.md)",
+    )
+    p.add_argument(
+        "--quota",
+        type=int,
+        default=DEFAULT_QUOTA,
+        metavar="N",
+        help=f"names one server may bind (default {DEFAULT_QUOTA})",
+    )
+    p.add_argument(
+        "--max-names",
+        type=int,
+        default=DEFAULT_MAX_NAMES,
+        metavar="N",
+        help=f"names in all (default {DEFAULT_MAX_NAMES})",
+    )
+    p.add_argument(
+        "--max-message-size",
+        metavar="BYTES",
+        default=os.environ.get("MIRO_MAX_MESSAGE_SIZE") or None,
+        help="the largest message accepted (default 8M; K, M, G suffixes); a larger one "
+        "closes its connection",
+    )
+    p.add_argument(
+        "--max-connections",
+        type=int,
+        default=sockets.DEFAULT_MAX_CONNECTIONS,
+        metavar="N",
+        help=f"connections per socket (default {sockets.DEFAULT_MAX_CONNECTIONS})",
+    )
     p.add_argument("-MLL", "--log-level", type=int, default=5, help="Miro log level (default 5)")
     ns = p.parse_args(argv)
+    if ns.quota < 1 or ns.max_names < 1 or ns.max_connections < 1:
+        p.error("--quota, --max-names and --max-connections take a number from 1 up")
     for name in ns.channel:
         try:
             check_name(name)
@@ -60,8 +112,18 @@ def naming_main(argv: Sequence[str]) -> int:
         endpoint = naming_endpoint(ns.endpoint)
         if ns.host:
             server_addresses(endpoint, ns.host)  # checks that it is an address of this machine
+        size = None
+        if ns.max_message_size is not None:
+            size = byte_size(ns.max_message_size, "--max-message-size")
+        policy = sockets.policy_for(
+            keys=ns.keys,
+            insecure=ns.insecure,
+            max_message_size=size,
+            binds=sockets.endpoint_host(endpoint),
+        )
     except UsageError as e:
         p.error(str(e))
+    policy = dataclasses.replace(policy, max_connections=ns.max_connections)
     if ns.channel and not ns.host and re.search(r"://(0\.0\.0\.0|\*):", endpoint):
         p.error(
             "--channel with an --endpoint on every interface needs --host ADDRESS: the "
@@ -69,9 +131,10 @@ def naming_main(argv: Sequence[str]) -> int:
         )
     log.configure(ns.log_level)
     reactor = Reactor(zmq.Context.instance())
+    sockets.configure(reactor.context, policy)
     invoker = ZmqInvoker(reactor.context)
     try:
-        service = NamingService(reactor, invoker, endpoint, ns.host)
+        service = NamingService(reactor, invoker, endpoint, ns.host, ns.quota, ns.max_names)
     except zmq.ZMQError as e:
         print(f"miro naming: cannot serve on {endpoint}: {e}", file=sys.stderr)
         return 1
@@ -81,9 +144,13 @@ def naming_main(argv: Sequence[str]) -> int:
     bound = service.adapter.bound
     every = "://0.0.0.0:" in bound
     note = " (every interface: other hosts use this machine's address)" if every else ""
-    print(f"naming service at {bound}{note}", flush=True)
-    for name in ns.channel:
-        print(f"event channel {name}", flush=True)
+    if policy.keys is not None:
+        note += f"; CURVE with the key {policy.keys.path}"
+    elif not sockets.is_loopback(sockets.endpoint_host(bound)):
+        note += "; --insecure: anyone who can connect may change names"
+    lines = [f"naming service at {bound}{note}", *(f"event channel {n}" for n in ns.channel)]
+    # Said once the reactor runs: a signal from whoever waited for these lines then stops it.
+    reactor.call_soon(lambda: print("\n".join(lines), flush=True))
     reactor.run()
     for channel in channels:
         channel.close()

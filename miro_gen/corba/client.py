@@ -28,7 +28,12 @@ from struct import pack as struct_pack
 from typing import Any
 
 from miro_gen.corba import bodies, giop
-from miro_gen.corba.connection import DEFAULT_MAX_MESSAGE, GiopConnection, NotGiop
+from miro_gen.corba.connection import (
+    DEFAULT_MAX_MESSAGE,
+    GiopConnection,
+    NotGiop,
+    greets_with_zmtp,
+)
 from miro_gen.corba.giop import GiopError, MsgType, ReplyStatus
 from miro_gen.corba.ior import IOR, OUR_CODE_SETS, GiopBody, ior_from_ref, parse_url, ref_from_ior
 from miro_gen.exceptions import BAD_PARAM, COMM_FAILURE, TIMEOUT, TRANSIENT, CompletionStatus
@@ -301,6 +306,8 @@ class IIOPInvoker:
                 conn.close()
                 if not fresh:
                     raise _Closed() from None
+                if greets_with_zmtp(conn.peer):
+                    raise not_giop(NotGiop("ZMTP greeting", zmq=True), conn.peer) from None
                 raise COMM_FAILURE(
                     f"{operation}: lost the connection to {conn.peer}: {e}",
                     completed=CompletionStatus.MAYBE,

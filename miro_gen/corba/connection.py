@@ -35,6 +35,19 @@ def is_zmtp(data: bytes) -> bool:
     return len(data) >= 1 and data[0] == 0xFF and (len(data) < 10 or data[9] == 0x7F)
 
 
+def greets_with_zmtp(peer: str, timeout: float = 0.5) -> bool:
+    """Whether the listener at `peer` (HOST:PORT) greets a silent new connection with ZMTP's
+    signature. A ZeroMQ peer that enforces security resets a connection whose first bytes are
+    GIOP before its own greeting can be read, so a reset alone does not tell it apart."""
+    host, _, port = peer.rpartition(":")
+    try:
+        with socket.create_connection((host.strip("[]"), int(port)), timeout=timeout) as sock:
+            sock.settimeout(timeout)
+            return is_zmtp(sock.recv(16))
+    except (OSError, ValueError):
+        return False
+
+
 class GiopConnection:
     """One end of a TCP connection carrying GIOP. `read_message` is for one thread at a time;
     `send` may be called from any thread."""

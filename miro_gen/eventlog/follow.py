@@ -27,7 +27,7 @@ class ClockFollower(StructuredPushConsumer):
     """Feeds a player's clock messages to `clock`."""
 
     def __init__(self, channel: Any, clock: LogClock) -> None:
-        super().__init__(channel)
+        super().__init__(channel, latest_only=True)  # only the newest clock state matters
         self.clock = clock
         self.set_subscriptions([("*", CLOCK_TYPE)])
 

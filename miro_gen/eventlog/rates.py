@@ -7,21 +7,32 @@ from collections import deque
 
 
 class RateWindow:
-    """The periods between the last `window` + 1 arrivals: their rate, min, max and spread."""
+    """The periods between the last `window` + 1 arrivals: their rate, min, max and spread;
+    their bandwidth; and the lag of the last `window` arrivals (how long after its push each
+    one arrived)."""
 
     def __init__(self, window: int = 100) -> None:
         self.periods: deque[float] = deque(maxlen=window)
         self.sizes: deque[int] = deque(maxlen=window)  # bytes of the arrivals ending a period
+        self.lags: deque[float] = deque(maxlen=window)
         self.last: float | None = None
         self.count = 0
 
-    def add(self, t: float, size: int = 0) -> None:
-        """An arrival at `t` seconds, of `size` bytes."""
+    def add(self, t: float, size: int = 0, lag: float | None = None) -> None:
+        """An arrival at `t` seconds, of `size` bytes, `lag` seconds after it was pushed."""
         if self.last is not None:
             self.periods.append(t - self.last)
             self.sizes.append(size)
         self.last = t
         self.count += 1
+        if lag is not None:
+            self.lags.append(lag)
+
+    def lag(self) -> tuple[float, float] | None:
+        """(mean, max) lag in seconds, or None before the first arrival with one."""
+        if not self.lags:
+            return None
+        return sum(self.lags) / len(self.lags), max(self.lags)
 
     def bandwidth(self) -> float | None:
         """Bytes a second over the window, or None before two arrivals."""

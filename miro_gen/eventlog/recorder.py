@@ -58,6 +58,8 @@ class Recorder:
 
     def line(self) -> str:
         missed = f", {self.tap.missed} missed" if self.tap.missed else ""
+        if self.writer.refused:
+            missed += f", {self.writer.refused} refused (too many topics)"
         return (
             f"recording {self.writer.path}: {self.writer.messages} events{missed}, "
             f"{self.rate:.0f}/s, {human_bytes(self.writer.size())}"

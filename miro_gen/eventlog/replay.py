@@ -13,8 +13,13 @@ from __future__ import annotations
 import threading
 from typing import NamedTuple
 
-from miro_gen.eventlog.wire import MAX_EVENTS, pack_batch
-from miro_gen.transport.events import EventChannel, StructuredPushSupplier, topic
+from miro_gen.eventlog.wire import BATCH_HEADER, EVENT_HEADER, MAX_EVENTS, pack_batch
+from miro_gen.transport.events import (
+    MAX_BATCH_BYTES,
+    EventChannel,
+    StructuredPushSupplier,
+    topic,
+)
 
 
 class _Encoded(NamedTuple):
@@ -64,15 +69,21 @@ class ReplaySupplier(StructuredPushSupplier):
             pending, self._pending = self._pending, []
             self._scheduled = False
         run: list[_Encoded] = []
+        size = 0
         for e in pending:
+            if BATCH_HEADER + EVENT_HEADER + len(e.data) > self.max_frame:  # too large to send
+                self.replay_dropped += 1
+                continue
             if run and (
                 (e.domain, e.type_name, e.type_hash, e.supplier)
                 != (run[0].domain, run[0].type_name, run[0].type_hash, run[0].supplier)
                 or len(run) == MAX_EVENTS
+                or size + len(e.data) > MAX_BATCH_BYTES
             ):
                 self._send_run(run)
-                run = []
+                run, size = [], 0
             run.append(e)
+            size += len(e.data)
         if run:
             self._send_run(run)
 

@@ -14,14 +14,18 @@ from typing import Any
 
 import zmq
 
-from miro_gen.eventlog.gaps import GapCounter
 from miro_gen.eventlog.types import matches
 from miro_gen.eventlog.wire import FrameError, RawEvent, parse_batch, split_topic
 from miro_gen.log import logger
-from miro_gen.transport.events import HWM, EventChannel, subscription_prefix
+from miro_gen.transport import sockets
+from miro_gen.transport.channel_link import ChannelLink
+from miro_gen.transport.events import EventChannel, subscription_prefix
+from miro_gen.transport.gaps import GapCounter
 
 _log = logger("MIRO")
-RCVHWM = 100_000  # frames: a recorder would rather queue than drop while it writes a chunk
+# A recorder would rather queue than drop while it writes a chunk: up to this many bytes of
+# frames of the largest size (batched frames of small events count as frames too).
+QUEUE_BYTES = 1 << 30
 
 Handler = Callable[[list[RawEvent], int], object]  # events of one frame, receive time ns
 
@@ -46,12 +50,19 @@ class RawEventTap:
         self.gaps = GapCounter()
         self.bad_frames = 0
         self._wanted: dict[bytes, bool] = {}
-        self.socket: zmq.Socket[Any] = self.reactor.context.socket(zmq.SUB)
-        self.socket.setsockopt(zmq.LINGER, 0)
-        self.socket.setsockopt(zmq.RCVHWM, max(HWM, RCVHWM))
+        context = self.reactor.context
+        self.socket: zmq.Socket[Any] = sockets.connecting_socket(context, zmq.SUB)
+        self.socket.setsockopt(zmq.RCVHWM, sockets.queue_limit(context, QUEUE_BYTES))
         for prefix in {subscription_prefix(d, t) for d, t in self.filters}:
             self.socket.setsockopt(zmq.SUBSCRIBE, prefix)
-        self.socket.connect(channel.consumer_endpoint)
+        resolve = channel.resolve
+        self.link = ChannelLink(  # found again when the channel's host restarts
+            self.reactor,
+            self.socket,
+            channel.consumer_endpoint,
+            None if resolve is None else lambda: resolve().consumer_endpoint,
+            lambda up: None,
+        )
         self.reactor.call_soon(self.reactor.register, self.socket, self._readable)
 
     def _readable(self) -> None:
@@ -97,8 +108,4 @@ class RawEventTap:
         return self.gaps.missed
 
     def close(self) -> None:
-        def close() -> None:
-            self.reactor.unregister(self.socket)
-            self.socket.close(0)
-
-        self.reactor.call_soon(close)
+        self.link.close_socket()

@@ -18,6 +18,8 @@ VERSION = 1
 _BATCH = Struct("<BBHQ32s")  # version, flags, count, supplier id, type hash
 _EVENT = Struct("<QqqI")  # sequence number, stamp ns, publish ns, payload length
 MAX_EVENTS = 0xFFFF  # the count is 16 bits
+EVENT_HEADER = _EVENT.size  # bytes before each payload
+BATCH_HEADER = _BATCH.size  # bytes before a frame's first event
 
 
 class FrameError(ValueError):

@@ -9,6 +9,10 @@ and its sequence number (its low 32 bits: MCAP's field is 32 bits wide).
 The file is chunked, zstd-compressed and indexed. A chunk is closed when it is full or a second
 old, and the file flushed then: a recorder killed outright leaves every closed chunk readable.
 `finish()` writes the summary and indexes; call it on every way out.
+
+What arrives is not trusted to fit the file: MCAP numbers channels with 16 bits, so topics
+past the 65,535th are refused (counted in `refused`, the others recorded on), and a stamp
+outside MCAP's unsigned 64 bits is recorded as 0, so that no record is ever half-written.
 """
 
 from __future__ import annotations
@@ -27,6 +31,8 @@ PROFILE = ""  # no well-known MCAP profile describes omgidl/cdr logs
 LIBRARY = f"miro-gen/{__version__}"
 CHUNK_BYTES = 1 << 20
 CHUNK_SECONDS = 1.0
+MAX_CHANNELS = 0xFFFF  # MCAP's channel ids are 16 bits (0 is not one)
+_U64 = 1 << 64
 
 
 class LogWriter:
@@ -41,6 +47,8 @@ class LogWriter:
         self._schemas: dict[str, int] = {}  # type hash -> schema id (0: unknown type)
         self.unknown_types: set[tuple[str, str]] = set()  # (topic, hash) written without schema
         self.messages = 0
+        self.refused = 0  # events of topics past MAX_CHANNELS, not recorded
+        self.refused_topics: set[str] = set()  # their topics (the first 100 of them)
         self.chunk_seconds = chunk_seconds
         self._chunk_started = time.monotonic()
         self._pending = 0  # messages not yet in a closed chunk
@@ -60,11 +68,16 @@ class LogWriter:
         return sid
 
     def _channel_id(self, e: RawEvent) -> int:
+        """The channel of the event's topic, registered if new; 0 when the file has no room."""
         key = (e.domain, e.type_name, e.type_hash)
         cid = self._channels.get(key)
         if cid is None:
-            sid = self._schema_id(e.type_hash)
             topic = topic_name(e.domain, e.type_name)
+            if len(self._channels) >= MAX_CHANNELS:
+                if len(self.refused_topics) < 100:
+                    self.refused_topics.add(topic)
+                return 0
+            sid = self._schema_id(e.type_hash)
             if sid == 0:
                 self.unknown_types.add((topic, e.type_hash))
             metadata = {"domain": e.domain, "type_name": e.type_name, "type_hash": e.type_hash}
@@ -75,11 +88,17 @@ class LogWriter:
     def write(self, events: list[RawEvent], received_ns: int) -> None:
         """Append the events of one frame, received at `received_ns`."""
         add = self._mcap.add_message
+        written = 0
         for e in events:
             cid = self._channels.get((e.domain, e.type_name, e.type_hash)) or self._channel_id(e)
-            add(cid, received_ns, e.data, e.stamp_ns, e.seq & 0xFFFFFFFF)
-        self.messages += len(events)
-        self._pending += len(events)
+            if not cid:
+                self.refused += 1
+                continue
+            stamp = e.stamp_ns if 0 <= e.stamp_ns < _U64 else 0
+            add(cid, received_ns, e.data, stamp, e.seq & 0xFFFFFFFF)
+            written += 1
+        self.messages += written
+        self._pending += written
 
     def tick(self) -> None:
         """Close the current chunk if it is older than `chunk_seconds` (call it periodically)."""

@@ -23,7 +23,12 @@ from PySide6.QtCore import QCoreApplication, QEvent, QObject, Qt, QTimer, Signal
 from PySide6.QtWidgets import QWidget
 
 from miro_gen.log import logger
-from miro_gen.transport.events import EventChannel, StructuredEvent, StructuredPushConsumer
+from miro_gen.transport.events import (
+    KEEP_ALL,
+    EventChannel,
+    StructuredEvent,
+    StructuredPushConsumer,
+)
 from miro_gen.transport.reactor import Reactor
 from miro_gen.transport.server import Server
 
@@ -142,7 +147,7 @@ class _Consumer(StructuredPushConsumer):
     """Hands each event, on the reactor thread, to its subscription."""
 
     def __init__(self, channel: EventChannel, mailbox: Mailbox) -> None:
-        super().__init__(channel)
+        super().__init__(channel, depth=KEEP_ALL)  # the mailbox keeps what the GUI gets
         self._mailbox = mailbox
 
     def push_structured_event(self, event: StructuredEvent) -> None:

@@ -6,8 +6,11 @@ takes over the socket when a servant blocks, so a servant may wait (for the next
 another service that calls back into this one (A -> B -> A) without stopping the process from
 serving. Methods marked `@nonblocking` always run on the receiving thread. The reactor runs no
 servant code. A frame that does not parse is logged and dropped; a request for an unknown
-object gets OBJECT_NOT_EXIST; a request that waited for a free thread until its caller stopped
-waiting is not run.
+object gets OBJECT_NOT_EXIST, one for an operation the object does not have BAD_OPERATION
+(before anything about it is kept: a peer must not grow this process's memory with made-up
+names); a request that waited for a free thread until its caller stopped waiting is not run.
+Requests waiting for a thread are bounded in number and bytes; a reply larger than the maximum
+message size becomes MARSHAL.
 """
 
 from __future__ import annotations
@@ -20,7 +23,13 @@ from collections.abc import Hashable
 
 import zmq
 
-from miro_gen.exceptions import OBJECT_NOT_EXIST, TRANSIENT, CompletionStatus
+from miro_gen.exceptions import (
+    BAD_OPERATION,
+    MARSHAL,
+    OBJECT_NOT_EXIST,
+    TRANSIENT,
+    CompletionStatus,
+)
 from miro_gen.log import logger
 from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.runtime.rpc import (
@@ -30,7 +39,7 @@ from miro_gen.runtime.rpc import (
     is_nonblocking,
     system_exception_reply,
 )
-from miro_gen.transport import frames
+from miro_gen.transport import frames, sockets
 from miro_gen.transport.dispatch import Dispatcher
 from miro_gen.transport.reactor import Reactor
 
@@ -38,6 +47,7 @@ _log = logger("MIRO")
 
 DEFAULT_WORKERS = 16
 MAX_PENDING = 10_000  # requests queued for workers; beyond this, TRANSIENT (try again later)
+MAX_PENDING_BYTES = 256 << 20  # and bytes of their bodies
 
 
 class ObjectAdapter:
@@ -55,11 +65,12 @@ class ObjectAdapter:
     ) -> None:
         self.reactor = reactor
         self.invoker = invoker
-        self.socket = reactor.context.socket(zmq.ROUTER)
-        self.socket.setsockopt(zmq.LINGER, 0)
+        self.socket = sockets.listening_socket(reactor.context, zmq.ROUTER)
         self.socket.setsockopt(zmq.ROUTER_HANDOVER, 1)
-        self.socket.setsockopt(zmq.HEARTBEAT_IVL, 500)
-        self.socket.setsockopt(zmq.HEARTBEAT_TIMEOUT, 2000)
+        hwm = sockets.queue_limit(reactor.context)
+        self.socket.setsockopt(zmq.RCVHWM, hwm)
+        self.socket.setsockopt(zmq.SNDHWM, hwm)
+        self.max_message_size = sockets.policy(reactor.context).max_message_size
         self.socket.bind(bind)
         self.bound = self.socket.getsockopt_string(zmq.LAST_ENDPOINT)  # what it listens on
         self.endpoint = _advertised(self.bound, host)
@@ -69,7 +80,9 @@ class ObjectAdapter:
         self._lock = threading.Lock()
         self._quick: dict[tuple[type, str], bool] = {}  # (servant class, operation): @nonblocking
         # From here on the socket belongs to the dispatcher's threads.
-        self._dispatcher = Dispatcher(self.socket, self._receive, workers, MAX_PENDING)
+        self._dispatcher = Dispatcher(
+            self.socket, self._receive, workers, MAX_PENDING, MAX_PENDING_BYTES
+        )
 
     # ---- objects --------------------------------------------------------------------------------
 
@@ -110,6 +123,12 @@ class ObjectAdapter:
         if servant is None:
             missing = OBJECT_NOT_EXIST(f"no object with key {req.key!r} at {self.endpoint}")
             return _reply_frames(peer, req, system_exception_reply(missing))
+        if req.operation not in servant._dispatch:  # answered before anything is cached
+            unknown = BAD_OPERATION(
+                f"{servant._repo_id} has no operation '{req.operation[:100]}'",
+                completed=CompletionStatus.NO,
+            )
+            return _reply_frames(peer, req, system_exception_reply(unknown))
         kind = (type(servant), req.operation)
         quick = self._quick.get(kind)
         if quick is None:
@@ -124,7 +143,17 @@ class ObjectAdapter:
 class _Call:
     """One request to run: a dispatcher task."""
 
-    __slots__ = ("adapter", "body", "kind", "peer", "quick", "received", "request", "servant")
+    __slots__ = (
+        "adapter",
+        "body",
+        "kind",
+        "peer",
+        "quick",
+        "received",
+        "request",
+        "servant",
+        "size",
+    )
 
     def __init__(
         self,
@@ -143,6 +172,7 @@ class _Call:
         self.body = body
         self.kind = kind
         self.quick = quick
+        self.size = len(body)
         self.received = time.monotonic() if request.timeout_ms and not quick else 0.0
 
     def late(self) -> bool:
@@ -152,6 +182,14 @@ class _Call:
     def run(self) -> list[bytes] | None:
         req = self.request
         reply = self.servant._invoke(req.operation, self.body, self.adapter.invoker)
+        limit = self.adapter.max_message_size
+        if len(reply.body) > limit:
+            too_large = MARSHAL(
+                f"the reply to {req.operation} is {len(reply.body)} bytes, more than the "
+                f"maximum message size ({limit}; --max-message-size)",
+                completed=CompletionStatus.YES,
+            )
+            reply = system_exception_reply(too_large)
         return _reply_frames(self.peer, req, reply)
 
     def refuse(self) -> list[bytes] | None:

@@ -16,8 +16,10 @@ reach, not the bind address"). The rules, in order:
   address too. No route, or a host name that does not resolve, is a `UsageError`.
 
 Without `--host`, sockets bind on `127.0.0.1` when the advertised address is a loopback one and
-on `0.0.0.0` (every interface) otherwise. The transport speaks IPv4 only (its ZeroMQ sockets are
-not IPv6-enabled).
+on `0.0.0.0` (every interface) otherwise. `--bind ADDR|IFACE` listens on one interface instead
+(given by an address of this machine or an interface name such as `eth0`); without `--host`,
+that interface's address is the one advertised. The transport speaks IPv4 only (its ZeroMQ
+sockets are not IPv6-enabled).
 """
 
 from __future__ import annotations
@@ -41,9 +43,26 @@ class Addresses:
     advertise: str
 
 
-def server_addresses(naming: str, host: str | None) -> Addresses:
+def server_addresses(naming: str, host: str | None, bind: str | None = None) -> Addresses:
     """The addresses of a server whose naming service is at `naming` (`tcp://HOST:PORT`), with
-    `host` the `--host` / `MIRO_HOST` value if one was given."""
+    `host` the `--host` / `MIRO_HOST` value and `bind` the `--bind` one, if given."""
+    chosen = _addresses(naming, host)
+    if not bind:
+        return chosen
+    if bind in ("*", EVERY_INTERFACE):
+        return Addresses(EVERY_INTERFACE, chosen.advertise)
+    ip = _interface_address(bind)
+    if ip is None:
+        ip = _resolve(bind, f"--bind {bind!r}")
+        _check_mine(ip, f"--bind {bind!r}")
+    if host:
+        if _is_local_only(ip) and not _is_local_only(_resolve(host, "--host")):
+            raise UsageError(f"--bind {bind} is loopback: others cannot reach it at {host}")
+        return Addresses(ip, chosen.advertise)
+    return Addresses(ip, ip)
+
+
+def _addresses(naming: str, host: str | None) -> Addresses:
     if host:
         return _given(host)
     naming_host, _, port = naming.partition("://")[2].rpartition(":")
@@ -77,6 +96,16 @@ def _given(host: str) -> Addresses:
     ip = _resolve(host, what)
     if ipaddress.ip_address(ip).is_unspecified:
         raise UsageError(f"{what}: others cannot connect to {ip}; give this machine's address")
+    _check_mine(ip, what)
+    if ip == host and _is_local_only(ip):  # a loopback address: nobody else could use it
+        return Addresses(ip, host)
+    # Other machines may resolve a host name to another address than this one does (Debian maps
+    # its own name to 127.0.1.1), so a name binds every interface.
+    return Addresses(EVERY_INTERFACE, host)
+
+
+def _check_mine(ip: str, what: str) -> None:
+    """UsageError unless `ip` is an address of this machine."""
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         try:
             s.bind((ip, 0))
@@ -88,11 +117,23 @@ def _given(host: str) -> Addresses:
                     "service"
                 ) from None
             raise UsageError(f"{what}: cannot use {ip}: {e.strerror or e}") from None
-    if ip == host and _is_local_only(ip):  # a loopback address: nobody else could use it
-        return Addresses(ip, host)
-    # Other machines may resolve a host name to another address than this one does (Debian maps
-    # its own name to 127.0.1.1), so a name binds every interface.
-    return Addresses(EVERY_INTERFACE, host)
+
+
+def _interface_address(name: str) -> str | None:
+    """The IPv4 address of the network interface `name` (`eth0`), None if there is no such
+    interface; UsageError if it has no IPv4 address."""
+    if name not in {n for _, n in socket.if_nameindex()}:
+        return None
+    import fcntl
+    import struct
+
+    siocgifaddr = 0x8915
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        try:
+            raw = fcntl.ioctl(s.fileno(), siocgifaddr, struct.pack("256s", name.encode()[:15]))
+        except OSError:
+            raise UsageError(f"--bind {name}: the interface has no IPv4 address") from None
+    return socket.inet_ntoa(raw[20:24])
 
 
 def _resolve(name: str, what: str) -> str:

@@ -20,10 +20,10 @@ arrives on that same socket: each thread that hands back a reply, or wakes the l
 sends it over an inproc connection to the ROUTER, prefixed with a random token that remote
 peers cannot know.
 
-At most `workers` threads run servants at once; beyond that, requests wait in a bounded queue
-(the caller is told TRANSIENT when it is full) and those whose callers have stopped waiting by
-the time a thread is free are not run. Sockets change hands only under the dispatcher's lock,
-the memory barrier ZeroMQ asks for.
+At most `workers` threads run servants at once; beyond that, requests wait in a queue bounded
+in requests and bytes (the caller is told TRANSIENT when it is full) and those whose callers
+have stopped waiting by the time a thread is free are not run. Sockets change hands only under
+the dispatcher's lock, the memory barrier ZeroMQ asks for.
 """
 
 from __future__ import annotations
@@ -59,6 +59,7 @@ class Task(Protocol):
 
     kind: Hashable  # what the dispatcher learns "may block" about: (servant class, operation)
     quick: bool  # @nonblocking: run by the leader, never handed over
+    size: int  # bytes it holds while it waits
 
     def late(self) -> bool:
         """Whether its caller has stopped waiting (a queued task is then not run)."""
@@ -97,12 +98,19 @@ class Dispatcher:
     `receive` turns each message into a task or an immediate reply."""
 
     def __init__(
-        self, socket: zmq.Socket[Any], receive: Receive, workers: int, max_pending: int
+        self,
+        socket: zmq.Socket[Any],
+        receive: Receive,
+        workers: int,
+        max_pending: int,
+        max_pending_bytes: int = 1 << 62,
     ) -> None:
         self.socket = socket
         self._receive = receive
         self._workers = max(1, workers)
         self._max_pending = max_pending
+        self._max_pending_bytes = max_pending_bytes
+        self._pending_bytes = 0
         self._lock = threading.Lock()
         self._numbers = itertools.count(1)
         self._threads = 0
@@ -164,6 +172,7 @@ class Dispatcher:
                     return None
                 while self._pending:
                     task = self._pending.popleft()
+                    self._pending_bytes -= task.size
                     if task.late():
                         _log.notice("skipped a request: its caller stopped waiting")
                         continue
@@ -217,8 +226,12 @@ class Dispatcher:
                     self._last_inline = self._inline[0]
                     self._wake_watchdog()
                 return True
-            if len(self._pending) < self._max_pending:
+            if (
+                len(self._pending) < self._max_pending
+                and self._pending_bytes + task.size <= self._max_pending_bytes
+            ):
                 self._pending.append(task)
+                self._pending_bytes += task.size
                 return False
         self._send(task.refuse())
         return False

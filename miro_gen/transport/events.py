@@ -2,10 +2,10 @@
 subscribe to (Miro's EventChannel, StructuredPushSupplier, StructuredPushConsumer).
 
 A channel is a ZeroMQ XSUB/XPUB proxy, run by libzmq in a thread of the process that hosts it,
-and bound in the naming service (docs/PROTOCOL.md, "Event channels"). Suppliers connect XPUB
-sockets to its XSUB side, so subscriptions travel back to them: `has_subscribers()` tells a
-supplier whether anyone listens, and `push()` skips encoding when nobody does. Consumers connect
-SUB sockets to its XPUB side.
+and bound in the naming service (transport.channels; docs/PROTOCOL.md, "Event channels").
+Suppliers connect XPUB sockets to its XSUB side, so subscriptions travel back to them:
+`has_subscribers()` tells a supplier whether anyone listens, and `push()` skips encoding when
+nobody does. Consumers connect SUB sockets to its XPUB side.
 
 Each event carries its domain (by convention the supplier's naming context: the robot), its type
 name, the type hash of its payload, a sequence number per supplier and type (so consumers count
@@ -14,44 +14,54 @@ turn leave in one frame per topic (split at MAX_BATCH_EVENTS / MAX_BATCH_BYTES),
 is not capped at one ZeroMQ message per event; at low rates that is one event per frame, as fast
 as a single message; an event of LARGE_EVENT bytes or more travels alone, copied once into its
 frame and decoded in place from the consumer's. Slow consumers never block suppliers: the
-supplier's queue and ZeroMQ's are bounded, what overflows is dropped and counted
-(`StructuredPushSupplier.dropped`), and the sequence numbers make the drops visible
-(`StructuredPushConsumer.missed`).
+supplier's queue and ZeroMQ's are bounded (in bytes: transport.sockets), what overflows is
+dropped and counted (`StructuredPushSupplier.dropped`), and the sequence numbers make the drops
+visible (`StructuredPushConsumer.missed`). A consumer keeps the events waiting for its handler
+as its quality of service says (keep-last depth, latest-only: transport.event_queue), so a slow
+one gets recent events and counts what it skipped (`dropped`, `lag`). Suppliers and consumers
+find their channel again when its host restarts elsewhere (transport.channel_link).
 """
 
 from __future__ import annotations
 
 import itertools
-import os
 import random
 import threading
+import time
 from collections.abc import Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from struct import Struct
 from struct import error as StructError
 from typing import Any
 
-import MiroNaming
 import zmq
 
 from miro_gen import clock
 from miro_gen.log import logger
 from miro_gen.runtime.cdr import encode_after, type_for_hash
-from miro_gen.transport.local import bind_twin, nearest
-from miro_gen.transport.reactor import Reactor
+from miro_gen.transport import sockets
+from miro_gen.transport.channel_link import ChannelLink
+from miro_gen.transport.channels import (  # the channels' names, importable from here as before
+    CHANNEL_REPO_ID as CHANNEL_REPO_ID,
+)
+from miro_gen.transport.channels import DEFAULT_CHANNEL as DEFAULT_CHANNEL
+from miro_gen.transport.channels import PROXY_HWM as PROXY_HWM
+from miro_gen.transport.channels import ChannelHost as ChannelHost
+from miro_gen.transport.channels import EventChannel as EventChannel
+from miro_gen.transport.channels import EventChannelFactory as EventChannelFactory
+from miro_gen.transport.channels import resolve_channel as resolve_channel
+from miro_gen.transport.event_queue import DEFAULT_DEPTH, EventQueue, Waiting
+from miro_gen.transport.event_queue import KEEP_ALL as KEEP_ALL  # for consumers' depth=
+from miro_gen.transport.gaps import GapCounter, gap
 
 _log = logger("MIRO")
 
-CHANNEL_REPO_ID = "IDL:miro-gen/EventChannel:1.0"
-DEFAULT_CHANNEL = "EventChannel"
 EVENT_VERSION = 1
-HWM = 10_000  # frames a supplier's or a consumer's socket queues for one peer before dropping
+HWM = 10_000  # frames a supplier's or a consumer's socket queues for one peer, at most
+MAX_SUBSCRIPTIONS = 10_000  # prefixes a supplier tracks; beyond, it sends every topic
+MAX_PREFIX = 4096  # bytes of a subscription prefix a supplier tracks
 QUEUE_EVENTS = 100_000  # events a supplier holds for its reactor's next turn, at most
 QUEUE_BYTES = 64 << 20  # and bytes
-# Frames a channel queues for each of its peers. Fewer than HWM: the queue is the channel
-# host's memory, and frames may be camera images. (High-water marks are set once: libzmq can
-# stall a pipe whose mark is lowered while it carries messages.)
-PROXY_HWM = 1_000
 # Events from this size on travel alone, in a frame put together with one copy and handed to
 # ZeroMQ without another (copy=False); consumers decode them from ZeroMQ's buffer, in place.
 LARGE_EVENT = 64 * 1024
@@ -62,6 +72,7 @@ LARGE_EVENT = 64 * 1024
 MAX_BATCH_EVENTS = 16_384
 MAX_BATCH_BYTES = 256 * 1024
 TURN_EVENTS = 4096  # events a consumer delivers per reactor turn, so other handlers get a turn
+TURN_FRAMES = 256  # frames a consumer reads per reactor turn
 _BATCH = Struct("<BBHQ32s")  # version, flags, count, supplier id, type hash
 _EVENT = Struct("<QqqI")  # sequence number, stamp ns, publish ns, payload length
 _EVENT_SIZE = _EVENT.size
@@ -103,148 +114,6 @@ class _Framed(list[bytes]):
     """A large event's whole batch frame: it travels alone."""
 
 
-def _close_on(reactor: Reactor, socket: zmq.Socket[Any]) -> None:
-    """Close a socket of the reactor's thread, on that thread."""
-
-    def close() -> None:
-        reactor.unregister(socket)
-        socket.close(0)
-
-    reactor.call_soon(close)
-
-
-# ---- channels -------------------------------------------------------------------------------
-
-
-@dataclass
-class EventChannel:
-    """Where a channel's suppliers (`supplier_endpoint`) and consumers (`consumer_endpoint`)
-    connect; `reactor` is the process's, which suppliers and consumers made from it use."""
-
-    name: str
-    supplier_endpoint: str
-    consumer_endpoint: str
-    reactor: Reactor
-    domain_name: str = ""  # the default domain of suppliers (the process's naming context)
-    _host: ChannelHost | None = field(default=None, repr=False)
-
-    def endpoints(self, context: zmq.Context[Any]) -> tuple[str, str]:
-        """(supplier, consumer) endpoints for sockets of `context`: in the process that hosts
-        the channel, in-process ones (ZeroMQ hands frames over without copying them); on its
-        host, its ipc:// twins (miro_gen.transport.local); elsewhere the advertised ones."""
-        host = self._host
-        if host is not None and host.context is context:
-            return host.local_endpoints
-        return nearest(self.supplier_endpoint), nearest(self.consumer_endpoint)
-
-
-class ChannelHost:
-    """Runs a channel's XSUB/XPUB proxy in a thread (libzmq's, without the GIL) until closed:
-    in the process that creates the channel, or in `miro naming --channel`.
-
-    Besides its TCP endpoints it binds in-process ones, for the suppliers and consumers of its
-    own process (ZeroMQ hands their frames over without copying them), and their ipc://
-    twins, for those of other processes on its host."""
-
-    def __init__(self, context: zmq.Context[Any], bind_host: str, advertise: str) -> None:
-        self.context = context
-        self.xsub = context.socket(zmq.XSUB)
-        self.xpub = context.socket(zmq.XPUB)
-        for s in (self.xsub, self.xpub):
-            s.setsockopt(zmq.LINGER, 0)
-            s.setsockopt(zmq.SNDHWM, PROXY_HWM)
-            s.setsockopt(zmq.RCVHWM, PROXY_HWM)
-        self.xpub.setsockopt(zmq.XPUB_VERBOSER, 1)  # every (un)subscription reaches suppliers
-        port_in = self.xsub.bind_to_random_port(f"tcp://{bind_host}")
-        port_out = self.xpub.bind_to_random_port(f"tcp://{bind_host}")
-        self.supplier_endpoint = f"tcp://{advertise}:{port_in}"
-        self.consumer_endpoint = f"tcp://{advertise}:{port_out}"
-        bind_twin(self.xsub, self.supplier_endpoint)
-        bind_twin(self.xpub, self.consumer_endpoint)
-        name = f"inproc://miro-channel-{os.getpid()}-{id(self)}"
-        self.local_endpoints = (f"{name}-suppliers", f"{name}-consumers")
-        self.xsub.bind(self.local_endpoints[0])
-        self.xpub.bind(self.local_endpoints[1])
-        self.control = context.socket(zmq.PAIR)
-        self.control.bind(name)
-        self._peer = context.socket(zmq.PAIR)
-        self._peer.connect(name)
-        self.thread = threading.Thread(target=self._run, name="miro-channel", daemon=True)
-        self.thread.start()
-
-    def _run(self) -> None:
-        try:
-            zmq.proxy_steerable(self.xsub, self.xpub, None, self._peer)
-        except zmq.ZMQError as e:  # the context is terminating
-            _log.debug("event channel proxy ended: %s", e)
-        finally:
-            for s in (self.xsub, self.xpub, self._peer):
-                s.close(0)
-
-    def close(self) -> None:
-        self.control.send(b"TERMINATE")
-        self.thread.join(5)
-        self.control.close(0)
-
-
-class EventChannelFactory:
-    """Creates event channels hosted by `server`'s process and bound in its naming context."""
-
-    def __init__(self, server: Any) -> None:
-        self.server = server
-        # The channels this process hosts, whichever factory created them.
-        self._channels: dict[str, EventChannel] = server.hosted_channels
-
-    def create_channel(self, name: str = DEFAULT_CHANNEL) -> EventChannel:
-        """Host a channel and bind it as `name`; the one already hosted here if there is one."""
-        full = self.server.naming.full_name(name)
-        if full in self._channels:
-            return self._channels[full]
-        # Bound and advertised like the server's objects (miro_gen.transport.addresses).
-        advertise = self.server.adapter.endpoint.split("://", 1)[1].rsplit(":", 1)[0]
-        ch_host = ChannelHost(self.server.context, self.server.addresses.bind, advertise)
-        channel = EventChannel(
-            full,
-            ch_host.supplier_endpoint,
-            ch_host.consumer_endpoint,
-            self.server.reactor(),
-            self.server.options.naming_context,
-            ch_host,
-        )
-        entry = MiroNaming.Entry(
-            full, CHANNEL_REPO_ID, ch_host.supplier_endpoint, ch_host.consumer_endpoint.encode(), ""
-        )
-        self.server.bind_entry(entry)
-        self.server.on_shutdown(ch_host.close)
-        self._channels[full] = channel
-        return channel
-
-    def find_or_create_channel(self, name: str = DEFAULT_CHANNEL) -> EventChannel:
-        """The channel bound as `name` (in this process's context, then at the root: one that
-        `miro naming --channel` or another service hosts), else one hosted here."""
-        hosted = self._channels.get(self.server.naming.full_name(name))
-        if hosted is not None:
-            return hosted
-        try:
-            return resolve_channel(self.server, name)
-        except MiroNaming.NotFound:
-            return self.create_channel(name)
-
-
-def resolve_channel(server: Any, name: str = DEFAULT_CHANNEL) -> EventChannel:
-    """The channel bound as `name` (naming rules as for objects)."""
-    entry = server.naming.resolve(name)
-    if entry.repo_id != CHANNEL_REPO_ID:
-        raise MiroNaming.NotFound(name=f"{entry.name} (bound, but not an event channel)")
-    return EventChannel(
-        entry.name,
-        entry.endpoint,
-        bytes(entry.key).decode(),
-        server.reactor(),
-        server.options.naming_context,
-    )
-
-
 # ---- suppliers ------------------------------------------------------------------------------
 
 
@@ -283,7 +152,9 @@ class StructuredPushSupplier:
 
     Events wait for that turn in a bounded queue (QUEUE_EVENTS events, QUEUE_BYTES bytes): when
     the reactor cannot keep up, `push()` drops the newest and counts them in `dropped`, as it
-    does those ZeroMQ refuses at its high-water mark. Consumers see them as gaps."""
+    does those ZeroMQ refuses at its high-water mark, those larger than the maximum message
+    size, and those pushed for subscribers while the channel is gone (its host died; the
+    supplier finds it again when it is bound anew). Consumers see them as gaps."""
 
     def __init__(self, channel: EventChannel, domain_name: str | None = None) -> None:
         self.channel = channel
@@ -301,14 +172,32 @@ class StructuredPushSupplier:
         self._raw_hashes: dict[str, bytes] = {}
         self.sent = 0
         self.dropped = 0  # events pushed while someone subscribed that were never sent
-        self.socket = self.reactor.context.socket(zmq.XPUB)
-        self.socket.setsockopt(zmq.LINGER, 0)
-        self.socket.setsockopt(zmq.SNDHWM, HWM)
+        self._too_large: set[str] = set()  # types with an event too large to send (said once)
+        context = self.reactor.context
+        self.max_frame = sockets.policy(context).max_message_size
+        self.socket = sockets.connecting_socket(context, zmq.XPUB)
+        # A turn's events leave in a burst of frames (100,000 small events: about 30), which the
+        # socket must hold until the channel reads them: room for a full queue of batches
+        # (QUEUE_BYTES), more only when the supplier's own events are larger than a batch.
+        burst = QUEUE_BYTES // MAX_BATCH_BYTES
+        self.socket.setsockopt(zmq.SNDHWM, min(HWM, max(burst, sockets.queue_limit(context))))
         self.socket.setsockopt(zmq.XPUB_VERBOSER, 1)
         # At the high-water mark an XPUB drops silently; with NODROP a non-blocking send fails
         # instead, so that the supplier counts what it drops. It never blocks either way.
         self.socket.setsockopt(zmq.XPUB_NODROP, 1)
-        self.socket.connect(channel.endpoints(self.reactor.context)[0])
+        # No queue for a connection that is down: the channel's subscriptions end with it, and
+        # what is pushed meanwhile is counted as dropped, not sent into the void.
+        self.socket.setsockopt(zmq.IMMEDIATE, 1)
+        self._connected = False
+        self._lost: set[bytes] = set()  # the subscriptions when the channel went away
+        resolve = channel.resolve
+        self.link = ChannelLink(
+            self.reactor,
+            self.socket,
+            channel.endpoints(context)[0],
+            None if resolve is None else lambda: resolve().endpoints(context)[0],
+            self._connection_changed,
+        )
         self.reactor.call_soon(self.reactor.register, self.socket, self._subscription_changed)
 
     def _topic(self, type_name: str) -> _Topic:
@@ -336,12 +225,19 @@ class StructuredPushSupplier:
         t = self._topics.get(type_name) or self._topic(type_name)
         seq = next(t.seq)
         if not (t.subscribed if t.generation == self._generation else self._subscribed(t)):
+            if not self._connected and any(t.frame.startswith(p) for p in self._lost):
+                with self._lock:  # subscribed when the channel went away: lost
+                    self.dropped += 1
+                return True
             return False
         now = clock.current().time_ns()  # log time under --clock log, else the wall clock
         type_hash = payload._type_hash
         stamp_ns = now if stamp is None else int(stamp * 1e9)
         packed, framed = self._encode(t, type_hash, (seq, stamp_ns, now), payload)
         size = len(framed or packed)
+        if (size if framed else size + _BATCH.size) > self.max_frame:
+            self._refuse_large(type_name, size)
+            return True
         with self._lock:
             if self._queued >= QUEUE_EVENTS or self._queued_bytes + size > QUEUE_BYTES:
                 self.dropped += 1
@@ -438,15 +334,43 @@ class StructuredPushSupplier:
 
     def _send_frame(self, frame: bytes, body: bytes) -> bool:
         """Send a topic frame and a batch frame (large ones without a copy); False at the
-        high-water mark."""
+        high-water mark, or when the channel is gone (nobody to send to: the events are lost)."""
+        if not self._connected:
+            return False
         try:
             self.socket.send_multipart([frame, body], zmq.NOBLOCK, copy=len(body) < LARGE_EVENT)
         except zmq.Again:
             return False
         return True
 
+    def _refuse_large(self, type_name: str, size: int) -> None:
+        with self._lock:
+            self.dropped += 1
+        if type_name not in self._too_large and len(self._too_large) < 1000:
+            self._too_large.add(type_name)
+            _log.warning(
+                "dropped a %s event of %d bytes: more than the maximum message size "
+                "(%d; --max-message-size)",
+                type_name,
+                size,
+                self.max_frame,
+            )
+
+    def _connection_changed(self, up: bool) -> None:
+        """The connection to the channel came up or went down (reactor thread)."""
+        if up:
+            self._lost = set()
+        else:
+            self._lost = set(self._subscriptions)
+            _log.notice("lost the event channel %s; looking for it", self.channel.name)
+        self._connected = up
+
     def _subscription_changed(self) -> None:
+        # A lost connection's subscriptions end with unsubscriptions that ZeroMQ queues after
+        # its monitor event: read that event first, so that `_lost` still holds them.
+        self.link.read_events()
         changed = False
+        subs = self._subscriptions
         while True:
             try:
                 msg = self.socket.recv(zmq.NOBLOCK)
@@ -454,18 +378,20 @@ class StructuredPushSupplier:
                 break
             if not msg:
                 continue
-            prefix = msg[1:]
-            n = self._subscriptions.get(prefix, 0) + (1 if msg[0] == 1 else -1)
+            prefix = msg[1 : MAX_PREFIX + 1]  # a longer prefix matches no fewer topics
+            if prefix not in subs and len(subs) >= MAX_SUBSCRIPTIONS:
+                prefix = b""  # too many to track: send every topic (the channel filters)
+            n = subs.get(prefix, 0) + (1 if msg[0] == 1 else -1)
             if n > 0:
-                self._subscriptions[prefix] = n
+                subs[prefix] = n
             else:
-                self._subscriptions.pop(prefix, None)
+                subs.pop(prefix, None)
             changed = True
         if changed:
             self._generation += 1  # after the change, so a reader never keeps a stale answer
 
     def close(self) -> None:
-        _close_on(self.reactor, self.socket)
+        self.link.close_socket()
 
 
 # ---- consumers ------------------------------------------------------------------------------
@@ -473,25 +399,52 @@ class StructuredPushSupplier:
 
 class StructuredPushConsumer:
     """Receives the events it subscribes to. Subclass it and override
-    `push_structured_event(event)`; it runs on the reactor thread, so it must not block."""
+    `push_structured_event(event)`; it runs on the reactor thread, so it must not block.
 
-    def __init__(self, channel: EventChannel) -> None:
+    Events wait for the handler in a queue kept as `depth` says (transport.event_queue): the
+    newest 10 per topic by default, as ROS 2 keeps them; `latest_only` keeps the newest one;
+    `depth=KEEP_ALL` keeps everything up to the queue's byte limit. `missed` counts events lost
+    on the way (sequence gaps), `dropped` those this consumer skipped because its handler fell
+    behind, `lag` how old (seconds since it was pushed) the last event delivered was."""
+
+    def __init__(
+        self, channel: EventChannel, *, depth: int = DEFAULT_DEPTH, latest_only: bool = False
+    ) -> None:
         self.channel = channel
         self.reactor = channel.reactor
-        self.socket = self.reactor.context.socket(zmq.SUB)
-        self.socket.setsockopt(zmq.LINGER, 0)
-        self.socket.setsockopt(zmq.RCVHWM, HWM)
-        self.socket.connect(channel.endpoints(self.reactor.context)[1])
+        self.queue = EventQueue(depth, latest_only)
+        context = self.reactor.context
+        self.socket = sockets.connecting_socket(context, zmq.SUB)
+        self.socket.setsockopt(zmq.RCVHWM, min(HWM, sockets.queue_limit(context)))
+        resolve = channel.resolve
+        self.link = ChannelLink(
+            self.reactor,
+            self.socket,
+            channel.endpoints(context)[1],
+            None if resolve is None else lambda: resolve().endpoints(context)[1],
+            lambda up: None,
+        )
         self._filters: list[tuple[str, str]] = []
         self._prefixes: set[bytes] = set()
-        self._next_seq: dict[tuple[int, str], int] = {}  # per (supplier, type name)
+        self._gaps = GapCounter()  # per (supplier, type name), bounded
         self._topics: dict[bytes, tuple[str, str, bool]] = {}
         self._classes: dict[bytes, type[Any]] = {}
         self._unknown: set[tuple[str, str]] = set()
+        self._scheduled = False
         self.received = 0
-        self.missed = 0  # events lost between suppliers and this consumer
         self.undecodable = 0  # events whose type hash matches no imported generated type
+        self.lag = 0.0  # seconds between the push and the delivery of the last event delivered
         self.reactor.call_soon(self.reactor.register, self.socket, self._readable)
+
+    @property
+    def missed(self) -> int:
+        """Events lost between their suppliers and this consumer (sequence gaps)."""
+        return self._gaps.missed
+
+    @property
+    def dropped(self) -> int:
+        """Events received but skipped: the handler fell behind (depth, latest-only)."""
+        return self.queue.dropped
 
     def set_subscriptions(self, subscriptions: Iterable[tuple[str, str]]) -> None:
         """Receive the events of these (domain, type) pairs, `*` for any; replaces the last."""
@@ -516,33 +469,55 @@ class StructuredPushConsumer:
         return any((d in (ANY, domain)) and (t in (ANY, type_name)) for d, t in self._filters)
 
     def _readable(self) -> None:
-        recv, deliver = self.socket.recv_multipart, self.push_structured_event
-        reactor = self.reactor
-        delivered = 0
-        while delivered < TURN_EVENTS:  # the poller reports the rest in the next turn
+        """Take every frame waiting (so that the queue, not ZeroMQ, decides what waits), then
+        deliver a turn's worth of events."""
+        recv, queue = self.socket.recv_multipart, self.queue
+        for _ in range(TURN_FRAMES):
             try:
-                parts = recv(zmq.NOBLOCK, copy=False)  # payloads are decoded in place
+                parts = recv(zmq.NOBLOCK, copy=False)  # large payloads are decoded in place
             except zmq.Again:
-                return
-            delivered += 1  # a frame counts, even one that is dropped
+                break
             try:
-                events = self._parse(parts)
+                self._parse(parts)
             except (ValueError, StructError, UnicodeDecodeError) as e:
                 _log.warning("dropped an event frame on %s: %s", self.channel.name, e)
+        else:
+            self._schedule()  # more frames may wait: read them next turn
+        if len(queue):
+            self._deliver()
+
+    def _schedule(self) -> None:
+        if not self._scheduled:
+            self._scheduled = True
+            self.reactor.call_soon(self._resume)
+
+    def _resume(self) -> None:
+        self._scheduled = False
+        self._readable()
+
+    def _deliver(self) -> None:
+        deliver, queue, reactor = self.push_structured_event, self.queue, self.reactor
+        pop = queue.pop
+        n = 0
+        while n < TURN_EVENTS and not reactor.stopping:
+            w = pop()
+            if w is None:
+                break
+            event = w.event
+            try:
+                event.payload = w.cls.deserialize(event.payload)
+            except Exception as e:  # MARSHAL: a corrupt payload is reported, not delivered
+                _log.warning("dropped an undecodable %s event: %s", event.type_name, e)
                 continue
-            n = 0
-            for event in events:
-                if reactor.stopping:  # a slow consumer's backlog must not delay the shutdown
-                    break
-                try:
-                    deliver(event)
-                except Exception:
-                    _log.exception("push_structured_event failed on %s", event.type_name)
-                n += 1
-            self.received += n
-            delivered += n
-            if n < len(events):
-                return
+            n += 1
+            self.lag = time.time() - event.publish_time
+            try:
+                deliver(event)
+            except Exception:
+                _log.exception("push_structured_event failed on %s", event.type_name)
+        self.received += n
+        if len(queue) and not reactor.stopping:
+            self._schedule()  # the rest next turn: other handlers get theirs meanwhile
 
     def _topic(self, head: bytes) -> tuple[str, str, bool]:
         """(domain, type name, whether subscribed) of a topic frame."""
@@ -566,7 +541,7 @@ class StructuredPushConsumer:
             cls = type_for_hash(type_hash)
             if cls is not None:
                 self._classes[raw_hash] = cls
-            elif (type_name, type_hash) not in self._unknown:
+            elif (type_name, type_hash) not in self._unknown and len(self._unknown) < 1000:
                 self._unknown.add((type_name, type_hash))
                 _log.warning(
                     "events %s/%s have type hash %s, which no imported generated type has: "
@@ -577,65 +552,60 @@ class StructuredPushConsumer:
                 )
         return cls
 
-    def _parse(self, parts: list[zmq.Frame]) -> list[StructuredEvent]:
-        """The events of one message, decoded; raises if the frame does not parse (then none
-        of its events count, and the sequence numbers stay as they were)."""
+    def _parse(self, parts: list[zmq.Frame]) -> None:
+        """Queue the events of one message; raises if the frame does not parse (then none of
+        its events count, and the sequence numbers stay as they were)."""
         if len(parts) != 2:
             raise ValueError(f"{len(parts)} frames, expected 2")
         head, body = parts[0].bytes, parts[1].buffer  # the body is not copied
         domain, type_name, wanted = self._topic(head)
         if not wanted:
-            return []
+            return
         version, _, count, supplier, raw_hash = _BATCH.unpack_from(body)
         if version != EVENT_VERSION:
             raise ValueError(f"event version {version} is not supported")
         cls = self._class(raw_hash, domain, type_name)
-        deserialize = None if cls is None else cls.deserialize
         type_hash = raw_hash.hex()
-        key = (supplier, type_name)
-        expected = self._next_seq.get(key)
+        expected = self._gaps.expected(supplier, type_name)
+        first = expected
         missed = 0
         unpack, size, at = _EVENT.unpack_from, len(body), _BATCH.size
-        out = []
-        for _ in range(count):
+        topic_key = (domain, type_name)
+        waiting = []
+        keep_from = count - 1 if self.queue.latest_only else 0  # latest-only: only the last
+        for i in range(count):
             seq, stamp_ns, publish_ns, n = unpack(body, at)
             at += _EVENT_SIZE
             if at + n > size:
                 raise ValueError("event payload is truncated")
-            if expected is not None and seq > expected:
-                missed += seq - expected
+            missed += gap(expected, seq)
             expected = seq + 1
-            if deserialize is None:
-                at += n
-                continue
-            try:
-                payload = deserialize(body[at : at + n])
-            except Exception as e:  # MARSHAL: a corrupt payload is reported, not delivered
-                _log.warning("dropped an undecodable %s event: %s", type_name, e)
-                at += n
-                continue
-            at += n
-            out.append(
-                StructuredEvent(
+            if cls is not None and i >= keep_from:
+                # Decoded when delivered; a small payload is copied out, so that a batch's
+                # frame is not kept for one event that waits.
+                data = body[at : at + n] if n >= LARGE_EVENT else bytes(body[at : at + n])
+                event = StructuredEvent(
                     domain,
                     type_name,
-                    payload,
+                    data,
                     seq,
                     stamp_ns / 1e9,
                     publish_ns / 1e9,
                     supplier,
                     type_hash,
                 )
-            )
+                waiting.append(Waiting(topic_key, event, cls, n))
+            at += n
         if at != size:
             raise ValueError("trailing bytes after the events")
         # Only a frame that parses to its end moves the sequence numbers.
-        if expected is not None:
-            self._next_seq[key] = expected
-        self.missed += missed
-        if deserialize is None:
+        if expected is not None and expected != first:
+            self._gaps.advance(supplier, type_name, expected, missed)
+        if cls is None:
             self.undecodable += count
-        return out
+        elif waiting:
+            self.queue.dropped += keep_from
+            self.queue.add(topic_key, waiting)
 
     def close(self) -> None:
-        _close_on(self.reactor, self.socket)
+        self.link.close_socket()

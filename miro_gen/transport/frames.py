@@ -94,6 +94,9 @@ def decode_request(frame: bytes) -> Request:
 
 _targets: dict[bytes, tuple[bytes, str]] = {}  # request tails seen, decoded (a few per object)
 MAX_TARGETS: Final = 4096
+# Only short tails are remembered: real keys and operation names are a few dozen bytes, and a
+# peer's made-up 64 KB names must not fill the table with gigabytes (4096 x 128 KB).
+MAX_TARGET_BYTES: Final = 256
 
 
 def _target(tail: bytes) -> tuple[bytes, str]:
@@ -108,9 +111,10 @@ def _target(tail: bytes) -> tuple[bytes, str]:
     if len(key) != n_key or len(op_bytes) != n_op or at + n_op != len(tail):
         raise FrameError("request header is truncated or has trailing bytes")
     target = key, op_bytes.decode("utf-8")
-    if len(_targets) >= MAX_TARGETS:  # many objects, or someone making up keys: start again
-        _targets.clear()
-    _targets[tail] = target
+    if len(tail) <= MAX_TARGET_BYTES:
+        if len(_targets) >= MAX_TARGETS:  # many objects, or someone making up keys: start again
+            _targets.clear()
+        _targets[tail] = target
     return target
 
 

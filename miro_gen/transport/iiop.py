@@ -79,6 +79,15 @@ class CorbaSide:
         with self._lock:
             self._names.append(entry.name)
 
+    def unbind(self, full: str) -> None:
+        """Unbind a name bound here from the CORBA naming service."""
+        assert self.naming is not None
+        with self._lock:
+            if full not in self._names:
+                return
+            self._names.remove(full)
+        self.naming.unbind(full)
+
     def stub(self, entry: Any, cls: type[rpc.StubT]) -> rpc.StubT:
         ref = getattr(entry, "ref", None) or ObjectRef(entry.repo_id, entry.endpoint, entry.key)
         return cls(ref, self.iiop)

@@ -14,7 +14,9 @@ and never replayed (PITFALLS.md, ZeroMQ):
 
 A call is a send and a blocking receive with a time limit (checking the monitor every
 `CHECK_INTERVAL` while the reply is late); request headers are built once per object and
-operation.
+operation. Sockets come from `transport.sockets` (limits, heartbeats, CURVE): a request larger
+than the maximum message size is MARSHAL before anything is sent, and a server that refuses
+the handshake (no key, another key, too many connections) is TRANSIENT at once.
 """
 
 from __future__ import annotations
@@ -29,17 +31,15 @@ from typing import Any
 import zmq
 from zmq.backend import Socket as _Socket
 
-from miro_gen.exceptions import COMM_FAILURE, TIMEOUT, TRANSIENT, CompletionStatus
+from miro_gen.exceptions import COMM_FAILURE, MARSHAL, TIMEOUT, TRANSIENT, CompletionStatus
 from miro_gen.log import logger
 from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.runtime.rpc import Reply, ReplyStatus, Servant
-from miro_gen.transport import frames
+from miro_gen.transport import frames, sockets
 
 _log = logger("MIRO")
 
 CONNECT_TIMEOUT = 2.0  # seconds a call waits for a connection before TRANSIENT
-HEARTBEAT_IVL_MS = 500
-HEARTBEAT_TIMEOUT_MS = 2000
 CHECK_INTERVAL_MS = 250  # while waiting for a reply, how often to look for a lost connection
 MAX_TAILS = 4096  # request header tails kept (objects x operations); then start again
 
@@ -49,7 +49,18 @@ _MORE = int(zmq.SNDMORE) | _NOBLOCK
 _RCVTIMEO = int(zmq.RCVTIMEO)
 _CONNECTED = int(zmq.EVENT_HANDSHAKE_SUCCEEDED)
 _REFUSED = int(zmq.EVENT_CONNECT_RETRIED)  # before a first connection: nobody listens there
+_DENIED = int(  # the server would not have us: no key, another key, too many connections
+    zmq.EVENT_HANDSHAKE_FAILED_AUTH
+    | zmq.EVENT_HANDSHAKE_FAILED_PROTOCOL
+    | zmq.EVENT_HANDSHAKE_FAILED_NO_DETAIL
+)
 _LOST = int(zmq.EVENT_DISCONNECTED | zmq.EVENT_CLOSED)
+# Once connected, only events that come once per connection: a monitor nobody reads (the
+# socket of a thread that made one call long ago) must not fill up, or libzmq's I/O thread
+# blocks sending to it; reconnecting to a dead server gives an event every RECONNECT_IVL.
+_CONNECTED_EVENTS = int(zmq.EVENT_HANDSHAKE_SUCCEEDED | zmq.EVENT_DISCONNECTED)
+_RECONNECT_STOP = 109  # libzmq 4.3's ZMQ_RECONNECT_STOP (a draft name in pyzmq)
+_STOP_AFTER_HANDSHAKE_FAILED = 2  # ZMQ_RECONNECT_STOP_HANDSHAKE_FAILED
 _EVENT = struct.Struct("=HI")  # a monitor message's first frame: event, value
 _OK = ReplyStatus.OK
 
@@ -59,20 +70,20 @@ class _Connection:
 
     def __init__(self, context: zmq.Context[Any], endpoint: str) -> None:
         self.endpoint = endpoint
-        self.socket = context.socket(zmq.DEALER)
+        self.socket = sockets.connecting_socket(context, zmq.DEALER)
         s = self.socket
-        s.setsockopt(zmq.LINGER, 0)
         s.setsockopt(zmq.IMMEDIATE, 1)
-        s.setsockopt(zmq.HEARTBEAT_IVL, HEARTBEAT_IVL_MS)
-        s.setsockopt(zmq.HEARTBEAT_TIMEOUT, HEARTBEAT_TIMEOUT_MS)
-        s.setsockopt(zmq.HEARTBEAT_TTL, HEARTBEAT_TIMEOUT_MS)
         s.setsockopt(zmq.RECONNECT_IVL, 100)
+        s.setsockopt(zmq.RECONNECT_IVL_MAX, 2000)
+        with contextlib.suppress(zmq.ZMQError):  # denied (no key, the cap): do not retry
+            s.setsockopt(_RECONNECT_STOP, _STOP_AFTER_HANDSHAKE_FAILED)
         s.setsockopt(zmq.RCVTIMEO, CHECK_INTERVAL_MS)
         self.rcvtimeo = CHECK_INTERVAL_MS
-        self.monitor = s.get_monitor_socket(_CONNECTED | _REFUSED | _LOST)
+        self.monitor = sockets.monitor(s, _CONNECTED | _REFUSED | _DENIED | _LOST)
         s.connect(endpoint)
         self.connected = False
         self.refused = False
+        self.denied = False
         self.lost = False
 
     def read_monitor(self) -> None:
@@ -84,11 +95,22 @@ class _Connection:
             except struct.error:  # pragma: no cover - libzmq sends well-formed events
                 continue
             if event == _CONNECTED:
-                self.connected = True
+                if not self.connected:
+                    self.connected = True
+                    self._calm_monitor()
+            elif event & _DENIED and not self.connected:
+                self.denied = self.refused = True
             elif event == _REFUSED and not self.connected:
                 self.refused = True
             elif event & _LOST and self.connected:
                 self.lost = True
+
+    def _calm_monitor(self) -> None:
+        """Connected: from now on, only the events that come once per connection."""
+        with contextlib.suppress(zmq.ZMQError):
+            self.socket.disable_monitor()
+        self.monitor.close(0)
+        self.monitor = sockets.monitor(self.socket, _CONNECTED_EVENTS)
 
     def wait_connected(self, deadline: float) -> bool:
         while not self.connected and not self.refused:
@@ -141,6 +163,13 @@ class ZmqInvoker:
             raise TRANSIENT("the invoker is closed")
         if not endpoint:
             raise TRANSIENT("the object reference has no endpoint (nil reference?)")
+        limit = sockets.policy(self.context).max_message_size
+        if len(body) > limit:  # the server would drop the connection: say why instead
+            raise MARSHAL(
+                f"{operation}: the request is {len(body)} bytes, more than the maximum message "
+                f"size ({limit}; --max-message-size)",
+                completed=CompletionStatus.NO,
+            )
         wait = timeout if timeout is not None and timeout > 0 else 0.0
         start = time.monotonic()
         try:
@@ -174,6 +203,11 @@ class ZmqInvoker:
         TRANSIENT (completed NO: nothing was sent) when it is refused or does not come."""
         if not conn.wait_connected(min(deadline, time.monotonic() + CONNECT_TIMEOUT)):
             self._drop(conn)
+            if conn.denied:
+                raise TRANSIENT(
+                    f"{conn.endpoint} refused the connection for {operation}: it needs the "
+                    "robot's or fleet's key (--keys), or has too many connections"
+                )
             why = "connection refused" if conn.refused else "no connection in time"
             raise TRANSIENT(f"cannot reach {conn.endpoint} for {operation}: {why}")
 

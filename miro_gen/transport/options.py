@@ -18,6 +18,12 @@ takes what it knows and leaves the service's own ones. The contract (DESIGN.md, 
 * `-MCF FILE` / `-MiroConfigFile FILE`: the run-time parameter document;
 * `--host HOST` (env `MIRO_HOST`): the address other machines reach this process at; by default
   the one towards the naming service (see `miro_gen.transport.addresses`, docs/PROTOCOL.md);
+* `--bind ADDR|IFACE` (env `MIRO_BIND`): the interface a server listens on instead of every
+  interface (`0.0.0.0`) when other hosts must reach it;
+* `--keys FILE` (env `MIRO_KEYS`): the robot's or fleet's CURVE key (`miro keys new`);
+  `--insecure`: no CURVE even beyond loopback (docs/SECURITY.md);
+* `--max-message-size BYTES` (env `MIRO_MAX_MESSAGE_SIZE`; suffixes K, M, G): the largest
+  message a socket accepts (default 8M, like omniORB's `giopMaxMsgSize`);
 * `--clock wall|log|log:CHANNEL`: the time `miro_gen.clock.now()` and reactor timers follow:
   wall time (default), or the clock of a log player (`miro log play`), published on the
   channel `LogClock` (or CHANNEL); see docs/LOGS.md.
@@ -63,6 +69,10 @@ class CommonOptions:
     config_file: str | None = None
     host: str | None = None
     clock: str = "wall"  # or "log" (the channel LogClock), or "log:CHANNEL"
+    bind: str | None = None  # --bind: the interface to listen on
+    keys: str | None = None  # --keys: the CURVE key file
+    insecure: bool = False  # --insecure: no CURVE, whatever is bound
+    max_message_size: int | None = None  # --max-message-size, bytes
     naming_url: str | None = None  # the naming service's CORBA URL, when one was given
     iiop_endpoint: str | None = None  # HOST:PORT to serve IIOP on (--iiop-endpoint)
     ignored: list[str] = field(default_factory=list)  # -ORB options given, for the notice
@@ -138,6 +148,10 @@ def parse_common_options(
         _naming(opts, env["MIRO_NAMING"])
     if env.get("MIRO_HOST"):
         opts.host = env["MIRO_HOST"]
+    opts.bind = env.get("MIRO_BIND") or None
+    opts.keys = env.get("MIRO_KEYS") or None
+    if env.get("MIRO_MAX_MESSAGE_SIZE"):
+        opts.max_message_size = byte_size(env["MIRO_MAX_MESSAGE_SIZE"], "MIRO_MAX_MESSAGE_SIZE")
     rest: list[str] = []
     args = list(argv)
     i = 0
@@ -157,6 +171,16 @@ def parse_common_options(
             break
         if name == "--clock":
             opts.clock = _clock(inline if eq else value(name))
+        elif name in ("--bind", "--keys", "--max-message-size"):
+            text = inline if eq else value(name)
+            if name == "--bind":
+                opts.bind = text
+            elif name == "--keys":
+                opts.keys = text
+            else:
+                opts.max_message_size = byte_size(text, name)
+        elif arg == "--insecure":
+            opts.insecure = True
         elif name == "--iiop-endpoint" or arg in ("-ORBEndpoint", "-ORBendPoint"):
             text = inline if eq else value(arg if arg.startswith("-ORB") else name)
             opts.iiop_endpoint = iiop_endpoint(text, name)
@@ -198,6 +222,19 @@ def parse_common_options(
             rest.append(arg)
         i += 1
     return opts, rest
+
+
+def byte_size(text: str, option: str) -> int:
+    """A number of bytes: `8388608`, `8M`, `512K`, `1G` (powers of 1024)."""
+    t = text.strip().upper().removesuffix("B").removesuffix("I")
+    scale = {"K": 1 << 10, "M": 1 << 20, "G": 1 << 30}.get(t[-1:], 1)
+    try:
+        n = int(t[:-1] if scale > 1 else t) * scale
+    except ValueError:
+        n = 0
+    if not 1024 <= n <= 1 << 31:
+        raise UsageError(f"{option} takes a size from 1K to 2G (such as 8M), not {text!r}")
+    return n
 
 
 def _clock(text: str) -> str:

@@ -181,6 +181,11 @@ class Reactor:
         self._wake()
 
     @property
+    def closed(self) -> bool:
+        """Whether `close()` has been called: nothing runs on this reactor any more."""
+        return self._closed
+
+    @property
     def stopping(self) -> bool:
         """Whether `run()` is to return: a handler with a long queue of work may stop early."""
         return self._stopping
@@ -191,9 +196,12 @@ class Reactor:
         open sockets would otherwise hang whoever terminates it."""
         if not self._closed:
             self._closed = True
-            for key in list(self._handlers):
-                if isinstance(key, zmq.Socket) and not key.closed:
-                    key.close(0)
+            sockets = [k for k in self._handlers if isinstance(k, zmq.Socket) and not k.closed]
+            for s in sockets:  # first stop the monitors: libzmq blocks on a closed one's events
+                with contextlib.suppress(zmq.ZMQError):
+                    s.disable_monitor()
+            for s in sockets:
+                s.close(0)
             self._handlers.clear()
             self._wake_r.close()
             self._wake_w.close()

@@ -33,6 +33,7 @@ from miro_gen import lifecycle, log
 from miro_gen.exceptions import TRANSIENT, SystemException
 from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.runtime.rpc import Servant, Stub
+from miro_gen.transport import sockets
 from miro_gen.transport.adapter import ObjectAdapter
 from miro_gen.transport.addresses import server_addresses
 from miro_gen.transport.invoker import ZmqInvoker
@@ -42,6 +43,7 @@ from miro_gen.transport.reactor import Reactor
 
 StubT = TypeVar("StubT", bound=Stub)
 RENEW_TIMEOUT = 2.0  # seconds a lease renewal may take
+RETRY_BIND = 0.2  # seconds between attempts to bind a name another owner's lease still holds
 WAIT_STEP = 0.5  # at most this many seconds between two looks for a name being waited for
 _log = log.logger("MIRO")
 
@@ -76,6 +78,7 @@ class Client:
     def __init__(self, argv: Sequence[str] | None = None, *, context: Any = None) -> None:
         self.options, self.argv = _take_options(argv)
         self.context = context if context is not None else zmq.Context.instance()
+        self._configure_sockets(None)
         self.invoker = ZmqInvoker(self.context)
         self.corba = _corba_side(self)  # the CORBA world: a CORBA naming service, IIOP
         self.naming: Any = (
@@ -135,6 +138,19 @@ class Client:
         _log.debug("%s looked up again: %s", entry.name, entry.endpoint)
         return ref
 
+    def _configure_sockets(self, binds: str | None) -> None:
+        """The limits and security of this process's sockets (transport.sockets), from its
+        options, what it binds on and where its naming service is."""
+        o = self.options
+        policy = sockets.policy_for(
+            keys=o.keys,
+            insecure=o.insecure,
+            max_message_size=o.max_message_size,
+            binds=binds,
+            talks_to=sockets.endpoint_host(o.naming),
+        )
+        sockets.configure(self.context, policy)
+
     def _unreachable(self, error: TRANSIENT) -> TRANSIENT:
         """The naming service did not answer: say so clearly when it is a CORBA one."""
         if self.corba is not None:
@@ -162,9 +178,10 @@ class Server(Client):
     ) -> None:
         super().__init__(argv, context=context)
         # Before any socket exists: a --host that is not ours is a UsageError, nothing to close.
-        self.addresses = server_addresses(self.options.naming, self.options.host)
+        self.addresses = server_addresses(self.options.naming, self.options.host, self.options.bind)
         if bind_host is not None:
             self.addresses = dataclasses.replace(self.addresses, bind=bind_host)
+        self._configure_sockets(self.addresses.bind)
         clock = None
         if self.options.clock != "wall":  # --clock log: timers and now() follow a log player
             from miro_gen.clock import LogClock, use
@@ -212,21 +229,55 @@ class Server(Client):
         return ref
 
     def bind_entry(self, entry: MiroNaming.Entry) -> None:
-        """Bind a naming entry under this server's lease (objects, event channels)."""
+        """Bind a naming entry under this server's lease (objects, event channels). A name
+        that another server holds is waited for, up to a lease (the entry of a server killed
+        without unbinding lives that long); AlreadyBound after that."""
         if self.corba is not None and self.corba.naming is not None:
             self.corba.bind(entry)  # CosNaming: no lease; unbound when the server stops
             self._unbind_if_interrupted()
             _log.notice("bound %s in the naming service", entry.name)
             return
-        try:
-            with naming_errors(self.options.naming, f"bind {entry.name}"):
-                self.naming.registry.rebind(entry, self.owner, int(self.lease * 1000))
-        except TRANSIENT as e:
-            raise self._unreachable(e) from None
+        lease_ms = int(self.lease * 1000)
+        deadline = time.monotonic() + max(self.lease, DEFAULT_LEASE) + 0.5
+        told = False
+        while True:
+            try:
+                with naming_errors(self.options.naming, f"bind {entry.name}"):
+                    self.naming.registry.rebind(entry, self.owner, lease_ms)
+                break
+            except TRANSIENT as e:
+                raise self._unreachable(e) from None
+            except MiroNaming.AlreadyBound:
+                if time.monotonic() >= deadline:
+                    raise
+                if not told:
+                    told = True
+                    _log.notice(
+                        "%s is bound by another server (one killed without unbinding?): "
+                        "waiting for its lease to end",
+                        entry.name,
+                    )
+                time.sleep(RETRY_BIND)
         with self._names_lock:
             self._names[entry.name] = entry
         self._start_renewing()
         _log.notice("bound %s in the naming service", entry.name)
+
+    def remove_from_name_service(self, name: str) -> None:
+        """Unbind `name`, bound by this server, and stop renewing it. Its object is still
+        served until deactivated (`adapter.deactivate`); another server may bind the name now
+        instead of waiting for this one's lease."""
+        full = self.naming.full_name(name)
+        if self.corba is not None and self.corba.naming is not None:
+            self.corba.unbind(full)
+            return
+        with self._names_lock:
+            self._names.pop(full, None)
+        with (
+            contextlib.suppress(MiroNaming.NotFound),
+            naming_errors(self.options.naming, f"unbind {full}"),
+        ):
+            self.naming.registry.unbind(full, self.owner)
 
     def _unbind_if_interrupted(self) -> None:
         """A server whose names live in a CORBA naming service (no leases there) unbinds them
@@ -236,7 +287,7 @@ class Server(Client):
 
     def resolve_channel(self, name: str = "EventChannel") -> Any:
         """The event channel bound as `name` (see EventChannelFactory.create_channel)."""
-        from miro_gen.transport.events import resolve_channel
+        from miro_gen.transport.channels import resolve_channel
 
         return resolve_channel(self, name)
 
@@ -272,7 +323,7 @@ class Server(Client):
             names, self._names = list(self._names), {}
         for name in names:
             with contextlib.suppress(SystemException, MiroNaming.NotFound):
-                self.naming.registry.unbind(name)
+                self.naming.registry.unbind(name, self.owner)
         for fn in reversed(self._on_shutdown):
             try:
                 fn()
@@ -296,18 +347,32 @@ class Server(Client):
             self._renewer.start()
 
     def _renew_loop(self) -> None:
+        held_elsewhere: set[str] = set()  # lost names another server holds now (said once)
         while not self._stop.wait(self.lease / 3):
+            lease_ms = int(self.lease * 1000)
+            with self._names_lock:
+                entries = dict(self._names)
             try:
-                known = self._registry_for_renewal.renew(self.owner, int(self.lease * 1000))
-                if not known:  # the naming service restarted (or we were cut off too long)
-                    self._rebind_all()
+                # The naming service says, name by name, which it does not hold for us (it
+                # restarted, a lease ran out while we were cut off): those are bound again.
+                lost = self._registry_for_renewal.renew(self.owner, list(entries), lease_ms)
+                for name in lost:
+                    with self._names_lock:  # (not one removed meanwhile)
+                        entry = self._names.get(name)
+                    if entry is None:
+                        continue
+                    try:
+                        self._registry_for_renewal.rebind(entry, self.owner, lease_ms)
+                    except MiroNaming.AlreadyBound:
+                        if name not in held_elsewhere:
+                            held_elsewhere.add(name)
+                            _log.warning(
+                                "%s is bound by another server now; it is bound again here "
+                                "when that one's lease ends",
+                                name,
+                            )
+                        continue
+                    held_elsewhere.discard(name)
+                    _log.notice("bound %s again in the naming service", name)
             except SystemException as e:
                 _log.warning("cannot renew names: %s", e)
-
-    def _rebind_all(self) -> None:
-        with self._names_lock:
-            entries = list(self._names.values())
-        for entry in entries:
-            self._registry_for_renewal.rebind(entry, self.owner, int(self.lease * 1000))
-        if entries:
-            _log.notice("bound %d names again in a restarted naming service", len(entries))

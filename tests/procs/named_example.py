@@ -1,9 +1,9 @@
 """ExampleA's servant behind the public API, for the integration tests.
 
-    python tests/procs/named_example.py [common options] [NAME]
+    python tests/procs/named_example.py [common options] [NAME ...]
 
-Binds NAME (default ExampleA) with Server.add_to_name_service, prints `READY`, and serves until
-SIGINT/SIGTERM, then unbinds. setData(a, b) with a < 0 sleeps -a seconds first (a test hook).
+Binds each NAME (default ExampleA) with Server.add_to_name_service, prints `READY`, and serves
+until SIGINT/SIGTERM, then unbinds. setData(a, b) with a < 0 sleeps -a seconds first (a test hook).
 """
 
 from __future__ import annotations
@@ -36,8 +36,8 @@ class Example(Miro__POA.Example):
 
 def main() -> None:
     server = Server(sys.argv, lease=float(__import__("os").environ.get("MIRO_TEST_LEASE", "3")))
-    name = sys.argv[1] if len(sys.argv) > 1 else "ExampleA"
-    server.add_to_name_service(Example(), name)
+    for name in sys.argv[1:] or ["ExampleA"]:
+        server.add_to_name_service(Example(), name)
     server.reactor().call_soon(lambda: print("READY", flush=True))
     server.run()
 

@@ -1,0 +1,165 @@
+"""Event channels: where suppliers and consumers of a channel connect, the process that hosts
+one (an XSUB/XPUB proxy run by libzmq in a thread), and finding one in the naming service
+(docs/PROTOCOL.md, "Event channels"). Suppliers and consumers are in transport.events.
+
+A host's sockets are listening sockets of transport.sockets (limits, CURVE, admission); its
+queues hold at most PROXY_HWM frames per peer, fewer when the largest message allowed is large
+(`sockets.queue_limit`): the queue is the host's memory, and frames may be camera images.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import MiroNaming
+import zmq
+
+from miro_gen.log import logger
+from miro_gen.transport import sockets
+from miro_gen.transport.local import bind_twin, nearest
+from miro_gen.transport.reactor import Reactor
+
+_log = logger("MIRO")
+
+CHANNEL_REPO_ID = "IDL:miro-gen/EventChannel:1.0"
+DEFAULT_CHANNEL = "EventChannel"
+# Frames a channel queues for each of its peers, at most (high-water marks are set once: libzmq
+# can stall a pipe whose mark is lowered while it carries messages).
+PROXY_HWM = 1_000
+
+
+@dataclass
+class EventChannel:
+    """Where a channel's suppliers (`supplier_endpoint`) and consumers (`consumer_endpoint`)
+    connect; `reactor` is the process's, which suppliers and consumers made from it use."""
+
+    name: str
+    supplier_endpoint: str
+    consumer_endpoint: str
+    reactor: Reactor
+    domain_name: str = ""  # the default domain of suppliers (the process's naming context)
+    _host: ChannelHost | None = field(default=None, repr=False)
+    # Looks the channel up again (in the naming service) when its host has gone: None for a
+    # channel at fixed endpoints (one hosted here, or made by hand).
+    resolve: Callable[[], EventChannel] | None = field(default=None, repr=False)
+
+    def endpoints(self, context: zmq.Context[Any]) -> tuple[str, str]:
+        """(supplier, consumer) endpoints for sockets of `context`: in the process that hosts
+        the channel, in-process ones (ZeroMQ hands frames over without copying them); on its
+        host, its ipc:// twins (miro_gen.transport.local); elsewhere the advertised ones."""
+        host = self._host
+        if host is not None and host.context is context:
+            return host.local_endpoints
+        return nearest(self.supplier_endpoint), nearest(self.consumer_endpoint)
+
+
+class ChannelHost:
+    """Runs a channel's XSUB/XPUB proxy in a thread (libzmq's, without the GIL) until closed:
+    in the process that creates the channel, or in `miro naming --channel`.
+
+    Besides its TCP endpoints it binds in-process ones, for the suppliers and consumers of its
+    own process (ZeroMQ hands their frames over without copying them), and their ipc://
+    twins, for those of other processes on its host."""
+
+    def __init__(self, context: zmq.Context[Any], bind_host: str, advertise: str) -> None:
+        self.context = context
+        self.xsub = sockets.listening_socket(context, zmq.XSUB)
+        self.xpub = sockets.listening_socket(context, zmq.XPUB)
+        hwm = min(PROXY_HWM, sockets.queue_limit(context))  # frames of up to the maximum size
+        for s in (self.xsub, self.xpub):
+            s.setsockopt(zmq.SNDHWM, hwm)
+            s.setsockopt(zmq.RCVHWM, hwm)
+        self.xpub.setsockopt(zmq.XPUB_VERBOSER, 1)  # every (un)subscription reaches suppliers
+        port_in = self.xsub.bind_to_random_port(f"tcp://{bind_host}")
+        port_out = self.xpub.bind_to_random_port(f"tcp://{bind_host}")
+        self.supplier_endpoint = f"tcp://{advertise}:{port_in}"
+        self.consumer_endpoint = f"tcp://{advertise}:{port_out}"
+        bind_twin(self.xsub, self.supplier_endpoint)
+        bind_twin(self.xpub, self.consumer_endpoint)
+        name = f"inproc://miro-channel-{os.getpid()}-{id(self)}"
+        self.local_endpoints = (f"{name}-suppliers", f"{name}-consumers")
+        self.xsub.bind(self.local_endpoints[0])
+        self.xpub.bind(self.local_endpoints[1])
+        self.control = context.socket(zmq.PAIR)
+        self.control.bind(name)
+        self._peer = context.socket(zmq.PAIR)
+        self._peer.connect(name)
+        self.thread = threading.Thread(target=self._run, name="miro-channel", daemon=True)
+        self.thread.start()
+
+    def _run(self) -> None:
+        try:
+            zmq.proxy_steerable(self.xsub, self.xpub, None, self._peer)
+        except zmq.ZMQError as e:  # the context is terminating
+            _log.debug("event channel proxy ended: %s", e)
+        finally:
+            for s in (self.xsub, self.xpub, self._peer):
+                s.close(0)
+
+    def close(self) -> None:
+        self.control.send(b"TERMINATE")
+        self.thread.join(5)
+        self.control.close(0)
+
+
+class EventChannelFactory:
+    """Creates event channels hosted by `server`'s process and bound in its naming context."""
+
+    def __init__(self, server: Any) -> None:
+        self.server = server
+        # The channels this process hosts, whichever factory created them.
+        self._channels: dict[str, EventChannel] = server.hosted_channels
+
+    def create_channel(self, name: str = DEFAULT_CHANNEL) -> EventChannel:
+        """Host a channel and bind it as `name`; the one already hosted here if there is one."""
+        full = self.server.naming.full_name(name)
+        if full in self._channels:
+            return self._channels[full]
+        # Bound and advertised like the server's objects (miro_gen.transport.addresses).
+        advertise = self.server.adapter.endpoint.split("://", 1)[1].rsplit(":", 1)[0]
+        ch_host = ChannelHost(self.server.context, self.server.addresses.bind, advertise)
+        channel = EventChannel(
+            full,
+            ch_host.supplier_endpoint,
+            ch_host.consumer_endpoint,
+            self.server.reactor(),
+            self.server.options.naming_context,
+            ch_host,
+        )
+        entry = MiroNaming.Entry(
+            full, CHANNEL_REPO_ID, ch_host.supplier_endpoint, ch_host.consumer_endpoint.encode(), ""
+        )
+        self.server.bind_entry(entry)
+        self.server.on_shutdown(ch_host.close)
+        self._channels[full] = channel
+        return channel
+
+    def find_or_create_channel(self, name: str = DEFAULT_CHANNEL) -> EventChannel:
+        """The channel bound as `name` (in this process's context, then at the root: one that
+        `miro naming --channel` or another service hosts), else one hosted here."""
+        hosted = self._channels.get(self.server.naming.full_name(name))
+        if hosted is not None:
+            return hosted
+        try:
+            return resolve_channel(self.server, name)
+        except MiroNaming.NotFound:
+            return self.create_channel(name)
+
+
+def resolve_channel(server: Any, name: str = DEFAULT_CHANNEL) -> EventChannel:
+    """The channel bound as `name` (naming rules as for objects)."""
+    entry = server.naming.resolve(name)
+    if entry.repo_id != CHANNEL_REPO_ID:
+        raise MiroNaming.NotFound(name=f"{entry.name} (bound, but not an event channel)")
+    return EventChannel(
+        entry.name,
+        entry.endpoint,
+        bytes(entry.key).decode(),
+        server.reactor(),
+        server.options.naming_context,
+        resolve=lambda: resolve_channel(server, entry.name),
+    )
