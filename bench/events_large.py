@@ -107,13 +107,16 @@ class Tally:
 def _run_consumer(tallies: dict[str, Tally], missed: Callable[[], int]) -> None:
     """REPORT: `GOT` and what arrived of each type since the last report, `|` between them."""
     print("READY", flush=True)
+    before = [0]  # the consumer's count of missed events at the last report
 
     def report(words: list[str]) -> str | None:
         if words[0] == "COUNT":  # how many so far, without a report
             return f"COUNT {sum(t.received for t in tallies.values())}"
         if words[0] != "REPORT":
             return None
-        return "GOT " + " | ".join(t.report(name, missed()) for name, t in tallies.items())
+        now = missed()  # (a running total: each report says what this run missed)
+        since, before[0] = now - before[0], now
+        return "GOT " + " | ".join(t.report(name, since) for name, t in tallies.items())
 
     _lines(report)
 
@@ -179,6 +182,7 @@ def ours_supplier(naming: str) -> None:
 
 def ours_consumer(naming: str, channel: str, types: str = "Image") -> None:
     from miro_gen import Server, StructuredEvent, StructuredPushConsumer
+    from miro_gen.transport.events import KEEP_ALL
 
     server = Server(["bench", "--naming", naming, "-MNC", "consumer"])
     tallies = {t: Tally() for t in types.split(",")}
@@ -187,7 +191,8 @@ def ours_consumer(naming: str, channel: str, types: str = "Image") -> None:
         def push_structured_event(self, event: StructuredEvent) -> None:
             tallies[event.type_name].hit(0)
 
-    consumer = Consumer(server.resolve_channel(channel))
+    # every event, as the raw baselines deliver every frame (the default keeps the newest 10)
+    consumer = Consumer(server.resolve_channel(channel), depth=KEEP_ALL)
     consumer.set_subscriptions([("*", t) for t in tallies])
     threading.Thread(target=server.run, daemon=True).start()
     _run_consumer(tallies, lambda: consumer.missed)

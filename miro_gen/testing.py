@@ -13,7 +13,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from types import TracebackType
@@ -42,15 +42,22 @@ def naming_service() -> Iterator[str]:
 
 class ServiceProcess:
     """`python -m MODULE ARGS` in `cwd` (default: the current folder, a project whose generated
-    code is in `generated/`), its output (stdout and stderr) collected line by line."""
+    code is in `generated/`), its output (stdout and stderr) collected line by line. `wrapper`
+    is a command to run it under (`["ip", "netns", "exec", "robot"]`)."""
 
-    def __init__(self, module: str, *args: str, cwd: str | Path | None = None) -> None:
+    def __init__(
+        self,
+        module: str,
+        *args: str,
+        cwd: str | Path | None = None,
+        wrapper: Sequence[str] = (),
+    ) -> None:
         self.cwd = Path(cwd or os.getcwd())
         env = dict(os.environ)
         paths = [str(self.cwd / "generated"), str(self.cwd), env.get("PYTHONPATH", "")]
         env["PYTHONPATH"] = os.pathsep.join(p for p in paths if p)
         self.proc = subprocess.Popen(
-            [sys.executable, "-u", "-m", module, *args],
+            [*wrapper, sys.executable, "-u", "-m", module, *args],
             cwd=self.cwd,
             env=env,
             stdin=subprocess.DEVNULL,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import signal
 import socket
 import subprocess
@@ -33,11 +34,31 @@ def running_examples(endpoint: str) -> list[str]:
     return found
 
 
-def test_the_demo_runs_all_four_examples_for_its_duration() -> None:
+def test_the_demo_runs_all_four_examples_until_ctrl_c() -> None:
+    """The examples' output, labelled, as they run; then one Ctrl-C stops them all and the
+    naming service last. (It waits for the output it checks instead of a duration, so that a
+    loaded machine only makes it slower.)"""
     address = naming()
-    result = run_miro(*DEMO[3:], *address, "--duration", "3", "--period", "0.5", timeout=60)
-    assert result.returncode == 0, result.stderr
-    lines = result.stdout.splitlines()
+    demo = subprocess.Popen(
+        [*DEMO, *address, "--period", "0.5"], stdout=subprocess.PIPE, text=True, env=service_env()
+    )
+    lines: list[str] = []
+    try:
+        assert demo.stdout is not None
+        deadline = time.monotonic() + 120  # only a broken demo takes this long
+        for line in demo.stdout:
+            lines.append(line.rstrip("\n"))
+            received = [x for x in lines if x.startswith("exampleD | Received ExampleEvent #")]
+            if len(received) >= 2 or time.monotonic() > deadline:
+                break
+        assert len(running_examples(address[1])) == 4
+        demo.send_signal(signal.SIGINT)
+        lines += demo.stdout.read().splitlines()
+        assert demo.wait(20) == 0
+    finally:
+        if demo.poll() is None:  # a failed assertion must not leave the demo running
+            demo.send_signal(signal.SIGINT)
+            demo.wait(20)
     assert lines[0] == f"naming   | naming service at {address[1]}"
     assert lines[1] == (
         f"naming   | see it from another terminal: miro nslist --naming {address[1]}; "
@@ -47,33 +68,22 @@ def test_the_demo_runs_all_four_examples_for_its_duration() -> None:
     assert "exampleB | The object 'ExampleA' has been found in the naming service" in lines
     assert "exampleB | Variables a and b have been set to: 0 and 10" in lines
     assert "exampleB | Retrieved variables a and b are: 1 and 11" in lines
-    assert "exampleC | ExampleEvent #0 published" in lines
+    # exampleC starts first: its first events may find no subscriber yet, and say so
+    published = [x for x in lines if re.fullmatch(r"exampleC \| ExampleEvent #\d+ published", x)]
     received = [line for line in lines if line.startswith("exampleD | Received ExampleEvent #")]
-    assert len(received) >= 2
-    assert received[0].endswith("a = 0, b = 10")
+    assert published and len(received) >= 2
+    n = int(received[0].split("#")[1].split()[0])
+    assert received[0].endswith(f"a = {n}, b = {10 + n}")
     assert lines[-1] == "naming   | stopped"
     assert not running_examples(address[1])
 
 
-def test_ctrl_c_stops_the_examples_and_the_naming_service() -> None:
-    demo = subprocess.Popen(DEMO + naming(), stdout=subprocess.PIPE, text=True, env=service_env())
-    try:
-        assert demo.stdout is not None
-        endpoint = demo.stdout.readline().rsplit(" ", 1)[1].strip()
-        deadline = time.monotonic() + 30
-        for line in demo.stdout:
-            if line.startswith("exampleD | Received") or time.monotonic() > deadline:
-                break
-        assert len(running_examples(endpoint)) == 4
-        demo.send_signal(signal.SIGINT)
-        rest = demo.stdout.read()
-        assert demo.wait(20) == 0
-        assert rest.rstrip().endswith("naming   | stopped")
-        assert not running_examples(endpoint)
-    finally:
-        if demo.poll() is None:  # a failed assertion must not leave the demo running
-            demo.send_signal(signal.SIGINT)
-            demo.wait(20)
+def test_the_demo_stops_by_itself_after_its_duration() -> None:
+    address = naming()
+    result = run_miro(*DEMO[3:], *address, "--duration", "1", timeout=60)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.splitlines()[-1] == "naming   | stopped"
+    assert not running_examples(address[1])
 
 
 def test_the_demo_listens_where_the_tools_look_when_it_can(

@@ -12,11 +12,13 @@ why.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -41,14 +43,19 @@ class Hosts:
     """Namespaces named after this test run (`miro-<pid>-<host>`) and the processes in them,
     which hold the fleet's key `key` (MIRO_KEYS)."""
 
-    def __init__(self, key: Path) -> None:
-        self.prefix = f"miro-{os.getpid()}-"
+    def __init__(self, key: Path, addresses: dict[str, str] | None = None, tag: str = "") -> None:
+        self.addresses = ADDRESSES if addresses is None else addresses
+        self.prefix = f"miro-{os.getpid()}{tag}-"
         self.created: list[str] = []
         self.procs: list[subprocess.Popen[str]] = []
         self.env = service_env(MIRO_KEYS=str(key))
 
     def ns(self, host: str) -> str:
         return self.prefix + host
+
+    def wrapper(self, host: str) -> list[str]:
+        """What runs a command in `host`'s namespace with the fleet's key."""
+        return ["ip", "netns", "exec", self.ns(host), "env", f"MIRO_KEYS={self.env['MIRO_KEYS']}"]
 
     def add(self, host: str) -> subprocess.CompletedProcess[str]:
         done = subprocess.run(
@@ -63,7 +70,7 @@ class Hosts:
         hub = self.ns("hub")
         ip("-n", hub, "link", "add", "br0", "type", "bridge")
         ip("-n", hub, "link", "set", "br0", "up")
-        for host, address in ADDRESSES.items():
+        for host, address in self.addresses.items():
             ns, port = self.ns(host), f"to-{host}"
             ip("-n", hub, "link", "add", port, "type", "veth", "peer", "name", "eth0", "netns", ns)
             ip("-n", hub, "link", "set", port, "master", "br0", "up")
@@ -71,13 +78,14 @@ class Hosts:
             ip("-n", ns, "link", "set", "eth0", "up")
             ip("-n", ns, "link", "set", "lo", "up")
 
-    def popen(self, host: str, *argv: str, stderr: Path) -> subprocess.Popen[str]:
-        """`argv` (run by this Python) in `host`'s namespace, from this checkout."""
-        with stderr.open("w") as err:
+    def popen(self, host: str, *argv: str, stderr: Path | None = None) -> subprocess.Popen[str]:
+        """`argv` (run by this Python) in `host`'s namespace, from this checkout; its output
+        (stderr to the file `stderr`, else with stdout)."""
+        with stderr.open("w") if stderr is not None else contextlib.nullcontext() as err:
             proc = subprocess.Popen(
                 ["ip", "netns", "exec", self.ns(host), sys.executable, *argv],
                 stdout=subprocess.PIPE,
-                stderr=err,
+                stderr=err if err is not None else subprocess.STDOUT,
                 text=True,
                 env=self.env,
             )
@@ -110,15 +118,17 @@ class Hosts:
             subprocess.run(["ip", "netns", "delete", ns], capture_output=True, timeout=30)
 
 
-@pytest.fixture(scope="module")
-def hosts(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Hosts]:
+def network(addresses: dict[str, str] | None = None, tag: str = "") -> Iterator[Hosts]:
+    """Namespaces for `addresses` (host -> address in 10.77.0.0/24 or another /24) joined by a
+    hub, whose processes hold a fleet key made for them (MIRO_KEYS); skips, saying why, where
+    they cannot be made."""
     if not sys.platform.startswith("linux"):
         pytest.skip("network namespaces are a Linux feature")
     if os.geteuid() != 0:
         pytest.skip("creating network namespaces (ip netns add) needs root")
     if shutil.which("ip") is None:
         pytest.skip("the ip command (iproute2) is not installed")
-    key = tmp_path_factory.mktemp("keys") / "fleet"
+    key = Path(tempfile.mkdtemp(prefix="miro-keys-")) / "fleet"
     made = subprocess.run(
         [sys.executable, "-m", "miro_gen.cli.main", "keys", "new", str(key)],
         capture_output=True,
@@ -127,9 +137,9 @@ def hosts(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Hosts]:
         timeout=60,
     )
     assert made.returncode == 0, made.stderr
-    h = Hosts(Path(str(key) + ".key_secret"))
+    h = Hosts(Path(str(key) + ".key_secret"), addresses, tag)
     try:
-        for host in ("hub", *ADDRESSES):
+        for host in ("hub", *h.addresses):
             done = h.add(host)
             if done.returncode != 0:
                 pytest.skip(
@@ -140,6 +150,12 @@ def hosts(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Hosts]:
         yield h
     finally:
         h.close()
+        shutil.rmtree(key.parent, ignore_errors=True)
+
+
+@pytest.fixture(scope="module")
+def hosts() -> Iterator[Hosts]:
+    yield from network()
 
 
 @pytest.fixture(scope="module")

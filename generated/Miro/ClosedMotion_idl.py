@@ -32,6 +32,7 @@ class ClosedMotion(_rpc.Stub):
 
     __slots__ = ()
     _repo_id = "IDL:Miro/ClosedMotion:1.0"
+    _interface_hash = "7e390112b69541520ee0ba69350f6332449c8705246efd5b1e472ac3f3ab3663"
 
     def rotateToPosition(self, angle: float) -> None:
         """Turn in place to an absolute heading.

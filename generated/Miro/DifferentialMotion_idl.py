@@ -36,6 +36,7 @@ class DifferentialMotion(_m_Miro_Motion_idl.Motion):
 
     __slots__ = ()
     _repo_id = "IDL:Miro/DifferentialMotion:1.0"
+    _interface_hash = "715d5c573719421a52a145aa067b420393183ae3aa975b58f676203a219d3039"
 
     def setLRVelocity(self, left: int, right: int) -> None:
         """Set the velocity of each wheel and start moving.

@@ -267,6 +267,7 @@ class Example(_rpc.Stub):
 
     __slots__ = ()
     _repo_id = "IDL:Miro/Example:1.0"
+    _interface_hash = "5181998559b576e87e353e1b692671b2aa48be3f589557e7d81ab9ada7f960c2"
 
     def setData(self, a: float, b: float) -> None:
         """Set the two values the server keeps."""

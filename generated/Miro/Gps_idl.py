@@ -498,6 +498,7 @@ class Gps(_rpc.Stub):
 
     __slots__ = ()
     _repo_id = "IDL:Miro/Gps:1.0"
+    _interface_hash = "f5523244ff6f3076d0960f99b669741303efd2c1f13d464827cabbfcdc5fb381"
 
     def getData(self) -> GpsDataIDL:
         """Return the latest reading.

@@ -291,6 +291,7 @@ class Camera(_rpc.Stub):
 
     __slots__ = ()
     _repo_id = "IDL:Miro/Camera:1.0"
+    _interface_hash = "0b06606a85d177c40ffb978b7f35fd39326e8fc4cb638c4741054ca36b521d04"
 
     def getFormat(self) -> ImageFormatIDL:
         """The size and layout of the images the camera delivers."""

@@ -24,3 +24,4 @@ class Imu(_m_Miro_InertialSensor_idl.InertialSensor):
 
     __slots__ = ()
     _repo_id = "IDL:Miro/Imu:1.0"
+    _interface_hash = "8a4b857f747a68a06823b56c394c5914f179caf51f946e4db5e94373b420a55e"

@@ -400,6 +400,7 @@ class InertialSensor(_rpc.Stub):
 
     __slots__ = ()
     _repo_id = "IDL:Miro/InertialSensor:1.0"
+    _interface_hash = "3a9599c57c04665a5b40c453818a9c8a8d3d1cfd345fd3ea5c0ce20fb621a2d6"
 
     def getData(self) -> InertialDataIDL:
         """Return the latest reading."""

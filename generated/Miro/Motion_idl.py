@@ -38,6 +38,7 @@ class Motion(_rpc.Stub):
 
     __slots__ = ()
     _repo_id = "IDL:Miro/Motion:1.0"
+    _interface_hash = "f979ecebb337c799e9aa23757f77ca6f5eec974ec366e266bece6c43301642b1"
 
     def limp(self) -> None:
         """Switch all drive motors off so that the base rolls freely.

@@ -35,6 +35,7 @@ class Odometry(_rpc.Stub):
 
     __slots__ = ()
     _repo_id = "IDL:Miro/Odometry:1.0"
+    _interface_hash = "4c793ad1a868ed4fbc2984dd26e998ae7bd9c2ac169f67817f9bb1440cb65e38"
 
     def setPosition(self, position: _m_Miro_Position_idl.PositionIDL) -> None:
         """Declare the robot's current pose to be the given one.

@@ -474,6 +474,7 @@ class Range3dSensor(_rpc.Stub):
 
     __slots__ = ()
     _repo_id = "IDL:Miro/Range3dSensor:1.0"
+    _interface_hash = "f99bfdddabceeb451fd894327e043541cb7564e64b2ea33d90893bfaaa017519"
 
     def getDescription(self) -> Range3dDescriptionIDL:
         """Return the properties and mounting of the sensor."""

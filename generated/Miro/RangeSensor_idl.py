@@ -65,6 +65,7 @@ class RangeSensor(_rpc.Stub):
 
     __slots__ = ()
     _repo_id = "IDL:Miro/RangeSensor:1.0"
+    _interface_hash = "d6336516053e8d71b819af926ea5fbd6442a566f02946a88f9dd712a01cd5c4c"
     INVALID_RANGE = RangeSensor_INVALID_RANGE
     HORIZON_RANGE = RangeSensor_HORIZON_RANGE
     NONE_PUSHING = RangeSensor_NONE_PUSHING

@@ -45,6 +45,7 @@ class Stall(_rpc.Stub):
 
     __slots__ = ()
     _repo_id = "IDL:Miro/Stall:1.0"
+    _interface_hash = "8b97747c03d942683d2830c814776a0c0e872fed8f3a402937e15d1dc11489ec"
     STALLED = Stall_StatusIDL.STALLED
     UNSTALLED = Stall_StatusIDL.UNSTALLED
     StatusIDL = Stall_StatusIDL

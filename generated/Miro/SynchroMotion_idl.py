@@ -32,6 +32,7 @@ class SynchroMotion(_m_Miro_Motion_idl.Motion):
 
     __slots__ = ()
     _repo_id = "IDL:Miro/SynchroMotion:1.0"
+    _interface_hash = "ad1409717c617159b59a8572e6ae7d89e803a191db25ca160d68645f451045cb"
 
     def rotateLimp(self) -> None:
         """Switch the rotation motor off; the base can then be turned by hand.

@@ -110,6 +110,7 @@ class myExample(_rpc.Stub):
 
     __slots__ = ()
     _repo_id = "IDL:Miro/myExample:1.0"
+    _interface_hash = "f8f3abd5e13e8ec90b2a5a71c7bc4ef62525ebec20617113cffffb5a9218ac27"
 
     def getString(self) -> myExampleIDL:
         """Return the string the server currently holds.

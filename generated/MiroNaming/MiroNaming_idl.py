@@ -318,6 +318,7 @@ class Registry(_rpc.Stub):
 
     __slots__ = ()
     _repo_id = "IDL:MiroNaming/Registry:1.0"
+    _interface_hash = "8e04bda82db4843215481ad4c6bd697217660d1231736a247aa2a9af5868bee7"
 
     def bind(self, binding: Entry, owner: str, lease_ms: int) -> None:
         """Bind a name that is free (or already held by the same owner).

@@ -32,6 +32,32 @@ class ClosedMotion(_rpc.Servant):
     """
 
     _repo_id = "IDL:Miro/ClosedMotion:1.0"
+    _interface_hash = "7e390112b69541520ee0ba69350f6332449c8705246efd5b1e472ac3f3ab3663"
+    _interface_schema = (
+        "module Miro {\n"
+        "  exception EOutOfBounds {\n"
+        "    string what;\n"
+        "  };\n"
+        "};\n"
+        "module Miro {\n"
+        "  exception EDevIO {\n"
+        "    string what;\n"
+        "  };\n"
+        "};\n"
+        "module Miro {\n"
+        "  interface ClosedMotion {\n"
+        "    void rotateToPosition(\n"
+        "        in double angle)\n"
+        "        raises (Miro::EOutOfBounds, Miro::EDevIO);\n"
+        "    void rotateRelative(\n"
+        "        in double angle)\n"
+        "        raises (Miro::EOutOfBounds, Miro::EDevIO);\n"
+        "    void translateRelative(\n"
+        "        in long distance)\n"
+        "        raises (Miro::EOutOfBounds, Miro::EDevIO);\n"
+        "  };\n"
+        "};\n"
+    )
 
     @_abc.abstractmethod
     def rotateToPosition(self, angle: float) -> None:

@@ -26,6 +26,21 @@ class Example(_rpc.Servant):
     """The polled interface ExampleA implements and ExampleB calls (manual section 5.1)."""
 
     _repo_id = "IDL:Miro/Example:1.0"
+    _interface_hash = "5181998559b576e87e353e1b692671b2aa48be3f589557e7d81ab9ada7f960c2"
+    _interface_schema = (
+        "module Miro {\n"
+        "  struct ExampleStructIDL {\n"
+        "    double a;\n"
+        "    double b;\n"
+        "  };\n"
+        "};\n"
+        "module Miro {\n"
+        "  interface Example {\n"
+        "    void setData(in double a, in double b);\n"
+        "    Miro::ExampleStructIDL getData();\n"
+        "  };\n"
+        "};\n"
+    )
 
     @_abc.abstractmethod
     def setData(self, a: float, b: float) -> None:

@@ -29,6 +29,24 @@ class Stall(_rpc.Servant):
     """
 
     _repo_id = "IDL:Miro/Stall:1.0"
+    _interface_hash = "8b97747c03d942683d2830c814776a0c0e872fed8f3a402937e15d1dc11489ec"
+    _interface_schema = (
+        "module Miro {\n"
+        "  exception EDevIO {\n"
+        "    string what;\n"
+        "  };\n"
+        "};\n"
+        "module Miro {\n"
+        "  interface Stall {\n"
+        "    enum StatusIDL {\n"
+        "      STALLED,\n"
+        "      UNSTALLED\n"
+        "    };\n"
+        "    boolean isStalled();\n"
+        "    void unstall() raises (Miro::EDevIO);\n"
+        "  };\n"
+        "};\n"
+    )
 
     @_abc.abstractmethod
     def isStalled(self) -> bool:

@@ -22,6 +22,20 @@ class myExample(_rpc.Servant):
     """The polled interface of the manual's ex_service module (section 9)."""
 
     _repo_id = "IDL:Miro/myExample:1.0"
+    _interface_hash = "f8f3abd5e13e8ec90b2a5a71c7bc4ef62525ebec20617113cffffb5a9218ac27"
+    _interface_schema = (
+        "module Miro {\n"
+        "  struct myExampleIDL {\n"
+        "    char Buffer[30];\n"
+        "    long cmdLength;\n"
+        "  };\n"
+        "};\n"
+        "module Miro {\n"
+        "  interface myExample {\n"
+        "    Miro::myExampleIDL getString();\n"
+        "  };\n"
+        "};\n"
+    )
 
     @_abc.abstractmethod
     def getString(self) -> _m_Miro_myExample_idl.myExampleIDL:

@@ -104,6 +104,7 @@ class Person(_rpc.Stub):
 
     __slots__ = ()
     _repo_id = "IDL:Person:1.0"
+    _interface_hash = "4a60edb5bb1585b0fa584e974c5d62635e7889045b772adea670d1ef9bb95ed0"
 
     def setTraits(self, height: float, waist: float, hair: str, age: int) -> None:
         """Set all traits of the person.

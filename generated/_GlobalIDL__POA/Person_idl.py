@@ -35,6 +35,27 @@ class Person(_rpc.Servant):
     """A person whose traits can be set and read one by one or all at once."""
 
     _repo_id = "IDL:Person:1.0"
+    _interface_hash = "4a60edb5bb1585b0fa584e974c5d62635e7889045b772adea670d1ef9bb95ed0"
+    _interface_schema = (
+        "struct PersonTraitsIDL {\n"
+        "  float height;\n"
+        "  float waist;\n"
+        "  char hair;\n"
+        "  long age;\n"
+        "};\n"
+        "interface Person {\n"
+        "  void setTraits(\n"
+        "      in float height,\n"
+        "      in float waist,\n"
+        "      in char hair,\n"
+        "      in long age);\n"
+        "  float getHeight();\n"
+        "  float getWaist();\n"
+        "  char getHair();\n"
+        "  long getAge();\n"
+        "  PersonTraitsIDL getTraits();\n"
+        "};\n"
+    )
 
     @_abc.abstractmethod
     def setTraits(self, height: float, waist: float, hair: str, age: int) -> None:

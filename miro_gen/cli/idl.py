@@ -104,7 +104,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if problem:
             diag.error(None, f"cannot read '{f}': {problem}")
     if not args.ast_json:
-        problem = checks.unusable_outdir(args.outdir)
+        problem = checks.unusable_outdir(args.outdir, writing=not args.check)
         if problem:
             diag.error(None, f"-o {args.outdir}: {problem}")
     if diag.has_errors:

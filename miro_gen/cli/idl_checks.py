@@ -22,8 +22,9 @@ def unreadable(path: str) -> str | None:
     return None
 
 
-def unusable_outdir(outdir: str) -> str | None:
-    """Why generated packages cannot go into `outdir` (a folder, made if missing), or None."""
+def unusable_outdir(outdir: str, writing: bool = True) -> str | None:
+    """Why generated packages cannot go into `outdir` (a folder, made if missing), or None.
+    Not `writing` (`--check`): only read, so a read-only tree can be checked."""
     path = os.path.abspath(outdir)
     while not os.path.exists(path):
         parent = os.path.dirname(path)
@@ -33,7 +34,7 @@ def unusable_outdir(outdir: str) -> str | None:
     if not os.path.isdir(path):
         what = "is a file" if path == os.path.abspath(outdir) else f"is inside file '{path}'"
         return f"the output folder {what}; give a folder (it is made if missing)"
-    if not os.access(path, os.W_OK | os.X_OK):
+    if writing and not os.access(path, os.W_OK | os.X_OK):
         return f"cannot write into '{path}': permission denied"
     return None
 

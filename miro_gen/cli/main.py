@@ -8,6 +8,18 @@ from collections.abc import Sequence
 
 from miro_gen.cli.common import VersionAction
 
+# The live tools: sub-command -> (module, function)
+LIVE = {
+    "call": ("miro_gen.cli.call", "call_main"),
+    "pub": ("miro_gen.cli.pub", "pub_main"),
+    "list": ("miro_gen.cli.listing", "list_main"),
+    "param": ("miro_gen.cli.param", "param_main"),
+    "build": ("miro_gen.cli.build", "build_main"),
+    "completion": ("miro_gen.cli.complete", "completion_main"),
+    "_complete": ("miro_gen.cli.complete", "complete_main"),
+    "doctor": ("miro_gen.cli.doctor", "doctor_main"),
+}
+
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
@@ -29,6 +41,28 @@ def build_parser() -> argparse.ArgumentParser:
     sub.add_parser("nslist", help="print the names bound in the naming service", add_help=False)
     sub.add_parser(
         "demo", help="run the manual's examples A to D with a naming service", add_help=False
+    )
+    sub.add_parser(
+        "launch", help="start a robot's services from a launch file (TOML)", add_help=False
+    )
+    sub.add_parser("call", help="call an operation of a running object", add_help=False)
+    sub.add_parser("pub", help="publish an event by hand", add_help=False)
+    sub.add_parser(
+        "list", help="the running services, their objects, events and parameters", add_help=False
+    )
+    sub.add_parser(
+        "param", help="get, set or dump the parameters of a running service", add_help=False
+    )
+    sub.add_parser(
+        "build", help="regenerate generated/ when IDL or parameter files changed", add_help=False
+    )
+    sub.add_parser(
+        "completion", help='shell completion: eval "$(miro completion bash)"', add_help=False
+    )
+    sub.add_parser(
+        "doctor",
+        help="which naming services are visible, and why one cannot be reached",
+        add_help=False,
     )
     sub.add_parser(
         "sim",
@@ -91,6 +125,15 @@ def dispatch(args: list[str]) -> int:
         from miro_gen.cli import keys
 
         return keys.keys_main(args[1:])
+    if args and args[0] == "launch":
+        from miro_gen.cli import launch
+
+        return launch.launch_main(args[1:])
+    if args and args[0] in LIVE:
+        import importlib
+
+        module, function = LIVE[args[0]]
+        return int(getattr(importlib.import_module(module), function)(args[1:]))
     if args and args[0] == "demo":
         from miro_gen.cli import demo
 

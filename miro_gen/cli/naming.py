@@ -100,7 +100,40 @@ def naming_main(argv: Sequence[str]) -> int:
         help=f"connections per socket (default {sockets.DEFAULT_MAX_CONNECTIONS})",
     )
     p.add_argument("-MLL", "--log-level", type=int, default=5, help="Miro log level (default 5)")
+    p.add_argument(
+        "--no-announce",
+        action="store_true",
+        help="do not announce this naming service on the network (multicast DNS), so that "
+        "processes without --naming cannot find it",
+    )
+    p.add_argument(
+        "-m",
+        dest="multicast",
+        type=int,
+        choices=(0, 1),
+        help="the manual's Naming_Service switch: -m 1 announces (the default), -m 0 does not",
+    )
+    p.add_argument(
+        "-ORBEndpoint",
+        "-ORBEndPoint",
+        dest="orb_endpoint",
+        metavar="iiop://HOST:PORT",
+        help="the manual's spelling of --endpoint",
+    )
+    p.add_argument(
+        "--list-announced",
+        action="store_true",
+        help="list the naming services announced on this network, whether each answers and "
+        "why not (as miro doctor does), and exit",
+    )
     ns = p.parse_args(argv)
+    if ns.list_announced:
+        from miro_gen.cli.doctor import doctor_main
+
+        return doctor_main([])
+    if ns.orb_endpoint:
+        ns.endpoint = _iiop_endpoint(p, ns.orb_endpoint)
+    announce = not ns.no_announce and ns.multicast != 0
     if ns.quota < 1 or ns.max_names < 1 or ns.max_connections < 1:
         p.error("--quota, --max-names and --max-connections take a number from 1 up")
     for name in ns.channel:
@@ -151,12 +184,27 @@ def naming_main(argv: Sequence[str]) -> int:
     lines = [f"naming service at {bound}{note}", *(f"event channel {n}" for n in ns.channel)]
     # Said once the reactor runs: a signal from whoever waited for these lines then stops it.
     reactor.call_soon(lambda: print("\n".join(lines), flush=True))
+    announcer = None
+    if announce and not re.search(r"://(127\.|localhost)", bound):
+        from miro_gen.transport.discovery import Announcer
+
+        announcer = Announcer(bound)
     reactor.run()
+    if announcer is not None:
+        announcer.close()
     for channel in channels:
         channel.close()
     service.close()
     reactor.close()
     return 0
+
+
+def _iiop_endpoint(p: argparse.ArgumentParser, text: str) -> str:
+    """`-ORBEndpoint iiop://HOST:PORT` (TAO's, as the manual writes it) as tcp://HOST:PORT."""
+    m = re.match(r"^iiop://(?:\d+\.\d+@)?([^:/]+):(\d+)/?$", text.strip())
+    if not m:
+        p.error(f"-ORBEndpoint takes iiop://HOST:PORT, not {text!r}")
+    return f"tcp://{m.group(1)}:{m.group(2)}"
 
 
 def _host_channel(service: NamingService, name: str) -> ChannelHost:

@@ -89,6 +89,10 @@ def run_main(argv: Sequence[str]) -> int:
     if service is None:
         print(f"miro run: {missing(name, project, folder)}", file=sys.stderr)
         return 1
+    from miro_gen.cli.freshness import before_running
+
+    if not before_running(service.root, "miro run"):  # never the old generated code
+        return 1
     prepare(service, project, rest)
     lifecycle.run_main(lambda: execute(service), f"miro run {name}")
 

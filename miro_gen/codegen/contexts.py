@@ -44,6 +44,11 @@ RUNTIME_IMPORTS = {
 # ---- items of a module -----------------------------------------------------------------------
 
 
+def schema_lines(schema: str) -> list[str]:
+    """A schema as lines that keep their newline (one string literal each)."""
+    return [line + "\n" for line in schema.split("\n")[:-1]]
+
+
 @dataclass
 class Item:
     """A generated declaration: a class, an alias or a constant at module level."""
@@ -126,8 +131,7 @@ class DataTypeContext(Item):
 
     @property
     def schema_lines(self) -> list[str]:
-        """The schema as lines that keep their newline (one string literal each)."""
-        return [line + "\n" for line in self.schema.split("\n")[:-1]]
+        return schema_lines(self.schema)
 
 
 @dataclass
@@ -238,6 +242,15 @@ class InterfaceContext(Item):
     repo_id: str
     bases: list[str]
     operations: list[OperationContext]
+    schema: str  # the interface schema (interface_schema.py); "" when it has none
+
+    @cached_property
+    def interface_hash(self) -> str:
+        return hashlib.sha256(self.schema.encode("utf-8")).hexdigest() if self.schema else ""
+
+    @property
+    def schema_lines(self) -> list[str]:
+        return schema_lines(self.schema)
 
 
 @dataclass

@@ -33,7 +33,7 @@ class _Lowering:
         self.scope = Scope(spec, source)
         hints = TypeHints(self.scope)
         self.data = DataLowering(self.scope, hints)
-        self.interfaces = InterfaceLowering(self.scope, hints)
+        self.interfaces = InterfaceLowering(self.scope, hints, spec.declarations)
         # Class attributes each container gets for what is nested in it: (name, value).
         self.nested: dict[int, list[tuple[str, str]]] = {}
 

@@ -14,6 +14,7 @@ from miro_gen.codegen.contexts import (
     StubContext,
 )
 from miro_gen.codegen.hints import TypeHints
+from miro_gen.codegen.interface_schema import NoInterfaceSchema, interface_schema
 from miro_gen.codegen.python_limits import python_bases
 from miro_gen.codegen.scope import Scope
 from miro_gen.codegen.shapes import shape_of
@@ -40,9 +41,22 @@ class _Signature:
 class InterfaceLowering:
     """Stub and skeleton contexts of interfaces, written into the module contexts passed in."""
 
-    def __init__(self, scope: Scope, hints: TypeHints) -> None:
+    def __init__(self, scope: Scope, hints: TypeHints, declarations: list[ast.Decl]) -> None:
         self.scope = scope
         self.hints = hints
+        self.declarations = declarations  # for the interface schemas
+        self._schemas: dict[int, str] = {}
+
+    def schema(self, d: ast.Interface) -> str:
+        """The interface schema of `d` ('' when it cannot have one), made once for both."""
+        text = self._schemas.get(id(d))
+        if text is None:
+            try:
+                text = interface_schema(d, self.declarations)
+            except NoInterfaceSchema:  # its service object cannot describe it to callers
+                text = ""
+            self._schemas[id(d)] = text
+        return text
 
     def stub(
         self, d: ast.Interface, m: ModuleContext, nested: list[tuple[str, str]]
@@ -58,6 +72,7 @@ class InterfaceLowering:
             repo_id=d.repo_id,
             bases=[self.scope.ref(b, m) for b in python_bases(d.bases)] or ["_rpc.Stub"],
             operations=self._operations(d, m, in_stub=True),
+            schema=self.schema(d),
             nested=nested,
         )
 
@@ -73,6 +88,7 @@ class InterfaceLowering:
             bases=[self.scope.ref(b, m, poa=True) for b in python_bases(d.bases)]
             or ["_rpc.Servant"],
             operations=self._operations(d, m, in_stub=False),
+            schema=self.schema(d),
         )
 
     def _operations(

@@ -103,23 +103,27 @@ def _scoped(decl: ast.Decl, data_scope: DataScope) -> str:
     return "::".join((*modules, name))
 
 
-def _type(t: ast.TypeSpec, data_scope: DataScope) -> str:
+def _type(t: ast.TypeSpec, data_scope: DataScope, refs: bool = False) -> str:
+    """The IDL spelling of type `t`; object references as `miro::ObjectRef` (a data schema),
+    or with `refs` as the interface they are (an interface schema)."""
     match t:
         case ast.BaseType():
-            return "::".join(OBJECT_REF) if t.name == "Object" else t.name
+            return "::".join(OBJECT_REF) if t.name == "Object" and not refs else t.name
         case ast.StringType():
             base = "wstring" if t.wide else "string"
             return f"{base}<{t.bound}>" if t.bound is not None else base
         case ast.SequenceType():
-            elem = _type(t.element, data_scope)
+            elem = _type(t.element, data_scope, refs)
             return f"sequence<{elem}, {t.bound}>" if t.bound is not None else f"sequence<{elem}>"
         case ast.NamedType() if t.decl is not None:
             decl = t.decl.resolved
-            return "::".join(OBJECT_REF) if decl.is_interface else _scoped(decl, data_scope)
+            if decl.is_interface:
+                return decl.scoped_name if refs else "::".join(OBJECT_REF)
+            return _scoped(decl, data_scope)
         case ast.FixedType():
             return f"fixed<{t.digits}, {t.scale}>"
         case ast.MapType():
-            inner = f"{_type(t.key, data_scope)}, {_type(t.value, data_scope)}"
+            inner = f"{_type(t.key, data_scope, refs)}, {_type(t.value, data_scope, refs)}"
             return f"map<{inner}, {t.bound}>" if t.bound is not None else f"map<{inner}>"
     raise TypeError(f"not a data type: {t!r}")  # pragma: no cover
 
@@ -142,11 +146,13 @@ def _label(v: ast.ConstValue, data_scope: DataScope) -> str:
     return str(v)
 
 
-def _body(decl: ast.Decl, data_scope: DataScope) -> str:
+def _body(decl: ast.Decl, data_scope: DataScope, refs: bool = False) -> str:
+    """The declaration's text. With `refs` (an interface schema), object references keep
+    their interfaces and exceptions stay exceptions."""
     name = _place(decl, data_scope)[1]
     match decl:
         case ast.Typedef():
-            return f"typedef {_type(decl.type, data_scope)} {name}{_dims(decl.dims)};"
+            return f"typedef {_type(decl.type, data_scope, refs)} {name}{_dims(decl.dims)};"
         case ast.Enum():
             body = ",\n".join(f"  {e.name}" for e in decl.enumerators)
             return f"enum {name} {{\n{body}\n}};"
@@ -155,15 +161,17 @@ def _body(decl: ast.Decl, data_scope: DataScope) -> str:
             if isinstance(decl, ast.Struct) and decl.base is not None:
                 base = f" : {_scoped(decl.base.resolved, data_scope)}"
             lines = [
-                f"  {_type(m.type, data_scope)} {m.name}{_dims(m.dims)};" for m in decl.members
+                f"  {_type(m.type, data_scope, refs)} {m.name}{_dims(m.dims)};"
+                for m in decl.members
             ]
-            return f"struct {name}{base} {{\n" + "\n".join(lines) + ("\n" if lines else "") + "};"
+            word = "exception" if refs and isinstance(decl, ast.Exception_) else "struct"
+            return f"{word} {name}{base} {{\n" + "\n".join(lines) + ("\n" if lines else "") + "};"
         case ast.Union_():
             lines = [f"union {name} switch ({_type(decl.switch_type, data_scope)}) {{"]
             for c in decl.cases:
                 for v in c.labels:
                     lines.append("  default:" if v is None else f"  case {_label(v, data_scope)}:")
-                lines.append(f"    {_type(c.type, data_scope)} {c.name}{_dims(c.dims)};")
+                lines.append(f"    {_type(c.type, data_scope, refs)} {c.name}{_dims(c.dims)};")
             lines.append("};")
             return "\n".join(lines)
     raise TypeError(f"not a data type: {decl!r}")  # pragma: no cover

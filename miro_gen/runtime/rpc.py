@@ -136,6 +136,7 @@ class Stub:
     __slots__ = ("_invoker", "_rebind", "_ref", "_timeout")
 
     _repo_id: ClassVar[str] = "IDL:omg.org/CORBA/Object:1.0"
+    _interface_hash: ClassVar[str] = ""  # SHA-256 of the interface schema (see Servant)
 
     def __init__(self, ref: ObjectRef, invoker: Invoker, timeout: float | None = None) -> None:
         self._ref = ref
@@ -292,6 +293,10 @@ class Servant(ABC):  # noqa: B024 - generated subclasses declare the abstract me
 
     _repo_id: ClassVar[str] = "IDL:omg.org/CORBA/Object:1.0"
     _dispatch: ClassVar[dict[str, Dispatcher]] = {}
+    # The interface's self-contained IDL (docs/CODEGEN.md), which the process's service object
+    # gives callers without generated code, and its SHA-256; empty for hand-written servants.
+    _interface_schema: ClassVar[str] = ""
+    _interface_hash: ClassVar[str] = ""
 
     def _invoke(self, operation: str, body: bytes, invoker: Invoker) -> Reply:
         """Run one request: a reply, whatever the implementation did or raised."""

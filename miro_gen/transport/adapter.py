@@ -98,6 +98,11 @@ class ObjectAdapter:
         with self._lock:
             self._servants.pop(key, None)
 
+    def servants(self) -> list[tuple[bytes, Servant]]:
+        """(key, servant) of every object served here."""
+        with self._lock:
+            return list(self._servants.items())
+
     def reference_for(self, servant: Servant) -> ObjectRef:
         """The reference of a servant, activating it on first use."""
         with self._lock:

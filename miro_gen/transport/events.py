@@ -39,7 +39,7 @@ import zmq
 from miro_gen import clock
 from miro_gen.log import logger
 from miro_gen.runtime.cdr import encode_after, type_for_hash
-from miro_gen.transport import sockets
+from miro_gen.transport import offers, sockets
 from miro_gen.transport.channel_link import ChannelLink
 from miro_gen.transport.channels import (  # the channels' names, importable from here as before
     CHANNEL_REPO_ID as CHANNEL_REPO_ID,
@@ -170,6 +170,7 @@ class StructuredPushSupplier:
         self._subscriptions: dict[bytes, int] = {}
         self._generation = 0  # bumped whenever _subscriptions changes
         self._raw_hashes: dict[str, bytes] = {}
+        self._offered: dict[str, str] = {}  # type name -> payload type hash, as described
         self.sent = 0
         self.dropped = 0  # events pushed while someone subscribed that were never sent
         self._too_large: set[str] = set()  # types with an event too large to send (said once)
@@ -223,6 +224,10 @@ class StructuredPushSupplier:
         subscribes (nothing is encoded then). `stamp`: when the data was taken (default now, on the
         process's clock: the replayed time under `--clock log`)."""
         t = self._topics.get(type_name) or self._topic(type_name)
+        offered = getattr(payload, "_type_hash", "")
+        if self._offered.get(type_name) != offered:  # the first of its kind
+            self._offered[type_name] = offered
+            offers.offered(self.channel.name, self.domain_name, type_name, payload)
         seq = next(t.seq)
         if not (t.subscribed if t.generation == self._generation else self._subscribed(t)):
             if not self._connected and any(t.frame.startswith(p) for p in self._lost):
@@ -450,6 +455,7 @@ class StructuredPushConsumer:
         """Receive the events of these (domain, type) pairs, `*` for any; replaces the last."""
         subs = [(d, t) for d, t in subscriptions]
         prefixes = {subscription_prefix(d, t) for d, t in subs}
+        offers.subscribed(self, self.channel.name, subs)
 
         def apply() -> None:
             for p in self._prefixes - prefixes:
@@ -608,4 +614,5 @@ class StructuredPushConsumer:
             self.queue.add(topic_key, waiting)
 
     def close(self) -> None:
+        offers.unsubscribed(self)
         self.link.close_socket()

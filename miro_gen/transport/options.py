@@ -63,6 +63,7 @@ class CommonOptions:
     """What the common options say (the defaults when absent)."""
 
     naming: str = DEFAULT_NAMING
+    naming_given: bool = False  # by an option or the environment (else: the default, or found)
     naming_context: str = field(default_factory=socket.gethostname)
     log_level: int = DEFAULT_LOG_LEVEL
     log_filter: list[str] = field(default_factory=list)  # empty: every category
@@ -117,6 +118,7 @@ def _corba_address(text: str) -> str | None:
 def _naming(opts: CommonOptions, text: str) -> None:
     """Set where the naming service is (and, for a CORBA URL, the URL itself)."""
     opts.naming = naming_endpoint(text)
+    opts.naming_given = True
     bare = text.strip().removeprefix("NameService=")
     opts.naming_url = None if bare.startswith("tcp://") else bare
 

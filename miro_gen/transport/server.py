@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import os
 import sys
 import threading
 import time
@@ -36,6 +37,7 @@ from miro_gen.runtime.rpc import Servant, Stub
 from miro_gen.transport import sockets
 from miro_gen.transport.adapter import ObjectAdapter
 from miro_gen.transport.addresses import server_addresses
+from miro_gen.transport.introspection import SERVICE_KEY, ServiceImpl, bind_service, service_name
 from miro_gen.transport.invoker import ZmqInvoker
 from miro_gen.transport.naming import DEFAULT_LEASE, NamingClient, naming_errors
 from miro_gen.transport.options import CommonOptions, parse_common_options
@@ -77,6 +79,10 @@ class Client:
 
     def __init__(self, argv: Sequence[str] | None = None, *, context: Any = None) -> None:
         self.options, self.argv = _take_options(argv)
+        if not self.options.naming_given and os.environ.get("MIRO_DISCOVERY", "1") != "0":
+            from miro_gen.transport.discovery import naming_for  # the manual's -m 1
+
+            self.options.naming = naming_for(self.options.naming)
         self.context = context if context is not None else zmq.Context.instance()
         self._configure_sockets(None)
         self.invoker = ZmqInvoker(self.context)
@@ -102,6 +108,15 @@ class Client:
             raise self._unreachable(e) from None
         if entry.repo_id != stub._repo_id:
             _log.debug("%s is a %s, used as a %s", entry.name, entry.repo_id, stub._repo_id)
+        elif entry.type_hash and stub._interface_hash and entry.type_hash != stub._interface_hash:
+            _log.warning(
+                "%s implements another version of %s than this program knows (interface hash "
+                "%s, here %s): calls may fail with BAD_OPERATION or MARSHAL",
+                entry.name,
+                entry.repo_id,
+                entry.type_hash[:12],
+                stub._interface_hash[:12],
+            )
         if self.corba is not None:  # a CORBA object, or any reached through the IIOP invoker
             found: StubT = self.corba.stub(entry, stub)
         else:
@@ -207,6 +222,9 @@ class Server(Client):
         self._cleaned = False
         self._on_shutdown: list[Callable[[], object]] = []
         self.hosted_channels: dict[str, Any] = {}  # event channels hosted here, by full name
+        # The service object (transport/introspection.py): bound when run() starts.
+        self.service = ServiceImpl(self, service_name(self.argv[0]))
+        self.adapter.activate(self.service, SERVICE_KEY)
         if clock is not None:
             from miro_gen.eventlog.follow import follow_log_clock
 
@@ -225,7 +243,8 @@ class Server(Client):
                 self._unbind_if_interrupted()
                 return corba_ref
         ref = self.adapter.reference_for(servant)
-        self.bind_entry(MiroNaming.Entry(full, ref.repo_id, ref.endpoint, ref.key, ""))
+        entry = MiroNaming.Entry(full, ref.repo_id, ref.endpoint, ref.key, servant._interface_hash)
+        self.bind_entry(entry)
         return ref
 
     def bind_entry(self, entry: MiroNaming.Entry) -> None:
@@ -258,10 +277,24 @@ class Server(Client):
                         entry.name,
                     )
                 time.sleep(RETRY_BIND)
+        self.keep_entry(entry)
+        _log.notice("bound %s in the naming service", entry.name)
+        bind_service(self, self.service)  # with its first name: nothing can come between
+
+    def keep_entry(self, entry: MiroNaming.Entry) -> bool:
+        """Keep `entry`, bound already, under this server's lease (renewed, bound again in a
+        restarted naming service, unbound at the end); False when the server is stopping."""
         with self._names_lock:
+            if self._stop.is_set():
+                return False
             self._names[entry.name] = entry
         self._start_renewing()
-        _log.notice("bound %s in the naming service", entry.name)
+        return True
+
+    def bound_entries(self) -> list[MiroNaming.Entry]:
+        """The naming entries this server keeps bound."""
+        with self._names_lock:
+            return list(self._names.values())
 
     def remove_from_name_service(self, name: str) -> None:
         """Unbind `name`, bound by this server, and stop renewing it. Its object is still
@@ -302,6 +335,7 @@ class Server(Client):
         with lifecycle.signals_stop(self.shutdown) as signals:
             try:
                 if not signals.pending:
+                    bind_service(self, self.service, background=True)  # a consumer's
                     self._reactor.run()
             finally:
                 signals.cleaning_up()
@@ -317,6 +351,7 @@ class Server(Client):
         self._cleaned = True
         lifecycle.forget(self._cleanup)
         self._stop.set()
+        self.service.join()  # a bind of the service object still under way
         if self._renewer is not None:  # its socket must be closed by no one else while in use
             self._renewer.join(RENEW_TIMEOUT + 1)
         with self._names_lock:

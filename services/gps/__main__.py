@@ -60,6 +60,7 @@ from miro_gen.devices import (
     TtyConnection,
     startup,
 )
+from miro_gen.params.runtime import live
 
 from .nmea_epochs import NmeaParser, parse_date
 
@@ -136,6 +137,12 @@ def main(argv: list[str] | None = None) -> int:
     _log.debug("parameters:\n%s", params)
     supplier = startup.supplier_on(server, params.channelName, "gps")
     impl = GpsImpl(supplier, params)
+
+    def follow(_: object) -> None:  # `miro param set`: the new values take effect at once
+        impl.timeout = params.waitTimeout.total_seconds()
+        impl.type_name = params.eventName
+
+    live.on_change(follow)
     consumer = NmeaConsumer(impl, NmeaParser(not_before, params.hostDate))
     framer = DelimitedFramer(b"$", b"\n", max_length=256)  # NMEA: at most 82 characters
     handler = DevEventHandler(framer, consumer)

@@ -24,6 +24,7 @@ from lxml import etree
 
 from miro_gen.diagnostics import Diagnostic, SourcePos
 from miro_gen.log import logger
+from miro_gen.params.runtime import live
 from miro_gen.params.runtime.config import Config, ParamsError
 from miro_gen.params.runtime.xmlsafe import XmlError, parse_xml, read_xml
 
@@ -172,10 +173,10 @@ class ConfigDocument:
         `getParameters`). Returns whether the document had it; without it the values stay.
         Any error raises `ParamsError` listing every problem, and `params` is left unchanged."""
         elem = self.find(category)
-        if elem is None:
-            return False
-        params.from_xml(elem, self.path)
-        return True
+        if elem is not None:
+            params.from_xml(elem, self.path)
+        live.remember(self.section or "", category, params, self.path)  # for `miro param`
+        return elem is not None
 
     def get_instances(self, type_name: str) -> list[Instance]:
         """The `<instance name="..." type="type_name">` elements of the current section."""

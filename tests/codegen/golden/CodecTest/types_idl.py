@@ -3637,6 +3637,7 @@ class Holder(_rpc.Stub):
 
     __slots__ = ()
     _repo_id = "IDL:CodecTest/Holder:1.0"
+    _interface_hash = "6d8043517fd9d39b1dbeb241c3965201816ee2ae3e44970d09da34dd2c1431e9"
     Inner = Holder_Inner
     OFF = Holder_Mode.OFF
     ON = Holder_Mode.ON

@@ -26,6 +26,33 @@ class Holder(_rpc.Servant):
     """Skeleton of interface CodecTest::Holder: subclass it and implement the operations."""
 
     _repo_id = "IDL:CodecTest/Holder:1.0"
+    _interface_hash = "6d8043517fd9d39b1dbeb241c3965201816ee2ae3e44970d09da34dd2c1431e9"
+    _interface_schema = (
+        "module CodecTest {\n"
+        "  interface Holder {\n"
+        "    struct Inner {\n"
+        "      long a;\n"
+        "    };\n"
+        "    enum Mode {\n"
+        "      OFF,\n"
+        "      ON\n"
+        "    };\n"
+        "    typedef sequence<CodecTest::Holder::Inner> InnerSeq;\n"
+        "    union Choice switch (CodecTest::Holder::Mode) {\n"
+        "      case CodecTest::Holder::OFF:\n"
+        "        long when_off;\n"
+        "      case CodecTest::Holder::ON:\n"
+        "        CodecTest::Holder::Inner when_on;\n"
+        "    };\n"
+        "    exception Oops {\n"
+        "      string why;\n"
+        "    };\n"
+        "    CodecTest::Holder::Inner get(\n"
+        "        in CodecTest::Holder::Mode m)\n"
+        "        raises (CodecTest::Holder::Oops);\n"
+        "  };\n"
+        "};\n"
+    )
 
     @_abc.abstractmethod
     def get(self, m: _m_CodecTest_types_idl.Holder_Mode) -> _m_CodecTest_types_idl.Holder_Inner:

@@ -1,0 +1,239 @@
+"""Never running stale generated code: whether a project's `generated/` is what its IDL and
+parameter files make today, and making it so.
+
+A project is a folder with `idl/*.idl` and/or compile-time parameter files (`params/*.xml`,
+`services/*/*Parameters.xml`) compiled into `generated/`, as `miro new` lays it out and this
+repository is:
+
+    miro-idl -I idl idl/*.idl
+    miro-params -I idl params/*.xml services/*/*Parameters.xml
+
+`check()` answers quickly when nothing changed: it keeps the digests of the inputs (and of the
+compilers that made the output) in `.miro/fresh.json`, and only when they differ runs the two
+compilers' own `--check`. `ensure_fresh()` regenerates what is stale, or, when `generated/`
+cannot be written, raises `StaleError` naming the commands to run.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import gc
+import hashlib
+import io
+import json
+import os
+import sys
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+STAMP = Path(".miro") / "fresh.json"
+_TOOL_SOURCES = ("codegen", "idl", "params", "templates")  # what decides the generated code
+
+
+class StaleError(Exception):
+    """`generated/` is stale and cannot be regenerated here; the message names the commands."""
+
+
+@dataclass
+class Project:
+    """A project's folder and the compilers' inputs in it."""
+
+    root: Path
+    idl_files: list[Path] = field(default_factory=list)
+    param_files: list[Path] = field(default_factory=list)
+
+    @property
+    def generated(self) -> Path:
+        return self.root / "generated"
+
+    def commands(self) -> list[list[str]]:
+        """The compiler runs that make `generated/`, as argument lists (paths relative)."""
+        out = []
+        if self.idl_files:
+            out.append(["miro-idl", "-I", "idl", *self._rel(self.idl_files)])
+        if self.param_files:
+            out.append(["miro-params", "-I", "idl", *self._rel(self.param_files)])
+        return out
+
+    def command_text(self) -> str:
+        """The commands as a user types them (with the shell's patterns)."""
+        out = []
+        if self.idl_files:
+            out.append("miro-idl -I idl idl/*.idl")
+        if self.param_files:
+            where = ["params/*.xml"] if (self.root / "params").is_dir() else []
+            if any(p.parent.parent.name == "services" for p in self.param_files):
+                where.append("services/*/*Parameters.xml")
+            out.append(" ".join(["miro-params -I idl", *where]))
+        return " && ".join(out)
+
+    def _rel(self, paths: list[Path]) -> list[str]:
+        return [p.relative_to(self.root).as_posix() for p in paths]
+
+
+def find_project(start: Path) -> Project | None:
+    """The project `start` is in (it or the nearest folder above with `generated/` beside
+    `idl/`, `params/` or services' parameter files); None outside any."""
+    start = start.resolve()
+    for folder in (start, *start.parents):
+        if not (folder / "generated").is_dir():
+            continue
+        params = [*(folder / "params").glob("*.xml"), *folder.glob("services/*/*Parameters.xml")]
+        project = Project(folder, sorted((folder / "idl").glob("*.idl")), sorted(params))
+        if project.idl_files or project.param_files:
+            return project
+    return None
+
+
+def _digest(paths: Sequence[Path]) -> dict[str, str]:
+    out = {}
+    for p in paths:
+        with contextlib.suppress(OSError):
+            out[str(p)] = hashlib.sha256(p.read_bytes()).hexdigest()
+    return out
+
+
+def _tool_digest() -> str:
+    """One hash of the sources that decide what the compilers write (the templates, the front
+    ends and back ends): another version of miro-gen makes other code."""
+    package = Path(__file__).resolve().parent
+    h = hashlib.sha256()
+    for name in _TOOL_SOURCES:
+        folder = package / name
+        for p in sorted(folder.rglob("*")):
+            if p.is_file() and p.suffix in (".py", ".j2", ".lark", ".xml"):
+                h.update(str(p.relative_to(package)).encode())
+                h.update(p.read_bytes())
+    return h.hexdigest()
+
+
+def _inputs(project: Project) -> dict[str, object]:
+    idl_dir = project.root / "idl"
+    includes = sorted(idl_dir.rglob("*.idl")) if idl_dir.is_dir() else []
+    files = sorted({*project.idl_files, *project.param_files, *includes})
+    return {
+        "tool": _tool_digest(),
+        "commands": project.commands(),
+        "files": _digest(files),
+    }
+
+
+def _stamp_matches(project: Project, inputs: dict[str, object]) -> bool:
+    try:
+        return bool(json.loads((project.root / STAMP).read_text()) == inputs)
+    except (OSError, ValueError):
+        return False
+
+
+def _write_stamp(project: Project, inputs: dict[str, object]) -> None:
+    path = project.root / STAMP
+    with contextlib.suppress(OSError):  # a read-only tree: checked in full next time
+        path.parent.mkdir(exist_ok=True)
+        tmp = path.with_suffix(".tmp")
+        tmp.write_text(json.dumps(inputs, indent=1))
+        os.replace(tmp, path)
+
+
+def _run(main: Callable[[list[str]], int], argv: list[str]) -> tuple[int, str]:
+    """A compiler's main() in this process: its status and what it printed."""
+    out = io.StringIO()
+    enabled = gc.isenabled()
+    limit = sys.getrecursionlimit()
+    try:
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(out):
+            status = main(argv)
+    finally:  # what the compilers change for their own short runs, as it was
+        if enabled:
+            gc.enable()
+        sys.setrecursionlimit(limit)
+    return status, out.getvalue()
+
+
+def _compile(project: Project, check: bool) -> list[tuple[list[str], int, str]]:
+    """Run each compiler (with --check, or writing) from the project's folder."""
+    from miro_gen.cli import idl, params
+
+    mains = {"miro-idl": idl.main, "miro-params": params.main}
+    results = []
+    here = Path.cwd()
+    os.chdir(project.root)
+    try:
+        for command in project.commands():
+            argv = [*command[1:3], "-o", "generated", *(["--check"] if check else []), *command[3:]]
+            status, text = _run(mains[command[0]], argv)
+            results.append((command, status, text))
+    finally:
+        os.chdir(here)
+    return results
+
+
+@dataclass
+class Freshness:
+    fresh: bool
+    stale: list[str] = field(default_factory=list)  # what the --check runs said
+    errors: list[str] = field(default_factory=list)  # compile errors (the inputs are broken)
+
+
+def check(project: Project) -> Freshness:
+    """Whether `generated/` is what the inputs make today."""
+    inputs = _inputs(project)
+    if _stamp_matches(project, inputs):
+        return Freshness(True)
+    stale, errors = [], []
+    for _command, status, text in _compile(project, check=True):
+        lines = [line for line in text.splitlines() if line.strip()]
+        if status != 0:
+            if any("is out of date" in line for line in lines):
+                stale += [line for line in lines if "is out of date" in line]
+            else:
+                errors += lines or ["the compiler failed"]
+    if not stale and not errors:
+        _write_stamp(project, inputs)
+    return Freshness(not stale and not errors, stale, errors)
+
+
+def ensure_fresh(project: Project) -> list[str]:
+    """Regenerate `generated/` if it is stale; the lines the compilers printed about what they
+    wrote (empty when it was fresh). StaleError when it cannot be written, or the inputs do
+    not compile (then the message holds the compilers' errors)."""
+    state = check(project)
+    if state.fresh:
+        return []
+    if state.errors:
+        raise StaleError("\n".join(state.errors))
+    if not os.access(project.generated, os.W_OK):
+        raise StaleError(
+            f"{project.generated} is out of date and cannot be written here; "
+            f"run in {project.root}: {project.command_text()}"
+        )
+    inputs = _inputs(project)
+    wrote: list[str] = []
+    for _command, status, text in _compile(project, check=False):
+        lines = [line for line in text.splitlines() if line.strip()]
+        if status != 0:
+            raise StaleError("\n".join(lines) or "the compiler failed")
+        wrote += [line for line in lines if line.startswith("wrote ")]
+    _write_stamp(project, inputs)
+    return wrote
+
+
+def before_running(folder: Path, prog: str) -> bool:
+    """What `miro run` and `miro launch` do first: regenerate the generated code of the project
+    `folder` is in when it is stale (saying so on stderr); False, having said why, when it is
+    stale and cannot be regenerated. True outside any project."""
+    project = find_project(folder)
+    if project is None:
+        return True
+    try:
+        wrote = ensure_fresh(project)
+    except StaleError as e:
+        print(f"{prog}: {e}", file=sys.stderr)
+        return False
+    if wrote:
+        print(
+            f"{prog}: the IDL or parameter files changed: regenerated {len(wrote)} files in "
+            f"{project.generated}",
+            file=sys.stderr,
+        )
+    return True
