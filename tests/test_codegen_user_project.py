@@ -1,12 +1,12 @@
 """Generated code is product code in a user's own project too: what miro-idl and miro-params
 make of a user's IDL and parameter files (tests/codegen/project: several files, modules reopened
 across files, two modules named `Util`, a module named like the standard library's `sched`, the
-global scope, parameters in an IDL module's package and in a package of their own, an
-included IDL file of the installed project's and its module Miro reopened) passes ruff,
-with its default rules and with typical settings, and mypy --strict, in a fresh project that has
-none of this repository's settings; with the generated packages at the project's root
-(`-o .`, where isort calls them first-party) or in a folder on sys.path (`-o generated`,
-third-party). Every module imports there, beside the installed miro-gen."""
+global scope, parameters in an IDL module's package and in a package of their own, an included
+IDL file of the installed miro-gen's and its module Miro reopened) passes ruff check, with its
+default rules and with typical settings, ruff format --check and mypy --strict, in a fresh
+project that has none of this repository's settings; with the generated packages at the
+project's root (`-o .`, where isort calls them first-party) or in a folder on sys.path
+(`-o generated`, third-party). Every module imports there, beside the installed miro-gen."""
 
 from __future__ import annotations
 
@@ -113,6 +113,13 @@ def test_ruff_typical_settings_pass(project: Project) -> None:
     out = _run([sys.executable, "-m", "ruff", "check", "--no-cache", "."], project.root)
     assert out.returncode == 0, out.stdout + out.stderr
     assert "All checks passed" in out.stdout
+
+
+def test_ruff_format_leaves_it_as_it_is(project: Project) -> None:
+    """The templates' layout (100 columns) under ruff's formatter at its line length (88)."""
+    cmd = [sys.executable, "-m", "ruff", "format", "--check", "--no-cache", "."]
+    out = _run(cmd, project.root)
+    assert out.returncode == 0, out.stdout + out.stderr
 
 
 def test_mypy_strict_passes(project: Project, site: Path) -> None:

@@ -29,7 +29,8 @@ LINE = 100
 # the project's layout: `# isort: skip_file`, which isort itself honours too); line lengths are
 # the templates' and IDL's, module and package names are IDL's (`Example_idl`, `Miro`: N999 is in
 # ruff's default rules); and unused exemptions are not reported (RUF100), since which of these
-# rules apply is the project's choice.
+# rules apply is the project's choice. The layout is the templates' too (`# fmt: off`, to the end
+# of the file: ruff's formatter and black keep it whatever line length the project formats to).
 LINT_EXEMPTIONS = ("E501", "N999", "RUF100")
 
 
@@ -109,10 +110,11 @@ def environment() -> jinja2.Environment:
 
 
 def lint_header(extra: Iterable[str] = ()) -> str:
-    """The lines after a generated file's header comments that exempt it from the lint rules
-    it cannot follow in every project (LINT_EXEMPTIONS), plus `extra` rules (a module's names)."""
+    """The lines after a generated file's header comments that exempt it from the formatter
+    and from the lint rules it cannot follow in every project (LINT_EXEMPTIONS), plus `extra`
+    rules (a module's names)."""
     codes = ", ".join(sorted({*LINT_EXEMPTIONS, *extra}))
-    return f"# isort: skip_file\n# ruff: noqa: {codes}"
+    return f"# isort: skip_file\n# fmt: off\n# ruff: noqa: {codes}"
 
 
 def render_module(module: ModuleContext) -> str:
