@@ -56,6 +56,10 @@ class Diagnostics:
 
     def error(self, pos: SourcePos | None, message: str) -> None:
         self.items.append(Diagnostic("error", pos, message))
+        self.check_limit()
+
+    def check_limit(self) -> None:
+        """Stop (CompileError) once the maximum number of errors is reached."""
         if self.error_count >= self.max_errors:
             self.items.append(Diagnostic("note", None, "too many errors; stopping"))
             raise CompileError(self.items)

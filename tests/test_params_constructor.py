@@ -136,6 +136,38 @@ def test_all_constructor_errors_are_collected(tmp_path: Path) -> None:
     assert re.findall(r"C\.xml:(\d+)", out.stderr) == ["11", "13"]
 
 
+# MiroMicro's RobotParameters.xml: C++ that makeParams pasted into the constructor as it is
+HOSTNAME_CXX = """\
+char* hn = getenv("HOSTNAME");
+if (hn != NULL) {
+  std::string hostname = hn;
+  unsigned int current = 0;
+  do { ++current; } while (current &lt; hostname.length() &amp;&amp; hostname[current] != '.');
+  s = hostname.substr(0, current);
+}"""
+
+
+def test_cxx_beyond_the_subset_is_an_error_that_says_the_way_out(tmp_path: Path) -> None:
+    src = _ctor_file(tmp_path, HOSTNAME_CXX)
+    out = run_miro_params("-o", str(tmp_path / "out"), str(src))
+    assert out.returncode == 1 and "Traceback" not in out.stderr
+    assert re.search(r"C\.xml:11:\d+: error: constructor: unexpected '\*'", out.stderr)
+    assert re.search(r"C\.xml:11:\d+: note: .*--skip-untranslatable.*PC::AParameters", out.stderr)
+    assert not (tmp_path / "out").exists()
+
+
+def test_skip_untranslatable_generates_the_class_with_its_declared_defaults(
+    tmp_path: Path,
+) -> None:
+    src = _ctor_file(tmp_path, HOSTNAME_CXX)
+    out = run_miro_params("--skip-untranslatable", "-o", str(tmp_path / "out"), str(src))
+    assert out.returncode == 0, out.stderr
+    warning = "warning: constructor: unexpected '*'; the constructor of PC::AParameters is left out"
+    assert warning in out.stderr
+    a = import_generated(tmp_path / "out", "PC.C").AParameters()
+    assert (a.n, a.s) == (2, "")
+
+
 def test_user_helper_module_reads_and_writes_its_type(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

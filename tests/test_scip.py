@@ -117,13 +117,21 @@ def test_faults_as_asked() -> None:
     assert len(frames) == 35 + 3 and len(good) == 35 + 3 - 11 - 5
 
 
-def read_response(sock: socket.socket) -> scip.Response:
-    data = b""
-    while not data.endswith(b"\n\n"):
-        chunk = sock.recv(65536)
-        assert chunk, "the simulator closed the connection"
-        data += chunk
-    return scip.split_response(data[:-2])
+class Responses:
+    """SCIP responses read from a socket one at a time (one read may hold several, or part of
+    one: a response ends with an empty line)."""
+
+    def __init__(self, sock: socket.socket) -> None:
+        self.sock = sock
+        self.data = b""
+
+    def next(self) -> scip.Response:
+        while b"\n\n" not in self.data:
+            chunk = self.sock.recv(65536)
+            assert chunk, "the simulator closed the connection"
+            self.data += chunk
+        response, _, self.data = self.data.partition(b"\n\n")
+        return scip.split_response(response)
 
 
 def test_miro_sim_scip_on_a_tcp_port_replays_a_scene(tmp_path: Path) -> None:
@@ -142,13 +150,14 @@ def test_miro_sim_scip_on_a_tcp_port_replays_a_scene(tmp_path: Path) -> None:
         assert banner.startswith("SCIP 2.0 (UTM-30LX) on 127.0.0.1:"), banner
         port = int(banner.split(":")[1].split()[0])
         with socket.create_connection(("127.0.0.1", port), timeout=10) as sock:
+            responses = Responses(sock)
             sock.sendall(b"VV\n")
-            assert scip.parse_info(read_response(sock).lines)["PROD"] == "UTM-30LX"
+            assert scip.parse_info(responses.next().lines)["PROD"] == "UTM-30LX"
             sock.sendall(b"MD0000108001000\n")
-            assert read_response(sock).status == "00"
+            assert responses.next().status == "00"
             seen = set()
             for _ in range(4):
-                response = read_response(sock)
+                response = responses.next()
                 command = ScanCommand.parse(response.echo)
                 seen.add(tuple(scip.decode_scan(response.lines, command)[1]))
             assert seen == {(1000,) * 1081, (2000,) * 1081}

@@ -76,6 +76,13 @@ def build_parser() -> argparse.ArgumentParser:
         "in MODULE (MODULE:CLASS when it is not TYPE's name with Parameters); may be repeated; "
         'as <config_global name="python_class" type=TYPE value=MODULE/>',
     )
+    p.add_argument(
+        "--skip-untranslatable",
+        action="store_true",
+        help="a <constructor> block in C++ beyond what miro-params translates (docs/PARAMS.md) "
+        "is left out with a warning, its class keeping the declared defaults, instead of "
+        "being an error",
+    )
     mode = p.add_mutually_exclusive_group()
     mode.add_argument(
         "--check",
@@ -138,6 +145,7 @@ def compile_files(
     name: str | None,
     diag: Diagnostics,
     python_classes: dict[str, str] | None = None,
+    skip_untranslatable: bool = False,
 ) -> list[object]:
     """The template contexts of `paths` (errors in `diag`)."""
     from miro_gen.params.compiler.build import build_modules
@@ -151,7 +159,11 @@ def compile_files(
             targets.append(f)
     names = {Path(paths[0]).resolve(): name} if name else {}
     files = list(loader.files.values())
-    return list(build_modules(files, targets, names, diag, python_classes))
+    return list(
+        build_modules(
+            files, targets, names, diag, python_classes, skip_untranslatable=skip_untranslatable
+        )
+    )
 
 
 def _run(args: argparse.Namespace, diag: Diagnostics) -> int:
@@ -163,7 +175,14 @@ def _run(args: argparse.Namespace, diag: Diagnostics) -> int:
 
     modules = [
         m
-        for m in compile_files(args.files, args.include_dirs, args.name, diag, args.python_classes)
+        for m in compile_files(
+            args.files,
+            args.include_dirs,
+            args.name,
+            diag,
+            args.python_classes,
+            args.skip_untranslatable,
+        )
         if isinstance(m, PyParamsModule)
     ]
     diag.print()

@@ -129,12 +129,15 @@ class ModuleBuilder:
         modules: dict[Path, tuple[str, str]],
         diag: Diagnostics,
         tools: bool = False,
+        skip_untranslatable: bool = False,
     ) -> None:
         self.f = f
         self.scope = scope
         self.modules = modules
         self.diag = diag
         self.tools = tools  # for --xsd and show/validate: every dummy item gets a stand-in
+        # constructors beyond the translated C++ subset: left out with a warning, not errors
+        self.skip_untranslatable = skip_untranslatable or tools
         package, name = modules[f.path.resolve()]
         self.module = PyParamsModule(
             source=f.display, namespace=f.namespace, package=package, name=name
@@ -310,7 +313,7 @@ class ModuleBuilder:
                 cls.doc += '\n\nAbstract (final="false"): a base of other parameter classes.'
         self._members(item, cls, base[1])
         if item.constructors and not stand_in:
-            cls.construct = compile_constructor(item, self, self.diag)
+            cls.construct = compile_constructor(item, self, self.diag, self.skip_untranslatable)
         return cls
 
     def _members(self, item: ItemDecl, cls: PyClass, parent: ItemDecl | None) -> None:
@@ -567,9 +570,11 @@ def build_modules(
     diag: Diagnostics,
     python_classes: dict[str, str] | None = None,
     tools: bool = False,
+    skip_untranslatable: bool = False,
 ) -> list[PyParamsModule]:
     """The modules of `targets` (the files named on the command line); `files` are all loaded
-    files (includes too), `names` the `-n` module names given."""
+    files (includes too), `names` the `-n` module names given; `skip_untranslatable`: see
+    `compile_constructor`."""
     modules = {
         f.path.resolve(): (package_for(f), module_for(f, names.get(f.path.resolve())))
         for f in files
@@ -591,4 +596,6 @@ def build_modules(
     if clash:
         diag.check()
     scope = Scope(files, python_classes or {})
-    return [ModuleBuilder(f, scope, modules, diag, tools).build() for f in targets]
+    return [
+        ModuleBuilder(f, scope, modules, diag, tools, skip_untranslatable).build() for f in targets
+    ]

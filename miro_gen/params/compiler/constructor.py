@@ -29,23 +29,54 @@ from miro_gen.params.compiler.expressions import parse_number, parser
 from miro_gen.params.compiler.model import ItemDecl
 
 
-def compile_constructor(item: ItemDecl, builder: Members, diag: Diagnostics) -> list[str]:
+def compile_constructor(
+    item: ItemDecl, builder: Members, diag: Diagnostics, skip_untranslatable: bool = False
+) -> list[str]:
     """The Python statements of an item's `<constructor>` blocks (errors in `diag`): one
-    C++ constructor body, so a block sees the locals of the blocks before it."""
+    C++ constructor body, so a block sees the locals of the blocks before it.
+
+    makeParams pasted the blocks into C++, so a real file may hold C++ beyond the subset
+    translated here. That is an error (with a note on the way out), or, with
+    `skip_untranslatable`, a warning and a class without its constructor: its declared defaults."""
+    own = Diagnostics(max_errors=1 << 30)  # the limit is checked in `diag`
     translator: Translator | None = None
     out: list[str] = []
     for block in item.constructors:
         try:
             tree = parser().parse(block.text, start="start")
             if translator is None:
-                translator = Translator(item, builder, block.pos, diag)
+                translator = Translator(item, builder, block.pos, own)
             translator.start = block.pos
             out += translator.statements(tree.children, 0)
         except lark.exceptions.UnexpectedInput as e:
             got = _describe(e)
-            diag.error(_pos(block.pos, e.line, e.column), f"constructor: unexpected {got}")
+            own.error(_pos(block.pos, e.line, e.column), f"constructor: unexpected {got}")
         except RecursionError:
-            diag.error(block.pos, "constructor: the block is nested too deeply")
+            own.error(block.pos, "constructor: the block is nested too deeply")
+    errors = [d for d in own.items if d.severity == "error"]
+    if not errors:
+        diag.items += own.items
+        return out
+    name = item.scoped_name or item.name or "the item"
+    if skip_untranslatable:
+        first = errors[0]
+        diag.warning(
+            first.pos,
+            f"{first.message}; the constructor of {name} is left out "
+            "(--skip-untranslatable): its members keep their declared defaults",
+        )
+        return []
+    beyond = [d for d in errors if "unexpected" in d.message or "not supported" in d.message]
+    for d in own.items:
+        diag.items.append(d)
+        if beyond and d is beyond[0]:  # C++ the subset lacks, not a mistake in the block
+            diag.note(
+                d.pos,
+                "miro-params translates a subset of C++ (docs/PARAMS.md, Constructor blocks): "
+                "rewrite the block in it, or pass --skip-untranslatable to generate "
+                f"{name} without its constructor",
+            )
+    diag.check_limit()
     return out
 
 
