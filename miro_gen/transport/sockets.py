@@ -42,6 +42,10 @@ _log = logger("MIRO")
 
 DEFAULT_MAX_MESSAGE_SIZE = 8 << 20  # bytes: a 1080p RGB image fits; omniORB's default is 2 MB
 QUEUE_BYTES_PER_PEER = 128 << 20  # what a socket may hold for one peer, at most
+# ... but never fewer frames than this: libzmq tells a writer how far its reader got only every
+# half high-water mark, so a mark of 16 dropped bursts of ten small frames sent to a consumer
+# that kept up. The price: a slow reader of maximum-size frames may hold 64 of them.
+MIN_QUEUE_FRAMES = 64
 DEFAULT_MAX_CONNECTIONS = 1024  # per listening socket; more are refused at the handshake
 HEARTBEAT_IVL_MS = 500
 HEARTBEAT_TIMEOUT_MS = 2000
@@ -92,8 +96,8 @@ def policy(context: zmq.Context[Any]) -> SocketPolicy:
 
 def queue_limit(context: zmq.Context[Any], budget: int = QUEUE_BYTES_PER_PEER) -> int:
     """A high-water mark, in messages, that holds at most `budget` bytes of the largest
-    messages allowed (at least 16, at most 10,000)."""
-    return max(16, min(10_000, budget // policy(context).max_message_size))
+    messages allowed, but never fewer than MIN_QUEUE_FRAMES (at most 10,000)."""
+    return max(MIN_QUEUE_FRAMES, min(10_000, budget // policy(context).max_message_size))
 
 
 def _common(s: zmq.Socket[Any], p: SocketPolicy) -> None:
