@@ -3,6 +3,7 @@ their events: for the tests and for bench/."""
 
 from __future__ import annotations
 
+import re
 import signal
 import subprocess
 import sys
@@ -50,11 +51,15 @@ class Driver:
     def logged(self, text: str) -> int:
         return self.log.read_text().count(text)
 
-    def stop(self) -> str:
-        """Stop it (SIGINT); what it printed on the way out."""
+    def stop(self, events: Recorder | None = None) -> str:
+        """Stop it (SIGINT); what it printed on the way out. With `events`, its consumer, also
+        wait until that has received all the driver says it published (`N published`)."""
         self.proc.send_signal(signal.SIGINT)
         out, _ = self.proc.communicate(timeout=20)
         self.stderr.close()
+        published = re.search(r"(\d+) published", out)
+        if events is not None and published is not None:
+            eventually(lambda: len(events.events) >= int(published[1]), 30)
         return out
 
     def kill(self) -> None:
@@ -113,7 +118,7 @@ class GpsRig:
             return ""
         self.closed = True
         try:
-            return self.driver.stop() if self.driver.proc.poll() is None else ""
+            return self.driver.stop(self.events) if self.driver.proc.poll() is None else ""
         finally:
             self.driver.kill()
             self.gui.stop()

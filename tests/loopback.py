@@ -89,17 +89,28 @@ class RunningServer:
 
 
 class Recorder(StructuredPushConsumer):
-    """A consumer that keeps what it receives (`events`), taking `delay` s over each; it keeps
-    every event waiting unless given another `depth` (or `latest_only`)."""
+    """A consumer that keeps what it receives (`events`), taking `delay` s over each, or held
+    before each until `gate` is set (at most a minute: a test that forgets it still ends); it
+    keeps every event waiting unless given another `depth` (or `latest_only`)."""
 
     def __init__(
-        self, *args: object, delay: float = 0.0, depth: int = KEEP_ALL, latest_only: bool = False
+        self,
+        *args: object,
+        delay: float = 0.0,
+        gate: threading.Event | None = None,
+        depth: int = KEEP_ALL,
+        latest_only: bool = False,
     ) -> None:
         super().__init__(*args, depth=depth, latest_only=latest_only)  # type: ignore[arg-type]
         self.events: list[StructuredEvent] = []
         self.delay = delay
+        self.gate = gate
+        self.holding = threading.Event()  # set once a delivery waits at the gate
 
     def push_structured_event(self, event: StructuredEvent) -> None:
+        if self.gate is not None and not self.gate.is_set():
+            self.holding.set()
+            self.gate.wait(60)
         if self.delay:
             time.sleep(self.delay)
         self.events.append(event)

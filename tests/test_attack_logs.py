@@ -10,7 +10,6 @@ import random
 import struct
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import Miro
@@ -173,8 +172,7 @@ def test_a_hostile_schema_is_not_preprocessed(tmp_path: Path, include: str) -> N
     and the tool goes on."""
     path = tmp_path / "hostile.mcap"
     hostile_log(path, include + "\nmodule H { struct S { long x; }; };\n")
-    started = time.monotonic()
-    echo = subprocess.run(
+    echo = subprocess.run(  # (the timeout: it must not hang)
         [sys.executable, "-m", "miro_gen.cli.main", "log", "echo", str(path)],
         capture_output=True,
         text=True,
@@ -187,7 +185,6 @@ def test_a_hostile_schema_is_not_preprocessed(tmp_path: Path, include: str) -> N
     assert "no generated type here has type hash abababababab" in echo.stdout
     said = echo.stdout + echo.stderr  # before: "/etc/passwd:1:1: error: unexpected 'root'"
     assert "passwd:" not in said and "'root'" not in said
-    assert time.monotonic() - started < 120
 
 
 def test_compiling_a_schema_is_stopped_past_its_limits(

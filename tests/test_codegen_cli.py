@@ -148,7 +148,26 @@ def test_files_compiled_one_at_a_time_share_their_package(tmp_path: Path) -> Non
 
 
 def test_missing_generated_include_is_warned(tmp_path: Path) -> None:
+    idl = REPO / "tests" / "codegen" / "project" / "idl"
+    out = run_miro_idl("-I", str(idl), "-o", "gen", str(idl / "rover.idl"), cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    assert "imports Geometry.geometry_idl, which is not generated" in out.stderr
+
+
+def test_an_include_the_installed_packages_hold_is_not_missing(tmp_path: Path) -> None:
+    """Odometry.idl includes Position.idl, whose module the installed miro-gen carries: the
+    generated `Miro` and the installed one are one package (miro_gen/runtime/packages.py)."""
     idl = REPO / "idl"
     out = run_miro_idl("-I", str(idl), "-o", "gen", str(idl / "Odometry.idl"), cwd=tmp_path)
     assert out.returncode == 0, out.stderr
-    assert "imports Miro.Position_idl, which is not generated" in out.stderr
+    assert "not generated" not in out.stderr
+    check = (
+        "import Miro, Miro.Odometry_idl, pathlib\n"
+        "assert pathlib.Path(Miro.__file__).parent.parent.name == 'gen', Miro.__file__\n"
+        "assert Miro.Odometry is Miro.Odometry_idl.Odometry\n"
+        "assert Miro.PositionIDL.__module__ == 'Miro.Position_idl'\n"
+    )
+    env = {**os.environ, "PYTHONPATH": "gen"}
+    cmd = [sys.executable, "-c", check]
+    ran = subprocess.run(cmd, cwd=tmp_path, env=env, text=True, capture_output=True)
+    assert ran.returncode == 0, ran.stderr

@@ -251,21 +251,28 @@ def _exchange(server: IIOPServer, data: bytes) -> tuple[giop.Header, bytes] | No
             return None
 
 
-def test_a_big_endian_client_is_served(served: tuple[IIOPServer, IIOPInvoker]) -> None:
+_KEY, _SET_DATA = b"robot/Example", b"setData\0"
+
+
+def _set_data_by_hand(served: tuple[IIOPServer, IIOPInvoker], minor: int, head: bytes) -> None:
+    """Send setData(0.5, 1e10) big-endian after a request header made by hand (its body
+    aligned to the message's start, as GIOP lays it out) and check that it was served."""
     server, invoker = served
-    key, op = b"robot/Example", b"setData\0"
-    head = struct.pack(">IBxxxhxxI", 1, 3, 0, len(key)) + key
-    head += b"\0" * (-len(head) % 4) + struct.pack(">I", len(op)) + op
-    head += b"\0" * (-len(head) % 4) + struct.pack(">I", 0)
-    head += b"\0" * (-(12 + len(head)) % 8)
-    body = struct.pack(">dd", 0.5, 1e10)
-    msg = b"GIOP\x01\x02\x00\x00" + struct.pack(">I", len(head) + len(body)) + head + body
-    answer = _exchange(server, msg)
+    body = b"\0" * (-(12 + len(head)) % 8) + struct.pack(">dd", 0.5, 1e10)
+    size = struct.pack(">I", len(head) + len(body))
+    answer = _exchange(server, b"GIOP\x01" + bytes((minor, 0, 0)) + size + head + body)
     assert answer is not None
     h, reply = answer
     assert giop.decode_reply(reply, h).status == ReplyStatus.NO_EXCEPTION
-    stub = Miro.Example(server.reference(key, Miro.Example._repo_id), invoker)
+    stub = Miro.Example(server.reference(_KEY, Miro.Example._repo_id), invoker)
     assert stub.getData() == Miro.ExampleStructIDL(0.5, 1e10)
+
+
+def test_a_big_endian_client_is_served(served: tuple[IIOPServer, IIOPInvoker]) -> None:
+    head = struct.pack(">IBxxxhxxI", 1, 3, 0, len(_KEY)) + _KEY
+    head += b"\0" * (-len(head) % 4) + struct.pack(">I", len(_SET_DATA)) + _SET_DATA
+    head += b"\0" * (-len(head) % 4) + struct.pack(">I", 0)
+    _set_data_by_hand(served, 2, head)
 
 
 def test_locate_requests_and_unknown_objects(served: tuple[IIOPServer, IIOPInvoker]) -> None:
@@ -435,6 +442,18 @@ def _request(conn: socket.socket) -> tuple[giop.Header, giop.Request]:
 def _be_reply(request_id: int, status: int, body: bytes) -> bytes:
     head = struct.pack(">III", request_id, status, 0)
     return b"GIOP\x01\x02\x00\x01" + struct.pack(">I", len(head) + len(body)) + head + body
+
+
+@pytest.mark.parametrize("principal", range(8))
+def test_a_giop_1_0_body_is_read_wherever_it_begins(
+    served: tuple[IIOPServer, IIOPInvoker], principal: int
+) -> None:
+    """A GIOP 1.0 body follows the request header at once (here after a principal of 0 to 7
+    octets), its values aligned to the message's start: decoded where it is, not forwarded."""
+    head = struct.pack(">IIB", 0, 5, 1) + b"\0" * 3 + struct.pack(">I", len(_KEY)) + _KEY
+    head += b"\0" * (-len(head) % 4) + struct.pack(">I", len(_SET_DATA)) + _SET_DATA
+    head += b"\0" * (-len(head) % 4) + struct.pack(">I", principal) + b"p" * principal
+    _set_data_by_hand(served, 0, head)
 
 
 @pytest.fixture

@@ -85,9 +85,10 @@ def rig(tmp_path: Path, request: pytest.FixtureRequest) -> Iterator[GpsRig]:
 
 
 def through_the_driver(rig: GpsRig, lines: list[bytes]) -> list[Miro.GpsDataIDL]:
-    readings = rig.replay(lines)
+    rig.replay(lines)
+    summary = rig.close()  # once all it published has arrived
+    readings = rig.readings()
     assert rig.events.missed == 0
-    summary = rig.close()
     assert f"{len(readings)} readings, {len(readings)} published" in summary, summary
     return readings
 

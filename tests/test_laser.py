@@ -82,7 +82,7 @@ class LaserRig:
 
     def close(self) -> str:
         try:
-            return self.driver.stop() if self.driver.proc.poll() is None else ""
+            return self.driver.stop(self.events) if self.driver.proc.poll() is None else ""
         finally:
             self.driver.kill()
             self.client.close()
@@ -119,11 +119,12 @@ def test_streamed_scans_in_pieces_with_bad_frames(tmp_path: Path, rigs: list[Las
     rig.sim.pause(True)  # the device stops streaming, as if unplugged
     time.sleep(0.2)
     sent, scans = dict(faults.sent), rig.device.scans
-    settled(rig)
+    good = scans - sent["corrupt"] - sent["truncate"]
+    eventually(lambda: len(rig.events.events) >= good, 30)  # the driver has read them all
+    settled(rig)  # (and sent no more)
     summary = rig.close()
     # A last frame cut short waits in the driver for the rest, which never comes.
     waiting = scans % faults.truncate == 0 and scans % faults.corrupt != 0
-    good = scans - sent["corrupt"] - sent["truncate"]
     assert f"laser: {good} scans, {good} published" in summary, (summary, sent, scans)
     assert f"dropped {sent['corrupt']} with a bad checksum" in summary, summary
     assert f"{sent['truncate'] - waiting} truncated, {sent['repeat']} out of order" in summary

@@ -15,6 +15,7 @@ from loopback import eventually
 from miro_cli import REPO
 
 from miro_gen.cli.launch import launch_main
+from miro_gen.launch import supervisor
 from miro_gen.launch.spec import LaunchError, read_launch_file
 from miro_gen.testing import ServiceProcess
 
@@ -262,6 +263,21 @@ def test_services_that_end_well_end_the_launch_with_0(tmp_path: Path) -> None:
         assert proc.proc.wait(60) == 0
     assert "launch | once exited with status 0" in said(proc)
     assert "launch | optional exited with status 1; given up" in said(proc)
+
+
+def test_a_launch_killed_outright_takes_its_services_with_it(tmp_path: Path) -> None:
+    """SIGKILL gives the launch no chance to stop anything: its services get SIGTERM from the
+    kernel (the parent-death signal), so none is left holding its names."""
+    if not supervisor._ends_with_us():
+        pytest.skip("no parent-death signal here (Linux with util-linux's setpriv)")
+    write(tmp_path, "forever.py", "import time\nprint('up', flush=True)\ntime.sleep(600)\n")
+    write(tmp_path, "robot.toml", '[services.forever]\nrun = "forever.py"\nready = "up"\n')
+    with launch(tmp_path) as proc:
+        proc.wait_for("forever is up", timeout=60)
+        (pid,) = started_pids(proc)
+        proc.proc.kill()
+        proc.proc.wait(30)
+        eventually(lambda: not alive(pid), 30)
 
 
 def test_inline_parameters_become_the_services_document(tmp_path: Path) -> None:

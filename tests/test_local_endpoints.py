@@ -3,6 +3,7 @@ and only there."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
 
@@ -18,8 +19,13 @@ def test_a_bound_twin_is_where_local_peers_connect() -> None:
     ctx = zmq.Context()
     sock = ctx.socket(zmq.PULL)
     try:
-        port = sock.bind_to_random_port("tcp://127.0.0.1")
-        endpoint = f"tcp://127.0.0.1:{port}"
+        while True:  # a port without a twin left behind by a process killed on it (in the
+            # shared folder of this user: other tests', other jobs' on this host)
+            port = sock.bind_to_random_port("tcp://127.0.0.1")
+            endpoint = f"tcp://127.0.0.1:{port}"
+            if not os.path.exists((local.ipc_twin(endpoint) or "ipc://")[len("ipc://") :]):
+                break
+            sock.unbind(endpoint)
         assert local.nearest(endpoint) == endpoint  # no twin yet
         twin = local.bind_twin(sock, endpoint)
         assert twin is not None and twin == local.ipc_twin(endpoint)
@@ -34,6 +40,34 @@ def test_a_bound_twin_is_where_local_peers_connect() -> None:
     finally:
         sock.close(0)
         ctx.term()
+
+
+def test_a_twin_left_by_a_killed_process_is_not_taken() -> None:
+    """A process killed without closing leaves its socket file; a later peer of the same port
+    must keep to TCP, where the port's new owner (or nobody) answers, not wait on a dead file."""
+    import socket as sockets
+
+    ctx = zmq.Context()
+    sock = ctx.socket(zmq.PULL)
+    try:
+        port = sock.bind_to_random_port("tcp://127.0.0.1")
+        endpoint = f"tcp://127.0.0.1:{port}"
+        path = (local.ipc_twin(endpoint) or "ipc://").removeprefix("ipc://")
+        dead = sockets.socket(sockets.AF_UNIX, sockets.SOCK_STREAM)
+        dead.bind(path)  # bound, never listening, then gone: as a killed process leaves it
+        dead.close()
+        assert os.path.exists(path)
+        assert local.nearest(endpoint) == endpoint
+        push = ctx.socket(zmq.PUSH)
+        push.connect(local.nearest(endpoint))
+        push.send(b"over TCP")
+        assert sock.poll(5000) and sock.recv() == b"over TCP"
+        push.close(0)
+    finally:
+        sock.close(0)
+        ctx.term()
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(path)
 
 
 def test_other_hosts_and_other_kinds_keep_their_endpoint(tmp_path: object) -> None:

@@ -69,18 +69,20 @@ def resolved(bridge: QtEventBridge, name: str) -> EventChannel:
 
 
 class Ticker:
-    """Measures how long the GUI thread goes without running a 10 ms timer."""
+    """Counts a flood in the turns of the GUI thread: at each run of a 10 ms timer, how many
+    events the subscription's consumer (on the reactor thread) had received by then."""
 
-    def __init__(self) -> None:
-        self.ticks: list[float] = []
+    def __init__(self, sub: Subscription) -> None:
+        self.sub = sub
+        self.received: list[int] = [0]
         self.timer = QTimer()
-        self.timer.timeout.connect(lambda: self.ticks.append(time.monotonic()))
+        self.timer.timeout.connect(lambda: self.received.append(sub.consumer.received))
         self.timer.start(10)
 
-    def longest_gap(self, start: float, end: float) -> float:
-        ticks = [t for t in self.ticks if start <= t <= end]
-        assert len(ticks) > 2, "the GUI thread never ran its timer"
-        return max(b - a for a, b in itertools.pairwise(ticks))
+    def most_between_turns(self) -> int:
+        """The most events that arrived between two turns of the GUI thread (so far)."""
+        marks = [*self.received, self.sub.consumer.received]
+        return max(b - a for a, b in itertools.pairwise(marks))
 
 
 def test_events_from_a_supplier_process_reach_the_widget(
@@ -126,20 +128,18 @@ def test_a_flood_is_coalesced_to_the_latest_and_the_gui_stays_responsive(
     sub = bridge.subscribe([("f", "ExampleEvent")], resolved(bridge, "f/F1"))
     counters: list[int] = []
     sub.received.connect(lambda e: counters.append(e.payload.counter))
-    ticker = Ticker()
+    ticker = Ticker(sub)
     bridge.start()
     qt_wait(lambda: bool(counters), 15)
-    start = time.monotonic()
     qt_wait(lambda: supplier.line("SENT") is not None, 60)
-    end = time.monotonic()
-    qt_wait(lambda: counters[-1] == FLOOD, 10)  # the final event always arrives
+    qt_wait(lambda: counters[-1] == FLOOD, 30)  # the final event always arrives
     assert counters == sorted(set(counters))
     assert sub.consumer.received > FLOOD / 10  # a real flood reached this process ...
     assert len(counters) < sub.consumer.received / 10  # ... and the GUI saw a trickle of it
     assert sub.delivered + sub.dropped == sub.consumer.received
-    # The GUI kept ticking through the flood: no pause of a third of it (a fixed bound in
-    # seconds alone fails under load, which stretches the flood and the pauses together).
-    assert ticker.longest_gap(start, end) < max(0.25, (end - start) / 3)
+    # The GUI kept turning through the flood: never a third of it without a run of its timer
+    # (counted in events, not seconds: a load slows both threads of this process together).
+    assert ticker.most_between_turns() < sub.consumer.received / 3
 
 
 def test_a_bounded_queue_keeps_order_and_drops_the_oldest(
@@ -159,12 +159,14 @@ def test_a_bounded_queue_keeps_order_and_drops_the_oldest(
     bridge.start()
     start = time.monotonic()
     qt_wait(lambda: supplier.line("SENT") is not None, 60)
-    qt_wait(lambda: bool(batches) and batches[max(batches)][-1] == FLOOD, 10)
+    qt_wait(lambda: bool(batches) and batches[max(batches)][-1] == FLOOD, 30)
     elapsed = time.monotonic() - start
     counters = [c for n in sorted(batches) for c in batches[n]]
     assert counters == sorted(set(counters))  # in order, none twice
     assert max(len(b) for b in batches.values()) <= 40
-    assert sub.deliveries <= elapsed * 20 + 5  # at most max_rate deliveries a second
+    # At most max_rate deliveries a second: a lower bound on the time they took, which a load
+    # can only lengthen (0.9: Qt's coarse timers may fire up to 5 % early).
+    assert sub.deliveries <= 1 + elapsed * 20 / 0.9
     assert sub.dropped > 0
     assert sub.delivered + sub.dropped == sub.consumer.received
 
@@ -199,7 +201,7 @@ def test_closing_the_window_stops_the_reactor_thread(
     assert window.isVisible() and bridge.running
     window.refuse = False
     window.close()
-    qt_wait(lambda: not bridge.running, 5)
+    qt_wait(lambda: not bridge.running, 15)
     assert stopped == [True]
     assert not [t for t in threading.enumerate() if t.name == "miro-qt-reactor"]
     assert sub.closed
@@ -236,9 +238,9 @@ def test_stopping_at_once_after_starting(bridges: Callable[..., QtEventBridge]) 
     """A window closed as soon as it opened: stop() right after start() still stops."""
     bridge = bridges()
     bridge.start()
-    start = time.monotonic()
-    assert bridge.stop()
-    assert time.monotonic() - start < 2 and not bridge.running
+    assert bridge.stop()  # False had its reactor thread outlived the stop's own timeout
+    assert not bridge.running
+    assert not [t for t in threading.enumerate() if t.name == "miro-qt-reactor"]
 
 
 def test_a_consumer_of_your_own_feeds_a_mailbox(

@@ -21,7 +21,7 @@ def on_reactor(r: Reactor, fn: Any, *args: Any) -> Any:
     done = threading.Event()
     out: list[Any] = []
     r.call_soon(lambda: (out.append(fn(*args)), done.set()))
-    assert done.wait(5)
+    assert done.wait(30)
     return out[0]
 
 
@@ -48,7 +48,7 @@ def test_a_zeromq_socket_is_dispatched_on_the_reactor_thread(reactor: Reactor) -
     push.connect(f"tcp://127.0.0.1:{port}")
     for m in (b"a", b"b", b"c"):
         push.send(m)
-    assert done.wait(5)
+    assert done.wait(30)
     assert got == [(b"a", True), (b"b", True), (b"c", True)]
     on_reactor(reactor, reactor.unregister, pull)
     push.close()
@@ -66,7 +66,7 @@ def test_a_file_descriptor_is_dispatched(reactor: Reactor) -> None:
 
     on_reactor(reactor, reactor.register, r_fd, readable)
     os.write(w_fd, b"nmea")
-    assert done.wait(5)
+    assert done.wait(30)
     assert got == [b"nmea"]
     on_reactor(reactor, reactor.unregister, r_fd)
     os.close(r_fd)
@@ -83,15 +83,20 @@ def test_one_shot_and_periodic_timers(reactor: Reactor) -> None:
         if sum(1 for a, _ in fired if a == "periodic") == 3:
             three.set()
 
-    reactor.schedule_timer(0.05, 0, tick, "once")
-    timer = reactor.schedule_timer(0.02, 0.03, tick, "periodic")
-    assert three.wait(5)
-    assert reactor.cancel_timer(timer)
-    assert not reactor.cancel_timer(timer)  # already cancelled
+    def start_timers() -> int:  # on the reactor thread: no run before `timer` is known
+        reactor.schedule_timer(0.05, 0, tick, "once")
+        return reactor.schedule_timer(0.02, 0.03, tick, "periodic")
+
+    timer = on_reactor(reactor, start_timers)
+    assert three.wait(30)
+    cancelled = on_reactor(reactor, lambda: [reactor.cancel_timer(timer) for _ in range(2)])
+    assert cancelled == [True, False]  # the second time: already cancelled
+    count = len(fired)
     time.sleep(0.1)
+    assert fired[count:] == []  # nothing after the cancel
+    assert [a for a, _ in fired].count("once") == 1  # due before the third periodic run
+    # Lower bounds on waiting, which a load can only lengthen.
     periodic = [t for a, t in fired if a == "periodic"]
-    assert len(periodic) == 3  # nothing after the cancel
-    assert [a for a, _ in fired].count("once") == 1
     assert periodic[0] >= 0.02 and periodic[2] >= 0.08
     once = next(t for a, t in fired if a == "once")
     assert once >= 0.05
@@ -109,10 +114,10 @@ def test_ace_style_timer_handler_and_cancel_before_due(reactor: Reactor) -> None
 
     h = Handler()
     reactor.schedule_timer(0.01, 0, h, 42)
-    assert h.done.wait(5)
+    assert h.done.wait(30)
     assert h.args == [42]
-    never = Handler()
-    assert reactor.cancel_timer(reactor.schedule_timer(0.05, 0, never))
+    never = Handler()  # scheduled and cancelled in one turn of the reactor: never due
+    assert on_reactor(reactor, lambda: reactor.cancel_timer(reactor.schedule_timer(0.05, 0, never)))
     time.sleep(0.1)
     assert never.args == []
 
@@ -130,10 +135,11 @@ def test_a_periodic_timer_keeps_its_rate_after_a_slow_run(reactor: Reactor) -> N
             done.set()
 
     timer = reactor.schedule_timer(0, 0.05, tick)
-    assert done.wait(5)
+    assert done.wait(30)
     reactor.cancel_timer(timer)
     # Due at 0, .05, .10, .15, .20: the run at 0 lasts until .12, so .05 and .10 are missed and
     # skipped; the 4th run is at .20. Catching up would run .05 and .10 at once, and .15 4th.
+    # A lower bound, which a load can only lengthen.
     assert times[3] - times[0] >= 0.18, [t - times[0] for t in times]
 
 
@@ -156,7 +162,7 @@ def test_call_soon_runs_in_order_from_many_threads(reactor: Reactor) -> None:
         t.start()
     for t in threads:
         t.join()
-    assert done.wait(5)
+    assert done.wait(30)
     for t in range(n_threads):
         assert [i for tt, i in seen if tt == t] == list(range(per_thread))
 
@@ -197,11 +203,9 @@ def test_stop_from_another_thread_returns_promptly() -> None:
     r = Reactor(zmq.Context())
     thread = r.run_in_thread()
     r.schedule_timer(3600, 0, print)  # a far timer must not keep it asleep
-    start = time.monotonic()
     r.stop()
-    thread.join(5)
+    thread.join(30)  # far sooner than the timer
     assert not thread.is_alive()
-    assert time.monotonic() - start < 1
     r.close()
     r.context.term()
 
@@ -217,10 +221,19 @@ def test_a_signal_delivered_to_another_thread_still_stops_the_main_threads_react
             time.sleep(0.2)
             signal.pthread_kill(threading.get_ident(), signal.SIGUSR1)  # to this thread
 
+        rescued = threading.Event()
+
+        def rescue() -> None:  # so that a failure is a failure, not a hang
+            if not stopped.wait(60):
+                rescued.set()
+                r.stop()
+
+        stopped = threading.Event()
         threading.Thread(target=kill_from_elsewhere, daemon=True).start()
-        start = time.monotonic()
+        threading.Thread(target=rescue, daemon=True).start()
         r.run()  # on the main thread, no timers: only the signal can end it
-        assert time.monotonic() - start < 3
+        stopped.set()
+        assert not rescued.is_set(), "the signal did not stop the reactor"
     finally:
         signal.signal(signal.SIGUSR1, old)
         r.close()

@@ -174,7 +174,9 @@ def _generate(args: argparse.Namespace, specs: list[Any], defines: dict[str, str
     if too_long:
         return 1
     files = generate.generated_files(modules, outdir)
-    missing = generate.missing_imports(modules, files, outdir)
+    missing = [
+        m for m in generate.missing_imports(modules, files, outdir) if not checks.installed(m)
+    ]
     if missing:
 
         def compile_dependency(path: str, into: Diagnostics) -> Any:
@@ -190,6 +192,12 @@ def _generate(args: argparse.Namespace, specs: list[Any], defines: dict[str, str
         print(
             f"miro-idl: warning: the generated code imports {module}, which is not generated: "
             f"compile the IDL file it comes from too",
+            file=sys.stderr,
+        )
+    for package in generate.shadowed_modules(modules):
+        print(
+            f"miro-idl: warning: IDL module {package} is the Python package {package}, which hides "
+            f"the standard library's {package} module from programs with {outdir} on sys.path",
             file=sys.stderr,
         )
     changed = generate.changed_files(files, outdir)

@@ -66,6 +66,18 @@ def too_long_paths(paths: list[str], outdir: Any) -> list[str]:
     return list(out.values())
 
 
+def installed(module: str) -> bool:
+    """Whether a generated module the new code imports is importable here already: from an
+    installed package, such as the `Miro.Time_idl` of an installed miro-gen, which a user's
+    `Miro` package of their own is spread over with it (miro_gen/runtime/packages.py)."""
+    import importlib.util
+
+    try:
+        return importlib.util.find_spec(module) is not None
+    except Exception:  # a parent package that fails to import: as good as missing
+        return False
+
+
 def existing_parent(path: str) -> str:
     while not os.path.exists(path) and os.path.dirname(path) != path:
         path = os.path.dirname(path)

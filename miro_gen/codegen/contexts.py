@@ -436,6 +436,12 @@ class PackageContext:
         return f"IDL module {idl_name}."
 
     @property
+    def noqa(self) -> list[str]:
+        """Ruff rules the `__init__` is exempt from: its names come from star imports (for type
+        checkers only)."""
+        return ["F403", "F405"] if self.modules else []
+
+    @property
     def sorted_exports(self) -> list[tuple[str, str]]:
         return sorted(self.exports.items())
 

@@ -9,6 +9,7 @@ renamed into place, so that an error leaves the output folder as it was.
 from __future__ import annotations
 
 import os
+import sys
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -28,6 +29,7 @@ __all__ = [
     "display_source",
     "generated_files",
     "missing_imports",
+    "shadowed_modules",
     "write_files",
 ]
 
@@ -88,6 +90,13 @@ def missing_imports(modules: list[ModuleContext], files: dict[str, str], outdir:
             if rel not in files and not (outdir / rel).is_file() and imported not in out:
                 out.append(imported)
     return out
+
+
+def shadowed_modules(modules: list[ModuleContext]) -> list[str]:
+    """The top-level packages of these modules that are named like a standard-library module
+    (IDL `module queue`): wherever the output folder comes first on sys.path, every program
+    imports the generated package in its place (miro_gen's `import queue` too)."""
+    return sorted({m.package.split(".")[0] for m in modules} & sys.stdlib_module_names)
 
 
 def changed_files(files: dict[str, str], outdir: Path) -> list[str]:

@@ -9,6 +9,7 @@ decisions of their own.
 from __future__ import annotations
 
 import textwrap
+from collections.abc import Iterable
 from functools import cache, lru_cache
 from pathlib import Path
 from typing import Any
@@ -21,6 +22,16 @@ from miro_gen.codegen.contexts import ModuleContext, PackageContext
 from miro_gen.codegen.layout import bracket, wrap
 
 LINE = 100
+
+# What every generated file exempts itself from, so that it passes ruff in any project, whatever
+# rules the project selects and wherever it keeps the generated packages: the order of imports
+# is the generator's (isort would group generated packages as first or third party, depending on
+# the project's layout: `# isort: skip_file`, which isort itself honours too); line lengths are
+# the templates' and IDL's, module and package names are IDL's (`Example_idl`, `Miro`: N999 is in
+# ruff's default rules); and unused exemptions are not reported (RUF100), since which of these
+# rules apply is the project's choice. The layout is the templates' too (`# fmt: off`, to the end
+# of the file: ruff's formatter and black keep it whatever line length the project formats to).
+LINT_EXEMPTIONS = ("E501", "N999", "RUF100")
 
 
 def template_dir() -> Path:
@@ -93,31 +104,24 @@ def environment() -> jinja2.Environment:
     env.filters["docstring"] = docstring
     env.filters["wrap"] = wrap
     env.globals["bracket"] = bracket
+    env.globals["lint_header"] = lint_header
     env.globals["version"] = __version__
     return env
 
 
-# Rendered in the place of the module's ruff exemptions, which are known once it is rendered.
-_NOQA_MARK = "\x00"
+def lint_header(extra: Iterable[str] = ()) -> str:
+    """The lines after a generated file's header comments that exempt it from the formatter
+    and from the lint rules it cannot follow in every project (LINT_EXEMPTIONS), plus `extra`
+    rules (a module's names)."""
+    codes = ", ".join(sorted({*LINT_EXEMPTIONS, *extra}))
+    return f"# isort: skip_file\n# fmt: off\n# ruff: noqa: {codes}"
 
 
 def render_module(module: ModuleContext) -> str:
-    """The module's code; it exempts itself from the line-length rule only when it must
-    (long IDL names and literals can make lines longer than the project's limit)."""
-    text = environment().get_template("idl/module.py.j2").render(m=module, noqa_mark=_NOQA_MARK)
-    codes = set(module.noqa)
-    if max(map(len, text.split("\n"))) > LINE:
-        codes.add("E501")
-    mark = f"# ruff: noqa: {_NOQA_MARK}\n"
-    exemption = f"# ruff: noqa: {', '.join(sorted(codes))}\n" if codes else ""
-    return text.replace(mark, exemption, 1)
+    """The code of a module."""
+    return environment().get_template("idl/module.py.j2").render(m=module)
 
 
 def render_package_init(package: PackageContext) -> str:
-    """A package `__init__` that imports its modules' names lazily (see the template); like a
-    module, it exempts itself from the line-length rule only when long IDL names make it."""
-    text = environment().get_template("idl/package_init.py.j2").render(p=package)
-    if max(map(len, text.split("\n"))) > LINE:
-        head, rest = text.split("\n", 1)
-        text = f"{head}\n# ruff: noqa: E501 - long IDL names make long lines\n{rest}"
-    return text
+    """A package `__init__` that imports its modules' names lazily (see the template)."""
+    return environment().get_template("idl/package_init.py.j2").render(p=package)

@@ -73,25 +73,6 @@ def _build(cls: type) -> TypeCode:
     return tc
 
 
-_registered: dict[str, TypeCode] = {}
-
-
-def register_typecode(tc: TypeCode) -> None:
-    """Make a TypeCode known by its repository id (for types without generated classes, such as
-    the CosNaming exceptions this package decodes itself)."""
-    _registered[tc.id] = tc
-
-
-def typecode_for_repo_id(repo_id: str) -> TypeCode | None:
-    """The TypeCode of a type known by repository id: registered, or a generated class's."""
-    tc = _registered.get(repo_id)
-    if tc is None:
-        cls = registry.find_repo_id(repo_id)
-        if cls is not None:
-            tc = typecode_for(cls)
-    return tc
-
-
 def class_for(tc: TypeCode) -> type | None:
     """The generated class for a named struct, union or exception TypeCode, if there is one."""
     tc = tc.resolved()

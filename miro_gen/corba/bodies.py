@@ -1,10 +1,11 @@
 """Reply bodies between GIOP and the transport-neutral `Reply` of `miro_gen.runtime.rpc`.
 
 Generated stubs and skeletons read and write bodies that begin with a 4-byte encapsulation
-header and hold the values laid out from a multiple of 8. A GIOP 1.2 body starts at a multiple
-of 8 in its message, so for plain results the two are the same bytes; what differs is around
-them: a user exception's members follow its repository id (so they may start at a multiple of 4
-only, and are realigned using the exception's TypeCode), a system exception is a repository id,
+header and hold the values aligned relative to its end. A GIOP 1.2 body starts at a multiple
+of 8 in its message, so for plain results the two are the same bytes; a body that begins
+elsewhere (GIOP 1.0/1.1, a user exception's members after its repository id) is handed over
+after zero bytes that keep its values where they were modulo 8 (`body_in`, read from
+`cdr.body_start`). What differs is around them: a system exception is a repository id,
 a minor code and a completion status (its message travels in a service context of ours, which
 other ORBs ignore), and object references are IORs (a `GiopBody` decodes them as such).
 """
@@ -26,8 +27,19 @@ _HEADERS: Final = (b"\x00\x00\x00\x00", b"\x00\x01\x00\x00")  # big-, little-end
 
 
 def body_in(msg: bytes, offset: int, little: bool) -> GiopBody:
-    """The body at `offset` of a message, as generated decoders read it."""
-    return GiopBody(_HEADERS[little] + msg[offset:])
+    """The body at `offset` of a message, as generated decoders read it. A GIOP 1.0/1.1 body
+    follows its header at once, so it may begin anywhere: zero bytes after the encapsulation
+    header keep its values where they were modulo 8 (`cdr.body_start`)."""
+    pad = offset % 8
+    body = GiopBody(_HEADERS[little] + bytes(pad) + msg[offset:])
+    if pad:
+        body.start = 4 + pad
+    return body
+
+
+def body_input(body: bytes) -> CdrInput:
+    """A stream over the values of a request or reply body, for hand-written readers."""
+    return CdrInput(bytes(body[4:]), cdr.body_start(body) - 4, LE if body[1] == 1 else BE)
 
 
 # ---- system exceptions -----------------------------------------------------------------------
@@ -106,17 +118,10 @@ def system_exception_out(reply: rpc.Reply) -> tuple[bytes, Contexts]:
 
 
 def user_exception_in(msg: bytes, offset: int, little: bool) -> rpc.Reply:
-    """A user exception's GIOP body as the body its generated class decodes."""
+    """A user exception's GIOP body as the body its generated class decodes: its members,
+    which follow its repository id (so they may begin 4 bytes off a multiple of 8)."""
     inp = CdrInput(msg, offset, LE if little else BE)
     repo_id = inp.string("exception id")
-    if inp.pos % 8:
-        tc = anys.typecode_for_repo_id(repo_id)
-        if tc is not None:
-            out = CdrOutput()
-            anys.transcode(tc, inp, out, anys.GIOP_REFS, anys.GIOP_REFS)
-            body = GiopBody(_HEADERS[1] + out.buf)
-            return rpc.Reply(rpc.ReplyStatus.USER_EXCEPTION, body, repo_id)
-    # Aligned already, or an exception nobody here knows (the caller reports it as UNKNOWN).
     return rpc.Reply(rpc.ReplyStatus.USER_EXCEPTION, body_in(msg, inp.pos, little), repo_id)
 
 
@@ -177,4 +182,4 @@ def call(
         return rpc.Reply(rpc.ReplyStatus.OK, b""), CdrInput(b"")
     if reply.status == rpc.ReplyStatus.SYSTEM_EXCEPTION:
         rpc.raise_system_exception(reply)
-    return reply, CdrInput(bytes(reply.body[4:]), 0, LE if reply.body[1] == 1 else BE)
+    return reply, body_input(reply.body)

@@ -230,10 +230,7 @@ class IIOPInvoker:
             value = getattr(value, "_ref", value)
             if not isinstance(value, ObjectRef):
                 raise BAD_PARAM("expected an object reference, a stub or a servant")
-        ior = ior_from_ref(value or ObjectRef())
-        if self.server is not None:  # one of ours under its GIOP 1.0/1.1 alias: as itself
-            ior = self.server.canonical(ior)
-        return EncodedRef(ior.encode())
+        return EncodedRef(ior_from_ref(value or ObjectRef()).encode())
 
     # ---- one request ----------------------------------------------------------------------------
 
@@ -455,11 +452,6 @@ class IIOPInvoker:
 def _result(reply: giop.Reply, msg: bytes, operation: str, peer: str) -> rpc.Reply | IOR:
     s = reply.status
     if s == ReplyStatus.NO_EXCEPTION:
-        if reply.body % 8 and reply.body < len(msg):
-            _log.warning(
-                "%s: the GIOP 1.%d reply from %s is not 8-aligned; 8-byte values in it "
-                "may be misread", operation, reply.minor, peer,
-            )  # fmt: skip
         return rpc.Reply(rpc.ReplyStatus.OK, bodies.body_in(msg, reply.body, reply.little))
     if s == ReplyStatus.USER_EXCEPTION:
         return bodies.user_exception_in(msg, reply.body, reply.little)

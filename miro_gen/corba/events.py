@@ -26,13 +26,13 @@ import threading
 from typing import Any
 
 from miro_gen.corba.anys import read_any, write_any
-from miro_gen.corba.bodies import call
+from miro_gen.corba.bodies import body_input, call
 from miro_gen.corba.ior import IOR, ior_from_ref, ref_from_ior
 from miro_gen.exceptions import BAD_OPERATION, MARSHAL, UserException
 from miro_gen.log import logger
 from miro_gen.runtime import rpc
 from miro_gen.runtime.cdr import ObjectRef
-from miro_gen.runtime.cdrstream import CdrInput, CdrOutput
+from miro_gen.runtime.cdrstream import CdrOutput
 
 _log = logger("MIRO")
 
@@ -164,7 +164,7 @@ class CosEventConsumer(rpc.Servant):
     @rpc.nonblocking
     def push(self, body: bytes) -> bytes:
         try:
-            inp = CdrInput(bytes(body[4:]), 0, 0 if body[1] == 1 else 1)
+            inp = body_input(body)
             value = read_any(inp)
         except MARSHAL as e:
             self.undecodable += 1

@@ -444,8 +444,6 @@ class GiopBody(ForeignBody):
     """A request or reply body that came in a GIOP message: its object references are IORs
     (generated decoders call `get_object` for them)."""
 
-    __slots__ = ()
-
     def get_object(self, off: int, e: int, what: str) -> tuple[ObjectRef, int]:
         inp = CdrInput(self, off, e)
         try:

@@ -84,27 +84,6 @@ class NotEmpty(UserException):
     _repo_id = _NC + "NotEmpty:1.0"
 
 
-def _register_typecodes() -> None:
-    """The TypeCodes of the exceptions above (their members follow their repository ids, at
-    offsets that need realigning)."""
-    from miro_gen.corba import typecode as tc
-    from miro_gen.corba.anys import register_typecode
-
-    s = tc.string_tc()
-    component = tc.TypeCode(tc.K.tk_struct, "IDL:omg.org/CosNaming/NameComponent:1.0",
-                            "NameComponent", [("id", s), ("kind", s)])  # fmt: skip
-    name = tc.TypeCode(tc.K.tk_sequence, content=component)
-    reason = tc.TypeCode(tc.K.tk_enum, _NC + "NotFoundReason:1.0", "NotFoundReason",
-                         enumerators=[r.name for r in NotFoundReason])  # fmt: skip
-    register_typecode(tc.TypeCode(tc.K.tk_except, NotFound._repo_id, "NotFound",
-                                  [("why", reason), ("rest_of_name", name)]))  # fmt: skip
-    context = tc.objref_tc(NAMING_CONTEXT)
-    register_typecode(tc.TypeCode(tc.K.tk_except, CannotProceed._repo_id, "CannotProceed",
-                                  [("cxt", context), ("rest_of_name", name)]))  # fmt: skip
-    for cls in (InvalidName, AlreadyBound, NotEmpty):
-        register_typecode(tc.TypeCode(tc.K.tk_except, cls._repo_id, cls.__name__))
-
-
 class Binding(NamedTuple):
     name: Name
     is_context: bool
@@ -116,9 +95,6 @@ def miro_name(path: str) -> Name:
     if not parts:
         raise MiroNaming.InvalidName(name=path)
     return [(p, "") for p in parts]
-
-
-_register_typecodes()
 
 
 # ---- the CosNaming::NamingContext client ------------------------------------------------------

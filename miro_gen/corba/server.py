@@ -10,10 +10,8 @@ same IORs, as a persistent POA does, and `corbaloc:iiop:HOST:PORT/robot1/Example
 A message that breaks the protocol is answered with MessageError and the connection closed; a
 request for an unknown key gets OBJECT_NOT_EXIST; nothing a client sends stops the server.
 GIOP 1.0 and 1.1 requests are served too. Their body follows the header at once, so it may start
-at an offset that is not a multiple of 8, which generated decoders cannot read: such a request is
-answered with a LOCATION_FORWARD to the same object under a key 4 bytes longer, which the client
-repeats the request to, now aligned (a one-way request, which cannot be forwarded, is logged and
-dropped instead).
+at an offset that is not a multiple of 8: `bodies.body_in` hands it to generated decoders with
+padding that keeps its values' alignment.
 """
 
 from __future__ import annotations
@@ -45,7 +43,6 @@ from miro_gen.runtime.cdrstream import CdrInput, CdrOutput
 _log = logger("MIRO")
 
 DEFAULT_WORKERS = 16
-ALIGN_PREFIX = b"\x00MA\x00"  # a key variant 4 bytes longer (see the module doc)
 _OBJECT = "IDL:omg.org/CORBA/Object:1.0"
 
 
@@ -127,16 +124,6 @@ class IIOPServer:
     def ior(self, key: bytes, repo_id: str) -> IOR:
         return IOR.iiop(repo_id, self.host, self.port, key)
 
-    def canonical(self, ior: IOR) -> IOR:
-        """`ior`, or when it names one of our objects under its alignment alias (see the
-        module doc), the object's own IOR: a reference comes back as it went out."""
-        if not any(p.tag == 0 and ALIGN_PREFIX in p.data for p in ior.profiles):
-            return ior
-        profile = ior.iiop_profile()
-        if profile is None or profile.port != self.port or not profile.key.startswith(ALIGN_PREFIX):
-            return ior
-        return self.ior(profile.key[len(ALIGN_PREFIX) :], ior.type_id)
-
     def reference_for(self, servant: rpc.Servant) -> CorbaRef:
         key = self._keys.get(id(servant))
         if key is not None:
@@ -144,10 +131,7 @@ class IIOPServer:
         return self.activate(servant)
 
     def _servant(self, key: bytes) -> rpc.Servant | None:
-        servant = self._servants.get(key)
-        if servant is None and key.startswith(ALIGN_PREFIX):
-            servant = self._servants.get(key[len(ALIGN_PREFIX) :])
-        return servant
+        return self._servants.get(key)
 
     # ---- connections ----------------------------------------------------------------------------
 
@@ -230,9 +214,6 @@ class IIOPServer:
         self, conn: _ServerConnection, h: giop.Header, req: giop.Request, msg: bytes
     ) -> None:
         servant = self._servant(req.key)
-        if req.minor < 2 and req.body % 8 and req.body < len(msg) and servant is not None:
-            self._misaligned(conn, req)
-            return
         expected = req.response_expected
         if req.sync_flags == 1:  # SYNC_WITH_SERVER: acknowledge receipt, then run as one-way
             conn.send(giop.encode_reply(req.minor, req.request_id, ReplyStatus.NO_EXCEPTION, b""))
@@ -280,23 +261,6 @@ class IIOPServer:
     def _send_reply(self, conn: _ServerConnection, req: giop.Request, reply: rpc.Reply) -> None:
         status, payload, contexts = bodies.reply_out(reply)
         conn.send(giop.encode_reply(req.minor, req.request_id, status, payload, contexts))
-
-    def _misaligned(self, conn: _ServerConnection, req: giop.Request) -> None:
-        if not req.response_expected:
-            _log.warning(
-                "IIOP: dropped the one-way GIOP 1.%d request %s from %s: its body is not "
-                "8-aligned (use GIOP 1.2)", req.minor, req.operation, conn.peer,
-            )  # fmt: skip
-            return
-        key = req.key
-        key = key[len(ALIGN_PREFIX) :] if key.startswith(ALIGN_PREFIX) else ALIGN_PREFIX + key
-        servant = self._servant(key)
-        repo_id = servant._repo_id if servant is not None else _OBJECT
-        out = CdrOutput()
-        IOR.iiop(repo_id, self.host, self.port, key, (1, req.minor)).write(out)
-        conn.send(
-            giop.encode_reply(req.minor, req.request_id, ReplyStatus.LOCATION_FORWARD, out.buf)
-        )
 
     def _object_operation(self, servant: rpc.Servant, req: giop.Request, msg: bytes) -> rpc.Reply:
         """CORBA::Object's own operations: _is_a, _non_existent, _repository_id."""

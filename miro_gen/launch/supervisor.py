@@ -15,6 +15,7 @@ behind.
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
 import shutil
 import signal
@@ -249,6 +250,33 @@ class NameWatcher:
         self._thread.join(3)
 
 
+@functools.cache
+def _ends_with_us() -> tuple[str, ...]:
+    """A prefix that gives a child SIGTERM when the launch dies, even by SIGKILL (Linux's
+    parent-death signal, set by util-linux's setpriv before it executes the command; children
+    are started from the launch's main thread, whose end is the process's): a launch that is
+    killed must not leave services behind that keep their names bound. Empty where setpriv
+    cannot do it; then only a launch that stops on a signal stops its services."""
+    setpriv = shutil.which("setpriv") if sys.platform.startswith("linux") else None
+    if setpriv is None:
+        return ()
+    try:
+        usage = subprocess.run(
+            [setpriv, "--help"], capture_output=True, text=True, timeout=5
+        ).stdout
+    except (OSError, subprocess.SubprocessError):
+        return ()
+    return (setpriv, "--pdeathsig", "TERM", "--") if "--pdeathsig" in usage else ()
+
+
+def _runnable(program: str, cwd: str | Path | None, path: str | None) -> bool:
+    """Whether `program` would be found and run (a relative path from `cwd`, as Popen does)."""
+    if os.sep in program:
+        full = os.path.join(cwd or os.getcwd(), program)
+        return os.path.isfile(full) and os.access(full, os.X_OK)
+    return shutil.which(program, path=path) is not None
+
+
 class Supervisor:
     """Runs `part` of `spec`, writing to `console`, until `stop()` or a required service fails;
     `run()` returns the exit status (0, or 1 when a required service could not stay up)."""
@@ -367,8 +395,12 @@ class Supervisor:
         spec = c.spec
         try:
             argv, env = self._command(c)
+            prefix = _ends_with_us()
+            if prefix and not _runnable(argv[0], spec.cwd, env.get("PATH")):
+                # (said as Popen says it, not by setpriv after it started)
+                raise FileNotFoundError(2, "No such file or directory", argv[0])
             proc = subprocess.Popen(
-                argv,
+                [*prefix, *argv],
                 cwd=spec.cwd,
                 env=env,
                 stdin=subprocess.DEVNULL,

@@ -68,7 +68,7 @@ _U32_UNPACK: Final = (_U32[LE].unpack_from, _U32[BE].unpack_from)
 # Elements that may take no bytes at all (empty structs) cannot be checked against the bytes
 # left: one decode may create this many of them in all (sequences of them nested in sequences
 # would otherwise multiply a lying length). Each thread's budget is refilled by
-# header_endianness(), which every decode of a whole value starts with.
+# body_header(), which every decode of a whole value starts with.
 _EMPTY_ELEMENTS: Final = 1 << 16
 _zero_size = threading.local()
 _XCDR2_KINDS: Final = {6, 7, 8, 9, 10, 11}
@@ -140,8 +140,11 @@ def pair(fmt: str) -> tuple[Struct, Struct]:
     return Struct("<" + fmt), Struct(">" + fmt)
 
 
-def header_endianness(data: bytes | bytearray | memoryview) -> int:
-    """Check the encapsulation header; the endianness index of the data that follows."""
+def body_header(data: bytes | bytearray | memoryview) -> tuple[int, int]:
+    """Check the encapsulation header (generated decoders start with it): the endianness index
+    of the values that follow, and the offset where they begin. That is 4, after the header,
+    or further on in a body that came in a GIOP 1.0/1.1 message: after the zero bytes that keep
+    the alignment its values had there (`ForeignBody.start`)."""
     _zero_size.left = _EMPTY_ELEMENTS
     if len(data) < 4:
         raise MARSHAL(f"{len(data)} bytes is too short for a CDR encapsulation header")
@@ -150,7 +153,17 @@ def header_endianness(data: bytes | bytearray | memoryview) -> int:
         if data[0] == 0 and kind in _XCDR2_KINDS:
             raise MARSHAL(f"XCDR2 encapsulation (kind {kind}) is not supported; expected XCDR1")
         raise MARSHAL(f"unknown CDR encapsulation kind {data[0]:02x} {kind:02x}")
-    return LE if kind == 1 else BE
+    return (LE if kind == 1 else BE), (data.start if isinstance(data, ForeignBody) else 4)
+
+
+def header_endianness(data: bytes | bytearray | memoryview) -> int:
+    """Check the encapsulation header; the endianness index of the data that follows."""
+    return body_header(data)[0]
+
+
+def body_start(data: bytes | bytearray | memoryview) -> int:
+    """Where the values of a body begin (see `body_header`)."""
+    return data.start if isinstance(data, ForeignBody) else 4
 
 
 # ---- strings ----------------------------------------------------------------------------------
@@ -387,9 +400,13 @@ class EncodedRef(NamedTuple):
 
 class ForeignBody(bytes):
     """A request or reply body that came over a protocol whose object references are not
-    (repository id, endpoint, key) triples: `get_object` decodes them (GIOP bodies hold IORs)."""
+    (repository id, endpoint, key) triples: `get_object` decodes them (GIOP bodies hold IORs).
 
-    __slots__ = ()
+    `start` is where its values begin (`body_start`). Values are aligned relative to the end of
+    the 4-byte header; a GIOP 1.0/1.1 body may begin anywhere in its message, whose start its
+    values are aligned to, so zero bytes after the header put them at the same place modulo 8."""
+
+    start: int = 4  # set on an instance that has padding
 
     def get_object(self, off: int, e: int, what: str) -> tuple[ObjectRef, int]:
         raise NotImplementedError  # pragma: no cover - subclasses implement it

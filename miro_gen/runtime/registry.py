@@ -16,7 +16,6 @@ for consumers) or where waiting is fine (`find`, for the tools).
 from __future__ import annotations
 
 import importlib
-import logging
 import os
 import sys
 import threading
@@ -112,6 +111,8 @@ def discover() -> bool:
                     importlib.import_module(name)
                     new = True
                 except Exception as e:  # a broken package must not stop the search
+                    import logging
+
                     logging.getLogger("miro.MIRO").warning(
                         "cannot import generated package %s: %s", name, e
                     )

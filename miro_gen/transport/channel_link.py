@@ -27,6 +27,7 @@ from miro_gen.transport.reactor import Reactor
 _log = logger("MIRO")
 
 RESOLVE_EVERY = 0.25  # seconds between two look-ups of a channel whose connection is down
+CLOSE_TIMEOUT = 10.0  # seconds a closing watcher waits for its look-up (naming calls: 5 s)
 _EVENTS = zmq.EVENT_HANDSHAKE_SUCCEEDED | zmq.EVENT_DISCONNECTED
 
 
@@ -109,9 +110,12 @@ class ChannelWatcher:
         self._links: set[ChannelLink] = set()
         self._lock = threading.Condition()
         self._thread: threading.Thread | None = None
+        self._closed = False
 
     def watch(self, link: ChannelLink) -> None:
         with self._lock:
+            if self._closed:
+                return
             self._links.add(link)
             if self._thread is None:
                 self._thread = threading.Thread(target=self._run, name="miro-rematch", daemon=True)
@@ -121,7 +125,7 @@ class ChannelWatcher:
         while True:
             with self._lock:
                 self._links = {k for k in self._links if not (k.connected or k.closed)}
-                if not self._links or self.reactor.closed:
+                if not self._links or self.reactor.closed or self._closed:
                     self._thread = None
                     return
                 links = list(self._links)
@@ -136,11 +140,31 @@ class ChannelWatcher:
                 if endpoint != link.endpoint:
                     self.reactor.call_soon(link.move, endpoint)
             with self._lock:
-                self._lock.wait(RESOLVE_EVERY)
+                if not self._closed:
+                    self._lock.wait(RESOLVE_EVERY)
+
+    def close(self, timeout: float = CLOSE_TIMEOUT) -> None:
+        """Look nothing up any more, and wait for a look-up under way: it uses the process's
+        invoker, whose sockets must not be closed under it (ZeroMQ aborts the process)."""
+        with self._lock:
+            self._closed = True
+            self._lock.notify_all()
+            thread = self._thread
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(timeout)
 
 
 _watchers: weakref.WeakKeyDictionary[Reactor, ChannelWatcher] = weakref.WeakKeyDictionary()
 _watchers_lock = threading.Lock()
+
+
+def close_watcher(reactor: Reactor) -> None:
+    """Stop the channel watcher of `reactor`, if it has one (before its process's sockets
+    are closed)."""
+    with _watchers_lock:
+        w = _watchers.pop(reactor, None)
+    if w is not None:
+        w.close()
 
 
 def watcher(reactor: Reactor) -> ChannelWatcher:

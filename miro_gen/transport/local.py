@@ -94,7 +94,18 @@ def nearest(endpoint: str) -> str:
     parts = _split(endpoint)
     if twin is None or parts is None or not _is_local(parts[0]):
         return endpoint
-    return twin if os.path.exists(twin[len("ipc://") :]) else endpoint
+    return twin if _listening(twin[len("ipc://") :]) else endpoint
+
+
+def _listening(path: str) -> bool:
+    """Whether a process listens on the Unix socket `path`: a file left by one that was killed
+    (or a twin of a port that has changed hands) refuses the connection at once."""
+    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as probe:
+        try:
+            probe.connect(path)
+        except OSError:
+            return False
+    return True
 
 
 def bind_twin(sock: zmq.Socket[Any], endpoint: str) -> str | None:

@@ -34,7 +34,7 @@ from miro_gen import lifecycle, log
 from miro_gen.exceptions import TRANSIENT, SystemException
 from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.runtime.rpc import Servant, Stub
-from miro_gen.transport import sockets
+from miro_gen.transport import channel_link, sockets
 from miro_gen.transport.adapter import ObjectAdapter
 from miro_gen.transport.addresses import server_addresses
 from miro_gen.transport.channels import EventChannel, resolve_channel
@@ -363,6 +363,7 @@ class Server(Client):
                 fn()
             except Exception:
                 _log.exception("a shutdown handler failed")
+        channel_link.close_watcher(self._reactor)  # its look-up uses our invoker
         self.adapter.close()
         self._reactor.close()
         self.close()

@@ -12,7 +12,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from miro_gen.codegen.generate import GENERATED_MARK as IDL_MARK
-from miro_gen.codegen.render import LINE, environment
+from miro_gen.codegen.render import environment
 from miro_gen.params.compiler.pymodel import GENERATED_MARK, PyParamsModule
 
 
@@ -23,10 +23,7 @@ def render_module(m: PyParamsModule) -> str:
         "imports": sorted(m.imports.items()),
         "sections": sorted(m.sections.items()),
     }
-    text = template.render(noqa=[], **context)
-    if any(len(line) > LINE for line in text.split("\n")):
-        text = template.render(noqa=["E501"], **context)
-    return text
+    return template.render(**context)
 
 
 def _owner(path: Path) -> str | None:

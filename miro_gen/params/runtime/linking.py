@@ -1,17 +1,18 @@
 """How generated modules find the modules they need: other generated modules (with a message
 naming the compile-time file to compile when one is missing), hand-written classes of `dummy`
 items (with a message naming the module and class to write), and the other folders a package
-of parameter modules is spread over (`Video` in two output folders)."""
+of parameter modules is spread over (`Video` in two output folders: `package_path`, which
+miro-idl's packages share)."""
 
 from __future__ import annotations
 
 import importlib
-import importlib.machinery
-import pkgutil
-import sys
 from typing import Any
 
 from miro_gen.params.runtime.config import Config
+from miro_gen.runtime.packages import package_path
+
+__all__ = ["hand_written", "missing_module", "package_path"]
 
 
 def _is_missing(error: ModuleNotFoundError, module: str) -> bool:
@@ -47,24 +48,3 @@ def hand_written(module: str, cls: str, item: str, declared: str) -> type[Config
     if not (isinstance(target, type) and issubclass(target, Config)):
         raise ImportError(f"{module} has no class {cls} deriving from Config: {what}", name=module)
     return target
-
-
-def package_path(path: list[str], name: str) -> list[str]:
-    """`__path__` of a package that parameter modules share across folders: every folder of
-    that name the import system can find (sys.path entries and installed packages), so that
-    `Video.Parameters` from one output folder and `Video.Filter` from another both import."""
-    out = list(pkgutil.extend_path(path, name))
-    for finder in sys.meta_path:
-        if isinstance(finder, type) and issubclass(finder, importlib.machinery.PathFinder):
-            continue
-        find_spec = getattr(finder, "find_spec", None)
-        if find_spec is None:
-            continue
-        try:
-            spec = find_spec(name, None)
-        except Exception:  # a finder that cannot answer for this name
-            continue
-        for folder in (spec.submodule_search_locations or []) if spec is not None else []:
-            if folder not in out:
-                out.append(folder)
-    return out
