@@ -68,7 +68,7 @@ server.shutdown()
 """
 
 RAW_COUNTER = """
-import signal, struct, sys, zmq
+import signal, sys, zmq
 ctx = zmq.Context()
 s = ctx.socket(zmq.SUB)
 s.setsockopt(zmq.RCVHWM, 100000)
@@ -78,7 +78,7 @@ print("READY", flush=True)
 signal.signal(signal.SIGINT, lambda *_: (print(count, missed, flush=True), sys.exit(0)))
 count = missed = 0
 expected = None
-H = struct.Struct("<BBHQ32s"); E = struct.Struct("<QqqI")
+from miro_gen.transport.event_frames import BATCH as H, EVENT as E
 while True:
     topic, body = s.recv_multipart()
     n = H.unpack_from(body)[2]
@@ -179,8 +179,8 @@ def replay_spacing(naming: str) -> tuple[float, float]:
     """Median and 95th percentile (ms) of how far arrivals stray from the recorded spacing."""
     import Miro
 
-    from miro_gen.eventlog.wire import RawEvent
     from miro_gen.eventlog.writer import LogWriter
+    from miro_gen.transport.event_frames import RawEvent
 
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "spacing.mcap"

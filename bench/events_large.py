@@ -398,9 +398,9 @@ def camera_rate(seconds: float = 5.0, consumers: int = 4, hz: float = 30.0) -> b
 
 def sensor_log(path: Path, seconds: float) -> tuple[int, int]:
     """A log of 1280x720 RGB images at 30 Hz and 1,081-beam scans at 40 Hz: (images, scans)."""
-    from miro_gen.eventlog.wire import RawEvent
     from miro_gen.eventlog.writer import LogWriter
     from miro_gen.sim.laser import LaserScans
+    from miro_gen.transport.event_frames import RawEvent
 
     writer = LogWriter(str(path))
     t0 = 1_577_836_800_000_000_000

@@ -27,7 +27,7 @@ from loopback import (
 )
 
 from miro_gen import TRANSIENT, Client, EventChannelFactory, StructuredPushSupplier
-from miro_gen.eventlog.wire import pack_batch
+from miro_gen.transport.event_frames import pack_batch
 from miro_gen.transport.events import DEFAULT_DEPTH, topic
 from miro_gen.transport.gaps import MAX_SOURCES
 

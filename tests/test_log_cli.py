@@ -9,8 +9,8 @@ import Miro
 import pytest
 from loopback import run_miro
 
-from miro_gen.eventlog.wire import RawEvent
 from miro_gen.eventlog.writer import LogWriter
+from miro_gen.transport.event_frames import RawEvent
 
 T0 = 1_700_000_000_000_000_000  # ns
 

@@ -23,8 +23,8 @@ from eventlog_helpers import proc, read_events, stop
 from loopback import NamingProcess, eventually, run_miro
 
 from miro_gen.clock import LogClock
-from miro_gen.eventlog.wire import RawEvent
 from miro_gen.eventlog.writer import LogWriter
+from miro_gen.transport.event_frames import RawEvent
 from miro_gen.transport.reactor import Reactor
 
 T0 = 1_577_836_800_000_000_000  # 2020-01-01 00:00:00 UTC: log time is not wall time

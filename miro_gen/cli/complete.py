@@ -152,7 +152,8 @@ def _robot(words: list[str]) -> Any:
     opts, _ = parse_common_options(words[2:])
     argv = ["miro", "--naming", opts.naming, "-MNC", opts.naming_context]
     robot = Robot(argv, timeout=TIMEOUT)
-    robot.client.naming.registry._timeout = TIMEOUT
+    naming = robot.client.naming  # miro's own (Robot refuses a CORBA naming service)
+    naming.registry = naming.registry_stub(robot.client.invoker, TIMEOUT)
     return robot
 
 

@@ -26,9 +26,9 @@ def _parser(prog: str, description: str) -> argparse.ArgumentParser:
 
 def _tap(server: Any, channel: Any, topics: list[tuple[str, str]], handler: Any) -> Any:
     from miro_gen.eventlog.tap import RawEventTap
-    from miro_gen.eventlog.types import import_generated_packages
+    from miro_gen.runtime import registry
 
-    import_generated_packages()
+    registry.discover()
     return RawEventTap(channel, topics, handler)
 
 
@@ -38,7 +38,7 @@ def echo_main(argv: Sequence[str]) -> int:
     p.add_argument("-n", "--count", type=int, default=0, help="exit after N events")
     ns = p.parse_args(split_common(p, argv))
     from miro_gen.eventlog.show import clock_text, payload_text
-    from miro_gen.eventlog.wire import RawEvent
+    from miro_gen.transport.event_frames import RawEvent
     from miro_gen.transport.gaps import GapCounter
 
     found = server_and_channel(p, prog, argv, ns.channel)
@@ -85,7 +85,7 @@ def hz_main(argv: Sequence[str]) -> int:
     if ns.window < 1:
         p.error("--window must be 1 or more")
     from miro_gen.eventlog.rates import RateWindow, data_rate
-    from miro_gen.eventlog.wire import RawEvent
+    from miro_gen.transport.event_frames import RawEvent
     from miro_gen.transport.gaps import GapCounter
 
     found = server_and_channel(p, prog, argv, ns.channel)

@@ -100,12 +100,13 @@ def info_main(argv: Sequence[str]) -> int:
 
 def _compile_missing_types(path: str, log: Any) -> None:
     """Compile the log's schemas whose types are not generated here, so that they decode."""
-    from miro_gen.eventlog.types import find_type, types_from_schemas
+    from miro_gen.eventlog.types import types_from_schemas
+    from miro_gen.runtime import registry
 
     missing = [
         t
         for t in log.topics()
-        if t.schema_encoding == "omgidl" and t.type_hash and find_type(t.type_hash) is None
+        if t.schema_encoding == "omgidl" and t.type_hash and registry.find(t.type_hash) is None
     ]
     if missing:
         why = types_from_schemas([t.schema.decode("utf-8", "replace") for t in missing])

@@ -98,11 +98,10 @@ def _payload(robot: Robot, domain: str, type_name: str, given: str | None) -> tu
 
 def _local_type(scoped: str) -> Any:
     """A generated class of this name on this machine's path."""
-    from miro_gen.eventlog.types import import_generated_packages
-    from miro_gen.runtime.cdr import _TYPES_BY_HASH
+    from miro_gen.runtime import registry
 
-    import_generated_packages()
-    for cls in list(_TYPES_BY_HASH.values()):
+    registry.discover()
+    for cls in registry.known_types():
         if cls._type_name == scoped:
             return cls
     return None

@@ -34,7 +34,7 @@ from miro_gen.codegen.steps import (
     EncodeStep,
 )
 from miro_gen.idl import ast
-from miro_gen.runtime.cdr import default_discriminator
+from miro_gen.runtime.datatypes import default_discriminator
 
 XCDR2_ANNOTATIONS = {"appendable", "mutable", "optional", "external"}
 

@@ -23,7 +23,7 @@ from miro_gen.corba.ior import IOR, GiopBody, ior_from_ref, ref_from_ior
 from miro_gen.corba.schema import SchemaReader
 from miro_gen.corba.typecode import PRIMITIVES, K, TypeCode
 from miro_gen.exceptions import BAD_PARAM, MARSHAL, UserException
-from miro_gen.runtime import cdr
+from miro_gen.runtime import cdr, registry
 from miro_gen.runtime.cdr import LE, ObjectRef
 from miro_gen.runtime.cdrstream import CdrInput, CdrOutput
 
@@ -63,7 +63,7 @@ def _build(cls: type) -> TypeCode:
     if not schema or not name:
         raise BAD_PARAM(f"{cls.__name__} is not a generated IDL type (it has no data schema)")
     # Schemas drop #pragma prefix: the generated classes know the real repository ids.
-    repo_ids = {c._type_name: c._repo_id for c in cdr.imported_types()}
+    repo_ids = {c._type_name: c._repo_id for c in registry.known_types()}
     tc = SchemaReader(schema, repo_ids).types.get(name)
     if tc is None:  # pragma: no cover - a schema always declares its type
         raise BAD_PARAM(f"the data schema of {name} does not declare it")
@@ -78,7 +78,7 @@ def class_for(tc: TypeCode) -> type | None:
     tc = tc.resolved()
     if tc.kind not in (K.tk_struct, K.tk_union, K.tk_except) or not tc.id:
         return None
-    cls = cdr.type_for_repo_id(tc.id)
+    cls = registry.find_repo_id(tc.id)
     if cls is None:
         cls = _by_module_path(tc.id)
     if cls is not None and typecode_for(cls).equivalent(tc):

@@ -19,7 +19,7 @@ from miro_gen.corba import anys
 from miro_gen.corba.giop import SC_MIRO_DETAIL, Contexts, ReplyStatus, context
 from miro_gen.corba.ior import GiopBody
 from miro_gen.exceptions import MARSHAL, UNKNOWN, CompletionStatus, SystemException
-from miro_gen.runtime import cdr, rpc
+from miro_gen.runtime import cdr, registry, rpc
 from miro_gen.runtime.cdr import BE, LE, ObjectRef
 from miro_gen.runtime.cdrstream import CdrInput, CdrOutput, encapsulated, encapsulation_input
 
@@ -129,7 +129,7 @@ def user_exception_out(reply: rpc.Reply) -> bytes:
     """The GIOP body of a user exception reply of ours: its id, then its members."""
     out = CdrOutput()
     out.string(reply.repo_id, "exception id")
-    cls = cdr.type_for_repo_id(reply.repo_id)
+    cls = registry.find_repo_id(reply.repo_id)
     if cls is None:  # pragma: no cover - the servant raised an instance: its class is imported
         out.raw(memoryview(reply.body)[4:])
         return out.getvalue()

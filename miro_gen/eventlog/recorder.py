@@ -11,15 +11,16 @@ from __future__ import annotations
 import signal
 import time
 from collections.abc import Sequence
-from typing import Any
 
 from miro_gen.eventlog.progress import StatusLine, human_bytes
 from miro_gen.eventlog.tap import RawEventTap
-from miro_gen.eventlog.types import import_generated_packages
-from miro_gen.eventlog.wire import RawEvent
 from miro_gen.eventlog.writer import LogWriter
+from miro_gen.runtime import registry
+from miro_gen.transport.channels import EventChannel
+from miro_gen.transport.event_frames import RawEvent
+from miro_gen.transport.log_clock import CLOCK_TYPE  # a player's clock: never recorded
+from miro_gen.transport.server import Server
 
-CLOCK_TYPE = "MiroLogClock"  # a player's clock: not an event of the robot, never recorded
 TICK = 0.25  # seconds between chunk checks and progress updates
 
 
@@ -28,8 +29,8 @@ class Recorder:
 
     def __init__(
         self,
-        server: Any,
-        channel: Any,
+        server: Server,
+        channel: EventChannel,
         subscriptions: Sequence[tuple[str, str]],
         writer: LogWriter,
         status: StatusLine,
@@ -40,7 +41,7 @@ class Recorder:
         self.started = time.monotonic()
         self._last = (self.started, 0)
         self.rate = 0.0
-        import_generated_packages()  # now, not on the first event: that would delay it
+        registry.discover()  # now, not on the first event: that would delay it
         self.tap = RawEventTap(channel, subscriptions, self._write, skip=[CLOCK_TYPE])
         server.reactor().schedule_timer(TICK, TICK, self._tick)
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import time
 
-from miro_gen.eventlog.types import find_type
+from miro_gen.runtime import registry
 
 
 def clock_text(ns: int) -> str:
@@ -20,7 +20,7 @@ def date_text(ns: int) -> str:
 
 def payload_text(type_hash: str, data: bytes) -> str:
     """The decoded payload, or why it cannot be decoded."""
-    cls = find_type(type_hash) if type_hash else None
+    cls = registry.find(type_hash) if type_hash else None
     if cls is None:
         name = f"type hash {type_hash[:12]}" if type_hash else "no type hash"
         return f"({len(data)} bytes; no generated type here has {name})"

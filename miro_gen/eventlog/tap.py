@@ -15,10 +15,10 @@ from typing import Any
 import zmq
 
 from miro_gen.eventlog.types import matches
-from miro_gen.eventlog.wire import FrameError, RawEvent, parse_batch, split_topic
 from miro_gen.log import logger
 from miro_gen.transport import sockets
 from miro_gen.transport.channel_link import ChannelLink
+from miro_gen.transport.event_frames import FrameError, RawEvent, parse_batch, split_topic
 from miro_gen.transport.events import EventChannel, subscription_prefix
 from miro_gen.transport.gaps import GapCounter
 

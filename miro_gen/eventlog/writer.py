@@ -24,8 +24,9 @@ from typing import IO, Any
 from mcap.writer import CompressionType, Writer
 
 from miro_gen import __version__
-from miro_gen.eventlog.types import find_type, topic_name
-from miro_gen.eventlog.wire import RawEvent
+from miro_gen.eventlog.types import topic_name
+from miro_gen.runtime import registry
+from miro_gen.transport.event_frames import RawEvent
 
 PROFILE = ""  # no well-known MCAP profile describes omgidl/cdr logs
 LIBRARY = f"miro-gen/{__version__}"
@@ -57,7 +58,7 @@ class LogWriter:
     def _schema_id(self, type_hash: str) -> int:
         sid = self._schemas.get(type_hash)
         if sid is None:
-            cls = find_type(type_hash)
+            cls = registry.find(type_hash)
             if cls is None:
                 sid = 0
             else:

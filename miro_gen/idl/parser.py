@@ -10,131 +10,31 @@ follows them (or, for `///<`-style comments, the one before).
 from __future__ import annotations
 
 import threading
-from bisect import bisect_left
 from pathlib import Path
 from typing import Any
 
 from miro_gen.cache import cache_dir
 from miro_gen.diagnostics import Diagnostics, SourcePos
 from miro_gen.idl import ast
-from miro_gen.idl.engine import Engine, ParseFailure, Tok, load_tables
-from miro_gen.idl.keywords import (
-    CORBA3_FOLDED,
-    RESERVED,
-    RESERVED_FOLDED,
-    UNSUPPORTED_CONSTRUCTS,
-)
-from miro_gen.idl.literals import (
-    LiteralError,
-    decode_char,
-    decode_fixed,
-    decode_float,
-    decode_integer,
-    decode_string,
-)
-from miro_gen.idl.preprocessor import SourceText
+from miro_gen.idl.build_leaves import Children, LeafBuilder, Token
+from miro_gen.idl.doc_comments import attach_docs
+from miro_gen.idl.engine import Engine, ParseFailure, load_tables
+from miro_gen.idl.keywords import RESERVED, UNSUPPORTED_CONSTRUCTS
+from miro_gen.idl.source_text import SourceText
 
 GRAMMAR_PATH = Path(__file__).with_name("grammar.lark")
 
-_B = ast.BaseType
-T_SHORT, T_LONG, T_LONGLONG = _B("short"), _B("long"), _B("long long")
-T_USHORT, T_ULONG, T_ULONGLONG = _B("unsigned short"), _B("unsigned long"), _B("unsigned long long")
-T_INT8, T_UINT8 = _B("int8"), _B("uint8")
-T_FLOAT, T_DOUBLE, T_LONGDOUBLE = _B("float"), _B("double"), _B("long double")
-T_CHAR, T_WCHAR, T_BOOLEAN, T_OCTET = _B("char"), _B("wchar"), _B("boolean"), _B("octet")
-T_ANY, T_OBJECT, T_VALUEBASE = _B("any"), _B("Object"), _B("ValueBase")
 
-_Children = list[Any]
-Token = Tok
-
-
-class _AstBuilder:
-    """Callbacks, one per grammar rule or alias, building `ast` nodes while parsing."""
-
-    def __init__(self) -> None:
-        self.src: SourceText = SourceText("", [], [])
-        self.diag = Diagnostics()
-        self.named: list[tuple[int, Any]] = []
-        self.case_sensitive = False
-
-    def begin(self, src: SourceText, diag: Diagnostics, case_sensitive: bool = False) -> None:
-        self.src = src
-        self.diag = diag
-        self.named = []
-        self.case_sensitive = case_sensitive
-
-    # -- helpers ------------------------------------------------------------------------------
-    def pos(self, tok: Token) -> SourcePos:
-        return self.src.pos_at(tok.start_pos)
-
-    def ident(self, tok: Token) -> str:
-        """A declared identifier, checked against the keywords."""
-        v = str(tok)
-        if v[0] == "_":
-            return self._unescaped(tok, v)
-        if self.case_sensitive:
-            # DDS and ROS 2 files: only the exact spelling of a keyword is one (idlc -f
-            # case-sensitive), and a keyword where only a name can stand is that name, as
-            # rosidl's parser reads it (`sequence<int32> sequence;` in the Fibonacci action).
-            return v
-        if v in RESERVED:
-            self._keyword_error(tok, v)
-            return v
-        lv = v.lower()
-        kw = RESERVED_FOLDED.get(lv)
-        if kw is not None:
-            self.diag.error(self.pos(tok), f"identifier '{v}' clashes with keyword '{kw}'")
-        else:
-            kw3 = CORBA3_FOLDED.get(lv)
-            if kw3 is not None:
-                self.diag.warning(
-                    self.pos(tok), f"identifier '{v}' clashes with CORBA 3 keyword '{kw3}'"
-                )
-        return v
-
-    def use_ident(self, tok: Token) -> str:
-        """An identifier in a scoped name (a use, not a declaration).
-
-        As in omniidl, only declarations are checked against the keywords ignoring case: real
-        files escape a declaration (`typedef Object _Factory;`) and use the plain spelling
-        (`sequence<Factory>`). `CORBA::Object` and `CORBA::ValueBase` name the built-in types.
-        """
-        v = str(tok)
-        if v[0] == "_":
-            return self._unescaped(tok, v)
-        if v in RESERVED and tok.type == "IDENT" and not self.case_sensitive:
-            self._keyword_error(tok, v)
-        return v
-
-    def _unescaped(self, tok: Token, v: str) -> str:
-        """An escaped identifier: the underscore is dropped and keywords are allowed."""
-        if len(v) == 1 or not v[1].isalpha():
-            self.diag.error(self.pos(tok), f"invalid identifier '{v}'")
-        return v[1:]
-
-    def _keyword_error(self, tok: Token, v: str) -> None:
-        self.diag.error(
-            self.pos(tok),
-            f"'{v}' is a keyword and cannot be used as a name here "
-            f"(write '_{v}' to use it as an identifier)",
-        )
-
-    def declared(self, tok: Token, node: Any) -> Any:
-        """Record a node named by `tok`, for doc-comment attachment."""
-        self.named.append((tok.start_pos or 0, node))
-        return node
-
-    def scoped(self, toks: _Children, absolute: bool) -> ast.ScopedName:
-        return ast.ScopedName(tuple(self.use_ident(t) for t in toks), absolute, self.pos(toks[0]))
-
-    def instance(self, tok: Token) -> int:
-        return self.src.instance_at(tok.start_pos)
+class _AstBuilder(LeafBuilder):
+    """Callbacks, one per grammar rule or alias, building `ast` nodes while parsing: the
+    declarations here, the leaves (names, expressions, literals, types, annotations) in
+    `LeafBuilder`."""
 
     # -- top level ----------------------------------------------------------------------------
-    def start(self, c: _Children) -> list[Any]:
+    def start(self, c: Children) -> list[Any]:
         return c
 
-    def annotated(self, c: _Children) -> Any:
+    def annotated(self, c: Children) -> Any:
         node = c[-1]
         if isinstance(node, (ast.Pragma, ast.TypeIdDcl)):
             self.diag.error(c[0].pos, "annotations cannot be applied here")
@@ -142,17 +42,17 @@ class _AstBuilder:
             node.annotations = c[:-1] + node.annotations
         return node
 
-    def pragma(self, c: _Children) -> ast.Pragma:
+    def pragma(self, c: Children) -> ast.Pragma:
         tok = c[0]
         return ast.Pragma(str(tok), self.pos(tok), self.instance(tok))
 
-    def module(self, c: _Children) -> ast.Module:
+    def module(self, c: Children) -> ast.Module:
         _kw, name, *defs = c
         node = ast.Module(self.ident(name), self.pos(name), defs, instance=self.instance(name))
         return self.declared(name, node)  # type: ignore[no-any-return]
 
     # -- interfaces ---------------------------------------------------------------------------
-    def interface_dcl(self, c: _Children) -> ast.Interface:
+    def interface_dcl(self, c: Children) -> ast.Interface:
         qual, _kw, name, bases, *body = c
         node = ast.Interface(
             self.ident(name),
@@ -165,7 +65,7 @@ class _AstBuilder:
         )
         return self.declared(name, node)  # type: ignore[no-any-return]
 
-    def forward_dcl(self, c: _Children) -> ast.Forward:
+    def forward_dcl(self, c: Children) -> ast.Forward:
         qual, _kw, name = c
         node = ast.Forward(
             self.ident(name),
@@ -177,10 +77,10 @@ class _AstBuilder:
         )
         return self.declared(name, node)  # type: ignore[no-any-return]
 
-    def interface_inheritance(self, c: _Children) -> list[ast.ScopedName]:
+    def interface_inheritance(self, c: Children) -> list[ast.ScopedName]:
         return [n.name for n in c]
 
-    def op_dcl(self, c: _Children) -> ast.Operation:
+    def op_dcl(self, c: Children) -> ast.Operation:
         oneway, ret, name, params, raises, contexts = c
         node = ast.Operation(
             self.ident(name),
@@ -193,24 +93,24 @@ class _AstBuilder:
         )
         return self.declared(name, node)  # type: ignore[no-any-return]
 
-    def params(self, c: _Children) -> list[ast.Param]:
+    def params(self, c: Children) -> list[ast.Param]:
         return c
 
-    def param_dcl(self, c: _Children) -> ast.Param:
+    def param_dcl(self, c: Children) -> ast.Param:
         *anns, mode, typ, name = c
         node = ast.Param(str(mode), typ, self.ident(name), self.pos(name), anns)
         return self.declared(name, node)  # type: ignore[no-any-return]
 
-    def raises_expr(self, c: _Children) -> list[ast.ScopedName]:
+    def raises_expr(self, c: Children) -> list[ast.ScopedName]:
         return [n.name for n in c[1:]]
 
-    def context_expr(self, c: _Children) -> list[str]:
+    def context_expr(self, c: Children) -> list[str]:
         out = []
         for tok in c[1:]:
             out.append(self.string_value(tok))
         return out
 
-    def exception_list(self, c: _Children) -> list[ast.ScopedName]:
+    def exception_list(self, c: Children) -> list[ast.ScopedName]:
         return [n.name for n in c]
 
     def _attr_group(
@@ -230,29 +130,29 @@ class _AstBuilder:
         )
         return self.declared(names[0], group)  # type: ignore[no-any-return]
 
-    def readonly_attr(self, c: _Children) -> ast.AttributeGroup:
+    def readonly_attr(self, c: Children) -> ast.AttributeGroup:
         _ro, _kw, typ, name, raises = c
         return self._attr_group(typ, True, [name], raises or [], [])
 
-    def readonly_attrs(self, c: _Children) -> ast.AttributeGroup:
+    def readonly_attrs(self, c: Children) -> ast.AttributeGroup:
         _ro, _kw, typ, *names = c
         return self._attr_group(typ, True, names, [], [])
 
-    def attr_raises_dcl(self, c: _Children) -> ast.AttributeGroup:
+    def attr_raises_dcl(self, c: Children) -> ast.AttributeGroup:
         _kw, typ, name, (get_r, set_r) = c
         return self._attr_group(typ, False, [name], get_r, set_r)
 
-    def attrs(self, c: _Children) -> ast.AttributeGroup:
+    def attrs(self, c: Children) -> ast.AttributeGroup:
         _kw, typ, *names = c
         return self._attr_group(typ, False, names, [], [])
 
-    def attr_raises(self, c: _Children) -> tuple[list[ast.ScopedName], list[ast.ScopedName]]:
+    def attr_raises(self, c: Children) -> tuple[list[ast.ScopedName], list[ast.ScopedName]]:
         if c[0].type == "GETRAISES":
             return c[1], (c[3] if len(c) > 3 and c[3] is not None else [])
         return [], c[1]
 
     # -- value types --------------------------------------------------------------------------
-    def value_forward_dcl(self, c: _Children) -> ast.Forward:
+    def value_forward_dcl(self, c: Children) -> ast.Forward:
         abstract, _kw, name = c
         node = ast.Forward(
             self.ident(name),
@@ -263,7 +163,7 @@ class _AstBuilder:
         )
         return self.declared(name, node)  # type: ignore[no-any-return]
 
-    def value_box_dcl(self, c: _Children) -> ast.ValueBox:
+    def value_box_dcl(self, c: Children) -> ast.ValueBox:
         _kw, name, typ = c
         node = ast.ValueBox(self.ident(name), self.pos(name), typ, instance=self.instance(name))
         return self.declared(name, node)  # type: ignore[no-any-return]
@@ -282,26 +182,26 @@ class _AstBuilder:
         )
         return self.declared(name, node)  # type: ignore[no-any-return]
 
-    def value_abs_dcl(self, c: _Children) -> ast.ValueType:
+    def value_abs_dcl(self, c: Children) -> ast.ValueType:
         _abs, _kw, name, inh, *body = c
         return self._value(name, inh, body, abstract=True)
 
-    def value_dcl(self, c: _Children) -> ast.ValueType:
+    def value_dcl(self, c: Children) -> ast.ValueType:
         custom, _kw, name, inh, *body = c
         return self._value(name, inh, body, custom=custom is not None)
 
-    def value_inheritance(self, c: _Children) -> tuple[tuple[bool, list[Any]], list[Any]]:
+    def value_inheritance(self, c: Children) -> tuple[tuple[bool, list[Any]], list[Any]]:
         bases, supports = c
         return (bases or (False, [])), (supports or [])
 
-    def value_bases(self, c: _Children) -> tuple[bool, list[ast.ScopedName]]:
+    def value_bases(self, c: Children) -> tuple[bool, list[ast.ScopedName]]:
         trunc, *names = c
         return trunc is not None, [n.name for n in names]
 
-    def value_supports(self, c: _Children) -> list[ast.ScopedName]:
+    def value_supports(self, c: Children) -> list[ast.ScopedName]:
         return [n.name for n in c[1:]]
 
-    def state_member(self, c: _Children) -> ast.StateMemberGroup:
+    def state_member(self, c: Children) -> ast.StateMemberGroup:
         anns, rest = _split_annotations(c)
         access, typ, *decls = rest
         group = ast.StateMemberGroup(
@@ -312,109 +212,37 @@ class _AstBuilder:
             break
         return group
 
-    def init_dcl(self, c: _Children) -> ast.Factory:
+    def init_dcl(self, c: Children) -> ast.Factory:
         *anns, _kw, name, params, raises = c
         node = ast.Factory(self.ident(name), self.pos(name), params or [], raises or [], anns)
         return self.declared(name, node)  # type: ignore[no-any-return]
 
-    def init_params(self, c: _Children) -> list[ast.Param]:
+    def init_params(self, c: Children) -> list[ast.Param]:
         return c
 
-    def init_param(self, c: _Children) -> ast.Param:
+    def init_param(self, c: Children) -> ast.Param:
         _mode, typ, name = c
         node = ast.Param("in", typ, self.ident(name), self.pos(name))
         return self.declared(name, node)  # type: ignore[no-any-return]
 
-    def typeid_dcl(self, c: _Children) -> ast.TypeIdDcl:
+    def typeid_dcl(self, c: Children) -> ast.TypeIdDcl:
         kw, name, value = c
         return ast.TypeIdDcl(False, name.name, self.string_value(value), self.pos(kw))
 
-    def typeprefix_dcl(self, c: _Children) -> ast.TypeIdDcl:
+    def typeprefix_dcl(self, c: Children) -> ast.TypeIdDcl:
         kw, name, value = c
         return ast.TypeIdDcl(True, name.name, self.string_value(value), self.pos(kw))
 
     # -- constants and expressions ------------------------------------------------------------
-    def const_dcl(self, c: _Children) -> ast.Const:
+    def const_dcl(self, c: Children) -> ast.Const:
         _kw, typ, name, expr = c
         node = ast.Const(
             self.ident(name), self.pos(name), type=typ, expr=expr, instance=self.instance(name)
         )
         return self.declared(name, node)  # type: ignore[no-any-return]
 
-    def const_exp(self, c: _Children) -> Any:
-        """`a OP b OP c ...` as a flat list -> expression tree, by operator precedence."""
-        out: list[Any] = [c[0]]
-        ops: list[str] = []
-
-        def reduce() -> None:
-            right = out.pop()
-            left = out.pop()
-            out.append(ast.BinaryOp(ops.pop(), left, right, left.pos))
-
-        for i in range(1, len(c), 2):
-            op = str(c[i])
-            prec = _PRECEDENCE[op]
-            while ops and _PRECEDENCE[ops[-1]] >= prec:
-                reduce()
-            ops.append(op)
-            out.append(c[i + 1])
-        while ops:
-            reduce()
-        return out[0]
-
-    def op_neg(self, c: _Children) -> ast.UnaryOp:
-        return ast.UnaryOp("-", c[1], self.pos(c[0]))
-
-    def op_pos(self, c: _Children) -> ast.UnaryOp:
-        return ast.UnaryOp("+", c[1], self.pos(c[0]))
-
-    def op_inv(self, c: _Children) -> ast.UnaryOp:
-        return ast.UnaryOp("~", c[1], self.pos(c[0]))
-
-    def name_ref(self, c: _Children) -> ast.NameRef:
-        return ast.NameRef(c[0].name, c[0].name.pos)
-
-    def _literal(self, tok: Token, kind: str, decode: Any) -> ast.Literal:
-        try:
-            value = decode(str(tok))
-        except LiteralError as e:
-            self.diag.error(self.pos(tok), str(e))
-            value = decode_placeholder(kind)
-        return ast.Literal(kind, value, self.pos(tok))
-
-    def int_lit(self, c: _Children) -> ast.Literal:
-        return self._literal(c[0], "int", decode_integer)
-
-    def float_lit(self, c: _Children) -> ast.Literal:
-        return self._literal(c[0], "float", decode_float)
-
-    def fixed_lit(self, c: _Children) -> ast.Literal:
-        return self._literal(c[0], "fixed", decode_fixed)
-
-    def char_lit(self, c: _Children) -> ast.Literal:
-        return self._literal(c[0], "char", decode_char)
-
-    def wchar_lit(self, c: _Children) -> ast.Literal:
-        return self._literal(c[0], "wchar", decode_char)
-
-    def string_value(self, tok: Token) -> str:
-        try:
-            return decode_string(str(tok))
-        except LiteralError as e:
-            self.diag.error(self.pos(tok), str(e))
-            return ""
-
-    def string_lit(self, c: _Children) -> ast.Literal:
-        return ast.Literal("string", "".join(self.string_value(t) for t in c), self.pos(c[0]))
-
-    def wstring_lit(self, c: _Children) -> ast.Literal:
-        return ast.Literal("wstring", "".join(self.string_value(t) for t in c), self.pos(c[0]))
-
-    def bool_lit(self, c: _Children) -> ast.Literal:
-        return ast.Literal("bool", c[0].type == "TRUE", self.pos(c[0]))
-
     # -- types --------------------------------------------------------------------------------
-    def typedef(self, c: _Children) -> ast.TypedefGroup:
+    def typedef(self, c: Children) -> ast.TypedefGroup:
         kw, typ, *decls = c
         group = ast.TypedefGroup(
             typ, [d[:3] for d in decls], self.pos(kw), instance=self.instance(kw)
@@ -424,106 +252,26 @@ class _AstBuilder:
             break
         return group
 
-    def native(self, c: _Children) -> ast.Native:
+    def native(self, c: Children) -> ast.Native:
         _kw, name = c
         node = ast.Native(self.ident(name), self.pos(name), instance=self.instance(name))
         return self.declared(name, node)  # type: ignore[no-any-return]
 
-    def struct_forward(self, c: _Children) -> ast.Forward:
+    def struct_forward(self, c: Children) -> ast.Forward:
         _kw, name = c
         node = ast.Forward(
             self.ident(name), self.pos(name), of="struct", instance=self.instance(name)
         )
         return self.declared(name, node)  # type: ignore[no-any-return]
 
-    def union_forward(self, c: _Children) -> ast.Forward:
+    def union_forward(self, c: Children) -> ast.Forward:
         _kw, name = c
         node = ast.Forward(
             self.ident(name), self.pos(name), of="union", instance=self.instance(name)
         )
         return self.declared(name, node)  # type: ignore[no-any-return]
 
-    def t_short(self, c: _Children) -> ast.BaseType:
-        return T_SHORT
-
-    def t_long(self, c: _Children) -> ast.BaseType:
-        return T_LONG
-
-    def t_longlong(self, c: _Children) -> ast.BaseType:
-        return T_LONGLONG
-
-    def t_ushort(self, c: _Children) -> ast.BaseType:
-        return T_USHORT
-
-    def t_ulong(self, c: _Children) -> ast.BaseType:
-        return T_ULONG
-
-    def t_ulonglong(self, c: _Children) -> ast.BaseType:
-        return T_ULONGLONG
-
-    def t_int8(self, c: _Children) -> ast.BaseType:
-        return T_INT8
-
-    def t_uint8(self, c: _Children) -> ast.BaseType:
-        return T_UINT8
-
-    def t_float(self, c: _Children) -> ast.BaseType:
-        return T_FLOAT
-
-    def t_double(self, c: _Children) -> ast.BaseType:
-        return T_DOUBLE
-
-    def t_longdouble(self, c: _Children) -> ast.BaseType:
-        return T_LONGDOUBLE
-
-    def t_char(self, c: _Children) -> ast.BaseType:
-        return T_CHAR
-
-    def t_wchar(self, c: _Children) -> ast.BaseType:
-        return T_WCHAR
-
-    def t_boolean(self, c: _Children) -> ast.BaseType:
-        return T_BOOLEAN
-
-    def t_octet(self, c: _Children) -> ast.BaseType:
-        return T_OCTET
-
-    def t_any(self, c: _Children) -> ast.BaseType:
-        return T_ANY
-
-    def t_object(self, c: _Children) -> ast.BaseType:
-        return T_OBJECT
-
-    def t_valuebase(self, c: _Children) -> ast.BaseType:
-        return T_VALUEBASE
-
-    def t_sequence(self, c: _Children) -> ast.SequenceType:
-        kw, elem, bound = c
-        return ast.SequenceType(elem, bound, self.pos(kw))
-
-    def t_string(self, c: _Children) -> ast.StringType:
-        kw, bound = c
-        return ast.StringType(False, bound, self.pos(kw))
-
-    def t_wstring(self, c: _Children) -> ast.StringType:
-        kw, bound = c
-        return ast.StringType(True, bound, self.pos(kw))
-
-    def t_fixed(self, c: _Children) -> ast.FixedType:
-        kw, digits, scale = c
-        return ast.FixedType(digits, scale, self.pos(kw))
-
-    def t_map(self, c: _Children) -> ast.MapType:
-        kw, key, value, bound = c
-        return ast.MapType(key, value, bound, self.pos(kw))
-
-    def rel_name(self, c: _Children) -> ast.NamedType:
-        return ast.NamedType(self.scoped(c, False))
-
-    def abs_name(self, c: _Children) -> ast.NamedType:
-        return ast.NamedType(self.scoped(c, True))
-
-    def declarator(self, c: _Children) -> tuple[str, SourcePos, list[Any], int]:
+    def declarator(self, c: Children) -> tuple[str, SourcePos, list[Any], int]:
         name, *dims = c
         return (self.ident(name), self.pos(name), dims, name.start_pos)
 
@@ -535,7 +283,7 @@ class _AstBuilder:
             out.append(m)
         return out
 
-    def struct_type(self, c: _Children) -> ast.Struct:
+    def struct_type(self, c: Children) -> ast.Struct:
         _kw, name, base, *items = c
         members, pragmas = _members_and_pragmas(items)
         node = ast.Struct(
@@ -548,11 +296,11 @@ class _AstBuilder:
         )
         return self.declared(name, node)  # type: ignore[no-any-return]
 
-    def member(self, c: _Children) -> list[ast.Member]:
+    def member(self, c: Children) -> list[ast.Member]:
         anns, rest = _split_annotations(c)
         return self._members(anns, rest[0], rest[1:])
 
-    def union_type(self, c: _Children) -> ast.Union_:
+    def union_type(self, c: Children) -> ast.Union_:
         _kw, name, _sw, *rest = c
         i = 0
         while isinstance(rest[i], ast.Annotation):
@@ -569,7 +317,7 @@ class _AstBuilder:
         )
         return self.declared(name, node)  # type: ignore[no-any-return]
 
-    def case(self, c: _Children) -> ast.CaseBranch:
+    def case(self, c: Children) -> ast.CaseBranch:
         anns: list[ast.Annotation] = []
         labels: list[Any] = []
         typ: Any = None
@@ -588,10 +336,10 @@ class _AstBuilder:
         self.named.append((start, branch))
         return branch
 
-    def case_label(self, c: _Children) -> _Label:
+    def case_label(self, c: Children) -> _Label:
         return _Label(c[1] if c[0].type == "CASE" else None, self.pos(c[0]))
 
-    def enum_type(self, c: _Children) -> ast.Enum:
+    def enum_type(self, c: Children) -> ast.Enum:
         _kw, name, *items = c
         enumerators = [x for x in items if not isinstance(x, ast.Pragma)]
         node = ast.Enum(
@@ -606,14 +354,14 @@ class _AstBuilder:
             e.ordinal = i
         return self.declared(name, node)  # type: ignore[no-any-return]
 
-    def enumerator(self, c: _Children) -> ast.Enumerator:
+    def enumerator(self, c: Children) -> ast.Enumerator:
         *anns, name = c
         node = ast.Enumerator(
             self.ident(name), self.pos(name), annotations=anns, instance=self.instance(name)
         )
         return self.declared(name, node)  # type: ignore[no-any-return]
 
-    def except_dcl(self, c: _Children) -> ast.Exception_:
+    def except_dcl(self, c: Children) -> ast.Exception_:
         _kw, name, *items = c
         members, pragmas = _members_and_pragmas(items)
         node = ast.Exception_(
@@ -625,66 +373,14 @@ class _AstBuilder:
         )
         return self.declared(name, node)  # type: ignore[no-any-return]
 
-    # -- annotations --------------------------------------------------------------------------
-    def annotation_appl(self, c: _Children) -> ast.Annotation:
-        at, name, args = c
-        return ast.Annotation(name, args or {}, self.pos(at))
 
-    def annotation_name(self, c: _Children) -> ast.ScopedName:
-        # Annotation names may be keywords (`@default`, `@oneway`): no reserved-word check.
-        absolute = c[0] is not None
-        toks = c[1:]
-        return ast.ScopedName(tuple(str(t) for t in toks), absolute, self.pos(toks[0]))
-
-    def ann_single(self, c: _Children) -> dict[str, Any]:
-        return {"value": c[0]}
-
-    def ann_named(self, c: _Children) -> dict[str, Any]:
-        out: dict[str, Any] = {}
-        for name, expr in c:
-            if name in out:
-                self.diag.error(expr.pos, f"annotation parameter '{name}' given twice")
-            out[name] = expr
-        return out
-
-    def ann_param(self, c: _Children) -> tuple[str, Any]:
-        return self.ident(c[0]), c[1]
-
-    def annotation_dcl(self, c: _Children) -> ast.AnnotationDecl:
-        _kw, name, *body = c
-        members = [m for m in body if isinstance(m, tuple)]
-        node = ast.AnnotationDecl(
-            self.ident(name), self.pos(name), members=members, instance=self.instance(name)
-        )
-        return node
-
-    def ann_member(self, c: _Children) -> tuple[str, Any, Any]:
-        typ, name, _default, expr = c
-        return (self.ident(name), typ, expr)
-
-    def ann_enum(self, c: _Children) -> Any:
-        return c[0]
-
-    def ann_const(self, c: _Children) -> Any:
-        return c[0]
-
-    def ann_typedef(self, c: _Children) -> Any:
-        return c[0]
-
-    def typedef_in_ann(self, c: _Children) -> Any:
-        return None
-
-
-_PRECEDENCE = {"|": 1, "^": 2, "&": 3, ">>": 4, "<<": 4, "+": 5, "-": 5, "*": 6, "/": 6, "%": 6}
-
-
-def _members_and_pragmas(items: _Children) -> tuple[list[ast.Member], list[ast.Pragma]]:
+def _members_and_pragmas(items: Children) -> tuple[list[ast.Member], list[ast.Pragma]]:
     """A struct or exception body: member groups (one list per line) and `#pragma` lines."""
     members = [m for x in items if not isinstance(x, ast.Pragma) for m in x]
     return members, [x for x in items if isinstance(x, ast.Pragma)]
 
 
-def _split_annotations(c: _Children) -> tuple[list[Any], list[Any]]:
+def _split_annotations(c: Children) -> tuple[list[Any], list[Any]]:
     i = 0
     while i < len(c) and isinstance(c[i], ast.Annotation):
         i += 1
@@ -697,89 +393,6 @@ class _Label:
     def __init__(self, expr: Any, pos: SourcePos) -> None:
         self.expr = expr
         self.pos = pos
-
-
-def decode_placeholder(kind: str) -> Any:
-    return {"int": 0, "float": 0.0, "fixed": 0, "char": "?", "wchar": "?"}.get(kind, "")
-
-
-# ---- doc comments ---------------------------------------------------------------------------
-
-
-def _doc_text(comment: str) -> tuple[str, bool] | None:
-    """The text of a doc comment and whether it documents the preceding declaration."""
-    if comment.startswith("//"):
-        if len(comment) < 3 or comment[2] not in "/!" or comment.startswith("////"):
-            return None
-        body = comment[3:]
-        after = body.startswith("<")
-        if after:
-            body = body[1:]
-        return (body[1:] if body.startswith(" ") else body).rstrip(), after
-    if len(comment) < 5 or comment[2] not in "*!" or comment.startswith("/**/"):
-        return None
-    if comment.startswith("/***"):
-        return None
-    body = comment[3:-2]
-    after = body.startswith("<")
-    if after:
-        body = body[1:]
-    lines = body.split("\n")
-    cleaned: list[str] = []
-    for i, line in enumerate(lines):
-        s = line.strip()
-        if i > 0 and s.startswith("*"):
-            s = s[1:]
-            s = s[1:] if s.startswith(" ") else s
-        cleaned.append(s.rstrip() if i == 0 else (line if not line.strip().startswith("*") else s))
-    # Dedent continuation lines that were not star-prefixed.
-    text = "\n".join(x.rstrip() for x in cleaned).strip("\n")
-    return _dedent(text), after
-
-
-def _dedent(text: str) -> str:
-    lines = text.split("\n")
-    if len(lines) == 1:
-        return lines[0].strip()
-    first, rest = lines[0].strip(), lines[1:]
-    indents = [len(x) - len(x.lstrip()) for x in rest if x.strip()]
-    cut = min(indents) if indents else 0
-    return "\n".join([first, *(x[cut:] for x in rest)]).strip()
-
-
-def attach_docs(named: list[tuple[int, Any]], comments: list[tuple[int, str]]) -> None:
-    """Give each named node the doc comments between the previous named node and itself."""
-    if not comments or not named:
-        return
-    named.sort(key=lambda item: item[0])
-    starts = [n[0] for n in named]
-    pending: dict[int, list[tuple[str, bool]]] = {}
-    for offset, comment in comments:
-        parsed = _doc_text(comment)
-        if parsed is None:
-            continue
-        text, after = parsed
-        at = bisect_left(starts, offset)
-        idx = at - 1 if after else at
-        if 0 <= idx < len(named) and text:
-            pending.setdefault(idx, []).append((text, comment.startswith("/*")))
-    for idx, texts in pending.items():
-        node = named[idx][1]
-        if getattr(node, "doc", None) is None:
-            node.doc = _join_docs(texts) or None
-
-
-def _join_docs(texts: list[tuple[str, bool]]) -> str:
-    """Consecutive `///` lines form one paragraph; a block comment is a paragraph of its own,
-    as Doxygen reads a `//!` brief followed by a `/** */` description."""
-    out = ""
-    prev_block = False
-    for i, (text, block) in enumerate(texts):
-        if i:
-            out += "\n\n" if block or prev_block else "\n"
-        out += text
-        prev_block = block
-    return out
 
 
 # ---- the parser -----------------------------------------------------------------------------

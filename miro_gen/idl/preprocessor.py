@@ -15,11 +15,20 @@ from __future__ import annotations
 
 import os
 import re
-from bisect import bisect_right
 from typing import NamedTuple
 
 from miro_gen.diagnostics import Diagnostics, SourcePos
-from miro_gen.idl.literals import LiteralError, decode_char, decode_integer
+from miro_gen.idl.pp_conditions import MAX_CONDITION_DEPTH as MAX_CONDITION_DEPTH
+from miro_gen.idl.pp_conditions import ConditionError, ConditionParser
+from miro_gen.idl.pp_lexemes import (
+    IDENT,
+    LEXEME,
+    comment_segments,
+    split_args,
+    strip_comments,
+    substitute_params,
+)
+from miro_gen.idl.source_text import SourceText as SourceText  # importable from here as before
 
 MAX_INCLUDE_DEPTH = 200
 # Inclusions per translation unit (each #include of a guarded file counts). Real trees stay far
@@ -28,7 +37,6 @@ MAX_INCLUDE_DEPTH = 200
 MAX_INCLUSIONS = 10_000
 MAX_EXPANSION_DEPTH = 200
 MAX_EXPANDED_LINE = 1_000_000
-MAX_CONDITION_DEPTH = 2_000
 
 # `__OMNIIDL__` too, with omniidl 4.2's value: ORB IDL trees (Debian's omniORB tree) choose their
 # workarounds by it (`typedef Object _Factory;`, `#include <ir.idl>`), and miro-idl reads IDL as
@@ -36,14 +44,6 @@ MAX_CONDITION_DEPTH = 2_000
 PREDEFINED_MACROS = {"__MIRO_IDL__": "1", "__OMNIIDL__": "0x2630"}
 
 _DIRECTIVE = re.compile(r"\s*#\s*([A-Za-z_]\w*)?\s*(.*)$", re.S)
-_IDENT = re.compile(r"[A-Za-z_]\w*")
-# Pieces of a line that matter for comment tracking and macro expansion.
-_LEXEME = re.compile(
-    r'"(?:[^"\\\n]|\\.)*"?'  # string literal (possibly unterminated)
-    r"|'(?:[^'\\\n]|\\.)*'?"  # char literal
-    r"|//|/\*|\*/"
-    r"|[A-Za-z_]\w*"
-)
 _PASSED_PRAGMAS = ("prefix", "version", "ID")
 
 
@@ -51,82 +51,6 @@ class Macro(NamedTuple):
     name: str
     params: tuple[str, ...] | None  # None for object-like macros
     body: str
-
-
-class SourceText:
-    """Preprocessed text of one translation unit and the map back to the sources."""
-
-    __slots__ = ("_starts", "col_maps", "includes", "line_map", "paths", "text")
-
-    def __init__(
-        self,
-        text: str,
-        line_map: list[tuple[int, int, int]],
-        paths: list[str],
-        includes: dict[str, list[str]] | None = None,
-        col_maps: dict[int, list[tuple[int, int, bool]]] | None = None,
-    ) -> None:
-        self.text = text
-        # For output line i (0-based): (index into `paths`, source line, file instance id).
-        self.line_map = line_map
-        self.paths = paths
-        # Direct includes of each file (display paths), in order of first inclusion.
-        self.includes: dict[str, list[str]] = includes if includes is not None else {}
-        # For lines changed by macro expansion (by 0-based output line): column pieces
-        # (output column, source column, verbatim), 0-based, sorted by output column.
-        self.col_maps: dict[int, list[tuple[int, int, bool]]] = col_maps or {}
-        self._starts: list[int] | None = None
-
-    def pos(self, line: int, col: int) -> SourcePos:
-        """Source position of 1-based output `line` and `col`."""
-        if 1 <= line <= len(self.line_map):
-            p, src_line, _ = self.line_map[line - 1]
-            cmap = self.col_maps.get(line - 1) if self.col_maps else None
-            if cmap:
-                i = bisect_right(cmap, (col - 1, 1 << 62, True)) - 1
-                if i >= 0:
-                    out_col, src_col, verbatim = cmap[i]
-                    col = src_col + (col - 1 - out_col if verbatim else 0) + 1
-            return SourcePos(self.paths[p], src_line, col)
-        # Past the end (EOF errors): last line of the main file.
-        if self.line_map:
-            p, src_line, _ = self.line_map[-1]
-            return SourcePos(self.paths[p], src_line, col)
-        return SourcePos(self.paths[0] if self.paths else "<input>", 1, col)
-
-    def pos_at(self, offset: int) -> SourcePos:
-        """Source position of character `offset` of `text` (called for every declaration and
-        name the parser builds: the common case, a line macros left alone, is inlined)."""
-        starts = self._starts
-        if starts is None:
-            starts = self._line_starts()
-        line = bisect_right(starts, offset)
-        if line <= len(self.line_map) and (line - 1) not in self.col_maps:
-            p, src_line, _ = self.line_map[line - 1]
-            return SourcePos(self.paths[p], src_line, offset - starts[line - 1] + 1)
-        return self.pos(line, offset - starts[line - 1] + 1)
-
-    def instance_at(self, offset: int) -> int:
-        """File-instance id of the line holding character `offset` of `text`."""
-        return self.instance(bisect_right(self._line_starts(), offset))
-
-    def _line_starts(self) -> list[int]:
-        starts = self._starts
-        if starts is None:
-            starts = [0]
-            find = self.text.find
-            i = find("\n")
-            while i >= 0:
-                starts.append(i + 1)
-                i = find("\n", i + 1)
-            self._starts = starts
-        return starts
-
-    def instance(self, line: int) -> int:
-        """File-instance id of 1-based output `line` (each inclusion of a file is an instance)."""
-        if 1 <= line <= len(self.line_map):
-            return self.line_map[line - 1][2]
-        return 0
 
 
 class _Cond:
@@ -268,7 +192,7 @@ class Preprocessor:
                 pos = SourcePos(path, src_line, raw.index("#") + 1)
                 comment_tail = ""
                 if "/*" in raw:  # a block comment may start on a directive line
-                    _, in_comment, opened = _segments(raw, False)
+                    _, in_comment, opened = comment_segments(raw, False)
                     if opened is not None:
                         comment_start = SourcePos(path, src_line, opened + 1)
                         comment_tail = " " * opened + raw[opened:]  # the lexer must see '/*'
@@ -290,7 +214,7 @@ class Preprocessor:
             else:
                 start_in_comment = in_comment
                 if in_comment or "/*" in raw:
-                    _, in_comment, opened = _segments(raw, in_comment)
+                    _, in_comment, opened = comment_segments(raw, in_comment)
                     if opened is not None:
                         comment_start = SourcePos(path, src_line, opened + 1)
                 if active:
@@ -319,7 +243,7 @@ class Preprocessor:
         m = _DIRECTIVE.match(line)
         assert m is not None
         name = m.group(1) or ""
-        rest = _strip_comments(m.group(2)).strip()
+        rest = strip_comments(m.group(2)).strip()
 
         # Conditionals are interpreted even in inactive regions.
         if name in ("if", "ifdef", "ifndef"):
@@ -329,7 +253,7 @@ class Preprocessor:
             if name == "if":
                 value = self._eval_condition(rest, pos)
             else:
-                ident = _IDENT.match(rest)
+                ident = IDENT.match(rest)
                 if not ident:
                     self.diag.error(pos, f"#{name} needs a macro name")
                     value = False
@@ -378,7 +302,7 @@ class Preprocessor:
             self._define(rest, pos)
             return None
         if name == "undef":
-            ident = _IDENT.match(rest)
+            ident = IDENT.match(rest)
             if ident:
                 if self.macros.pop(ident.group(0), None) is not None:
                     self._macro_gen += 1
@@ -502,7 +426,7 @@ class Preprocessor:
         params: tuple[str, ...] | None = None
         if m.group(2) is not None:
             plist = [p.strip() for p in m.group(3).split(",")] if m.group(3).strip() else []
-            if any(not _IDENT.fullmatch(p) for p in plist):
+            if any(not IDENT.fullmatch(p) for p in plist):
                 self.diag.error(pos, f"malformed parameter list in #define {name}")
                 return
             params = tuple(plist)
@@ -527,7 +451,7 @@ class Preprocessor:
         Also returns the line's column map: (output column, source column, verbatim) pieces,
         so that positions in expanded text point back into the original line.
         """
-        segments, _, _ = _segments(line, in_comment)
+        segments, _, _ = comment_segments(line, in_comment)
         out: list[str] = []
         cmap: list[tuple[int, int, bool]] = []
         out_len = src_off = 0
@@ -580,7 +504,7 @@ class Preprocessor:
         i = verbatim_from = 0
         n = len(text)
         while True:
-            m = _LEXEME.search(text, i)
+            m = LEXEME.search(text, i)
             if m is None:
                 break
             tok = m.group(0)
@@ -598,7 +522,7 @@ class Preprocessor:
                     j += 1
                 if j >= n or text[j] != "(":
                     continue
-                args, end = _split_args(text, j)
+                args, end = split_args(text, j)
                 if end < 0:
                     self.diag.error(pos, f"unterminated argument list for macro '{tok}'")
                     break
@@ -613,7 +537,7 @@ class Preprocessor:
                     p: self._expand_text(a.strip(), pos, hide, None, depth + 1)
                     for p, a in zip(macro.params, args, strict=False)
                 }
-                body = _substitute_params(macro.body, expanded_args)
+                body = substitute_params(macro.body, expanded_args)
                 expansion = self._expand_text(body, pos, hide | {tok}, None, depth + 1)
             emit(text[verbatim_from : m.start()], verbatim_from, True)
             emit(expansion, m.start(), False)
@@ -630,240 +554,11 @@ class Preprocessor:
         expr = re.sub(r"\bdefined\s*(?:\(\s*([A-Za-z_]\w*)\s*\)|([A-Za-z_]\w*))", repl, expr)
         expr = self._expand_text(expr, pos)
         try:
-            return _CondParser(expr).parse() != 0
-        except _CondError as e:
+            return ConditionParser(expr).parse() != 0
+        except ConditionError as e:
             self.diag.error(pos, f"invalid #if expression: {e}")
             return False
 
 
-def _segments(line: str, in_comment: bool) -> tuple[list[tuple[str, bool]], bool, int | None]:
-    """Split `line` into (text, is_code) pieces given the block-comment state at its start.
-
-    Returns the pieces, the block-comment state at the end of the line and, when a block comment
-    is still open there, the 0-based column where it began on this line (None if it began earlier).
-    """
-    pieces: list[tuple[str, bool]] = []
-    i = 0
-    code_start = 0
-    opened: int | None = None
-    n = len(line)
-    while i < n:
-        if in_comment:
-            end = line.find("*/", i)
-            if end < 0:
-                pieces.append((line[code_start:], False))
-                return pieces, True, opened
-            pieces.append((line[code_start : end + 2], False))
-            i = code_start = end + 2
-            in_comment = False
-            opened = None
-            continue
-        m = _LEXEME.search(line, i)
-        if m is None:
-            break
-        tok = m.group(0)
-        if tok == "//":
-            pieces.append((line[code_start : m.start()], True))
-            pieces.append((line[m.start() :], False))
-            return pieces, False, None
-        if tok == "/*":
-            pieces.append((line[code_start : m.start()], True))
-            code_start = m.start()
-            opened = m.start()
-            in_comment = True
-            i = m.end()
-            continue
-        i = m.end()
-    # Also reached for an empty line, which leaves a block comment open.
-    pieces.append((line[code_start:], not in_comment))
-    return pieces, in_comment, opened if in_comment else None
-
-
-def _substitute_params(body: str, args: dict[str, str]) -> str:
-    """Replace a function-like macro's parameter names in its body by the (expanded) arguments."""
-    return _IDENT.sub(lambda m: args.get(m.group(0), m.group(0)), body)
-
-
-def _strip_comments(text: str) -> str:
-    """Remove comments from a directive's text (keeping string literals)."""
-    out: list[str] = []
-    i = 0
-    while True:
-        m = _LEXEME.search(text, i)
-        if m is None:
-            out.append(text[i:])
-            break
-        tok = m.group(0)
-        if tok == "//":
-            out.append(text[i : m.start()])
-            break
-        if tok == "/*":
-            out.append(text[i : m.start()] + " ")
-            end = text.find("*/", m.end())
-            if end < 0:
-                break
-            i = end + 2
-            continue
-        out.append(text[i : m.end()])
-        i = m.end()
-    return "".join(out)
-
-
-def _split_args(text: str, open_paren: int) -> tuple[list[str], int]:
-    """Split a macro call's arguments; returns (args, index after ')') or ([], -1)."""
-    depth = 0
-    args: list[str] = []
-    start = open_paren + 1
-    i = open_paren
-    n = len(text)
-    while i < n:
-        c = text[i]
-        if c in "\"'":
-            m = _LEXEME.match(text, i)
-            i = m.end() if m else i + 1
-            continue
-        if c == "(":
-            depth += 1
-        elif c == ")":
-            depth -= 1
-            if depth == 0:
-                args.append(text[start:i])
-                return args, i + 1
-        elif c == "," and depth == 1:
-            args.append(text[start:i])
-            start = i + 1
-        i += 1
-    return [], -1
-
-
-class _CondError(Exception):
-    pass
-
-
 class _ExpansionError(Exception):
     """Macro expansion that would not end or would not fit."""
-
-
-_COND_TOKEN = re.compile(
-    r"\s*(?:(0[xX][0-9a-fA-F]+|\d+)[uUlL]*|('(?:[^'\\]|\\.)*')|([A-Za-z_]\w*)"
-    r"|(\|\||&&|==|!=|<=|>=|<<|>>|[-+*/%()<>!~&|^?:]))"
-)
-_BINARY_PREC = {
-    "||": 1, "&&": 2, "|": 3, "^": 4, "&": 5, "==": 6, "!=": 6,
-    "<": 7, ">": 7, "<=": 7, ">=": 7, "<<": 8, ">>": 8, "+": 9, "-": 9, "*": 10, "/": 10, "%": 10,
-}  # fmt: skip
-
-
-class _CondParser:
-    """Evaluates a preprocessor `#if` expression (after macro expansion) as C does."""
-
-    def __init__(self, text: str) -> None:
-        self.tokens: list[tuple[str, object]] = []
-        i = 0
-        text = text.rstrip()
-        while i < len(text):
-            m = _COND_TOKEN.match(text, i)
-            if not m or m.end() == i:
-                raise _CondError(f"unexpected '{text[i:].strip()[:20]}'")
-            if m.group(1) is not None:
-                try:
-                    value = decode_integer(m.group(1))
-                except (LiteralError, ValueError) as e:
-                    raise _CondError(str(e)) from None
-                self.tokens.append(("num", value))
-            elif m.group(2) is not None:
-                try:
-                    value = ord(decode_char(m.group(2)))
-                except LiteralError as e:
-                    raise _CondError(str(e)) from None
-                self.tokens.append(("num", value))
-            elif m.group(3) is not None:
-                self.tokens.append(("num", 1 if m.group(3) == "true" else 0))
-            else:
-                self.tokens.append(("op", m.group(4)))
-            i = m.end()
-        self.i = 0
-        self.depth = 0
-
-    def parse(self) -> int:
-        if not self.tokens:
-            raise _CondError("empty expression")
-        v = self._ternary()
-        if self.i != len(self.tokens):
-            raise _CondError(f"unexpected '{self.tokens[self.i][1]}'")
-        return v
-
-    def _peek(self) -> str | None:
-        if self.i < len(self.tokens) and self.tokens[self.i][0] == "op":
-            return str(self.tokens[self.i][1])
-        return None
-
-    def _ternary(self) -> int:
-        cond = self._binary(1)
-        if self._peek() == "?":
-            self.i += 1
-            a = self._ternary()
-            if self._peek() != ":":
-                raise _CondError("expected ':'")
-            self.i += 1
-            b = self._ternary()
-            return a if cond else b
-        return cond
-
-    def _binary(self, min_prec: int) -> int:
-        left = self._unary()
-        while True:
-            op = self._peek()
-            prec = _BINARY_PREC.get(op or "")
-            if op is None or prec is None or prec < min_prec:
-                return left
-            self.i += 1
-            right = self._binary(prec + 1)
-            left = _apply(op, left, right)
-
-    def _unary(self) -> int:
-        if self.i >= len(self.tokens):
-            raise _CondError("unexpected end of expression")
-        kind, value = self.tokens[self.i]
-        self.i += 1
-        if kind == "num":
-            assert isinstance(value, int)
-            return value
-        if value in ("(", "!", "-", "+", "~"):
-            self.depth += 1
-            if self.depth > MAX_CONDITION_DEPTH:
-                raise _CondError("expression nested too deeply")
-        if value == "(":
-            v = self._ternary()
-            if self._peek() != ")":
-                raise _CondError("expected ')'")
-            self.i += 1
-            return v
-        if value == "!":
-            return int(not self._unary())
-        if value == "-":
-            return -self._unary()
-        if value == "+":
-            return self._unary()
-        if value == "~":
-            return ~self._unary()
-        raise _CondError(f"unexpected '{value}'")
-
-
-def _apply(op: str, a: int, b: int) -> int:
-    if op in ("/", "%"):
-        if b == 0:
-            raise _CondError("division by zero")
-        q = abs(a) // abs(b) * (1 if (a >= 0) == (b >= 0) else -1)
-        return q if op == "/" else a - q * b
-    if op in ("<<", ">>") and not 0 <= b < 64:
-        raise _CondError("shift count out of range")
-    result: int = {
-        "||": lambda: int(bool(a) or bool(b)), "&&": lambda: int(bool(a) and bool(b)),
-        "|": lambda: a | b, "^": lambda: a ^ b, "&": lambda: a & b,
-        "==": lambda: int(a == b), "!=": lambda: int(a != b), "<": lambda: int(a < b),
-        ">": lambda: int(a > b), "<=": lambda: int(a <= b), ">=": lambda: int(a >= b),
-        "<<": lambda: a << b, ">>": lambda: a >> b, "+": lambda: a + b, "-": lambda: a - b,
-        "*": lambda: a * b,
-    }[op]()  # fmt: skip
-    return result

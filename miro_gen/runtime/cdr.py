@@ -4,7 +4,8 @@ Generated code does the fixed-layout work itself with precompiled `struct.Struct
 holds what is shared: the encapsulation header, strings, sequences, unions, object references,
 and the checks that make decoding of malformed input fail at once with `MARSHAL` (every length
 is compared with the bytes that remain before anything is allocated). Sequences and arrays of
-numbers, which are `array.array`s, are in `arrays.py`.
+numbers, which are `array.array`s, are in `arrays.py`; the base classes of generated types in
+`datatypes.py`, and which class has a type hash in `registry.py`.
 
 Offsets count from the start of the buffer, which begins with the 4-byte encapsulation header;
 alignment is relative to the end of that header, so the padding before a value of alignment `a`
@@ -13,8 +14,6 @@ at offset `o` is `(4 - o) & (a - 1)`.
 
 from __future__ import annotations
 
-import importlib
-import os
 import sys
 import threading
 from array import array
@@ -23,9 +22,19 @@ from itertools import chain
 from struct import Struct
 from struct import error as StructError
 from struct import pack as struct_pack
-from typing import Any, ClassVar, Final, NamedTuple
+from typing import Any, Final, NamedTuple
 
 from miro_gen.exceptions import BAD_PARAM, MARSHAL, CompletionStatus
+from miro_gen.runtime import registry
+from miro_gen.runtime.datatypes import IdlType as IdlType  # generated code's bases, as before
+from miro_gen.runtime.datatypes import IdlUnion as IdlUnion
+from miro_gen.runtime.datatypes import default_discriminator as default_discriminator
+
+# Which generated class has a type hash or a repository id: miro_gen.runtime.registry (these
+# names stay importable from here).
+type_for_hash = registry.find
+type_for_repo_id = registry.find_repo_id
+imported_types = registry.known_types
 
 HEADER_LE: Final = b"\x00\x01\x00\x00"  # CDR_LE encapsulation, what we write
 LE: Final = 0  # endianness index into the (little, big) Struct pairs of generated code
@@ -364,218 +373,6 @@ def enum_value(table: tuple[Any, ...], value: int, what: str) -> Any:
     if value < len(table):
         return table[value]
     raise MARSHAL(f"{what}: {value} is not a valid enumerator ordinal (0 to {len(table) - 1})")
-
-
-# ---- generated data types ----------------------------------------------------------------------
-
-
-class IdlType:
-    """What every generated struct, union and exception carries: its IDL identity, its data
-    schema (the flattened IDL text of the type, for logs and tools) and the schema's hash."""
-
-    __slots__ = ()
-
-    _repo_id: ClassVar[str] = ""
-    _type_name: ClassVar[str] = ""
-    _type_hash: ClassVar[str] = ""
-    _data_schema: ClassVar[str] = ""
-
-    def __init_subclass__(cls, **kwargs: Any) -> None:
-        super().__init_subclass__(**kwargs)
-        type_hash = cls.__dict__.get("_type_hash")
-        if type_hash:
-            _TYPES_BY_HASH[type_hash] = cls
-
-    def serialize(self) -> bytes:
-        raise NotImplementedError  # pragma: no cover - generated classes implement it
-
-    def _encode(self, buf: Encoder) -> None:
-        raise NotImplementedError  # pragma: no cover - generated classes implement it
-
-
-# Every generated type imported so far, by type hash: what event consumers decode payloads with.
-_TYPES_BY_HASH: dict[str, type[IdlType]] = {}
-
-
-def type_for_hash(type_hash: str) -> type[IdlType] | None:
-    """The generated class whose data schema has this hash: one imported already, or one that
-    an imported generated package lists (its module is imported then), or, the first time a
-    hash is unknown, one of the generated packages on the path (imported then)."""
-    cls = _TYPES_BY_HASH.get(type_hash)
-    if cls is not None:
-        return cls
-    found = _listed(type_hash)
-    if found is None and _import_generated_packages():
-        found = _listed(type_hash)
-    return found
-
-
-def type_for_repo_id(repo_id: str) -> type[IdlType] | None:
-    """The generated class with this repository id among those imported (and, the first time
-    one is unknown, those of the generated packages on the path); for CORBA `any` values,
-    which name their type by repository id."""
-    for attempt in range(2):
-        for cls in list(_TYPES_BY_HASH.values()):
-            if cls._repo_id == repo_id:
-                return cls
-        if attempt or not _import_generated_packages():
-            break
-    return None
-
-
-def imported_types() -> list[type[IdlType]]:
-    """Every generated struct, union and exception class imported so far."""
-    return list(_TYPES_BY_HASH.values())
-
-
-def _listed(type_hash: str) -> type[IdlType] | None:
-    for module in list(sys.modules.values()):
-        table = getattr(module, "_TYPE_HASHES", None)
-        if isinstance(table, dict) and type_hash in table:
-            found = getattr(module, table[type_hash], None)
-            if isinstance(found, type) and issubclass(found, IdlType):
-                return found
-    return None
-
-
-_searched_path = False
-
-
-def _import_generated_packages() -> bool:
-    """Import the packages miro-idl generated that are on sys.path (their `__init__` says so on
-    its first line), once per process; whether any new one was imported. Tools that handle any
-    event type (recorders, echo) need them without naming them."""
-    global _searched_path
-    if _searched_path:
-        return False
-    _searched_path = True
-    new = False
-    for name, folder in _package_folders():
-        if not name.isidentifier() or name in sys.modules:
-            continue
-        try:
-            with open(os.path.join(folder, "__init__.py"), "rb") as f:
-                first = f.readline()
-        except OSError:
-            continue
-        if first.startswith(b"# Generated by miro-idl"):
-            try:
-                importlib.import_module(name)
-                new = True
-            except Exception as e:  # a broken package must not stop the search
-                _log_import_failure(name, e)
-    return new
-
-
-def _package_folders() -> list[tuple[str, str]]:
-    """(name, folder) of the top-level packages importable here: those in the folders of
-    sys.path, and those an editable install maps (setuptools' finders keep a MAPPING)."""
-    found: list[tuple[str, str]] = []
-    for entry in list(sys.path):
-        try:
-            with os.scandir(entry or ".") as children:
-                found += [(c.name, c.path) for c in children if c.is_dir()]
-        except OSError:
-            continue
-    for module_name, module in list(sys.modules.items()):
-        mapping = getattr(module, "MAPPING", None)
-        if module_name.startswith("__editable__") and isinstance(mapping, dict):
-            found += [(str(k), str(v)) for k, v in mapping.items()]
-    return found
-
-
-def _log_import_failure(name: str, error: Exception) -> None:
-    import logging
-
-    logging.getLogger("miro.MIRO").warning("cannot import generated package %s: %s", name, error)
-
-
-# ---- unions ------------------------------------------------------------------------------------
-
-
-class IdlUnion(IdlType):
-    """Base of generated unions: discriminator `_d`, value `_v`, one property per branch.
-
-    `U(branch=value)` selects a branch (the discriminator becomes the branch's first label, or
-    for the default branch a value no label uses, chosen as Cyclone DDS does); `U(d, v)` sets
-    both; `U()` is the first branch with its type's default value.
-    """
-
-    __slots__ = ("_d", "_v")
-
-    _type_name: ClassVar[str] = ""
-    _branches: ClassVar[dict[str, tuple[Any, ...]]] = {}  # branch -> labels (empty: default)
-    _labels: ClassVar[dict[Any, str]] = {}  # label -> branch
-    _default_branch: ClassVar[str | None] = None
-    _default_discriminator: ClassVar[Any] = None
-    _zero: ClassVar[dict[str, Callable[[], Any]]] = {}  # branch -> default value factory
-
-    def __init__(self, *args: Any, **branch: Any) -> None:
-        if args:
-            if len(args) != 2 or branch:
-                raise TypeError(
-                    f"{type(self).__name__}() takes (discriminator, value) or one branch=value"
-                )
-            self._d, self._v = args
-            return
-        if len(branch) > 1:
-            raise TypeError(f"{type(self).__name__}() takes a single branch=value")
-        if branch:
-            ((name, value),) = branch.items()
-        else:
-            name = next(iter(self._branches))
-            value = self._zero[name]()
-        self._set(name, value)
-
-    def _set(self, name: str, value: Any) -> None:
-        labels = self._branches.get(name)
-        if labels is None:
-            raise TypeError(f"{type(self).__name__} has no branch '{name}'")
-        self._d = labels[0] if labels else self._default_discriminator
-        self._v = value
-
-    def _get(self, name: str) -> Any:
-        active = self._branch()
-        if active != name:
-            raise AttributeError(
-                f"{type(self).__name__}: branch '{name}' is not active "
-                f"(discriminator {self._d!r} selects {active or 'no branch'})"
-            )
-        return self._v
-
-    def _branch(self) -> str | None:
-        """The branch the discriminator selects (None: no branch is active)."""
-        return self._labels.get(self._d, self._default_branch)
-
-    def __eq__(self, other: object) -> bool:
-        return type(other) is type(self) and (self._d, self._v) == (other._d, other._v)
-
-    __hash__ = None  # type: ignore[assignment]  # mutable
-
-    def __repr__(self) -> str:
-        """`U(branch=value)` when the discriminator is the branch's usual one, else `U(d, v)`."""
-        name = self._branch()
-        if name is not None:
-            labels = self._branches[name]
-            if self._d == (labels[0] if labels else self._default_discriminator):
-                return f"{type(self).__name__}({name}={self._v!r})"
-        return f"{type(self).__name__}({self._d!r}, {self._v!r})"
-
-
-def default_discriminator(kind: str, labels: set[Any], enum_size: int = 0) -> Any:
-    """The discriminator a union's default branch gets, chosen as Cyclone DDS chooses it."""
-    if kind == "enum":
-        return next(i for i in range(enum_size + 1) if i not in labels)
-    if kind == "boolean":
-        return True not in labels
-    if kind == "char":
-        return next(chr(i) for i in range(256) if chr(i) not in labels)
-    if kind in ("octet", "uint8") or kind.startswith("unsigned"):
-        return next(i for i in range(1 << 64) if i not in labels)
-    i = -1
-    while i in labels:
-        i -= 1
-    return i
 
 
 # ---- object references -------------------------------------------------------------------------

@@ -13,14 +13,17 @@ import os
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 import MiroNaming
 import zmq
 
 from miro_gen.log import logger
 from miro_gen.transport import sockets
+from miro_gen.transport.adapter import ObjectAdapter
+from miro_gen.transport.addresses import Addresses
 from miro_gen.transport.local import bind_twin, nearest
+from miro_gen.transport.options import CommonOptions
 from miro_gen.transport.reactor import Reactor
 
 _log = logger("MIRO")
@@ -106,10 +109,49 @@ class ChannelHost:
         self.control.close(0)
 
 
+class ChannelNaming(Protocol):
+    """The naming a channel is found in: transport.naming.NamingClient, or a CORBA naming
+    service's client (transport.iiop)."""
+
+    def full_name(self, name: str) -> str: ...
+
+    def resolve(self, name: str) -> MiroNaming.Entry: ...
+
+
+class ChannelServer(Protocol):
+    """What event channels need of their process's server (transport.server.Server): its
+    sockets' context and reactor, its options (the naming context), where it binds and what it
+    advertises, its naming, binding an entry under its lease, and its clean-up."""
+
+    @property
+    def context(self) -> zmq.Context[Any]: ...
+
+    @property
+    def options(self) -> CommonOptions: ...
+
+    @property
+    def addresses(self) -> Addresses: ...
+
+    @property
+    def adapter(self) -> ObjectAdapter: ...
+
+    @property
+    def naming(self) -> ChannelNaming: ...
+
+    @property
+    def hosted_channels(self) -> dict[str, EventChannel]: ...
+
+    def reactor(self) -> Reactor: ...
+
+    def bind_entry(self, entry: MiroNaming.Entry) -> None: ...
+
+    def on_shutdown(self, fn: Callable[[], object]) -> None: ...
+
+
 class EventChannelFactory:
     """Creates event channels hosted by `server`'s process and bound in its naming context."""
 
-    def __init__(self, server: Any) -> None:
+    def __init__(self, server: ChannelServer) -> None:
         self.server = server
         # The channels this process hosts, whichever factory created them.
         self._channels: dict[str, EventChannel] = server.hosted_channels
@@ -150,7 +192,7 @@ class EventChannelFactory:
             return self.create_channel(name)
 
 
-def resolve_channel(server: Any, name: str = DEFAULT_CHANNEL) -> EventChannel:
+def resolve_channel(server: ChannelServer, name: str = DEFAULT_CHANNEL) -> EventChannel:
     """The channel bound as `name` (naming rules as for objects)."""
     entry = server.naming.resolve(name)
     if entry.repo_id != CHANNEL_REPO_ID:

@@ -13,7 +13,11 @@ queue holds at most `max_bytes` of payloads (the oldest go first). What is evict
 from __future__ import annotations
 
 from collections import deque
-from typing import Any
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # the consumer (event_consumer.py) imports this module
+    from miro_gen.runtime.datatypes import IdlType
+    from miro_gen.transport.event_consumer import StructuredEvent
 
 KEEP_ALL = 0
 DEFAULT_DEPTH = 10  # ROS 2's default history depth
@@ -25,7 +29,9 @@ class Waiting:
 
     __slots__ = ("alive", "cls", "event", "size", "topic")
 
-    def __init__(self, topic: tuple[str, str], event: Any, cls: Any, size: int) -> None:
+    def __init__(
+        self, topic: tuple[str, str], event: StructuredEvent, cls: type[IdlType], size: int
+    ) -> None:
         self.topic = topic
         self.event = event  # a StructuredEvent whose payload is the CDR bytes
         self.cls = cls  # the generated type that decodes it

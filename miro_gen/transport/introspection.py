@@ -114,9 +114,9 @@ class ServiceImpl(MiroService__POA.Service):
         raise MiroService.NotFound(what=f"no object here implements {repo_id} with a schema")
 
     def type_schema(self, type_hash: str) -> str:
-        from miro_gen.runtime.cdr import type_for_hash
+        from miro_gen.runtime import registry
 
-        cls = type_for_hash(type_hash)
+        cls = registry.lookup(type_hash)  # the reactor's thread: the types imported here
         if cls is None:
             raise MiroService.NotFound(what=f"no type here has the hash {type_hash}")
         return str(cls._data_schema)
@@ -232,7 +232,7 @@ def _bind(server: Server, impl: ServiceImpl, invoker: Any) -> None:
 
     from miro_gen.exceptions import SystemException
 
-    registry = MiroNaming.Registry(server.naming.registry._ref, invoker, timeout=BIND_TIMEOUT)
+    registry = server.naming.registry_stub(invoker, BIND_TIMEOUT)
     lease = int(server.lease * 1000)
     ref = server.adapter.reference_for(impl)
     full = f"{server.options.naming_context}/{SERVICES}/{impl.name}"

@@ -126,7 +126,7 @@ class Registry(MiroNaming__POA.Registry):
                     self._refuse("%s: its owner has %d names, its quota", name, self.quota)
                     raise NO_RESOURCES(f"{name}: this server already has {self.quota} names")
                 if len(self._table) >= self.max_names:
-                    self.purge()
+                    self._purge()
                     if len(self._table) >= self.max_names:
                         self._refuse("%s: the table holds %d names", name, self.max_names)
                         raise NO_RESOURCES(f"{name}: the naming service is full")
@@ -172,7 +172,7 @@ class Registry(MiroNaming__POA.Registry):
     @nonblocking
     def _list(self, prefix: str) -> list[MiroNaming.Entry]:  # IDL "list"
         with self._lock:
-            self.purge()
+            self._purge()
             return [b.entry for n, b in sorted(self._table.items()) if n.startswith(prefix)]
 
     @nonblocking
@@ -192,7 +192,11 @@ class Registry(MiroNaming__POA.Registry):
         return lost
 
     def purge(self) -> None:
-        """Forget the entries whose leases ran out (callers hold the lock)."""
+        """Forget the entries whose leases ran out."""
+        with self._lock:
+            self._purge()
+
+    def _purge(self) -> None:  # callers hold the lock
         now = time.monotonic()
         for name in [n for n, b in self._table.items() if b.expires <= now]:
             _log.info("the lease of %s ran out", name)
@@ -239,8 +243,7 @@ class NamingService:
         self._timer = reactor.schedule_timer(PURGE_INTERVAL, PURGE_INTERVAL, self._purge)
 
     def _purge(self, _: Any) -> None:
-        with self.registry._lock:
-            self.registry.purge()
+        self.registry.purge()
 
     def close(self) -> None:
         self.adapter.reactor.cancel_timer(self._timer)
@@ -252,8 +255,13 @@ class NamingClient:
 
     def __init__(self, invoker: ZmqInvoker, endpoint: str, context: str) -> None:
         self.context = context
-        ref = ObjectRef(MiroNaming.Registry._repo_id, endpoint, NAMING_KEY)
-        self.registry = MiroNaming.Registry(ref, invoker, timeout=5.0)
+        self.endpoint = endpoint
+        self.ref = ObjectRef(MiroNaming.Registry._repo_id, endpoint, NAMING_KEY)
+        self.registry = self.registry_stub(invoker, 5.0)
+
+    def registry_stub(self, invoker: ZmqInvoker, timeout: float) -> MiroNaming.Registry:
+        """A stub of the naming service with its own call timeout (a lease renewer's)."""
+        return MiroNaming.Registry(self.ref, invoker, timeout=timeout)
 
     def full_name(self, name: str) -> str:
         """A name as bound by this process: under its context unless it is a path already."""
@@ -262,7 +270,7 @@ class NamingClient:
     def resolve(self, name: str) -> MiroNaming.Entry:
         """The entry of `name`: a path as it is; a plain name in this process's context first,
         then at the root. NotFound names what was looked for."""
-        with naming_errors(self.registry._ref.endpoint, f"resolve {name}"):
+        with naming_errors(self.endpoint, f"resolve {name}"):
             return self._resolve(name)
 
     def _resolve(self, name: str) -> MiroNaming.Entry:

@@ -37,6 +37,7 @@ from miro_gen.runtime.rpc import Servant, Stub
 from miro_gen.transport import channel_link, sockets
 from miro_gen.transport.adapter import ObjectAdapter
 from miro_gen.transport.addresses import server_addresses
+from miro_gen.transport.channels import EventChannel, resolve_channel
 from miro_gen.transport.introspection import SERVICE_KEY, ServiceImpl, bind_service, service_name
 from miro_gen.transport.invoker import ZmqInvoker
 from miro_gen.transport.naming import DEFAULT_LEASE, NamingClient, naming_errors
@@ -221,12 +222,12 @@ class Server(Client):
         self._renewer: threading.Thread | None = None
         self._cleaned = False
         self._on_shutdown: list[Callable[[], object]] = []
-        self.hosted_channels: dict[str, Any] = {}  # event channels hosted here, by full name
+        self.hosted_channels: dict[str, EventChannel] = {}  # hosted here, by full name
         # The service object (transport/introspection.py): bound when run() starts.
         self.service = ServiceImpl(self, service_name(self.argv[0]))
         self.adapter.activate(self.service, SERVICE_KEY)
         if clock is not None:
-            from miro_gen.eventlog.follow import follow_log_clock
+            from miro_gen.transport.log_clock import follow_log_clock
 
             follow_log_clock(self, self.options.clock.partition(":")[2] or "LogClock", clock)
 
@@ -318,10 +319,8 @@ class Server(Client):
         lifecycle.forget(self._cleanup)
         lifecycle.at_interrupt(self._cleanup)
 
-    def resolve_channel(self, name: str = "EventChannel") -> Any:
+    def resolve_channel(self, name: str = "EventChannel") -> EventChannel:
         """The event channel bound as `name` (see EventChannelFactory.create_channel)."""
-        from miro_gen.transport.channels import resolve_channel
-
         return resolve_channel(self, name)
 
     def on_shutdown(self, fn: Callable[[], object]) -> None:
@@ -374,9 +373,7 @@ class Server(Client):
     def _start_renewing(self) -> None:
         if self._renewer is None:
             lifecycle.at_interrupt(self._cleanup)  # unbind if interrupted before run()
-            self._registry_for_renewal = MiroNaming.Registry(
-                self.naming.registry._ref, self.invoker, timeout=RENEW_TIMEOUT
-            )
+            self._registry_for_renewal = self.naming.registry_stub(self.invoker, RENEW_TIMEOUT)
             self._renewer = threading.Thread(
                 target=self._renew_loop, name="miro-lease", daemon=True
             )

@@ -25,7 +25,8 @@ from miro_gen.params.compiler.ctor_exprs import (
     kind_of,
     source_text,
 )
-from miro_gen.params.compiler.expressions import parse_number, parser
+from miro_gen.params.compiler.cxx_numbers import parse_number
+from miro_gen.params.compiler.expressions import parser
 from miro_gen.params.compiler.model import ItemDecl
 
 

@@ -16,7 +16,8 @@ from typing import Any, Protocol
 import lark
 
 from miro_gen.diagnostics import Diagnostics
-from miro_gen.params.compiler.expressions import CONSTANTS, parse_number
+from miro_gen.params.compiler.cxx_numbers import parse_number
+from miro_gen.params.compiler.expressions import CONSTANTS
 from miro_gen.params.compiler.model import ItemDecl
 from miro_gen.params.compiler.pymodel import PyParamsModule, PyType, idl_constant, pyrepr
 

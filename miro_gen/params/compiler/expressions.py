@@ -12,7 +12,6 @@ raises `ExprError` naming the construct.
 from __future__ import annotations
 
 import math
-import struct
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cache
@@ -20,6 +19,18 @@ from pathlib import Path
 from typing import Any
 
 import lark
+
+from miro_gen.params.compiler.cxx_numbers import (
+    ExprError,
+    ExprValueError,
+    Float32,
+    cast_int,
+    common_type,
+    floating_result,
+    int_type,
+    parse_number,
+    typed,
+)
 
 __all__ = [
     "ExprError",
@@ -32,15 +43,6 @@ __all__ = [
     "to_float",
     "to_int",
 ]
-
-
-class ExprError(Exception):
-    """An expression outside the subset, or one C++ would refuse (division by zero)."""
-
-
-class ExprValueError(ExprError):
-    """A well-formed expression without a value (division by zero): harmless in the branch
-    of `&&`, `||` or `?:` that C++ does not evaluate."""
 
 
 @dataclass(frozen=True)
@@ -241,120 +243,6 @@ def describe(v: Value) -> str:
     return repr(v)
 
 
-@dataclass(frozen=True)
-class IntType:
-    """A C++ integral type after promotion: int, unsigned int, long, unsigned long (LP64)."""
-
-    bits: int
-    signed: bool
-
-    def wrap(self, value: int) -> int:
-        """Unsigned arithmetic is modular in C++ (signed overflow is undefined: kept)."""
-        return value if self.signed else value % (1 << self.bits)
-
-
-INT = IntType(32, True)
-UINT = IntType(32, False)
-LONG = IntType(64, True)
-ULONG = IntType(64, False)
-
-
-class Integral(int):
-    """An integer with its C++ type (plain Python ints are `int`)."""
-
-    ctype: IntType
-
-    def __new__(cls, value: int, ctype: IntType) -> Integral:
-        obj = super().__new__(cls, ctype.wrap(value))
-        obj.ctype = ctype
-        return obj
-
-
-def int_type(v: bool | int) -> IntType:
-    """The promoted type of an integer value (bool, char and short promote to int)."""
-    return v.ctype if isinstance(v, Integral) else INT
-
-
-def common_type(a: IntType, b: IntType) -> IntType:
-    """C++'s usual arithmetic conversions of two promoted integral types (LP64)."""
-    if a == b:
-        return a
-    if a.signed == b.signed:
-        return a if a.bits > b.bits else b
-    signed, unsigned = (a, b) if a.signed else (b, a)
-    if unsigned.bits >= signed.bits:
-        return unsigned
-    return signed  # long holds every unsigned int
-
-
-def _wrap(value: int, bits: int, signed: bool) -> int:
-    value &= (1 << bits) - 1
-    if signed and value >= 1 << (bits - 1):
-        value -= 1 << bits
-    return value
-
-
-class Float32(float):
-    """A C++ `float` (a `1.5f` literal, a `(float)` cast): a double rounded to single
-    precision. Arithmetic of floats (and integers) stays single; with a double it is double."""
-
-    def __new__(cls, value: float) -> Float32:
-        try:
-            rounded = struct.unpack("f", struct.pack("f", value))[0]
-        except OverflowError:
-            raise ExprValueError(f"{value} does not fit in a float") from None
-        return super().__new__(cls, rounded)
-
-
-def _floating_result(value: float, *operands: object) -> float:
-    """Single precision when no operand is a double."""
-    if any(isinstance(o, float) and not isinstance(o, Float32) for o in operands):
-        return value
-    return Float32(value) if math.isfinite(value) else value
-
-
-def _cast_int(value: int, bits: int, signed: bool) -> int:
-    """A conversion to an integral type: wraps modulo 2^bits, typed when 32 bits or more."""
-    wrapped = _wrap(value, bits, signed)
-    if bits < 32:
-        return wrapped  # promotes to int
-    return Integral(wrapped, IntType(bits, signed))
-
-
-def parse_number(text: str) -> int | float:
-    """A C++ number literal: suffixes, hexadecimal, octal (`010` is 8); an integer gets the
-    first of C++'s types that holds it (`3u` is unsigned, `0xFFFFFFFF` unsigned int)."""
-    t = text
-    suffix = ""
-    while t and t[-1] in "uUlL" and not (t.lower().startswith("0x") and t[-1] in "fF"):
-        suffix, t = t[-1].lower() + suffix, t[:-1]
-    if t.lower().startswith("0x"):
-        return _typed_literal(int(t, 16), suffix, decimal=False)
-    body = t.rstrip("fF") if "." in t or "e" in t.lower() else t
-    if body.isdigit():
-        octal = len(body) > 1 and body[0] == "0"
-        return _typed_literal(int(body, 8 if octal else 10), suffix, decimal=not octal)
-    try:
-        value = float(body)
-    except ValueError:
-        raise ExprError(f"{text!r} is not a number") from None
-    return Float32(value) if body != t else value
-
-
-def _typed_literal(value: int, suffix: str, decimal: bool) -> int:
-    unsigned = "u" in suffix
-    long_ = "l" in suffix
-    choices = [LONG, ULONG] if long_ else [INT, UINT, LONG, ULONG]
-    if unsigned:
-        choices = [c for c in choices if not c.signed]
-    elif decimal:
-        choices = [c for c in choices if c.signed]  # a decimal literal is never unsigned
-    for c in choices:
-        if value < (1 << (c.bits - 1) if c.signed else 1 << c.bits):
-            return value if c == INT else Integral(value, c)
-    raise ExprError(f"{value} is too large for any C++ integer type")
-
-
 def _unescape(raw: str) -> str:
     escapes = {"n": "\n", "t": "\t", "\\": "\\", '"': '"', "'": "'", "0": "\0", "r": "\r"}
     out: list[str] = []
@@ -371,10 +259,6 @@ def _unescape(raw: str) -> str:
         out.append(c)
         i += 1
     return "".join(out)
-
-
-def _typed(value: int, ctype: IntType) -> int:
-    return value if ctype == INT else Integral(value, ctype)
 
 
 class Evaluator:
@@ -428,7 +312,7 @@ class Evaluator:
         v = self._number(self.eval(node.children[0]), "-")
         if isinstance(v, float):
             return Float32(-v) if isinstance(v, Float32) else -v
-        return _typed(-v, int_type(v))
+        return typed(-v, int_type(v))
 
     def e_not_(self, node: lark.Tree[Any]) -> Value:
         return not to_bool(self.eval(node.children[0]))
@@ -450,7 +334,7 @@ class Evaluator:
             lo, hi = (-(1 << (bits - 1)), (1 << (bits - 1)) - 1) if signed else (0, (1 << bits) - 1)
             if isinstance(v, float) and not lo <= n <= hi:
                 raise ExprValueError(f"{v} does not fit in {ctype} (undefined in C++)")
-            return _cast_int(n, bits, signed)
+            return cast_int(n, bits, signed)
         raise ExprError(f"a cast to {ctype} is not supported")
 
     def e_binop(self, node: lark.Tree[Any]) -> Value:
@@ -461,20 +345,20 @@ class Evaluator:
             raise ExprError("adding two string literals is not C++")
         x, y = self._number(a, op), self._number(b, op)
         if isinstance(x, float) or isinstance(y, float):
-            return _floating_result(self._floating(op, float(x), float(y)), x, y)
+            return floating_result(self._floating(op, float(x), float(y)), x, y)
         ctype = common_type(int_type(x), int_type(y))
         i, j = ctype.wrap(int(x)), ctype.wrap(int(y))
         if op == "+":
-            return _typed(i + j, ctype)
+            return typed(i + j, ctype)
         if op == "-":
-            return _typed(i - j, ctype)
+            return typed(i - j, ctype)
         if op == "*":
-            return _typed(i * j, ctype)
+            return typed(i * j, ctype)
         if j == 0:
             raise ExprValueError(f"integer {'division' if op == '/' else 'remainder'} by zero")
         q = abs(i) // abs(j)
         q = q if (i >= 0) == (j >= 0) else -q  # C++ truncates towards zero
-        return _typed(q if op == "/" else i - q * j, ctype)
+        return typed(q if op == "/" else i - q * j, ctype)
 
     def _floating(self, op: str, x: float, y: float) -> float:
         if op == "+":
@@ -493,7 +377,7 @@ class Evaluator:
 
     def e_invert(self, node: lark.Tree[Any]) -> Value:
         v = self._integer(self.eval(node.children[0]), "~")
-        return _typed(~v, int_type(v))
+        return typed(~v, int_type(v))
 
     def e_shift_(self, node: lark.Tree[Any]) -> Value:
         left, op, right = node.children
@@ -503,13 +387,13 @@ class Evaluator:
         if not 0 <= b < ctype.bits:
             raise ExprValueError(f"a shift by {b} is undefined in C++")
         value = ctype.wrap(int(a))
-        return _typed(value << b if str(op) == "<<" else value >> b, ctype)
+        return typed(value << b if str(op) == "<<" else value >> b, ctype)
 
     def _bits(self, node: lark.Tree[Any], op: str) -> Value:
         a, b = (self._integer(self.eval(c), op) for c in node.children)
         ctype = common_type(int_type(a), int_type(b))
         i, j = ctype.wrap(int(a)), ctype.wrap(int(b))
-        return _typed({"|": i | j, "^": i ^ j, "&": i & j}[op], ctype)
+        return typed({"|": i | j, "^": i ^ j, "&": i & j}[op], ctype)
 
     def e_bit_or_(self, node: lark.Tree[Any]) -> Value:
         return self._bits(node, "|")
@@ -575,10 +459,10 @@ class Evaluator:
         chosen = x if to_bool(c) else y
         if isinstance(x, float) or isinstance(y, float):
             if is_number(x) and is_number(y):  # C++'s usual arithmetic conversions
-                return _floating_result(float(chosen), x, y)  # type: ignore[arg-type]
+                return floating_result(float(chosen), x, y)  # type: ignore[arg-type]
         elif isinstance(x, int) and isinstance(y, int) and isinstance(chosen, int):
             ctype = common_type(int_type(x), int_type(y))
-            return _typed(ctype.wrap(chosen), ctype)
+            return typed(ctype.wrap(chosen), ctype)
         return chosen
 
     def e_call(self, node: lark.Tree[Any]) -> Value:

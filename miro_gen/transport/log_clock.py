@@ -2,13 +2,14 @@
 
 The player publishes `MiroLogClock` events (`MiroLog::Clock`) on its clock channel (`LogClock`
 in its naming context). A follower resolves that channel, waiting for the player to bind it,
-and hands every clock message to the process's `LogClock`, on the reactor thread.
+and hands every clock message to the process's `LogClock`, on the reactor thread. The server
+starts it (transport.server); the player (eventlog.player) publishes what it follows.
 """
 
 from __future__ import annotations
 
 import threading
-from typing import Any
+from typing import TYPE_CHECKING
 
 import MiroLog
 import MiroNaming
@@ -16,9 +17,13 @@ import MiroNaming
 from miro_gen.clock import LogClock
 from miro_gen.exceptions import SystemException
 from miro_gen.log import logger
-from miro_gen.transport.events import StructuredEvent, StructuredPushConsumer
+from miro_gen.transport.channels import EventChannel
+from miro_gen.transport.event_consumer import StructuredEvent, StructuredPushConsumer
 
-CLOCK_TYPE = "MiroLogClock"
+if TYPE_CHECKING:
+    from miro_gen.transport.server import Server
+
+CLOCK_TYPE = "MiroLogClock"  # the type name of a player's clock events
 RETRY = 0.2  # seconds between attempts to resolve the clock channel
 _log = logger("MIRO")
 
@@ -26,7 +31,7 @@ _log = logger("MIRO")
 class ClockFollower(StructuredPushConsumer):
     """Feeds a player's clock messages to `clock`."""
 
-    def __init__(self, channel: Any, clock: LogClock) -> None:
+    def __init__(self, channel: EventChannel, clock: LogClock) -> None:
         super().__init__(channel, latest_only=True)  # only the newest clock state matters
         self.clock = clock
         self.set_subscriptions([("*", CLOCK_TYPE)])
@@ -37,7 +42,7 @@ class ClockFollower(StructuredPushConsumer):
             self.clock.update(c.log_time_ns, c.rate, c.paused, c.epoch)
 
 
-def follow_log_clock(server: Any, channel_name: str, clock: LogClock) -> threading.Thread:
+def follow_log_clock(server: Server, channel_name: str, clock: LogClock) -> threading.Thread:
     """Follow the clock published on `channel_name`, from a thread that waits for the channel
     to be bound (the process may start before the player)."""
     stop = threading.Event()

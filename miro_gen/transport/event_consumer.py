@@ -1,0 +1,318 @@
+"""Consumers of an event channel (Miro's StructuredPushConsumer): subscriptions by (domain,
+type), frames parsed on the reactor thread, payloads decoded with the generated class their
+type hash names (runtime.registry) when the handler is ready for them, as the consumer's
+quality of service keeps them (transport.event_queue), gaps counted per supplier and type.
+The overview is transport.events; the bytes are transport.event_frames.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterable
+from dataclasses import dataclass
+from struct import error as StructError
+from typing import Any
+
+import zmq
+
+from miro_gen.log import logger
+from miro_gen.runtime import registry
+from miro_gen.runtime.datatypes import IdlType
+from miro_gen.transport import offers, sockets
+from miro_gen.transport.channel_link import ChannelLink
+from miro_gen.transport.channels import EventChannel
+from miro_gen.transport.event_frames import (
+    BATCH_HEADER,
+    EVENT,
+    EVENT_HEADER,
+    read_batch_head,
+    split_topic,
+    topic,
+)
+from miro_gen.transport.event_queue import DEFAULT_DEPTH, EventQueue, Waiting
+from miro_gen.transport.event_supplier import HWM, LARGE_EVENT
+from miro_gen.transport.gaps import GapCounter, gap
+
+_log = logger("MIRO")
+
+TURN_EVENTS = 4096  # events a consumer delivers per reactor turn, so other handlers get a turn
+TURN_FRAMES = 256  # frames a consumer reads per reactor turn
+# Frames of a type hash no imported type has wait, at most this many and bytes, while the
+# generated packages on the path are imported (in a thread: runtime.registry.discover).
+HOLD_FRAMES = 1000
+HOLD_BYTES = 64 << 20
+ANY = "*"
+
+
+@dataclass(slots=True)
+class StructuredEvent:
+    """One event as a consumer receives it."""
+
+    domain_name: str
+    type_name: str
+    payload: Any  # the decoded generated type
+    seq: int
+    stamp: float  # source time, seconds since the epoch
+    publish_time: float  # when the supplier sent it, seconds since the epoch
+    supplier: int = 0  # the supplier's random id
+    type_hash: str = ""
+
+
+def subscription_prefix(domain: str, type_name: str) -> bytes:
+    """What to subscribe to at the socket for (domain, type); `*` matches any. A `*` domain
+    with a named type cannot be a prefix: it subscribes to all, and the consumer filters."""
+    if domain == ANY:
+        return b""
+    if type_name == ANY:
+        return domain.encode() + b"\0"
+    return topic(domain, type_name)
+
+
+class StructuredPushConsumer:
+    """Receives the events it subscribes to. Subclass it and override
+    `push_structured_event(event)`; it runs on the reactor thread, so it must not block.
+
+    Events wait for the handler in a queue kept as `depth` says (transport.event_queue): the
+    newest 10 per topic by default, as ROS 2 keeps them; `latest_only` keeps the newest one;
+    `depth=KEEP_ALL` keeps everything up to the queue's byte limit. `missed` counts events lost
+    on the way (sequence gaps), `dropped` those this consumer skipped because its handler fell
+    behind, `lag` how old (seconds since it was pushed) the last event delivered was."""
+
+    def __init__(
+        self, channel: EventChannel, *, depth: int = DEFAULT_DEPTH, latest_only: bool = False
+    ) -> None:
+        self.channel = channel
+        self.reactor = channel.reactor
+        self.queue = EventQueue(depth, latest_only)
+        context = self.reactor.context
+        self.socket = sockets.connecting_socket(context, zmq.SUB)
+        self.socket.setsockopt(zmq.RCVHWM, min(HWM, sockets.queue_limit(context)))
+        resolve = channel.resolve
+        self.link = ChannelLink(
+            self.reactor,
+            self.socket,
+            channel.endpoints(context)[1],
+            None if resolve is None else lambda: resolve().endpoints(context)[1],
+            lambda up: None,
+        )
+        self._filters: list[tuple[str, str]] = []
+        self._prefixes: set[bytes] = set()
+        self._gaps = GapCounter()  # per (supplier, type name), bounded
+        self._topics: dict[bytes, tuple[str, str, bool]] = {}
+        self._classes: dict[bytes, type[IdlType]] = {}
+        self._unknown: set[tuple[str, str]] = set()
+        self._held: list[list[zmq.Frame]] = []  # frames waiting for the search for their types
+        self._held_hashes: set[bytes] = set()
+        self._held_bytes = 0
+        self._searching = False
+        self._scheduled = False
+        self.received = 0
+        self.undecodable = 0  # events whose type hash matches no imported generated type
+        self.lag = 0.0  # seconds between the push and the delivery of the last event delivered
+        self.reactor.call_soon(self.reactor.register, self.socket, self._readable)
+
+    @property
+    def missed(self) -> int:
+        """Events lost between their suppliers and this consumer (sequence gaps)."""
+        return self._gaps.missed
+
+    @property
+    def dropped(self) -> int:
+        """Events received but skipped: the handler fell behind (depth, latest-only)."""
+        return self.queue.dropped
+
+    def set_subscriptions(self, subscriptions: Iterable[tuple[str, str]]) -> None:
+        """Receive the events of these (domain, type) pairs, `*` for any; replaces the last."""
+        subs = [(d, t) for d, t in subscriptions]
+        prefixes = {subscription_prefix(d, t) for d, t in subs}
+        offers.subscribed(self, self.channel.name, subs)
+
+        def apply() -> None:
+            for p in self._prefixes - prefixes:
+                self.socket.setsockopt(zmq.UNSUBSCRIBE, p)
+            for p in prefixes - self._prefixes:
+                self.socket.setsockopt(zmq.SUBSCRIBE, p)
+            self._prefixes = prefixes
+            self._filters = subs
+            self._topics.clear()
+
+        self.reactor.call_soon(apply)
+
+    def push_structured_event(self, event: StructuredEvent) -> None:
+        """Called for each event received (override it)."""
+
+    def _wanted(self, domain: str, type_name: str) -> bool:
+        return any((d in (ANY, domain)) and (t in (ANY, type_name)) for d, t in self._filters)
+
+    def _readable(self) -> None:
+        """Take every frame waiting (so that the queue, not ZeroMQ, decides what waits), then
+        deliver a turn's worth of events."""
+        recv, queue = self.socket.recv_multipart, self.queue
+        for _ in range(TURN_FRAMES):
+            try:
+                parts = recv(zmq.NOBLOCK, copy=False)  # large payloads are decoded in place
+            except zmq.Again:
+                break
+            try:
+                self._parse(parts)
+            except (ValueError, StructError, UnicodeDecodeError) as e:
+                _log.warning("dropped an event frame on %s: %s", self.channel.name, e)
+        else:
+            self._schedule()  # more frames may wait: read them next turn
+        if len(queue):
+            self._deliver()
+
+    def _schedule(self) -> None:
+        if not self._scheduled:
+            self._scheduled = True
+            self.reactor.call_soon(self._resume)
+
+    def _resume(self) -> None:
+        self._scheduled = False
+        self._readable()
+
+    def _deliver(self) -> None:
+        deliver, queue, reactor = self.push_structured_event, self.queue, self.reactor
+        pop = queue.pop
+        n = 0
+        while n < TURN_EVENTS and not reactor.stopping:
+            w = pop()
+            if w is None:
+                break
+            event = w.event
+            try:
+                event.payload = w.cls.deserialize(event.payload)
+            except Exception as e:  # MARSHAL: a corrupt payload is reported, not delivered
+                _log.warning("dropped an undecodable %s event: %s", event.type_name, e)
+                continue
+            n += 1
+            self.lag = time.time() - event.publish_time
+            try:
+                deliver(event)
+            except Exception:
+                _log.exception("push_structured_event failed on %s", event.type_name)
+        self.received += n
+        if len(queue) and not reactor.stopping:
+            self._schedule()  # the rest next turn: other handlers get theirs meanwhile
+
+    def _topic(self, head: bytes) -> tuple[str, str, bool]:
+        """(domain, type name, whether subscribed) of a topic frame."""
+        known = self._topics.get(head)
+        if known is None:
+            domain, type_name = split_topic(head)
+            known = (domain, type_name, self._wanted(domain, type_name))
+            if len(self._topics) >= 4096:  # a bounded cache, whatever the channel carries
+                self._topics.clear()
+            self._topics[head] = known
+        return known
+
+    def _class(self, raw_hash: bytes, domain: str, type_name: str) -> type[IdlType] | None:
+        """The generated type of payloads with this type hash; None (reported once) if none."""
+        cls = self._classes.get(raw_hash)
+        if cls is None:
+            type_hash = raw_hash.hex()
+            cls = registry.lookup(type_hash)  # never searches the path: this is the reactor
+            if cls is not None:
+                self._classes[raw_hash] = cls
+            elif self._searching or not registry.discovered():
+                pass  # its frames wait for the search (_hold)
+            elif (type_name, type_hash) not in self._unknown and len(self._unknown) < 1000:
+                self._unknown.add((type_name, type_hash))
+                _log.warning(
+                    "events %s/%s have type hash %s, which no imported generated type has: "
+                    "dropped (import the type's generated module, or regenerate it)",
+                    domain,
+                    type_name,
+                    type_hash[:12],
+                )
+        return cls
+
+    def _parse(self, parts: list[zmq.Frame]) -> None:
+        """Queue the events of one message; raises if the frame does not parse (then none of
+        its events count, and the sequence numbers stay as they were)."""
+        if len(parts) != 2:
+            raise ValueError(f"{len(parts)} frames, expected 2")
+        head, body = parts[0].bytes, parts[1].buffer  # the body is not copied
+        domain, type_name, wanted = self._topic(head)
+        if not wanted:
+            return
+        count, supplier, raw_hash = read_batch_head(body)
+        held = self._held and raw_hash in self._held_hashes  # after those already waiting
+        cls = None if held else self._class(raw_hash, domain, type_name)
+        if cls is None and self._hold(parts, raw_hash, len(body)):
+            return
+        if held:
+            cls = self._class(raw_hash, domain, type_name)
+        type_hash = raw_hash.hex()
+        expected = self._gaps.expected(supplier, type_name)
+        first = expected
+        missed = 0
+        unpack, size, at = EVENT.unpack_from, len(body), BATCH_HEADER
+        topic_key = (domain, type_name)
+        waiting = []
+        keep_from = count - 1 if self.queue.latest_only else 0  # latest-only: only the last
+        for i in range(count):
+            seq, stamp_ns, publish_ns, n = unpack(body, at)
+            at += EVENT_HEADER
+            if at + n > size:
+                raise ValueError("event payload is truncated")
+            missed += gap(expected, seq)
+            expected = seq + 1
+            if cls is not None and i >= keep_from:
+                # Decoded when delivered; a small payload is copied out, so that a batch's
+                # frame is not kept for one event that waits.
+                data = body[at : at + n] if n >= LARGE_EVENT else bytes(body[at : at + n])
+                event = StructuredEvent(
+                    domain,
+                    type_name,
+                    data,
+                    seq,
+                    stamp_ns / 1e9,
+                    publish_ns / 1e9,
+                    supplier,
+                    type_hash,
+                )
+                waiting.append(Waiting(topic_key, event, cls, n))
+            at += n
+        if at != size:
+            raise ValueError("trailing bytes after the events")
+        # Only a frame that parses to its end moves the sequence numbers.
+        if expected is not None and expected != first:
+            self._gaps.advance(supplier, type_name, expected, missed)
+        if cls is None:
+            self.undecodable += count
+        elif waiting:
+            self.queue.dropped += keep_from
+            self.queue.add(topic_key, waiting)
+
+    def _hold(self, parts: list[zmq.Frame], raw_hash: bytes, size: int) -> bool:
+        """Keep a frame whose type is not known yet until the generated packages on the path
+        are imported, off the reactor thread; False when that search is over (or too much
+        waits already): then its type is unknown here."""
+        if not self._searching:
+            if registry.discovered():
+                return False
+            self._searching = True
+            registry.discover_in_background(lambda: self.reactor.call_soon(self._release))
+        if len(self._held) >= HOLD_FRAMES or self._held_bytes + size > HOLD_BYTES:
+            return False
+        self._held.append(parts)
+        self._held_hashes.add(raw_hash)
+        self._held_bytes += size
+        return True
+
+    def _release(self) -> None:
+        """The search for generated packages is over: the frames that waited for it, in order."""
+        self._searching = False
+        held, self._held, self._held_hashes, self._held_bytes = self._held, [], set(), 0
+        for parts in held:
+            try:
+                self._parse(parts)
+            except (ValueError, StructError, UnicodeDecodeError) as e:
+                _log.warning("dropped an event frame on %s: %s", self.channel.name, e)
+        if len(self.queue):
+            self._deliver()
+
+    def close(self) -> None:
+        offers.unsubscribed(self)
+        self.link.close_socket()

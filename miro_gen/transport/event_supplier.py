@@ -1,0 +1,333 @@
+"""Suppliers of an event channel (Miro's StructuredPushSupplier): `push()` from any thread,
+events batched per reactor turn into one frame per topic, large ones alone and copied once,
+nothing encoded while nobody subscribes, every queue bounded and what overflows counted.
+The overview is transport.events; the bytes are transport.event_frames.
+"""
+
+from __future__ import annotations
+
+import itertools
+import random
+import threading
+from typing import Any
+
+import zmq
+
+from miro_gen import clock
+from miro_gen.log import logger
+from miro_gen.runtime.cdr import encode_after
+from miro_gen.transport import offers, sockets
+from miro_gen.transport.channel_link import ChannelLink
+from miro_gen.transport.channels import EventChannel
+from miro_gen.transport.event_frames import (
+    BATCH_HEADER,
+    EVENT,
+    EVENT_HEADER,
+    LENGTH,
+    LENGTH_AT,
+    batch_head,
+    topic,
+)
+
+_log = logger("MIRO")
+
+HWM = 10_000  # frames a supplier's or a consumer's socket queues for one peer, at most
+MAX_SUBSCRIPTIONS = 10_000  # prefixes a supplier tracks; beyond, it sends every topic
+MAX_PREFIX = 4096  # bytes of a subscription prefix a supplier tracks
+QUEUE_EVENTS = 100_000  # events a supplier holds for its reactor's next turn, at most
+QUEUE_BYTES = 64 << 20  # and bytes
+# Events from this size on travel alone, in a frame put together with one copy and handed to
+# ZeroMQ without another (copy=False); consumers decode them from ZeroMQ's buffer, in place.
+LARGE_EVENT = 64 * 1024
+# Events in one frame, at most. The count is 16 bits, and a high-water mark counts frames: HWM
+# frames must stay a bounded amount of memory. Yet frames must not be small: each send lets the
+# pushing thread take the GIL back for up to a switch interval, so a flush in many frames falls
+# behind a thread pushing flat out. An event larger than MAX_BATCH_BYTES travels alone.
+MAX_BATCH_EVENTS = 16_384
+MAX_BATCH_BYTES = 256 * 1024
+
+
+class _Framed(list[bytes]):
+    """A large event's whole batch frame: it travels alone."""
+
+
+class _Topic:
+    """What a supplier keeps per type name: the topic frame, the sequence numbers, whether
+    anyone subscribes (recomputed when the subscriptions change), the events not yet sent,
+    whether the last event was large."""
+
+    __slots__ = (
+        "frame",
+        "generation",
+        "large",
+        "last",
+        "last_hash",
+        "pending",
+        "seq",
+        "subscribed",
+    )
+
+    def __init__(self, frame: bytes) -> None:
+        self.frame = frame
+        self.large = False
+        self.seq = itertools.count()
+        self.generation = -1  # of the supplier's subscriptions that `subscribed` reflects
+        self.subscribed = False
+        # Runs of packed events with one type hash (one, unless the type changes), the last
+        # run's list and hash.
+        self.pending: list[tuple[str, list[bytes]]] = []
+        self.last: list[bytes] = []
+        self.last_hash = ""
+
+
+class StructuredPushSupplier:
+    """Pushes events into a channel. `push()` may be called from any thread; the sending
+    happens on the reactor thread, once per turn for all events pushed meanwhile.
+
+    Events wait for that turn in a bounded queue (QUEUE_EVENTS events, QUEUE_BYTES bytes): when
+    the reactor cannot keep up, `push()` drops the newest and counts them in `dropped`, as it
+    does those ZeroMQ refuses at its high-water mark, those larger than the maximum message
+    size, and those pushed for subscribers while the channel is gone (its host died; the
+    supplier finds it again when it is bound anew). Consumers see them as gaps."""
+
+    def __init__(self, channel: EventChannel, domain_name: str | None = None) -> None:
+        self.channel = channel
+        self.domain_name = channel.domain_name if domain_name is None else domain_name
+        self.reactor = channel.reactor
+        self.supplier_id = random.getrandbits(63)
+        self._topics: dict[str, _Topic] = {}
+        self._dirty: list[_Topic] = []  # topics with pending events, in the order they came
+        self._queued = 0
+        self._queued_bytes = 0
+        self._lock = threading.Lock()
+        self._flush_pending = False
+        self._subscriptions: dict[bytes, int] = {}
+        self._generation = 0  # bumped whenever _subscriptions changes
+        self._raw_hashes: dict[str, bytes] = {}
+        self._offered: dict[str, str] = {}  # type name -> payload type hash, as described
+        self.sent = 0
+        self.dropped = 0  # events pushed while someone subscribed that were never sent
+        self._too_large: set[str] = set()  # types with an event too large to send (said once)
+        context = self.reactor.context
+        self.max_frame = sockets.policy(context).max_message_size
+        self.socket = sockets.connecting_socket(context, zmq.XPUB)
+        # A turn's events leave in a burst of frames (100,000 small events: about 30), which the
+        # socket must hold until the channel reads them: room for a full queue of batches
+        # (QUEUE_BYTES), more only when the supplier's own events are larger than a batch.
+        burst = QUEUE_BYTES // MAX_BATCH_BYTES
+        self.socket.setsockopt(zmq.SNDHWM, min(HWM, max(burst, sockets.queue_limit(context))))
+        self.socket.setsockopt(zmq.XPUB_VERBOSER, 1)
+        # At the high-water mark an XPUB drops silently; with NODROP a non-blocking send fails
+        # instead, so that the supplier counts what it drops. It never blocks either way.
+        self.socket.setsockopt(zmq.XPUB_NODROP, 1)
+        # No queue for a connection that is down: the channel's subscriptions end with it, and
+        # what is pushed meanwhile is counted as dropped, not sent into the void.
+        self.socket.setsockopt(zmq.IMMEDIATE, 1)
+        self._connected = False
+        self._lost: set[bytes] = set()  # the subscriptions when the channel went away
+        resolve = channel.resolve
+        self.link = ChannelLink(
+            self.reactor,
+            self.socket,
+            channel.endpoints(context)[0],
+            None if resolve is None else lambda: resolve().endpoints(context)[0],
+            self._connection_changed,
+        )
+        self.reactor.call_soon(self.reactor.register, self.socket, self._subscription_changed)
+
+    def _topic(self, type_name: str) -> _Topic:
+        t = self._topics.get(type_name)
+        if t is None:  # setdefault: two threads creating it at once share one counter
+            t = self._topics.setdefault(type_name, _Topic(topic(self.domain_name, type_name)))
+        return t
+
+    def _subscribed(self, t: _Topic) -> bool:
+        generation = self._generation
+        if t.generation != generation:
+            subs = list(self._subscriptions)
+            t.subscribed = any(t.frame.startswith(p) for p in subs)
+            t.generation = generation  # a change meanwhile bumped _generation: recomputed next
+        return t.subscribed
+
+    def has_subscribers(self, type_name: str) -> bool:
+        """Whether any consumer subscribes to this supplier's events of `type_name`."""
+        return self._subscribed(self._topic(type_name))
+
+    def push(self, type_name: str, payload: Any, stamp: float | None = None) -> bool:
+        """Publish `payload` (a generated type) as an event of `type_name`; False when nobody
+        subscribes (nothing is encoded then). `stamp`: when the data was taken (default now, on the
+        process's clock: the replayed time under `--clock log`)."""
+        t = self._topics.get(type_name) or self._topic(type_name)
+        offered = getattr(payload, "_type_hash", "")
+        if self._offered.get(type_name) != offered:  # the first of its kind
+            self._offered[type_name] = offered
+            offers.offered(self.channel.name, self.domain_name, type_name, payload)
+        seq = next(t.seq)
+        if not (t.subscribed if t.generation == self._generation else self._subscribed(t)):
+            if not self._connected and any(t.frame.startswith(p) for p in self._lost):
+                with self._lock:  # subscribed when the channel went away: lost
+                    self.dropped += 1
+                return True
+            return False
+        now = clock.current().time_ns()  # log time under --clock log, else the wall clock
+        type_hash = payload._type_hash
+        stamp_ns = now if stamp is None else int(stamp * 1e9)
+        packed, framed = self._encode(t, type_hash, (seq, stamp_ns, now), payload)
+        size = len(framed or packed)
+        if (size if framed else size + BATCH_HEADER) > self.max_frame:
+            self._refuse_large(type_name, size)
+            return True
+        with self._lock:
+            if self._queued >= QUEUE_EVENTS or self._queued_bytes + size > QUEUE_BYTES:
+                self.dropped += 1
+                return True
+            if framed:  # alone, as it is
+                if not t.pending:
+                    self._dirty.append(t)
+                t.pending.append((type_hash, _Framed((framed,))))
+                t.last, t.last_hash = [], ""
+            elif type_hash == t.last_hash and t.pending:
+                t.last.append(packed)
+            else:
+                if not t.pending:
+                    self._dirty.append(t)
+                t.last, t.last_hash = [packed], type_hash
+                t.pending.append((type_hash, t.last))
+            self._queued += 1
+            self._queued_bytes += size
+            if self._flush_pending:
+                return True
+            self._flush_pending = True
+        self.reactor.call_soon(self._flush)
+        return True
+
+    def _encode(
+        self, t: _Topic, type_hash: str, head: tuple[int, int, int], payload: Any
+    ) -> tuple[bytes, bytes]:
+        """(event, b"") for a small event, to be batched; (b"", its whole frame) for a large
+        one. Once a type's events are large, the next is encoded into its frame directly (its
+        payload copied once); the payload length is filled in after."""
+        if t.large:
+            prefix = self._batch_head(type_hash, 1) + EVENT.pack(*head, 0)
+            buf = encode_after(prefix, payload)
+            n = buf.size - len(prefix)
+            buf.overwrite(LENGTH_AT, LENGTH.pack(n))
+            frame = buf.value()
+            if n + EVENT_HEADER >= LARGE_EVENT:
+                return b"", frame
+            t.large = False
+            return frame[BATCH_HEADER:], b""
+        data = payload.serialize()
+        packed = EVENT.pack(*head, len(data))
+        if len(packed) + len(data) < LARGE_EVENT:
+            return packed + data, b""
+        t.large = True
+        return b"", b"".join((self._batch_head(type_hash, 1), packed, data))
+
+    def _batch_head(self, type_hash: str, count: int) -> bytes:
+        raw = self._raw_hashes.get(type_hash)
+        if raw is None:
+            raw = self._raw_hashes[type_hash] = bytes.fromhex(type_hash)
+        return batch_head(count, self.supplier_id, raw)
+
+    def _flush(self) -> None:
+        with self._lock:
+            topics, self._dirty = self._dirty, []
+            queues = []
+            for t in topics:
+                queues.append((t.frame, t.pending))
+                t.pending, t.last, t.last_hash = [], [], ""
+            self._queued = self._queued_bytes = 0
+            self._flush_pending = False
+        for frame, runs in queues:
+            for type_hash, events in runs:
+                if type(events) is _Framed:
+                    self._send_body(frame, events[0], 1)
+                    continue
+                if len(events) <= MAX_BATCH_EVENTS and sum(map(len, events)) <= MAX_BATCH_BYTES:
+                    self._send(frame, type_hash, events)
+                    continue
+                batch: list[bytes] = []
+                size = 0
+                for packed in events:  # a busy turn: several frames, within the limits
+                    if batch and (
+                        len(batch) == MAX_BATCH_EVENTS or size + len(packed) > MAX_BATCH_BYTES
+                    ):
+                        self._send(frame, type_hash, batch)
+                        batch, size = [], 0
+                    batch.append(packed)
+                    size += len(packed)
+                self._send(frame, type_hash, batch)
+
+    def _send(self, frame: bytes, type_hash: str, packed: list[bytes]) -> None:
+        """One frame of the events `packed`."""
+        body = b"".join([self._batch_head(type_hash, len(packed)), *packed])
+        self._send_body(frame, body, len(packed))
+
+    def _send_body(self, frame: bytes, body: bytes, count: int) -> None:
+        if self._send_frame(frame, body):
+            self.sent += count
+        else:  # at the high-water mark: dropped, visible as a gap
+            with self._lock:
+                self.dropped += count
+
+    def _send_frame(self, frame: bytes, body: bytes) -> bool:
+        """Send a topic frame and a batch frame (large ones without a copy); False at the
+        high-water mark, or when the channel is gone (nobody to send to: the events are lost)."""
+        if not self._connected:
+            return False
+        try:
+            self.socket.send_multipart([frame, body], zmq.NOBLOCK, copy=len(body) < LARGE_EVENT)
+        except zmq.Again:
+            return False
+        return True
+
+    def _refuse_large(self, type_name: str, size: int) -> None:
+        with self._lock:
+            self.dropped += 1
+        if type_name not in self._too_large and len(self._too_large) < 1000:
+            self._too_large.add(type_name)
+            _log.warning(
+                "dropped a %s event of %d bytes: more than the maximum message size "
+                "(%d; --max-message-size)",
+                type_name,
+                size,
+                self.max_frame,
+            )
+
+    def _connection_changed(self, up: bool) -> None:
+        """The connection to the channel came up or went down (reactor thread)."""
+        if up:
+            self._lost = set()
+        else:
+            self._lost = set(self._subscriptions)
+            _log.notice("lost the event channel %s; looking for it", self.channel.name)
+        self._connected = up
+
+    def _subscription_changed(self) -> None:
+        # A lost connection's subscriptions end with unsubscriptions that ZeroMQ queues after
+        # its monitor event: read that event first, so that `_lost` still holds them.
+        self.link.read_events()
+        changed = False
+        subs = self._subscriptions
+        while True:
+            try:
+                msg = self.socket.recv(zmq.NOBLOCK)
+            except zmq.Again:
+                break
+            if not msg:
+                continue
+            prefix = msg[1 : MAX_PREFIX + 1]  # a longer prefix matches no fewer topics
+            if prefix not in subs and len(subs) >= MAX_SUBSCRIPTIONS:
+                prefix = b""  # too many to track: send every topic (the channel filters)
+            n = subs.get(prefix, 0) + (1 if msg[0] == 1 else -1)
+            if n > 0:
+                subs[prefix] = n
+            else:
+                subs.pop(prefix, None)
+            changed = True
+        if changed:
+            self._generation += 1  # after the change, so a reader never keeps a stale answer
+
+    def close(self) -> None:
+        self.link.close_socket()
