@@ -16,6 +16,7 @@ from hypothesis import strategies as st
 from loopback import service_env
 
 from miro_gen.devices import scip
+from miro_gen.devices.framers import LineFramer
 from miro_gen.devices.scip import URG_04LX, ScanCommand, ScipError
 from miro_gen.sim.scip import Faults, RecordedScene, RoomScene, ScipDevice
 
@@ -119,19 +120,19 @@ def test_faults_as_asked() -> None:
 
 class Responses:
     """SCIP responses read from a socket one at a time (one read may hold several, or part of
-    one: a response ends with an empty line)."""
+    one), cut by the driver's own framer: a response ends with an empty line."""
 
     def __init__(self, sock: socket.socket) -> None:
         self.sock = sock
-        self.data = b""
+        self.framer = LineFramer(b"\n\n", max_length=1 << 16)  # as the driver: whole scans
+        self.ready: list[bytes] = []
 
     def next(self) -> scip.Response:
-        while b"\n\n" not in self.data:
+        while not self.ready:
             chunk = self.sock.recv(65536)
             assert chunk, "the simulator closed the connection"
-            self.data += chunk
-        response, _, self.data = self.data.partition(b"\n\n")
-        return scip.split_response(response)
+            self.ready += self.framer.feed(chunk)
+        return scip.split_response(self.ready.pop(0))
 
 
 def test_miro_sim_scip_on_a_tcp_port_replays_a_scene(tmp_path: Path) -> None:
