@@ -40,6 +40,9 @@ from miro_gen.transport import frames, sockets
 _log = logger("MIRO")
 
 CONNECT_TIMEOUT = 2.0  # seconds a call waits for a connection before TRANSIENT
+# The minor code of a TRANSIENT for a connection refused at the handshake (no key, or the
+# socket's connection cap): the peer runs, but will not have this process.
+REFUSED_MINOR = 0x4D470001
 CHECK_INTERVAL_MS = 250  # while waiting for a reply, how often to look for a lost connection
 MAX_TAILS = 4096  # request header tails kept (objects x operations); then start again
 
@@ -206,7 +209,8 @@ class ZmqInvoker:
             if conn.denied:
                 raise TRANSIENT(
                     f"{conn.endpoint} refused the connection for {operation}: it needs the "
-                    "robot's or fleet's key (--keys), or has too many connections"
+                    "robot's or fleet's key (--keys), or has too many connections",
+                    REFUSED_MINOR,
                 )
             why = "connection refused" if conn.refused else "no connection in time"
             raise TRANSIENT(f"cannot reach {conn.endpoint} for {operation}: {why}")

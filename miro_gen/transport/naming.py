@@ -30,7 +30,7 @@ from miro_gen.log import logger
 from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.runtime.rpc import nonblocking
 from miro_gen.transport.adapter import ObjectAdapter
-from miro_gen.transport.invoker import ZmqInvoker
+from miro_gen.transport.invoker import REFUSED_MINOR, ZmqInvoker
 from miro_gen.transport.reactor import Reactor
 
 _log = logger("MIRO")
@@ -291,7 +291,7 @@ def naming_errors(endpoint: str, what: str) -> Iterator[None]:
     try:
         yield
     except (TRANSIENT, COMM_FAILURE, TIMEOUT) as e:
-        if "refused the connection" in e.message:  # it runs, but will not have us: say why
+        if e.minor == REFUSED_MINOR:  # it runs, but will not have us: say why
             raise TRANSIENT(f"cannot {what}: {e.message}", e.minor, e.completed) from None
         reason = e.message.rsplit(": ", 1)[-1] if ": " in e.message else e.message
         raise TRANSIENT(
