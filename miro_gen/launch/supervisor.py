@@ -208,14 +208,15 @@ class NameWatcher:
         from miro_gen.transport import sockets
         from miro_gen.transport.invoker import ZmqInvoker
         from miro_gen.transport.naming import NAMING_KEY
-        from miro_gen.transport.options import UsageError
+        from miro_gen.transport.options import UsageError, parse_common_options
 
         context: zmq.Context[Any] = zmq.Context()
-        try:  # the key its services get ($MIRO_KEYS, or the default key file)
+        try:  # the key and limits its services get from the environment (or the default key)
+            env, _ = parse_common_options([])
             policy = sockets.policy_for(
-                keys=os.environ.get("MIRO_KEYS") or None,
-                insecure=False,
-                max_message_size=None,
+                keys=env.keys,
+                insecure=env.insecure,
+                max_message_size=env.max_message_size,
                 talks_to=sockets.endpoint_host(self.url),
             )
             sockets.configure(context, policy)
