@@ -31,7 +31,7 @@ from typing import Any
 from miro_gen.launch.console import Console, Row, since
 from miro_gen.launch.documents import write_parameters
 from miro_gen.launch.spec import LaunchSpec, RestartPolicy, ServiceSpec, project_root
-from miro_gen.launch.tree import ProcessTree, send
+from miro_gen.launch.tree import ProcessTree, kill, left, send
 
 NAMING_LABEL = "naming"
 NAMING_READY = "naming service at"
@@ -514,18 +514,23 @@ class Supervisor:
             self.console.note(f"stopping {names}", routine=True)
         for depth in sorted({c.depth for c in running}, reverse=True):
             wave = [c for c in running if c.depth == depth]
+            groups = [c.proc.pid for c in wave if c.proc is not None]
             for c in wave:
                 c.state = "stopping"
                 _signal(c, signal.SIGTERM)
             end = time.monotonic() + self.spec.grace
-            while any(c.proc is not None and c.proc.poll() is None for c in wave):
+            # until the services and what they started (their groups and sessions) are gone
+            while any(c.proc is not None and c.proc.poll() is None for c in wave) or left(groups):
                 if time.monotonic() >= end or self.force.is_set():
                     for c in wave:
                         if c.proc is not None and c.proc.poll() is None:
-                            self.console.note(
-                                f"{c.name} did not stop within {self.spec.grace:g} s: killed"
-                            )
-                            _signal(c, signal.SIGKILL)
+                            what = f"{c.name} did not stop"
+                        elif c.proc is not None and left([c.proc.pid]):
+                            what = f"what {c.name} started did not stop"
+                        else:
+                            continue
+                        self.console.note(f"{what} within {self.spec.grace:g} s: killed")
+                    kill(groups)
                     break
                 time.sleep(0.02)
             for c in wave:

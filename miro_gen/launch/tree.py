@@ -92,7 +92,7 @@ def kill(ids: Collection[int]) -> int:
     """SIGKILL to the groups and sessions `ids` until nothing is left in them (a process that
     forked as the first signal came has a child the next one reaches); how many there were."""
     there = left(ids)
-    for _ in range(KILL_ROUNDS):
+    for _ in range(KILL_ROUNDS if there else 0):
         send(ids, signal.SIGKILL)
         time.sleep(POLL)
         if not left(ids):
