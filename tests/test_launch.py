@@ -4,6 +4,7 @@ the manual's examples)."""
 
 from __future__ import annotations
 
+import os
 import re
 import signal
 import sys
@@ -382,6 +383,40 @@ def test_a_launch_killed_outright_leaves_no_process(tmp_path: Path) -> None:
         proc.wait_for("process(es) left after 1 s: killed", timeout=30)
     (said_first,) = [t for t in proc.lines if t.startswith("launch watcher:")][:1]
     assert "ended without stopping its services" in said_first
+
+
+def watcher_of(launch_pid: int) -> int | None:
+    """The pid of the watcher of the launch `launch_pid` (None: none now)."""
+    for entry in Path("/proc").iterdir():
+        try:
+            argv = (entry / "cmdline").read_bytes().split(b"\0")
+        except OSError:
+            continue
+        if (
+            b"miro_gen.launch.tree" in argv
+            and str(launch_pid).encode() in argv
+            and alive(int(entry.name))
+        ):
+            return int(entry.name)
+    return None
+
+
+def test_a_watcher_that_ends_is_replaced(tmp_path: Path) -> None:
+    """The watcher killed (the OOM killer, a careless pkill): the launch starts another and
+    tells it everything, so a launch killed afterwards still leaves nothing."""
+    write(tmp_path, "forever.py", "import os, time\nprint('up', os.getpid(), flush=True)\n"
+          "time.sleep(600)\n")  # fmt: skip
+    write(tmp_path, "robot.toml", '[launch]\ngrace = 1\n[services.forever]\nrun = "forever.py"\n')
+    with launch(tmp_path) as proc:
+        pid = int(proc.wait_for("| up ", timeout=60)[0].split()[-1])
+        first = watcher_of(proc.proc.pid)
+        assert first is not None
+        os.kill(first, signal.SIGKILL)
+        proc.wait_for(f"the watcher (pid {first}) ended with -9; another started", timeout=30)
+        assert watcher_of(proc.proc.pid) not in (None, first)
+        proc.proc.kill()
+        proc.proc.wait(30)
+        eventually(lambda: not alive(pid), 30)
 
 
 def test_inline_parameters_become_the_services_document(tmp_path: Path) -> None:

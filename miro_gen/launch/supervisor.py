@@ -331,6 +331,8 @@ class Supervisor:
 
     def _turn(self) -> None:
         now = time.monotonic()
+        if self.tree is not None:
+            self.tree.check()
         for c in self.children:
             if c.proc is not None and c.proc.poll() is not None:
                 self._ended(c, now)

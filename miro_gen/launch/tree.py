@@ -28,7 +28,7 @@ from collections.abc import Callable, Collection
 
 POLL = 0.02  # seconds between looks at what is left while stopping
 KILL_ROUNDS = 50  # SIGKILL again while processes are still seen (a fork caught mid-way)
-WATCHER_STARTS = 3  # a watcher that keeps ending is given up, saying so
+WATCHER_STARTS = 10  # a watcher that keeps ending is given up, saying so
 
 
 # ---- the processes of a group or session -------------------------------------------------------
@@ -133,7 +133,8 @@ class ProcessTree:
         except OSError as e:
             self._note(f"cannot start the watcher: {e}")
             self._starts = WATCHER_STARTS
-            return self._start_watcher()
+            self._start_watcher()  # (says what that means)
+            return
         assert watcher.stdin is not None
         os.set_blocking(watcher.stdin.fileno(), False)
         self._watcher = watcher
@@ -147,13 +148,26 @@ class ProcessTree:
         try:
             os.write(watcher.stdin.fileno(), (line + "\n").encode())
         except BrokenPipeError:  # it ended: another, told everything
-            self._note("the watcher ended; starting another")
-            with contextlib.suppress(OSError):
-                watcher.stdin.close()
-            watcher.wait()
-            self._start_watcher()
+            self._replace(watcher)
         except BlockingIOError:  # it does not read (stopped?)
             self._note(f"the watcher does not read: it was not told {line!r}")
+
+    def _replace(self, watcher: subprocess.Popen[bytes]) -> None:
+        assert watcher.stdin is not None
+        with contextlib.suppress(OSError):
+            watcher.stdin.close()
+        code = watcher.wait()
+        self._start_watcher()
+        if self._watcher is not None:
+            self._note(
+                f"the watcher (pid {watcher.pid}) ended with {code}; another started (pid "
+                f"{self._watcher.pid})"
+            )
+
+    def check(self) -> None:
+        """Start the watcher again if it ended (the launch calls this now and then)."""
+        if self._watcher is not None and self._watcher.poll() is not None:
+            self._replace(self._watcher)
 
     def own(self, pgid: int, depth: int) -> None:
         """A service started as the leader of process group (and session) `pgid`; `depth` is
