@@ -404,8 +404,8 @@ def watcher_of(launch_pid: int) -> int | None:
 def test_a_watcher_that_ends_is_replaced(tmp_path: Path) -> None:
     """The watcher killed (the OOM killer, a careless pkill): the launch starts another and
     tells it everything, so a launch killed afterwards still leaves nothing."""
-    write(tmp_path, "forever.py", "import os, time\nprint('up', os.getpid(), flush=True)\n"
-          "time.sleep(600)\n")  # fmt: skip
+    forever = "import os, time\nprint('up', os.getpid(), flush=True)\ntime.sleep(600)\n"
+    write(tmp_path, "forever.py", forever)
     write(tmp_path, "robot.toml", '[launch]\ngrace = 1\n[services.forever]\nrun = "forever.py"\n')
     with launch(tmp_path) as proc:
         pid = int(proc.wait_for("| up ", timeout=60)[0].split()[-1])
