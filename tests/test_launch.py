@@ -409,11 +409,13 @@ def test_a_watcher_that_ends_is_replaced(tmp_path: Path) -> None:
     write(tmp_path, "robot.toml", '[launch]\ngrace = 1\n[services.forever]\nrun = "forever.py"\n')
     with launch(tmp_path) as proc:
         pid = int(proc.wait_for("| up ", timeout=60)[0].split()[-1])
+        eventually(lambda: watcher_of(proc.proc.pid) is not None, 30)
         first = watcher_of(proc.proc.pid)
         assert first is not None
         os.kill(first, signal.SIGKILL)
         proc.wait_for(f"the watcher (pid {first}) ended with -9; another started", timeout=30)
-        assert watcher_of(proc.proc.pid) not in (None, first)
+        # (a process's command line can be read only a moment after its start)
+        eventually(lambda: watcher_of(proc.proc.pid) not in (None, first), 30)
         proc.proc.kill()
         proc.proc.wait(30)
         eventually(lambda: not alive(pid), 30)
