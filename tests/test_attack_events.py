@@ -381,11 +381,18 @@ def test_binding_beyond_loopback_needs_a_key_or_insecure(tmp_path: Path) -> None
             "--insecure",
         ],
         stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
         text=True,
         env=env,
     )
-    assert insecure.stdout is not None
+    assert insecure.stdout is not None and insecure.stderr is not None
     line = insecure.stdout.readline()
     insecure.terminate()
     insecure.wait(10)
-    assert "--insecure: anyone who can connect may change names" in line
+    assert "--insecure: in the clear, open to anyone who can reach it" in line
+    assert insecure.stderr.readline().startswith(  # what it opens, precisely
+        "[WARNING MIRO] --insecure: serving on every interface (0.0.0.0) with neither key nor "
+        "encryption: anyone who can reach this machine may list, resolve and bind names, and "
+        "publish and subscribe on its event channels, and anyone on the network between may "
+        "read and change what is said"
+    )

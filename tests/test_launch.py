@@ -4,6 +4,7 @@ the manual's examples)."""
 
 from __future__ import annotations
 
+import os
 import re
 import signal
 import sys
@@ -15,7 +16,6 @@ from loopback import eventually
 from miro_cli import REPO
 
 from miro_gen.cli.launch import launch_main
-from miro_gen.launch import supervisor
 from miro_gen.launch.spec import LaunchError, read_launch_file
 from miro_gen.testing import ServiceProcess
 
@@ -130,14 +130,73 @@ def test_check_prints_the_plan_of_the_shipped_demo(capsys: pytest.CaptureFixture
     assert "ExampleA" in lines[4]
 
 
-def test_errors_in_the_file_exit_2_without_starting_anything(
+def test_errors_in_the_file_exit_1_without_starting_anything(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     path = write(tmp_path, "robot.toml", '[services.a]\ncommand = "true"\nrestart = 3\n')
-    assert launch_main([str(path)]) == 2
+    assert launch_main([str(path)]) == 1
     assert capsys.readouterr().err == (
         f"{path}:3: error: restart must be never, on-failure or always, not 3\n"
     )
+
+
+def test_numbers_are_finite_and_in_range(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """TOML spells nan and inf: `grace = nan` would make Ctrl-C wait forever, `restart_delay =
+    nan` never restart, `restart_delay = 0` restart a crashing service 24 times a second."""
+    got = errors(
+        tmp_path,
+        """
+        [launch]
+        grace = nan
+
+        [services.a]
+        command = "true"
+        restart_delay = nan
+        restart_delay_max = -inf
+        stable_after = 0
+
+        [services.b]
+        command = "true"
+        restart_delay = 0
+        restart_delay_max = inf
+        """,
+    )
+    assert got == [
+        "robot.toml:2: error: grace must be from 0 to 3600 seconds, not nan",
+        "robot.toml:6: error: restart_delay must be from 0.1 to 3600 seconds, not nan",
+        "robot.toml:7: error: restart_delay_max must be from 1 to 3600 seconds, not -inf",
+        "robot.toml:8: error: stable_after must be from 1 to 86400 seconds, not 0",
+        "robot.toml:12: error: restart_delay must be from 0.1 to 3600 seconds, not 0",
+        "robot.toml:13: error: restart_delay_max must be from 1 to 3600 seconds, not inf",
+    ]
+    path = tmp_path / "robot.toml"
+    assert launch_main([str(path)]) == 1
+    err = capsys.readouterr().err.splitlines()
+    assert err[0] == f"{path}:2: error: grace must be from 0 to 3600 seconds, not nan"
+    write(tmp_path, "robot.toml", '[launch]\ngrace = 1e400\n[services.a]\ncommand = "true"\n')
+    assert launch_main([str(path)]) == 1
+    assert capsys.readouterr().err == (
+        f"{path}:2: error: grace must be from 0 to 3600 seconds, not inf\n"
+    )
+
+
+def test_the_floors_keep_a_crash_loop_slow(tmp_path: Path) -> None:
+    """The smallest delays the file may give still double up to at least 1 s."""
+    write(
+        tmp_path,
+        "robot.toml",
+        """
+        [services.a]
+        command = "false"
+        restart_delay = 0.1
+        restart_delay_max = 1
+        restart_limit = 100
+        """,
+    )
+    (a,) = read_launch_file(tmp_path / "robot.toml").services
+    assert [a.restart.backoff(n) for n in range(1, 7)] == [0.1, 0.2, 0.4, 0.8, 1.0, 1.0]
 
 
 # ---- running ---------------------------------------------------------------------------------
@@ -213,6 +272,7 @@ def test_order_restarts_and_one_ctrl_c_stops_everything(tmp_path: Path) -> None:
         assert proc.stop() == 0
         assert "launch | d did not stop within 1 s: killed" in said(proc)
         assert said(proc)[-1] == "launch | all stopped"
+    assert not any("launch watcher" in t for t in proc.lines)  # it ended without a word
     for pid in [*pids, *started]:
         eventually(lambda pid=pid: not alive(pid))  # type: ignore[misc]
 
@@ -229,7 +289,7 @@ def test_a_required_service_that_cannot_stay_up_ends_the_launch_with_1(tmp_path:
 
         [services.bad]
         run = "bad.py"
-        restart_delay = 0
+        restart_delay = 0.1
         restart_limit = 2
         """,
     )
@@ -265,16 +325,97 @@ def test_services_that_end_well_end_the_launch_with_0(tmp_path: Path) -> None:
     assert "launch | optional exited with status 1; given up" in said(proc)
 
 
-def test_a_launch_killed_outright_takes_its_services_with_it(tmp_path: Path) -> None:
-    """SIGKILL gives the launch no chance to stop anything: its services get SIGTERM from the
-    kernel (the parent-death signal), so none is left holding its names."""
-    if not supervisor._ends_with_us():
-        pytest.skip("no parent-death signal here (Linux with util-linux's setpriv)")
-    write(tmp_path, "forever.py", "import time\nprint('up', flush=True)\ntime.sleep(600)\n")
-    write(tmp_path, "robot.toml", '[services.forever]\nrun = "forever.py"\nready = "up"\n')
+def test_a_launch_killed_outright_leaves_no_process(tmp_path: Path) -> None:
+    """SIGKILL gives the launch no chance to stop anything: its watcher stops the services in
+    its place. One ignores SIGTERM; the other's children (one in its process group, one that
+    moved to a group of its own and ignores SIGTERM) are not its direct children: after the
+    grace period, none of them is left."""
+    write(
+        tmp_path,
+        "stubborn.py",
+        """
+        import os, signal, time
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        print(f"stubborn pid {os.getpid()}", flush=True)
+        time.sleep(600)
+        """,
+    )
+    write(
+        tmp_path,
+        "forker.py",
+        """
+        import os, signal, subprocess, time
+        child = subprocess.Popen(["sleep", "600"])
+        hidden = subprocess.Popen(  # SIGTERM ignored in it, also after exec
+            ["sleep", "601"],
+            process_group=0,
+            preexec_fn=lambda: signal.signal(signal.SIGTERM, signal.SIG_IGN),
+        )
+        print(f"forker pids {os.getpid()} {child.pid} {hidden.pid}", flush=True)
+        time.sleep(600)
+        """,
+    )
+    write(
+        tmp_path,
+        "robot.toml",
+        """
+        [launch]
+        grace = 1
+
+        [services.stubborn]
+        run = "stubborn.py"
+        ready = "stubborn pid"
+
+        [services.forker]
+        run = "forker.py"
+        after = ["stubborn"]
+        """,
+    )
     with launch(tmp_path) as proc:
-        proc.wait_for("forever is up", timeout=60)
-        (pid,) = started_pids(proc)
+        stubborn = proc.wait_for("| stubborn pid", timeout=60)[0]
+        forker = proc.wait_for("| forker pids", timeout=60)[0]
+        pids = [int(stubborn.split()[-1]), *(int(p) for p in forker.split()[-3:])]
+        assert all(alive(pid) for pid in pids)
+        proc.proc.kill()
+        proc.proc.wait(30)
+        for pid in pids:
+            eventually(lambda pid=pid: not alive(pid), 30)  # type: ignore[misc]
+        proc.wait_for("process(es) left after 1 s: killed", timeout=30)
+    (said_first,) = [t for t in proc.lines if t.startswith("launch watcher:")][:1]
+    assert "ended without stopping its services" in said_first
+
+
+def watcher_of(launch_pid: int) -> int | None:
+    """The pid of the watcher of the launch `launch_pid` (None: none now)."""
+    for entry in Path("/proc").iterdir():
+        try:
+            argv = (entry / "cmdline").read_bytes().split(b"\0")
+        except OSError:
+            continue
+        if (
+            b"miro_gen.launch.tree" in argv
+            and str(launch_pid).encode() in argv
+            and alive(int(entry.name))
+        ):
+            return int(entry.name)
+    return None
+
+
+def test_a_watcher_that_ends_is_replaced(tmp_path: Path) -> None:
+    """The watcher killed (the OOM killer, a careless pkill): the launch starts another and
+    tells it everything, so a launch killed afterwards still leaves nothing."""
+    forever = "import os, time\nprint('up', os.getpid(), flush=True)\ntime.sleep(600)\n"
+    write(tmp_path, "forever.py", forever)
+    write(tmp_path, "robot.toml", '[launch]\ngrace = 1\n[services.forever]\nrun = "forever.py"\n')
+    with launch(tmp_path) as proc:
+        pid = int(proc.wait_for("| up ", timeout=60)[0].split()[-1])
+        eventually(lambda: watcher_of(proc.proc.pid) is not None, 30)
+        first = watcher_of(proc.proc.pid)
+        assert first is not None
+        os.kill(first, signal.SIGKILL)
+        proc.wait_for(f"the watcher (pid {first}) ended with -9; another started", timeout=30)
+        # (a process's command line can be read only a moment after its start)
+        eventually(lambda: watcher_of(proc.proc.pid) not in (None, first), 30)
         proc.proc.kill()
         proc.proc.wait(30)
         eventually(lambda: not alive(pid), 30)

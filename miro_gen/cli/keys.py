@@ -7,7 +7,7 @@ import os
 import sys
 from collections.abc import Sequence
 
-from miro_gen.transport.sockets import DEFAULT_KEY, KEY_SUFFIX
+from miro_gen.transport.keyfiles import DEFAULT_KEY, KEY_SUFFIX, write_key_pair
 
 
 def keys_main(argv: Sequence[str]) -> int:
@@ -36,26 +36,18 @@ def keys_main(argv: Sequence[str]) -> int:
     if ns.command is None:
         p.print_help()
         return 0
-    base = os.path.expanduser(ns.name)
+    base = os.path.expanduser(ns.name).removesuffix(KEY_SUFFIX)
     secret = base + KEY_SUFFIX
-    if os.path.exists(secret) and not ns.force:
+    try:
+        public_file, secret_file = write_key_pair(base, replace=ns.force)
+    except FileExistsError:
         p.error(
             f"{secret} exists (use --force to replace it: processes holding the old key "
             "can then no longer connect)"
         )
-    folder = os.path.dirname(os.path.abspath(base))
-    from zmq.auth.certs import create_certificates
-
-    umask = os.umask(0o077)  # the secret is never readable by others, not even for a moment
-    try:
-        os.makedirs(folder, mode=0o700, exist_ok=True)
-        public_file, secret_file = create_certificates(folder, os.path.basename(base))
-        os.chmod(public_file, 0o644)
     except OSError as e:
         print(f"miro keys: cannot write {secret}: {e.strerror or e}", file=sys.stderr)
         return 1
-    finally:
-        os.umask(umask)
     print(f"secret key: {secret_file}")
     print(f"public key: {public_file}")
     print(f"give it to every process of the robot or fleet: --keys {secret_file}")

@@ -4,6 +4,7 @@ them all with one Ctrl-C. See miro_gen.launch.spec for the file and docs/LAUNCH.
 from __future__ import annotations
 
 import argparse
+import math
 import signal
 import sys
 import threading
@@ -63,15 +64,15 @@ def parser() -> argparse.ArgumentParser:
 def launch_main(argv: Sequence[str]) -> int:
     p = parser()
     ns = p.parse_args(argv)
-    if ns.duration < 0:
-        p.error("--duration must be 0 or more seconds")
+    if not (math.isfinite(ns.duration) and ns.duration >= 0):
+        p.error(f"--duration must be 0 or more seconds, not {ns.duration}")
     try:
         spec = read_launch_file(ns.file)
         part = plan(spec, ns.host)
     except LaunchError as e:
         for d in e.diagnostics:
             print(d, file=sys.stderr)
-        return 2
+        return 1
     except PlanError as e:
         print(f"{ns.file}: error: {e}", file=sys.stderr)
         return 2

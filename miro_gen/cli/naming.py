@@ -30,6 +30,9 @@ from miro_gen.transport.naming import (
 from miro_gen.transport.options import DEFAULT_NAMING, UsageError, byte_size, naming_endpoint
 from miro_gen.transport.reactor import Reactor
 
+# What a stranger may do with a naming service served --insecure beyond loopback
+NAMING_SERVES = "list, resolve and bind names, and publish and subscribe on its event channels"
+
 
 def naming_main(argv: Sequence[str]) -> int:
     p = argparse.ArgumentParser(
@@ -68,8 +71,9 @@ def naming_main(argv: Sequence[str]) -> int:
     p.add_argument(
         "--insecure",
         action="store_true",
-        help="serve beyond loopback without a key: anyone who can connect may bind, resolve, "
-        "publish and subscribe (docs/SECURITY.md)",
+        help="serve beyond loopback without a key or encryption: anyone who can connect may "
+        "list, resolve and bind names and use the event channels, and anyone on the way may "
+        "read and change what is said (it says so as it starts; docs/SECURITY.md)",
     )
     p.add_argument(
         "--quota",
@@ -148,11 +152,13 @@ def naming_main(argv: Sequence[str]) -> int:
         size = None
         if ns.max_message_size is not None:
             size = byte_size(ns.max_message_size, "--max-message-size")
+        log.configure(ns.log_level)  # (before the policy: --insecure warns what it opens)
         policy = sockets.policy_for(
             keys=ns.keys,
             insecure=ns.insecure,
             max_message_size=size,
             binds=sockets.endpoint_host(endpoint),
+            serves=NAMING_SERVES,
         )
     except UsageError as e:
         p.error(str(e))
@@ -162,7 +168,6 @@ def naming_main(argv: Sequence[str]) -> int:
             "--channel with an --endpoint on every interface needs --host ADDRESS: the "
             "address other hosts reach the channel at"
         )
-    log.configure(ns.log_level)
     reactor = Reactor(zmq.Context.instance())
     sockets.configure(reactor.context, policy)
     invoker = ZmqInvoker(reactor.context)
@@ -179,8 +184,8 @@ def naming_main(argv: Sequence[str]) -> int:
     note = " (every interface: other hosts use this machine's address)" if every else ""
     if policy.keys is not None:
         note += f"; CURVE with the key {policy.keys.path}"
-    elif not sockets.is_loopback(sockets.endpoint_host(bound)):
-        note += "; --insecure: anyone who can connect may change names"
+    elif ns.insecure and not sockets.is_loopback(sockets.endpoint_host(bound)):
+        note += "; --insecure: in the clear, open to anyone who can reach it"
     lines = [f"naming service at {bound}{note}", *(f"event channel {n}" for n in ns.channel)]
     # Said once the reactor runs: a signal from whoever waited for these lines then stops it.
     reactor.call_soon(lambda: print("\n".join(lines), flush=True))

@@ -21,6 +21,7 @@ as `file:line: error: message` (the line of the key at fault). docs/LAUNCH.md is
 from __future__ import annotations
 
 import difflib
+import math
 import re
 import shlex
 import sys
@@ -39,6 +40,17 @@ _CONTEXT = re.compile(r"^[^/\s]+(?:/[^/\s]+)*$")
 _ANY_PORT = re.compile(r"^tcp://[^:/\s]+:\*$")
 _AT_END = " (at end of document)"
 _TOML_POSITION = re.compile(r"\s*\(at line (\d+), column (\d+)\)$")
+
+# The range of each number of seconds (finite: TOML also spells nan and inf). The floors keep a
+# crash loop slow: a restart waits at least 0.1 s, the back-off grows to at least 1 s, and only
+# a run of at least 1 s counts as stable (it ends the series, and so the back-off).
+MIN_RESTART_DELAY = 0.1
+SECONDS_RANGES = {
+    "grace": (0.0, 3600.0),
+    "restart_delay": (MIN_RESTART_DELAY, 3600.0),
+    "restart_delay_max": (1.0, 3600.0),
+    "stable_after": (1.0, 86400.0),
+}
 
 _LAUNCH_KEYS = {"context", "naming", "grace", "log_level", "colour"}
 _NAMING_KEYS = {"host", "endpoint", "channels", "announce", "restart", "log_level"}
@@ -193,11 +205,15 @@ class _Reader:
         return value
 
     def seconds(self, table: dict[str, Any], key: str, *where: str) -> float | None:
+        """`key`'s number of seconds, finite and within SECONDS_RANGES[key]."""
         value = self.typed(table, key, (int, float), "a number of seconds", *where)
-        if value is not None and value < 0:
-            self.error(f"{key} must be 0 or more seconds, not {value}", *where, key)
+        if value is None:
             return None
-        return None if value is None else float(value)
+        low, high = SECONDS_RANGES[key]
+        if not (math.isfinite(value) and low <= value <= high):
+            self.error(f"{key} must be from {low:g} to {high:g} seconds, not {value}", *where, key)
+            return None
+        return float(value)
 
     def level(self, table: dict[str, Any], *where: str) -> int | None:
         value = self.typed(table, "log_level", int, "a log level from 0 to 9", *where)

@@ -9,13 +9,12 @@ restart; when a required service cannot stay up (its policy says no more, or its
 reached) everything is stopped and the launch ends with status 1. `stop()` (Ctrl-C) stops the
 services in waves, those that depend on others first and the naming service last: SIGTERM to
 each process group, SIGKILL to what is left after the grace period, so that nothing is left
-behind.
+behind. The groups are owned through a `ProcessTree` (launch.tree), whose watcher process
+stops them in the same way when the launch itself is killed.
 """
 
 from __future__ import annotations
 
-import contextlib
-import functools
 import os
 import shutil
 import signal
@@ -32,6 +31,7 @@ from typing import Any
 from miro_gen.launch.console import Console, Row, since
 from miro_gen.launch.documents import write_parameters
 from miro_gen.launch.spec import LaunchSpec, RestartPolicy, ServiceSpec, project_root
+from miro_gen.launch.tree import ProcessTree, kill, left, send
 
 NAMING_LABEL = "naming"
 NAMING_READY = "naming service at"
@@ -165,7 +165,6 @@ class Child:
     started: float | None = None
     up_since: float | None = None
     next_start: float = 0.0
-    groups: list[int] = field(default_factory=list)  # every process group it has had
     was_up: bool = False  # it has been up at least once
 
     @property
@@ -251,33 +250,6 @@ class NameWatcher:
         self._thread.join(3)
 
 
-@functools.cache
-def _ends_with_us() -> tuple[str, ...]:
-    """A prefix that gives a child SIGTERM when the launch dies, even by SIGKILL (Linux's
-    parent-death signal, set by util-linux's setpriv before it executes the command; children
-    are started from the launch's main thread, whose end is the process's): a launch that is
-    killed must not leave services behind that keep their names bound. Empty where setpriv
-    cannot do it; then only a launch that stops on a signal stops its services."""
-    setpriv = shutil.which("setpriv") if sys.platform.startswith("linux") else None
-    if setpriv is None:
-        return ()
-    try:
-        usage = subprocess.run(
-            [setpriv, "--help"], capture_output=True, text=True, timeout=5
-        ).stdout
-    except (OSError, subprocess.SubprocessError):
-        return ()
-    return (setpriv, "--pdeathsig", "TERM", "--") if "--pdeathsig" in usage else ()
-
-
-def _runnable(program: str, cwd: str | Path | None, path: str | None) -> bool:
-    """Whether `program` would be found and run (a relative path from `cwd`, as Popen does)."""
-    if os.sep in program:
-        full = os.path.join(cwd or os.getcwd(), program)
-        return os.path.isfile(full) and os.access(full, os.X_OK)
-    return shutil.which(program, path=path) is not None
-
-
 class Supervisor:
     """Runs `part` of `spec`, writing to `console`, until `stop()` or a required service fails;
     `run()` returns the exit status (0, or 1 when a required service could not stay up)."""
@@ -297,6 +269,7 @@ class Supervisor:
         self.project = project_root(spec.folder)
         self.started_order: list[Child] = []
         self.naming_url = part.naming_url
+        self.tree: ProcessTree | None = None  # from run(): the process groups it owns
 
     # ---- the loop -------------------------------------------------------------------------------
 
@@ -306,6 +279,7 @@ class Supervisor:
         elif self.part.discover:
             threading.Thread(target=self._discover, name="launch-discover", daemon=True).start()
         self.console.show_table(self.rows)
+        self.tree = ProcessTree(self.spec.grace, self.console.note)
         try:
             while not self.stopping.is_set():
                 self._turn()
@@ -315,6 +289,7 @@ class Supervisor:
                 self.wake.clear()
         finally:
             self._stop_all()
+            self.tree.close()
             if self.watcher is not None:
                 self.watcher.close()
             shutil.rmtree(self.workdir, ignore_errors=True)
@@ -356,6 +331,8 @@ class Supervisor:
 
     def _turn(self) -> None:
         now = time.monotonic()
+        if self.tree is not None:
+            self.tree.check()
         for c in self.children:
             if c.proc is not None and c.proc.poll() is not None:
                 self._ended(c, now)
@@ -394,14 +371,11 @@ class Supervisor:
 
     def _start(self, c: Child) -> None:
         spec = c.spec
+        assert self.tree is not None
         try:
             argv, env = self._command(c)
-            prefix = _ends_with_us()
-            if prefix and not _runnable(argv[0], spec.cwd, env.get("PATH")):
-                # (said as Popen says it, not by setpriv after it started)
-                raise FileNotFoundError(2, "No such file or directory", argv[0])
             proc = subprocess.Popen(
-                [*prefix, *argv],
+                argv,
                 cwd=spec.cwd,
                 env=env,
                 stdin=subprocess.DEVNULL,
@@ -410,14 +384,15 @@ class Supervisor:
                 text=True,
                 encoding="utf-8",
                 errors="replace",
-                start_new_session=True,  # Ctrl-C reaches the launch only; it stops them in order
+                # a session and process group of its own, owned by the tree: Ctrl-C reaches
+                # the launch only, which stops them in order
+                start_new_session=True,
             )
         except (OSError, ValueError) as e:
             self.console.note(f"{c.name} cannot start: {e}")
             self._ended(c, time.monotonic(), 127)
             return
         c.proc = proc
-        c.groups.append(proc.pid)
         c.ready.clear()
         if spec.ready is None:
             c.ready.set()
@@ -432,6 +407,7 @@ class Supervisor:
             c.depth = (
                 0 if c.name == NAMING_LABEL else 1 + max([*deps, *(earlier if names else []), 0])
             )
+        self.tree.own(proc.pid, c.depth)
         c.reader = threading.Thread(target=self._copy, args=(c, proc), daemon=True)
         c.reader.start()
         again = f" (restart {c.restarts})" if c.restarts else ""
@@ -493,6 +469,8 @@ class Supervisor:
             code = c.proc.wait()
             if c.reader is not None:
                 c.reader.join(2)
+            if self.tree is not None:
+                self.tree.prune(c.proc.pid)
             c.proc = None
         assert code is not None
         c.last_exit = exit_text(code)
@@ -538,26 +516,30 @@ class Supervisor:
             self.console.note(f"stopping {names}", routine=True)
         for depth in sorted({c.depth for c in running}, reverse=True):
             wave = [c for c in running if c.depth == depth]
+            groups = [c.proc.pid for c in wave if c.proc is not None]
             for c in wave:
                 c.state = "stopping"
                 _signal(c, signal.SIGTERM)
             end = time.monotonic() + self.spec.grace
-            while any(c.proc is not None and c.proc.poll() is None for c in wave):
+            # until the services and what they started (their groups and sessions) are gone
+            while any(c.proc is not None and c.proc.poll() is None for c in wave) or left(groups):
                 if time.monotonic() >= end or self.force.is_set():
                     for c in wave:
                         if c.proc is not None and c.proc.poll() is None:
-                            self.console.note(
-                                f"{c.name} did not stop within {self.spec.grace:g} s: killed"
-                            )
-                            _signal(c, signal.SIGKILL)
+                            what = f"{c.name} did not stop"
+                        elif c.proc is not None and left([c.proc.pid]):
+                            what = f"what {c.name} started did not stop"
+                        else:
+                            continue
+                        self.console.note(f"{what} within {self.spec.grace:g} s: killed")
+                    kill(groups)
                     break
                 time.sleep(0.02)
             for c in wave:
                 self._ended(c, time.monotonic())
-        for c in self.children:  # what its processes left in their groups
-            for group in c.groups:
-                with contextlib.suppress(ProcessLookupError, PermissionError):
-                    os.killpg(group, signal.SIGKILL)
+        if self.tree is not None:  # what the services left in their groups and sessions
+            self.tree.kill_all()
+        for c in self.children:
             if c.state in ("waiting", "restarting", "starting", "up"):
                 c.state = "stopped"
         if running:
@@ -592,13 +574,10 @@ class Supervisor:
 
 
 def _signal(c: Child, sig: int) -> None:
+    """`sig` to the service's process group and session (launch.tree)."""
     if c.proc is None:
         return
-    try:
-        os.killpg(c.proc.pid, sig)
-    except (ProcessLookupError, PermissionError):
-        with contextlib.suppress(ProcessLookupError):
-            c.proc.send_signal(sig)
+    send([c.proc.pid], sig)
 
 
 def fill(word: str, values: dict[str, str]) -> str:

@@ -36,6 +36,8 @@ from zmq.utils import z85
 from zmq.utils.monitor import parse_monitor_message
 
 from miro_gen.log import logger
+from miro_gen.transport.keyfiles import DEFAULT_KEY as DEFAULT_KEY  # (its users look here)
+from miro_gen.transport.keyfiles import read_key_pair
 from miro_gen.transport.options import UsageError
 
 _log = logger("MIRO")
@@ -50,9 +52,7 @@ DEFAULT_MAX_CONNECTIONS = 1024  # per listening socket; more are refused at the 
 HEARTBEAT_IVL_MS = 500
 HEARTBEAT_TIMEOUT_MS = 2000
 HANDSHAKE_MS = 5000  # a connection that has not completed its handshake by then is dropped
-KEY_SUFFIX = ".key_secret"
 _ZAP_ENFORCE_DOMAIN = 93  # libzmq 4.3's ZMQ_ZAP_ENFORCE_DOMAIN (a draft name in pyzmq)
-DEFAULT_KEY = os.path.join("~", ".config", "miro", "fleet" + KEY_SUFFIX)
 
 
 @dataclass(frozen=True)
@@ -78,6 +78,8 @@ class SocketPolicy:
 
 
 PLAIN = SocketPolicy()
+SERVES = "call its objects, and subscribe to or publish its events"  # a stranger, --insecure
+_said: set[str] = set()  # the --insecure warnings given
 _monitors = itertools.count(1)
 _policies: weakref.WeakKeyDictionary[zmq.Context[Any], SocketPolicy] = weakref.WeakKeyDictionary()
 _lock = threading.Lock()
@@ -147,22 +149,9 @@ def connecting_socket(context: zmq.Context[Any], kind: int) -> zmq.Socket[Any]:
 
 
 def read_keys(path: str) -> Keys:
-    """The key pair in `path` (a `NAME.key_secret` file; `NAME` alone is accepted)."""
-    from zmq.auth.certs import load_certificate
-
-    full = os.path.expanduser(path)
-    if not full.endswith(KEY_SUFFIX) and not os.path.exists(full):
-        full += KEY_SUFFIX
-    try:
-        public, secret = load_certificate(full)
-    except (OSError, ValueError) as e:
-        raise UsageError(f"--keys {path}: cannot read a key pair: {e}") from None
-    if secret is None or len(public) != 40 or len(secret) != 40:
-        raise UsageError(
-            f"--keys {path}: not a secret key file (make one with `miro keys new`; the "
-            f"{KEY_SUFFIX} file holds the secret)"
-        )
-    return Keys(full, public, secret)
+    """The key pair in `path` (a `NAME.key_secret` file; `NAME` alone is accepted), refused
+    when others may read it (transport.keyfiles)."""
+    return Keys(*read_key_pair(path))
 
 
 def is_loopback(host: str) -> bool:
@@ -204,22 +193,31 @@ def policy_for(
     max_message_size: int | None,
     binds: str | None = None,
     talks_to: str | None = None,
+    serves: str = SERVES,
 ) -> SocketPolicy:
     """The policy of a process whose options say `keys` (a key file), `insecure` and
     `max_message_size`, that binds on `binds` (an address, or None) and talks to `talks_to`
     (the naming service's host). CURVE is on when a key is given, and whenever the process
     binds, or talks to, something beyond loopback, unless `insecure`; then a key is needed
-    (the default key file is used when it exists)."""
+    (the default key file is used when it exists). With `insecure`, the process says (as a
+    warning, once) what that opens: `serves` is what a stranger may then do with what it
+    binds."""
     size = DEFAULT_MAX_MESSAGE_SIZE if max_message_size is None else max_message_size
+    wide_bind = binds if binds is not None and not _stays_here(binds, binding=True) else None
+    wide_peer = None
+    if talks_to is not None and not _stays_here(talks_to, binding=False):
+        wide_peer = talks_to
     if insecure:
+        for line in insecure_exposure(keys, wide_bind, wide_peer, serves):
+            _say_once(line)
         return SocketPolicy(size)
     if keys:
         return SocketPolicy(size, read_keys(keys))
     wide = []
-    if binds is not None and not _stays_here(binds, binding=True):
-        wide.append(f"binds {binds}")
-    if talks_to is not None and not _stays_here(talks_to, binding=False):
-        wide.append(f"talks to {talks_to}")
+    if wide_bind is not None:
+        wide.append(f"binds {wide_bind}")
+    if wide_peer is not None:
+        wide.append(f"talks to {wide_peer}")
     if not wide:
         return SocketPolicy(size)
     if os.path.exists(os.path.expanduser(DEFAULT_KEY)):
@@ -229,6 +227,38 @@ def policy_for(
         "--keys FILE (or MIRO_KEYS; make one with `miro keys new`), or --insecure to send "
         "everything in the clear to anyone who can connect"
     )
+
+
+def insecure_exposure(
+    keys: str | None, binds: str | None, talks_to: str | None, serves: str = SERVES
+) -> list[str]:
+    """What `--insecure` opens, one line each, for a process that binds on `binds` and talks to
+    `talks_to` beyond loopback (None: on loopback), and was given the key `keys`."""
+    lines = []
+    default_key = os.path.expanduser(DEFAULT_KEY)
+    if keys or ((binds or talks_to) and os.path.exists(default_key)):
+        lines.append(f"--insecure: the key {keys or default_key} is not used")
+    if binds is not None:
+        where = "every interface (0.0.0.0)" if binds in ("0.0.0.0", "*") else binds
+        lines.append(
+            f"--insecure: serving on {where} with neither key nor encryption: anyone who can "
+            f"reach this machine may {serves}, and anyone on the network between may read "
+            "and change what is said"
+        )
+    if talks_to is not None:
+        lines.append(
+            f"--insecure: talking to the naming service at {talks_to}, and to what it names, "
+            "with neither key nor encryption: anyone on the network between may read and "
+            "change what is said, or answer in their place"
+        )
+    return lines
+
+
+def _say_once(line: str) -> None:
+    """A warning, once per process (a process makes its policy more than once)."""
+    if line not in _said:
+        _said.add(line)
+        _log.warning("%s", line)
 
 
 # ---- admission: the ZAP handler of a context (ZeroMQ RFC 27), in a thread of its own ---------
