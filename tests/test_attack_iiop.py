@@ -1,6 +1,7 @@
 """An IIOP server attacked as issue 33 found it could be, with real processes: beyond loopback
 (network namespaces this test makes) a key-less IIOP client finds nothing unless the server
-was started with --insecure, and then omniORB's C++ client is served; on loopback, floods of
+was started with --insecure, and then omniORB's C++ client is served (and a CORBA naming
+service on another machine is talked to only with --insecure); on loopback, floods of
 large requests held part-way, of unfinished fragments, of idle connections and of connections
 beyond the process's descriptors stay within a stated memory bound, start no thread per
 connection, do not make the accept loop spin, and legitimate calls are answered meanwhile.
@@ -237,3 +238,36 @@ def test_with_insecure_the_cpp_client_beyond_loopback_is_served_and_told(
     assert served.stdout.startswith("P50 ")
     assert "in the clear (--insecure): anyone who can connect may call" in log.read_text()
     lan.kill([server])
+
+
+def test_a_corba_naming_service_on_another_machine_needs_insecure(
+    lan: Hosts, cpp: SimpleNamespace, tmp_path: Path
+) -> None:
+    """omniNames on nsbox: `miro nslist` on the laptop, with the fleet's key, refuses to talk
+    IIOP to it in the clear; with --insecure it lists its names."""
+    data = tmp_path / "omninames"
+    data.mkdir()
+    names = subprocess.Popen(
+        ["ip", "netns", "exec", lan.ns("nsbox"), "omniNames", "-start", "2811",
+         "-datadir", str(data), "-logdir", str(data)],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+    )  # fmt: skip
+    try:
+        url = f"corbaloc:iiop:{LAN['nsbox']}:2811/NameService"
+        deadline = time.monotonic() + 30
+        while True:  # until omniNames answers (generous: only to avoid a hang)
+            listed = lan.run("laptop", "-m", "miro_gen.cli.main", "nslist", "--naming", url)
+            if "is a CORBA one" in listed.stderr or time.monotonic() > deadline:
+                break
+            time.sleep(0.2)
+        assert listed.returncode == 2, listed.stderr
+        assert "is a CORBA one on another machine" in listed.stderr
+        assert "--insecure" in listed.stderr
+        listed = lan.run(
+            "laptop", "-m", "miro_gen.cli.main", "nslist", "--naming", url, "--insecure"
+        )
+        assert listed.returncode == 0, listed.stderr
+        assert "(no names bound)" in listed.stdout
+    finally:
+        names.kill()
+        names.wait(10)
