@@ -13,6 +13,7 @@ same floods added 561 MiB and 526 MiB (bench/bench_iiop_floods.py)."""
 from __future__ import annotations
 
 import resource
+import socket
 import subprocess
 import textwrap
 import time
@@ -57,8 +58,9 @@ def answered(v: attack.Victim) -> None:
 
 def test_large_requests_held_part_way_stay_within_the_budget(victim: attack.Victim) -> None:
     """8 connections each send a 63 MiB request but its last byte (before: 561 MiB)."""
-    held = attack.hold_big_requests(victim.port, 8, 63 * MIB)
+    held: list[socket.socket] = []
     try:
+        held = attack.hold_big_requests(victim.port, 8, 63 * MIB)
         answered(victim)
         assert victim.added_mib() < BOUND_MIB
     finally:
@@ -72,8 +74,9 @@ def test_unfinished_fragments_stay_within_the_budget(
     """Connections that each send fragmented 16 MiB requests and never their last fragment:
     32 on one (before: 526 MiB; a connection is closed at 8 unfinished), or 4 on each of 6
     (64 MiB each: their connection's limit, 384 MiB in all without the budget)."""
-    held = [attack.hold_fragments(victim.port, requests, 16 * MIB) for _ in range(connections)]
+    held: list[socket.socket] = []
     try:
+        held += [attack.hold_fragments(victim.port, requests, 16 * MIB) for _ in range(connections)]
         answered(victim)
         assert victim.added_mib() < BOUND_MIB
     finally:
@@ -88,8 +91,9 @@ def test_idle_connections_start_no_threads(victim: attack.Victim) -> None:
     thread holds them, at most its connection cap of them (the least recently heard from make
     room), and callers get in."""
     needs_descriptors(1100)
-    held = attack.open_idle(victim.port, 1100)
+    held: list[socket.socket] = []
     try:
+        held = attack.open_idle(victim.port, 1100)
         descriptors = attack.settle(victim.pid)
         assert attack.status(victim.pid, "Threads") <= 3  # main, the loop (and slack for one)
         assert descriptors < 256 + 32  # the cap, and the process's own files
@@ -106,8 +110,9 @@ def test_out_of_descriptors_the_server_makes_room_instead_of_spinning(tmp_path: 
     needs_descriptors(1100)
     log = tmp_path / "victim.err"
     v = attack.Victim(REPO, nofile=256, spare=16, log=log)
-    held = attack.open_idle(v.port, 1100)
+    held: list[socket.socket] = []
     try:
+        held = attack.open_idle(v.port, 1100)
         attack.settle(v.pid)
         with attack.cpu_share(v.pid) as share:
             time.sleep(3)
@@ -124,8 +129,9 @@ def test_out_of_descriptors_with_nothing_to_close_accepting_pauses(tmp_path: Pat
     1 s) instead of asking again at once."""
     log = tmp_path / "victim.err"
     v = attack.Victim(REPO, nofile=256, spare=0, log=log)
-    held = attack.open_idle(v.port, 200, seconds=5)
+    held: list[socket.socket] = []
     try:
+        held = attack.open_idle(v.port, 200, seconds=5)
         time.sleep(1)
         with attack.cpu_share(v.pid) as share:
             time.sleep(3)
