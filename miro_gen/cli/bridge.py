@@ -95,14 +95,13 @@ def _corba_channel(server: Any, url: str) -> Any:
     from miro_gen.corba.events import EventChannel
     from miro_gen.corba.ior import ior_from_ref
     from miro_gen.corba.naming import resolve_url
-    from miro_gen.corba.server import IIOPServer
-    from miro_gen.transport.addresses import server_addresses
+    from miro_gen.transport.iiop import iiop_addresses, serve_iiop
 
     invoker = IIOPInvoker(server.invoker)
     ref = resolve_url(invoker, url)
     profile = ior_from_ref(ref).iiop_profile()
     towards = f"tcp://{profile.host}:{profile.port}" if profile else server.options.naming
-    addresses = server_addresses(towards, server.options.host)
-    invoker.server = IIOPServer(invoker, addresses.bind, 0, addresses.advertise)
+    addresses = iiop_addresses(server.options, towards)
+    invoker.server = serve_iiop(invoker, server.options, addresses.bind, addresses.advertise)
     server.on_shutdown(invoker.close)
     return EventChannel(ref, invoker)

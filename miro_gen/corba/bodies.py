@@ -37,6 +37,22 @@ def body_in(msg: bytes, offset: int, little: bool) -> GiopBody:
     return body
 
 
+def body_taken(msg: bytearray, offset: int, little: bool) -> GiopBody:
+    """`body_in` for a message whose bytes the caller gives up (a large one): the header and
+    padding are written over the bytes before the body (the request header, already read), so
+    that the body is copied once, not twice."""
+    pad = offset % 8
+    at = offset - 4 - pad
+    if at < 0:
+        return body_in(bytes(msg), offset, little)
+    msg[at : at + 4] = _HEADERS[little]
+    msg[at + 4 : offset] = bytes(pad)
+    body = GiopBody(memoryview(msg)[at:])
+    if pad:
+        body.start = 4 + pad
+    return body
+
+
 def body_input(body: bytes) -> CdrInput:
     """A stream over the values of a request or reply body, for hand-written readers."""
     return CdrInput(bytes(body[4:]), cdr.body_start(body) - 4, LE if body[1] == 1 else BE)

@@ -1,10 +1,12 @@
 """A TCP connection that carries GIOP messages: whole messages in, whole messages out.
 
-Reading reassembles fragmented messages (GIOP 1.1: the fragments follow their first part; 1.2:
-fragments name their request, so several may interleave) and checks sizes against a limit
-before anything is allocated. A peer that is not speaking GIOP is recognised: a ZeroMQ peer (a
-`miro naming` or a miro-gen server) greets every connection with ZMTP's signature, which is
-reported as such instead of as garbage.
+Reading reassembles fragmented messages (`fragments.Reassembly`) and checks sizes against a
+limit before anything is allocated. This is the client's side, which reads on the calling
+thread; the server's connections are read by one thread for all (`server_io`).
+
+A peer that is not speaking GIOP is recognised: a ZeroMQ peer (a `miro naming` or a miro-gen
+server) greets every connection with ZMTP's signature, which is reported as such instead of as
+garbage.
 """
 
 from __future__ import annotations
@@ -12,12 +14,11 @@ from __future__ import annotations
 import contextlib
 import socket
 import threading
-from struct import Struct
 
 from miro_gen.corba import giop
+from miro_gen.corba.fragments import Reassembly
 from miro_gen.corba.giop import HEADER_SIZE, GiopError, Header, MsgType
 
-_SIZE = (Struct("<I"), Struct(">I"))
 DEFAULT_MAX_MESSAGE = 64 << 20  # bytes a message may have, its fragments together
 _RECV = 65536
 
@@ -60,8 +61,7 @@ class GiopConnection:
         self.max_message = max_message
         self._buf = bytearray()
         self._send_lock = threading.Lock()
-        self._partial11: bytearray | None = None  # a GIOP 1.1 message whose fragments are coming
-        self._partial12: dict[int, bytearray] = {}  # GIOP 1.2 ones, by request id
+        self._fragments = Reassembly(max_message)
         self.closed = False
 
     # ---- sending --------------------------------------------------------------------------------
@@ -125,48 +125,12 @@ class GiopConnection:
 
     def _reassemble(self, h: Header, msg: bytes) -> tuple[Header, bytes] | None:
         if h.type == MsgType.FRAGMENT:
-            return self._fragment(h, msg)
+            whole = self._fragments.add(h, msg)
+            return None if whole is None else (whole[0], bytes(whole[1]))
         if not h.more:
             return h, msg
-        if h.type not in (MsgType.REQUEST, MsgType.REPLY) and not (
-            h.minor >= 2 and h.type in (MsgType.LOCATE_REQUEST, MsgType.LOCATE_REPLY)
-        ):
-            raise GiopError(f"a {h.type.name} message cannot be fragmented")
-        if h.minor == 1:
-            if self._partial11 is not None:
-                raise GiopError("a new fragmented message began before the last one ended")
-            self._partial11 = bytearray(msg)
-        else:
-            request_id = giop.decode_request_id(msg, h)
-            if request_id in self._partial12 or len(self._partial12) >= 64:
-                raise GiopError(f"too many or duplicate fragmented messages ({request_id})")
-            self._partial12[request_id] = bytearray(msg)
+        self._fragments.begin(h, msg)
         return None
-
-    def _fragment(self, h: Header, msg: bytes) -> tuple[Header, bytes] | None:
-        if h.minor == 1:
-            partial = self._partial11
-            data = msg[HEADER_SIZE:]
-            request_id = -1
-        else:
-            request_id = giop.decode_request_id(msg, h)
-            partial = self._partial12.get(request_id)
-            data = msg[HEADER_SIZE + 4 :]
-        if partial is None:
-            raise GiopError("a Fragment that continues no message")
-        if len(partial) + len(data) > self.max_message + HEADER_SIZE:
-            raise GiopError(f"a fragmented message beyond the limit of {self.max_message} bytes")
-        partial += data
-        if h.more:
-            return None
-        if h.minor == 1:
-            self._partial11 = None
-        else:
-            del self._partial12[request_id]
-        first = giop.read_header(bytes(partial[:HEADER_SIZE]))
-        partial[6] &= ~giop.FLAG_MORE & 0xFF
-        _SIZE[0 if first.little else 1].pack_into(partial, 8, len(partial) - HEADER_SIZE)
-        return first._replace(more=False, size=len(partial) - HEADER_SIZE), bytes(partial)
 
     def close(self) -> None:
         self.closed = True

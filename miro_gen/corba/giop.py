@@ -260,7 +260,7 @@ def _id_offset(msg: bytes) -> int:
     return inp.pos
 
 
-def decode_request(msg: bytes, h: Header) -> Request:
+def decode_request(msg: bytes | bytearray, h: Header) -> Request:
     inp = CdrInput(msg, HEADER_SIZE, LE if h.little else BE)
     try:
         if h.minor >= 2:
@@ -290,6 +290,22 @@ def decode_request(msg: bytes, h: Header) -> Request:
         )
     except MARSHAL as e:
         raise GiopError(f"malformed Request header: {e.message}") from None
+
+
+def request_id_of(head: bytes, h: Header) -> tuple[int, bool]:
+    """The request id of a Request and whether it expects a reply, read from its first bytes
+    (the rest may be missing: a message refused before it was read); GiopError when they do not
+    reach that far."""
+    inp = CdrInput(head, HEADER_SIZE, LE if h.little else BE)
+    try:
+        if h.minor >= 2:
+            request_id = inp.ulong()
+            return request_id, bool(inp.octet() & 1)
+        _read_contexts(inp)
+        request_id = inp.ulong()
+        return request_id, inp.boolean()
+    except MARSHAL:
+        raise GiopError("a Request whose first bytes do not hold its request id") from None
 
 
 def read_target(inp: CdrInput) -> bytes:
@@ -406,7 +422,7 @@ def encode_simple(minor: int, kind: MsgType) -> bytes:
     return _finish(_start(minor, kind))
 
 
-def decode_request_id(msg: bytes, h: Header) -> int:
+def decode_request_id(msg: bytes | bytearray, h: Header) -> int:
     """The request id of a CancelRequest, LocateRequest, LocateReply or 1.2 Fragment."""
     try:
         return CdrInput(msg, HEADER_SIZE, LE if h.little else BE).ulong()
@@ -414,7 +430,7 @@ def decode_request_id(msg: bytes, h: Header) -> int:
         raise GiopError(f"a {h.type.name} message too short for its request id") from None
 
 
-def decode_locate_request(msg: bytes, h: Header) -> tuple[int, bytes]:
+def decode_locate_request(msg: bytes | bytearray, h: Header) -> tuple[int, bytes]:
     inp = CdrInput(msg, HEADER_SIZE, LE if h.little else BE)
     try:
         request_id = inp.ulong()

@@ -1,11 +1,21 @@
 """The server side of IIOP: servants of generated skeletons, served to CORBA clients.
 
-One listening socket per process; a thread per connection reads its messages. A request runs on
-the connection's thread when its method is marked `@nonblocking`, else on a bounded worker pool
-(so that one connection may carry several calls at once, as TAO multiplexes them), and the reply
-is sent when it is ready. Object keys are what the caller names them (`add_to_name_service`
-uses the full name, `robot1/ExampleA`): with a fixed port, a restarted server publishes the very
-same IORs, as a persistent POA does, and `corbaloc:iiop:HOST:PORT/robot1/ExampleA` reaches it.
+One listening socket per process. Its connections are read and written by one thread
+(`server_io.ConnectionLoop`), whatever their number; a request runs on that thread when its
+method is marked `@nonblocking`, else on a bounded worker pool (so that one connection may carry
+several calls at once, as TAO multiplexes them), and the reply is sent when it is ready. What a
+server holds is bounded (docs/SECURITY.md): the bytes of the requests it reads, holds and runs
+(`inbound.Budget`: a request the budget has no room for is answered TRANSIENT without being
+kept), fragments per connection, connections (`max_connections`; idle ones make room), requests
+waiting for a worker (`MAX_WAITING`), threads (the loop and `workers`).
+
+It listens on loopback unless `beyond_loopback`: IIOP has neither keys nor encryption, so
+serving it to other machines is a choice the caller makes (`--insecure`), never a default
+(`BeyondLoopback` otherwise).
+
+Object keys are what the caller names them (`add_to_name_service` uses the full name,
+`robot1/ExampleA`): with a fixed port, a restarted server publishes the very same IORs, as a
+persistent POA does, and `corbaloc:iiop:HOST:PORT/robot1/ExampleA` reaches it.
 
 A message that breaks the protocol is answered with MessageError and the connection closed; a
 request for an unknown key gets OBJECT_NOT_EXIST; nothing a client sends stops the server.
@@ -17,6 +27,7 @@ padding that keeps its values' alignment.
 from __future__ import annotations
 
 import contextlib
+import ipaddress
 import itertools
 import os
 import socket
@@ -25,9 +36,11 @@ from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 from miro_gen.corba import bodies, giop
-from miro_gen.corba.connection import DEFAULT_MAX_MESSAGE, GiopConnection, NotGiop
+from miro_gen.corba.connection import DEFAULT_MAX_MESSAGE
 from miro_gen.corba.giop import GiopError, LocateStatus, MsgType, ReplyStatus
+from miro_gen.corba.inbound import Budget, Message, Refused
 from miro_gen.corba.ior import IOR, CorbaRef, iiop_endpoint, ref_from_ior
+from miro_gen.corba.server_io import STALL, ConnectionLoop, ServerConnection
 from miro_gen.exceptions import (
     BAD_OPERATION,
     NO_IMPLEMENT,
@@ -43,19 +56,69 @@ from miro_gen.runtime.cdrstream import CdrInput, CdrOutput
 _log = logger("MIRO")
 
 DEFAULT_WORKERS = 16
+DEFAULT_BUDGET = 160 << 20  # bytes of requests (reserved twice their size) and unsent replies
+BUDGET_RESERVE = 16 << 20  # ... of which this much only for messages of at most 64 KiB
+DEFAULT_MAX_CONNECTIONS = 256  # and never more than half the process's descriptor limit
+MAX_WAITING = 10_000  # requests waiting for a worker
+BACKLOG = 128
 _OBJECT = "IDL:omg.org/CORBA/Object:1.0"
+_OBJECT_OPERATIONS = {
+    "_is_a", "_non_existent", "_not_existent", "_repository_id",
+    "_interface", "_get_interface", "_component", "_get_component",
+}  # fmt: skip
 
 
-class _ServerConnection(GiopConnection):
-    def __init__(self, sock: socket.socket, peer: str, max_message: int) -> None:
-        super().__init__(sock, peer, max_message)
-        self.cancelled: set[int] = set()
+class BeyondLoopback(ValueError):
+    """The address to listen on is not loopback, and serving beyond it was not allowed."""
+
+    def __init__(self, address: str, port: int) -> None:
+        super().__init__(f"IIOP on {address}:{port} would be served beyond this machine")
+        self.address = address
+        self.port = port
+
+
+def _listen(bind: str, port: int, beyond_loopback: bool) -> socket.socket:
+    """A listening TCP socket bound to `bind`:`port`, checked to be loopback unless
+    `beyond_loopback` (before it listens: nobody can connect to a refused one)."""
+    family = socket.AF_INET6 if ":" in bind else socket.AF_INET
+    sock = socket.socket(family, socket.SOCK_STREAM)
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        if family == socket.AF_INET6:
+            with contextlib.suppress(OSError):
+                sock.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_V6ONLY, 1)
+        sock.bind((bind, port))
+        address = sock.getsockname()[0]
+        if not beyond_loopback and not ipaddress.ip_address(address.partition("%")[0]).is_loopback:
+            raise BeyondLoopback(address, sock.getsockname()[1])
+        sock.listen(BACKLOG)
+    except OSError as e:
+        sock.close()
+        raise TRANSIENT(f"cannot listen for IIOP on {bind}:{port}: {e.strerror or e}") from None
+    except BaseException:
+        sock.close()
+        raise
+    return sock
+
+
+def _connection_cap(wanted: int) -> int:
+    """`wanted`, but at most half the descriptors this process may open."""
+    try:
+        import resource
+
+        soft = resource.getrlimit(resource.RLIMIT_NOFILE)[0]
+    except (ImportError, OSError, ValueError):
+        return wanted
+    if soft == resource.RLIM_INFINITY:
+        return wanted
+    return max(1, min(wanted, soft // 2))
 
 
 class IIOPServer:
     """Serves servants over IIOP on `bind`:`port` (0: any free port), advertising `host` in
     the IORs it makes. `invoker`: the process's `IIOPInvoker`, through which servants' object
-    arguments are called."""
+    arguments are called. `bind` must be a loopback address unless `beyond_loopback`.
+    `budget`, `max_connections`, `stall`: the limits (`server_io`, `inbound`)."""
 
     def __init__(
         self,
@@ -65,14 +128,15 @@ class IIOPServer:
         host: str | None = None,
         workers: int = DEFAULT_WORKERS,
         max_message: int = DEFAULT_MAX_MESSAGE,
+        *,
+        beyond_loopback: bool = False,
+        budget: int = DEFAULT_BUDGET,
+        max_connections: int = DEFAULT_MAX_CONNECTIONS,
+        stall: float = STALL,
     ) -> None:
         self.invoker = invoker
-        family = socket.AF_INET6 if ":" in bind else socket.AF_INET
-        try:
-            self._listener = socket.create_server((bind, port), family=family, backlog=64)
-        except OSError as e:
-            raise TRANSIENT(f"cannot listen for IIOP on {bind}:{port}: {e.strerror or e}") from None
-        self.port = self._listener.getsockname()[1]
+        listener = _listen(bind, port, beyond_loopback)
+        self.port = listener.getsockname()[1]
         self.host = host or (bind if bind not in ("0.0.0.0", "::", "") else socket.gethostname())
         self.endpoint = iiop_endpoint(self.host, self.port)
         self.max_message = max_message
@@ -82,11 +146,19 @@ class IIOPServer:
         self._prefix = f"miro.{os.getpid()}.".encode()
         self._lock = threading.Lock()
         self._pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="miro-iiop")
-        self._connections: set[_ServerConnection] = set()
+        self._waiting = 0  # requests handed to the pool and not yet done
+        self.budget = Budget(budget, min(BUDGET_RESERVE, budget // 4))
         self._closed = False
         if getattr(invoker, "server", None) is None:
             invoker.server = self
-        threading.Thread(target=self._accept, name="miro-iiop-accept", daemon=True).start()
+        self.io = ConnectionLoop(
+            listener,
+            self._handle,
+            self.budget,
+            max_message,
+            _connection_cap(max_connections),
+            stall,
+        )
 
     # ---- objects --------------------------------------------------------------------------------
 
@@ -133,90 +205,72 @@ class IIOPServer:
     def _servant(self, key: bytes) -> rpc.Servant | None:
         return self._servants.get(key)
 
-    # ---- connections ----------------------------------------------------------------------------
+    # ---- messages (on the connection loop's thread) ---------------------------------------------
 
-    def _accept(self) -> None:
-        while not self._closed:
-            try:
-                sock, addr = self._listener.accept()
-            except OSError:
-                if self._closed:
-                    return
-                continue
-            conn = _ServerConnection(sock, f"{addr[0]}:{addr[1]}", self.max_message)
-            with self._lock:
-                if self._closed:
-                    conn.close()
-                    return
-                self._connections.add(conn)
-            threading.Thread(
-                target=self._serve, args=(conn,), name="miro-iiop-conn", daemon=True
-            ).start()
-
-    def _serve(self, conn: _ServerConnection) -> None:
+    def _handle(self, conn: ServerConnection, item: Message | Refused) -> bool:
+        """One message of `conn`; False when the connection is to be closed."""
+        if isinstance(item, Refused):
+            self._refuse(conn, item)
+            return True
+        handed = False
         try:
-            while not self._closed:
-                try:
-                    h, msg = conn.read_message()
-                except NotGiop as e:
-                    _log.warning("IIOP: %s; closing the connection", e)
-                    if not e.zmq:  # a ZeroMQ peer would not understand it
-                        conn.send_quietly(giop.encode_simple(1, MsgType.MESSAGE_ERROR))
-                    return
-                except GiopError as e:
-                    _log.warning("IIOP: %s: %s; answered with MessageError", conn.peer, e)
-                    conn.send_quietly(giop.encode_simple(1, MsgType.MESSAGE_ERROR))
-                    return
-                except (EOFError, OSError):
-                    return
-                try:
-                    if not self._message(conn, h, msg):
-                        return
-                except GiopError as e:
-                    _log.warning("IIOP: %s: %s; answered with MessageError", conn.peer, e)
-                    conn.send_quietly(giop.encode_simple(h.minor, MsgType.MESSAGE_ERROR))
-                    return
-                except OSError:
-                    return
-                except Exception:  # a defect of ours: logged, and this connection only ends
-                    _log.exception("IIOP: cannot handle a %s from %s", h.type.name, conn.peer)
-                    conn.send_quietly(giop.encode_simple(h.minor, MsgType.MESSAGE_ERROR))
-                    return
+            handed, keep = self._message(conn, item)
+            return keep
         finally:
-            with self._lock:
-                self._connections.discard(conn)
-            conn.close()
+            if not handed:
+                self.io.done(conn, item.charge)
 
-    def _message(self, conn: _ServerConnection, h: giop.Header, msg: bytes) -> bool:
-        """Handle one message; False when the connection is to be closed."""
+    def _message(self, conn: ServerConnection, msg: Message) -> tuple[bool, bool]:
+        """Handle one message: whether it went to a worker (which gives it back), and whether
+        the connection stays open."""
+        h, data = msg.header, msg.data
         if h.type == MsgType.REQUEST:
-            self._request(conn, h, giop.decode_request(msg, h), msg)
-        elif h.type == MsgType.LOCATE_REQUEST:
-            request_id, key = giop.decode_locate_request(msg, h)
+            return self._request(conn, h, giop.decode_request(data, h), msg), True
+        if h.type == MsgType.LOCATE_REQUEST:
+            request_id, key = giop.decode_locate_request(data, h)
             found = self._servant(key) is not None
             status = LocateStatus.OBJECT_HERE if found else LocateStatus.UNKNOWN_OBJECT
-            conn.send(giop.encode_locate_reply(h.minor, request_id, status))
+            self.io.send(conn, giop.encode_locate_reply(h.minor, request_id, status))
         elif h.type == MsgType.CANCEL_REQUEST:
-            conn.cancelled.add(giop.decode_request_id(msg, h))
+            conn.cancelled.add(giop.decode_request_id(data, h))
             if len(conn.cancelled) > 10_000:
                 conn.cancelled.clear()
         elif h.type in (MsgType.CLOSE_CONNECTION, MsgType.MESSAGE_ERROR):
             if h.type == MsgType.MESSAGE_ERROR:
                 _log.warning("IIOP: %s could not read a message of ours", conn.peer)
-            return False
+            return False, False
         else:
             raise GiopError(f"a client sent a {h.type.name} message")
-        return True
+        return False, True
+
+    def _refuse(self, conn: ServerConnection, refused: Refused) -> None:
+        """Answer a message the budget had no room for: TRANSIENT to a request (which may be
+        sent again), the connection closed for anything else."""
+        h = refused.header
+        if h.type != MsgType.REQUEST:
+            raise GiopError(f"a {h.size}-byte {h.type.name} message, and no room for it")
+        request_id, expected = giop.request_id_of(refused.head, h)
+        if expected:
+            busy = TRANSIENT(
+                f"{self.endpoint} has too much in hand for a {h.size}-byte request (its byte "
+                f"budget is {self.budget.total >> 20} MiB): try again",
+                completed=CompletionStatus.NO,
+            )
+            status, payload, contexts = bodies.reply_out(rpc.system_exception_reply(busy))
+            self.io.send(conn, giop.encode_reply(h.minor, request_id, status, payload, contexts))
 
     # ---- requests -------------------------------------------------------------------------------
 
     def _request(
-        self, conn: _ServerConnection, h: giop.Header, req: giop.Request, msg: bytes
-    ) -> None:
+        self, conn: ServerConnection, h: giop.Header, req: giop.Request, msg: Message
+    ) -> bool:
+        """Serve a request: whether it went to a worker."""
         servant = self._servant(req.key)
         expected = req.response_expected
         if req.sync_flags == 1:  # SYNC_WITH_SERVER: acknowledge receipt, then run as one-way
-            conn.send(giop.encode_reply(req.minor, req.request_id, ReplyStatus.NO_EXCEPTION, b""))
+            self.io.send(
+                conn, giop.encode_reply(req.minor, req.request_id, ReplyStatus.NO_EXCEPTION, b"")
+            )
             expected = False
         if servant is None:
             reply = rpc.system_exception_reply(
@@ -226,21 +280,55 @@ class IIOPServer:
             )
             if expected:
                 self._send_reply(conn, req, reply)
-            return
-        body = bodies.body_in(msg, req.body, req.little)
-        if req.operation.startswith("_") and req.operation not in servant._dispatch:
-            reply = self._object_operation(servant, req, msg)
+            return False
+        if req.operation in _OBJECT_OPERATIONS and req.operation not in servant._dispatch:
+            reply = self._object_operation(servant, req, msg.data)
             if expected:
                 self._send_reply(conn, req, reply)
-            return
+            return False
+        if isinstance(msg.data, bytearray):
+            body = bodies.body_taken(msg.data, req.body, req.little)
+        else:
+            body = bodies.body_in(msg.data, req.body, req.little)
         if rpc.is_nonblocking(servant, req.operation):
             self._run(conn, req, servant, body, expected)
-        else:
-            self._pool.submit(self._run, conn, req, servant, body, expected)
+            return False
+        with self._lock:
+            full = self._waiting >= MAX_WAITING
+            if not full:
+                self._waiting += 1
+        if full:
+            if expected:
+                busy = TRANSIENT(f"{self.endpoint} is overloaded", completed=CompletionStatus.NO)
+                self._send_reply(conn, req, rpc.system_exception_reply(busy))
+            return False
+        try:
+            self._pool.submit(self._work, conn, req, servant, body, expected, msg.charge)
+        except RuntimeError:  # the pool is shut down: the server is closing
+            with self._lock:
+                self._waiting -= 1
+            return False
+        return True
+
+    def _work(
+        self,
+        conn: ServerConnection,
+        req: giop.Request,
+        servant: rpc.Servant,
+        body: bytes,
+        expected: bool,
+        charge: int,
+    ) -> None:
+        try:
+            self._run(conn, req, servant, body, expected)
+        finally:
+            with self._lock:
+                self._waiting -= 1
+            self.io.done(conn, charge)
 
     def _run(
         self,
-        conn: _ServerConnection,
+        conn: ServerConnection,
         req: giop.Request,
         servant: rpc.Servant,
         body: bytes,
@@ -255,14 +343,15 @@ class IIOPServer:
             _log.exception("IIOP: %s failed", req.operation)
             reply = rpc.system_exception_reply(BAD_OPERATION(f"{req.operation}: {e!r}"))
         if expected and not conn.closed:
-            with contextlib.suppress(OSError):  # the client went away: nothing to tell it
-                self._send_reply(conn, req, reply)
+            self._send_reply(conn, req, reply)
 
-    def _send_reply(self, conn: _ServerConnection, req: giop.Request, reply: rpc.Reply) -> None:
+    def _send_reply(self, conn: ServerConnection, req: giop.Request, reply: rpc.Reply) -> None:
         status, payload, contexts = bodies.reply_out(reply)
-        conn.send(giop.encode_reply(req.minor, req.request_id, status, payload, contexts))
+        self.io.send(conn, giop.encode_reply(req.minor, req.request_id, status, payload, contexts))
 
-    def _object_operation(self, servant: rpc.Servant, req: giop.Request, msg: bytes) -> rpc.Reply:
+    def _object_operation(
+        self, servant: rpc.Servant, req: giop.Request, msg: bytes | bytearray
+    ) -> rpc.Reply:
         """CORBA::Object's own operations: _is_a, _non_existent, _repository_id."""
         out = CdrOutput()
         if req.operation == "_is_a":
@@ -274,13 +363,9 @@ class IIOPServer:
             out.boolean(False)
         elif req.operation == "_repository_id":
             out.string(servant._repo_id)
-        elif req.operation in ("_interface", "_get_interface", "_component", "_get_component"):
+        else:  # _interface, _get_interface, _component, _get_component
             return rpc.system_exception_reply(
                 NO_IMPLEMENT(f"{req.operation} is not supported", completed=CompletionStatus.NO)
-            )
-        else:
-            return servant._invoke(
-                req.operation, bodies.body_in(msg, req.body, req.little), self.invoker
             )
         return rpc.Reply(rpc.ReplyStatus.OK, b"\x00\x01\x00\x00" + out.getvalue())
 
@@ -292,11 +377,5 @@ class IIOPServer:
             if self._closed:
                 return
             self._closed = True
-            conns = list(self._connections)
-        with contextlib.suppress(OSError):  # wakes the thread blocked in accept()
-            self._listener.shutdown(socket.SHUT_RDWR)
-        self._listener.close()
-        for conn in conns:
-            conn.send_quietly(giop.encode_simple(2, MsgType.CLOSE_CONNECTION))
-            conn.close()
+        self.io.close()
         self._pool.shutdown(wait=False, cancel_futures=True)

@@ -127,7 +127,9 @@ class CdrInput:
 
     __slots__ = ("data", "e", "end", "pos")
 
-    def __init__(self, data: bytes, pos: int = 0, e: int = LE, end: int | None = None) -> None:
+    def __init__(
+        self, data: bytes | bytearray, pos: int = 0, e: int = LE, end: int | None = None
+    ) -> None:
         self.data = data
         self.pos = pos
         self.e = e
@@ -220,7 +222,7 @@ class CdrInput:
     def left(self) -> int:
         return self.end - self.pos
 
-    def _bounded(self) -> bytes | memoryview:
+    def _bounded(self) -> bytes | bytearray | memoryview:
         if self.end == len(self.data):
             return self.data
         return memoryview(self.data)[: self.end]

@@ -7,20 +7,31 @@ and a server an IIOP listener: `add_to_name_service` serves the servant over IIO
 name as object key (`robot1/ExampleA`: persistent when the port is fixed, and reachable as
 `corbaloc:iiop:HOST:PORT/robot1/ExampleA`) and binds its IOR in the CORBA naming service, or,
 with a ZeroMQ naming service and `--iiop-endpoint`, serves it over both.
+
+IIOP has neither keys nor encryption, so it follows the line CURVE is drawn at
+(docs/SECURITY.md) with nothing to fall back on: a process serves IIOP on loopback, and talks
+IIOP to a CORBA naming service on loopback, unless `--insecure`. Otherwise it stops at start-up
+with a one-line error (`UsageError`) that says what is refused and names `--insecure`; with
+`--insecure` it says what it opens. A CORBA peer on this machine that advertises another of the
+machine's addresses (omniORB's default) is served on loopback (`iiop_addresses`).
 """
 
 from __future__ import annotations
 
+import socket
 import threading
 from typing import Any
 
 from miro_gen.corba.client import IIOPInvoker
 from miro_gen.corba.ior import CorbaRef
 from miro_gen.corba.naming import CorbaEntry, CorbaNaming, Peer, corba_naming, decide
-from miro_gen.corba.server import IIOPServer
+from miro_gen.corba.server import BeyondLoopback, IIOPServer
 from miro_gen.log import logger
 from miro_gen.runtime import rpc
 from miro_gen.runtime.cdr import ObjectRef
+from miro_gen.transport import sockets
+from miro_gen.transport.addresses import LOOPBACK, Addresses, server_addresses
+from miro_gen.transport.options import CommonOptions, UsageError
 
 _log = logger("MIRO")
 
@@ -50,15 +61,12 @@ class CorbaSide:
             if given:
                 host = advertise = given
         if self.server is None:
-            self.server = IIOPServer(self.iiop, host, port, advertise)
+            self.server = serve_iiop(self.iiop, self.client.options, host, advertise, port)
             self.iiop.server = self.server
-            _log.info("serving IIOP at %s", self.server.endpoint)
         return self.server
 
     def _lazy_server(self) -> IIOPServer:
         """A client that passes one of its objects to a CORBA peer serves it (as an ORB does)."""
-        from miro_gen.transport.addresses import server_addresses
-
         a = server_addresses(self.client.options.naming, self.client.options.host)
         return self.serve(a.bind, a.advertise)
 
@@ -106,6 +114,63 @@ class CorbaSide:
         self.iiop.close()
 
 
+def serve_iiop(
+    invoker: IIOPInvoker, options: CommonOptions, bind: str, advertise: str, port: int = 0
+) -> IIOPServer:
+    """An IIOP server on `bind`:`port` advertising `advertise`, for a process whose common
+    options are `options`: beyond loopback only with --insecure (a UsageError otherwise)."""
+    try:
+        server = IIOPServer(invoker, bind, port, advertise, beyond_loopback=options.insecure)
+    except BeyondLoopback as e:
+        where = f"{e.address}:{e.port}" if port else e.address
+        raise UsageError(
+            f"IIOP on {where} would be open to other machines, in the clear (IIOP has no keys: "
+            "the robot's or fleet's key covers ZeroMQ only): serve it on loopback "
+            "(--iiop-endpoint 127.0.0.1:PORT), or give --insecure to let anyone who can "
+            "connect call this process's objects"
+        ) from None
+    if sockets.stays_here(bind, binding=True):
+        _log.info("serving IIOP at %s", server.endpoint)
+    else:
+        _log.warning(
+            "serving IIOP at %s (bound on %s) in the clear (--insecure): anyone who can "
+            "connect may call this process's objects",
+            server.endpoint, bind,
+        )  # fmt: skip
+    return server
+
+
+def iiop_addresses(options: CommonOptions, towards: str) -> Addresses:
+    """Where to serve IIOP for a CORBA peer at `towards` (tcp://HOST:PORT) to call back: on
+    loopback when that peer is on this machine, whichever of its addresses it advertises (as
+    omniORB does), else as a server's addresses are chosen (`addresses.server_addresses`)."""
+    if not options.host and _on_this_machine(sockets.endpoint_host(towards)):
+        return Addresses(LOOPBACK, LOOPBACK)
+    return server_addresses(towards, options.host)
+
+
+def _on_this_machine(host: str) -> bool:
+    """Whether `host` is (resolves to) an IPv4 address of this machine: one it can bind."""
+    try:
+        ip = socket.getaddrinfo(host, None, socket.AF_INET, socket.SOCK_STREAM)[0][4][0]
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            s.bind((ip, 0))
+    except (OSError, UnicodeError, IndexError):
+        return False
+    return True
+
+
+def _check_naming(opts: CommonOptions, url: str) -> None:
+    """A CORBA naming service beyond loopback is talked to in the clear: only with --insecure."""
+    host = sockets.endpoint_host(opts.naming)
+    if not opts.insecure and not sockets.stays_here(host, binding=False):
+        raise UsageError(
+            f"the naming service at {url} is a CORBA one on another machine, and IIOP has no "
+            "keys or encryption: give --insecure to talk to it (and the objects it names) in "
+            "the clear"
+        )
+
+
 def corba_for(client: Any) -> CorbaSide | None:
     """The CORBA side of a client or server whose options call for one, else None."""
     opts = client.options
@@ -114,6 +179,7 @@ def corba_for(client: Any) -> CorbaSide | None:
     if url is not None:
         peer = decide(url)
         if peer == Peer.GIOP:
+            _check_naming(opts, url)
             corba_naming_url = url
         elif peer == Peer.ZMQ:
             _log.info("%s is a miro naming service (ZeroMQ) at %s", url, opts.naming)

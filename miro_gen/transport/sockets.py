@@ -181,6 +181,12 @@ def _stays_here(host: str, binding: bool) -> bool:
     return all(ipaddress.ip_address(info[4][0]).is_loopback for info in infos)
 
 
+def stays_here(host: str, binding: bool) -> bool:
+    """Whether binding on (`binding`), or connecting to, `host` stays on this machine: the
+    line CURVE is drawn at, which IIOP follows too (`transport/iiop.py`)."""
+    return _stays_here(host, binding)
+
+
 def endpoint_host(endpoint: str) -> str:
     """The host part of `tcp://HOST:PORT`."""
     return endpoint.partition("://")[2].rpartition(":")[0].strip("[]")
