@@ -207,8 +207,9 @@ class Loader:
         """Where the C++ compiler would have found the header's source: the including file's
         folder and the -I folders; then the folders above the including file and their
         `src/` (Miro's builds gave `-I$MIRO_ROOT -I$MIRO_ROOT/src`), with the header's folder
-        (`miro/X.xml`); then the first folders without it; last the project's `params/` (for
-        `SvcParameters.xml` only: its other files are the project's own)."""
+        (`miro/X.xml`); then the first folders without it. `SvcParameters.xml` last of all in a
+        `params/` folder above the including file (the project's own, as in a clone of
+        miro-gen, which compiles it too), else in the copy miro-gen ships."""
         sub = f"{folder_part}/{name}" if folder_part else name
         here = f.path.resolve().parent
         near = [here, *self.include_dirs]
@@ -216,8 +217,10 @@ class Loader:
         candidates += [d / sub for up in here.parents for d in (up, up / "src")]
         if folder_part:
             candidates += [d / name for d in near]
-        if self.builtin is not None and name == "SvcParameters.xml":
-            candidates.append(self.builtin / name)
+        if name == "SvcParameters.xml":
+            candidates += [up / "params" / name for up in (here, *here.parents)]
+            if self.builtin is not None:
+                candidates.append(self.builtin / name)
         me = f.path.resolve()
         for candidate in candidates:
             if candidate.is_file() and candidate.resolve() != me:
