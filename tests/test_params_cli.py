@@ -284,13 +284,13 @@ def test_svc_parameters_is_the_projects_own_when_it_compiles_it_too(
     """A clone of miro-gen with miro-gen installed from it (not editable): the services'
     `miro/SvcParameters.h` is the clone's params/SvcParameters.xml, which the same run compiles,
     not the copy installed elsewhere (two files for one module Miro.SvcParameters)."""
+    from miro_gen import resources
     from miro_gen.cli import params
-    from miro_gen.params.compiler import loader
 
     installed = tmp_path / "site-packages" / "miro_gen" / "params" / "xml"
     installed.mkdir(parents=True)
     (installed / "SvcParameters.xml").write_bytes((REPO / "params/SvcParameters.xml").read_bytes())
-    monkeypatch.setattr(loader, "builtin_params_dir", lambda: installed)
+    monkeypatch.setattr(resources, "params_dir", lambda: installed)
     clone = tmp_path / "clone"
     for name in ("params/SvcParameters.xml", "services/gps/GpsParameters.xml"):
         (clone / name).parent.mkdir(parents=True, exist_ok=True)

@@ -22,6 +22,7 @@ from pathlib import Path
 
 from lxml import etree
 
+from miro_gen import resources
 from miro_gen.diagnostics import Diagnostics, SourcePos
 from miro_gen.params.compiler.model import Constructor, Include, ItemDecl, ParamDecl, ParamsFile
 from miro_gen.params.runtime.xmlsafe import XmlError, read_xml
@@ -35,15 +36,6 @@ _INCLUDE_KINDS = ("include", "Include", "src_Include")
 _IDENT = re.compile(r"[A-Za-z_]\w*$")
 _SCOPED = re.compile(r"(::)?[A-Za-z_]\w*(::[A-Za-z_]\w*)*$")
 _NAMESPACE = re.compile(r"[A-Za-z_]\w*(::[A-Za-z_]\w*)*$")
-
-
-def builtin_params_dir() -> Path | None:
-    """The project's `params/` (SvcParameters.xml): the checkout's, or the installed copy."""
-    here = Path(__file__).resolve()
-    for candidate in (here.parents[3] / "params", here.parents[1] / "xml"):
-        if (candidate / "SvcParameters.xml").is_file():
-            return candidate
-    return None
 
 
 def display_path(path: Path) -> str:
@@ -91,7 +83,7 @@ class Loader:
 
     def __init__(self, include_dirs: list[str], diag: Diagnostics) -> None:
         self.include_dirs = [Path(d) for d in include_dirs]
-        self.builtin = builtin_params_dir()
+        self.builtin = resources.params_dir()  # Miro's SvcParameters.xml, shipped
         self.diag = diag
         self.files: dict[Path, ParamsFile] = {}
         self._loading: set[Path] = set()
