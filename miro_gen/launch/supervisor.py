@@ -326,11 +326,14 @@ class Supervisor:
 
     def _discover(self) -> None:
         """Look for the announced naming service until one is seen (or the launch stops)."""
-        from miro_gen.transport.discovery import FIND_TIMEOUT, browse
+        from miro_gen.transport.discovery import FIND_TIMEOUT, DiscoveryOff, browse
 
         while not self.stopping.is_set():
             try:
                 found = browse(FIND_TIMEOUT, first=True)
+            except DiscoveryOff as e:  # nothing to find: the file must name its naming service
+                self.console.note(f"cannot look for the naming service: {e}")
+                return
             except Exception as e:  # no multicast here: say so once, keep trying
                 self.console.note(f"cannot look for the naming service: {e}")
                 found = []
