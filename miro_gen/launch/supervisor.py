@@ -463,14 +463,7 @@ class Supervisor:
                     self.workdir / f"{spec.name}.xml", spec.params_file, spec.parameters
                 )
             )
-        values = {
-            "name": spec.name,
-            "naming": env.get("MIRO_NAMING", ""),
-            "context": spec.context or this_host(),
-            "dir": str(self.spec.folder),
-            "host": address or "",
-            "params": params,
-        }
+        values = placeholders(self.spec, spec, env.get("MIRO_NAMING", ""), params)
         argv = [fill(word, values) for word in spec.argv]
         if spec.python:
             if spec.context:
@@ -602,6 +595,23 @@ def _signal(c: Child, sig: int) -> None:
     except (ProcessLookupError, PermissionError):
         with contextlib.suppress(ProcessLookupError):
             c.proc.send_signal(sig)
+
+
+def placeholders(
+    launch: LaunchSpec, service: ServiceSpec, naming: str, params: str
+) -> dict[str, str]:
+    """The values of the placeholders in `service`'s command: its name, the naming service
+    (`naming`), its naming context, the launch file's folder, its host's address and its
+    parameter document (`params`, written when it starts)."""
+    address = launch.hosts.get(service.host or "") if service.host else None
+    return {
+        "name": service.name,
+        "naming": naming,
+        "context": service.context or this_host(),
+        "dir": str(launch.folder),
+        "host": address or "",
+        "params": params,
+    }
 
 
 def fill(word: str, values: dict[str, str]) -> str:
