@@ -8,7 +8,7 @@ from __future__ import annotations
 import re
 from collections.abc import Callable
 
-from miro_cli import run_module
+from miro_cli import REPO, run_module
 
 
 def verbs(help_text: str) -> list[str]:
@@ -51,3 +51,13 @@ def test_every_verb_prints_its_help() -> None:
 
     done = check_every_help(run)
     assert "miro bridge corba --help" in done and "miro log record --help" in done
+
+
+def test_every_simulator_is_documented() -> None:
+    """Each kind `miro sim --help` lists has its row in docs/DEVICES.md's table of simulators."""
+    done = run_module("miro_gen.cli.main", "sim", "--help", timeout=60)
+    kinds = verbs(done.stdout)
+    assert {"nmea", "scip", "camera", "laser"} <= set(kinds), done.stdout
+    table = (REPO / "docs" / "DEVICES.md").read_text().split("## The simulators", 1)[1]
+    missing = [k for k in kinds if f"| `miro sim {k}" not in table]
+    assert not missing, f"not in docs/DEVICES.md's simulators: {missing}"
