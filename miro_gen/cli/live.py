@@ -1,6 +1,6 @@
 """`miro echo TOPIC` and `miro hz TOPIC`: look at the events on a channel as they arrive. The
-channel is the one the running suppliers of TOPIC publish on (their service objects say), as
-`miro pub` finds it; `miro echo` decodes with the generated types here, else with the data
+channels are those the running suppliers of TOPIC publish on (their service objects say), as
+`miro pub` finds them; `miro echo` decodes with the generated types here, else with the data
 schemas those suppliers give."""
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ from miro_gen.cli.eventargs import (
     COMMON,
     add_length_options,
     length_limit,
+    resolve_or_wait,
     server_and_channel,
     split_common,
     topic_arg,
@@ -35,7 +36,7 @@ def _parser(prog: str, description: str) -> argparse.ArgumentParser:
     p.add_argument(
         "--channel",
         metavar="NAME",
-        help="the event channel (default: the one the suppliers of TOPIC publish on, else "
+        help="the event channel (default: the ones the suppliers of TOPIC publish on, else "
         f"{DEFAULT_CHANNEL})",
     )
     return p
@@ -78,15 +79,9 @@ class Suppliers:
         except LiveError:  # no naming service yet: the channel is waited for, and said so
             return []
 
-    def channel(self) -> str:
-        names = sorted({o.channel for _, o in self.offers})
-        if len(names) > 1:
-            print(
-                f"{self.prog}: the suppliers publish on {', '.join(names)}: listening on "
-                f"{names[0]} (--channel chooses)",
-                file=sys.stderr,
-            )
-        return names[0] if names else DEFAULT_CHANNEL
+    def channel_names(self) -> list[str]:
+        """The channels the suppliers publish on (of their offers), each once."""
+        return sorted({o.channel for _, o in self.offers})
 
     def decodable(self, type_hash: str) -> None:
         """Make the events of `type_hash` decodable here when no generated type has it: with
@@ -120,6 +115,38 @@ class Suppliers:
             self.robot.close()
 
 
+def _listen(
+    p: argparse.ArgumentParser, prog: str, argv: Sequence[str], given: str | None, names: list[str]
+) -> tuple[Any, list[Any]] | None:
+    """A Server for the tool and the channels to listen on: the one `given`; else those of
+    `names` (the suppliers') bound now and EventChannel (where suppliers that do not describe
+    themselves, a log's replay, a bridge, publish), or EventChannel waited for when none is.
+    None when Ctrl-C comes while waiting."""
+    import MiroNaming
+
+    from miro_gen.cli.eventargs import make_server
+    from miro_gen.exceptions import SystemException
+
+    if given is not None:
+        found = server_and_channel(p, prog, argv, given)
+        return None if found is None else (found[0], [found[1]])
+    server = make_server(p, prog, argv)
+    channels: dict[str, Any] = {}
+    for name in [*names, DEFAULT_CHANNEL]:
+        try:
+            channel = server.resolve_channel(name)
+        except (MiroNaming.NotFound, SystemException):  # an offer its channel outlived
+            continue
+        channels.setdefault(channel.name, channel)
+    if channels:
+        return server, list(channels.values())
+    try:
+        return server, [resolve_or_wait(server, DEFAULT_CHANNEL, prog)]
+    except KeyboardInterrupt:
+        server.close()
+        return None
+
+
 def echo_main(argv: Sequence[str]) -> int:
     prog = "miro echo"
     p = _parser(prog, "Print the events of TOPIC as they arrive, decoded, and sequence gaps.")
@@ -134,11 +161,11 @@ def echo_main(argv: Sequence[str]) -> int:
     suppliers = Suppliers(prog, argv, ns.topics)
     for _, offer in suppliers.offers:
         suppliers.decodable(offer.type_hash)
-    found = server_and_channel(p, prog, argv, ns.channel or suppliers.channel())
+    found = _listen(p, prog, argv, ns.channel, suppliers.channel_names())
     if found is None:
         suppliers.close()
         return 0
-    server, channel = found
+    server, channels = found
     server.on_shutdown(suppliers.close)
     gaps = GapCounter()
     shown = [0]
@@ -161,7 +188,8 @@ def echo_main(argv: Sequence[str]) -> int:
         if ns.count and shown[0] >= ns.count:
             server.shutdown()
 
-    _tap(server, channel, ns.topics, show)
+    for channel in channels:
+        _tap(server, channel, ns.topics, show)
     server.run()
     return 0
 
@@ -184,14 +212,15 @@ def hz_main(argv: Sequence[str]) -> int:
     from miro_gen.transport.event_frames import RawEvent
     from miro_gen.transport.gaps import GapCounter
 
+    names: list[str] = []
     if ns.channel is None:
         suppliers = Suppliers(prog, argv, ns.topics)
-        ns.channel = suppliers.channel()
+        names = suppliers.channel_names()
         suppliers.close()
-    found = server_and_channel(p, prog, argv, ns.channel)
+    found = _listen(p, prog, argv, ns.channel, names)
     if found is None:
         return 0
-    server, channel = found
+    server, channels = found
     windows: dict[str, RateWindow] = {}
     gaps: dict[str, GapCounter] = {}
 
@@ -229,7 +258,8 @@ def hz_main(argv: Sequence[str]) -> int:
                 flush=True,
             )
 
-    _tap(server, channel, ns.topics, arrived)
+    for channel in channels:
+        _tap(server, channel, ns.topics, arrived)
     server.reactor().schedule_timer(1.0, 1.0, report)
     server.run()
     return 0
