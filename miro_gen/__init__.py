@@ -28,6 +28,7 @@ from miro_gen.exceptions import (
 if TYPE_CHECKING:
     from miro_gen.runtime.rpc import nonblocking
     from miro_gen.transport.events import (
+        KEEP_ALL,
         EventChannelFactory,
         StructuredEvent,
         StructuredPushConsumer,
@@ -47,6 +48,7 @@ _LAZY = {
     "StructuredPushSupplier": _EVENTS,
     "StructuredPushConsumer": _EVENTS,
     "StructuredEvent": _EVENTS,
+    "KEEP_ALL": _EVENTS,  # a consumer's depth: every event kept for its handler
     "Implementation": "miro_gen.transport.implementation",
 }
 
@@ -54,6 +56,7 @@ __all__ = [
     "BAD_OPERATION",
     "BAD_PARAM",
     "COMM_FAILURE",
+    "KEEP_ALL",
     "MARSHAL",
     "NO_IMPLEMENT",
     "NO_RESOURCES",

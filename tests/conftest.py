@@ -1,8 +1,12 @@
 """The checkout's generated code comes first on the path, including what the wheel leaves out
-(the manual's example parameters, package Test)."""
+(the manual's example parameters, package Test). Multicast DNS is off for every test and every
+process a test starts (MIRO_DISCOVERY=0: no naming service announced, none looked for), so that
+nothing leaves loopback; the network namespaces of tests/test_multihost.py turn it on again for
+the processes inside them."""
 
 from __future__ import annotations
 
+import os
 import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -14,6 +18,7 @@ import zmq
 GENERATED = str(Path(__file__).resolve().parents[1] / "generated")
 if GENERATED not in sys.path:
     sys.path.insert(0, GENERATED)
+os.environ["MIRO_DISCOVERY"] = "0"
 
 
 @pytest.fixture(scope="module")

@@ -3,7 +3,10 @@ parameter files change, never silently left stale."""
 
 from __future__ import annotations
 
+import os
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -111,3 +114,34 @@ def test_run_and_launch_regenerate_before_they_start(tmp_path: Path) -> None:
     assert "miro launch: the IDL or parameter files changed: regenerated 1 files" in done.stderr
     done = run_module("miro_gen.cli.main", "run", "show", cwd=root)
     assert (done.stdout, done.stderr) == ("speed 2.5\n", "")
+
+
+def test_a_changed_generator_makes_the_project_stale(tmp_path: Path) -> None:
+    """miro-gen installed elsewhere (a copy of the package, its templates inside, as a wheel
+    lays it out): after `miro build`, an edit of one of its templates (an upgrade) makes the
+    project stale, for `miro build --check` as for the compilers' own --check."""
+    site = tmp_path / "site"
+    shutil.copytree(
+        REPO / "miro_gen", site / "miro_gen", ignore=shutil.ignore_patterns("__pycache__")
+    )
+    assert not (site / "templates").exists()  # the copy's own templates are the ones it uses
+    root = make_project(tmp_path)
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(site), str(REPO / "generated")]))
+
+    def miro(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run(
+            [sys.executable, "-m", "miro_gen.cli.main", *args],
+            cwd=root, env=env, capture_output=True, text=True, timeout=120,
+        )  # fmt: skip
+
+    done = miro("build")
+    assert done.returncode == 0, done.stderr
+    assert miro("build", "--check").returncode == 0
+    template = site / "miro_gen" / "templates" / "params" / "module.py.j2"
+    template.write_text(template.read_text() + "# one more line\n")
+    done = miro("build", "--check")
+    assert done.returncode == 1, done.stdout + done.stderr
+    assert "generated/Arm/ArmParameters.py is out of date" in done.stderr
+    done = miro("build")
+    assert "wrote generated/Arm/ArmParameters.py" in done.stdout, done.stderr
+    assert (root / "generated/Arm/ArmParameters.py").read_text().endswith("# one more line\n")

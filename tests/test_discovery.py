@@ -4,12 +4,14 @@ visible and why a connection fails. Between network namespaces, as the multi-hos
 
 from __future__ import annotations
 
+import os
 import subprocess
+import sys
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from loopback import free_port, run_miro
+from loopback import free_port, run_miro, service_env
 from test_multihost import Hosts, ip, network
 
 from miro_gen.transport.discovery import answers
@@ -91,3 +93,26 @@ def test_the_manuals_endpoint_spelling_is_checked() -> None:
     done = run_miro("naming", "-ORBEndpoint", "corbaloc:nowhere")
     assert done.returncode == 2
     assert "-ORBEndpoint takes iiop://HOST:PORT, not 'corbaloc:nowhere'" in done.stderr
+
+
+def test_outside_their_namespaces_the_tests_send_no_multicast_dns() -> None:
+    """conftest.py turns multicast DNS off for every test and what it starts: a naming service
+    bound to every interface is not announced, and nothing is looked for."""
+    assert os.environ["MIRO_DISCOVERY"] == "0"
+    ns = subprocess.Popen(
+        [sys.executable, "-m", "miro_gen.cli.main", "naming", "--endpoint",
+         f"tcp://0.0.0.0:{free_port()}", "--insecure", "-MLL", "5"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=service_env(),
+    )  # fmt: skip
+    try:
+        assert ns.stdout is not None and ns.stdout.readline().startswith("naming service at")
+    finally:
+        ns.terminate()
+        _, err = ns.communicate(timeout=30)
+    assert "not announced on the network: multicast DNS is off here (MIRO_DISCOVERY=0)" in err
+    assert "announced as" not in err
+    doctor = run_miro("doctor", "--timeout", "1")
+    assert (
+        "cannot look for announced naming services (multicast DNS): multicast DNS is off here "
+        "(MIRO_DISCOVERY=0)"
+    ) in doctor.stdout, doctor.stdout + doctor.stderr

@@ -9,6 +9,7 @@ in order, paced as recorded.
 from __future__ import annotations
 
 import contextlib
+import re
 import signal
 import subprocess
 import sys
@@ -19,7 +20,7 @@ from typing import Any
 
 import Miro
 import pytest
-from eventlog_helpers import proc, read_events, start_recorder, stop, supply
+from eventlog_helpers import miro, proc, read_events, start_recorder, stop, supply
 from loopback import NamingProcess, eventually, run_miro, service_env
 from mcap.exceptions import EndOfFile
 from mcap.reader import NonSeekingReader, make_reader
@@ -144,6 +145,28 @@ def test_a_killed_recorder_leaves_a_readable_file(naming: str, tmp_path: Path) -
     assert "unfinished" in info.stderr
 
 
+def test_a_recording_without_a_file_name_is_named_after_its_context_and_time(
+    naming: str, tmp_path: Path
+) -> None:
+    """As rosbag2 and Miro's LogNotify: `<context>_<date>_<time>.mcap` in $MIRO_LOG, said."""
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    rec = miro(
+        "log", "record", "--naming", naming, "-MNC", "robot7", "robot3/ExampleEvent",
+        env=service_env(MIRO_LOG=str(logs)),
+    )  # fmt: skip
+    assert rec.stderr is not None
+    line = rec.stderr.readline()
+    (path,) = logs.iterdir()
+    assert re.fullmatch(r"robot7_\d{4}-\d\d-\d\d_\d\d-\d\d-\d\d\.mcap", path.name), path.name
+    assert line == f"recording robot3/ExampleEvent from EventChannel into {path}\n"
+    supply(naming, 5, 10, context="robot3")
+    _, err = stop(rec, signal.SIGINT)
+    assert rec.returncode == 0, err
+    assert f"{path}: 5 events in" in err
+    assert len(readable(path)) == 5
+
+
 def test_damaged_files_are_errors_not_tracebacks(recorded: Path, tmp_path: Path) -> None:
     cut = tmp_path / "cut.mcap"
     data = recorded.read_bytes()
@@ -193,7 +216,6 @@ def test_usage_errors(tmp_path: Path) -> None:
     existing = tmp_path / "x.mcap"
     existing.write_bytes(b"")
     for args, message in (
-        (("log", "record"), "the following arguments are required: -o/--output"),
         (("log", "record", "-o", str(existing)), "exists (use --force"),
         (("log", "record", "-o", "y.mcap", "a/"), "is not DOMAIN/TYPE"),
         (("log", "play", "x.mcap", "--rate", "0"), "--rate must be more than 0"),

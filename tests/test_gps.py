@@ -115,6 +115,32 @@ def test_the_driver_against_a_pseudo_terminal(
     assert f"{epochs} readings, {epochs} published" in summary
 
 
+def test_the_first_fix_after_timeless_no_fix_sentences_is_published(tmp_path: Path) -> None:
+    """A 1 Hz receiver acquiring satellites sends a GGA with neither time nor fix each second,
+    then gets its first fix. gpsd 3.22, fed this through a pseudo-terminal, reports a no-fix
+    TPV (mode 1) for each of the three, then the fixes of 12:00:01, :02 and :03; so does the
+    driver (each no-fix one goes out after the quarter second of silence that follows it)."""
+    rig = GpsRig(tmp_path)
+    try:
+        readings = rig.readings
+        for n in range(1, 4):
+            rig.device.write(checksummed("GPGGA,,,,,,0,00,99.99,,,,,,"))
+            eventually(lambda n=n: len(readings()) == n, 30)  # a second's pause at least
+            time.sleep(0.5)
+        for k in range(1, 4):
+            time_of_day = f"12000{k}.00"
+            rig.device.write(
+                checksummed(f"GPGGA,{time_of_day},4807.038,N,01131.00{k},E,1,08,0.9,545.4,M,,M,,")
+                + checksummed(f"GPRMC,{time_of_day},A,4807.038,N,01131.00{k},E,0.0,0.0,230394,,,A")
+            )
+            time.sleep(1.0)
+        eventually(lambda: any(r.utcTime.sec % 60 == 3 for r in readings()), 30)
+        got = [(r.valid, r.utcTime.sec % 60 if r.valid else None) for r in readings()]
+        assert got == [(False, None)] * 3 + [(True, 1), (True, 2), (True, 3)]
+    finally:
+        rig.close()
+
+
 def test_a_wrong_parameter_document_stops_the_driver_with_its_line(tmp_path: Path) -> None:
     config = tmp_path / "rover.xml"
     config.write_text(

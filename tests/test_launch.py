@@ -130,6 +130,21 @@ def test_check_prints_the_plan_of_the_shipped_demo(capsys: pytest.CaptureFixture
     assert "ExampleA" in lines[4]
 
 
+def test_check_shows_the_commands_with_their_placeholders_filled_in(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = write(
+        tmp_path,
+        "robot.toml",
+        '[naming]\nendpoint = "tcp://127.0.0.1:5999"\n\n[services.cam]\n'
+        'command = ["cat", "{dir}/cam.cfg", "{name}", "{naming}", "{context}", "{{x}}"]\n'
+        'context = "robot1"\n',
+    )
+    assert launch_main([str(path), "--check"]) == 0
+    row = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("cam "))
+    assert row.endswith(f"cat {tmp_path}/cam.cfg cam tcp://127.0.0.1:5999 robot1 {{x}}"), row
+
+
 def test_errors_in_the_file_exit_1_without_starting_anything(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

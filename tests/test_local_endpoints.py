@@ -5,7 +5,10 @@ from __future__ import annotations
 
 import contextlib
 import os
+import socket
 import sys
+import time
+from pathlib import Path
 
 import pytest
 import zmq
@@ -81,3 +84,52 @@ def test_other_hosts_and_other_kinds_keep_their_endpoint(tmp_path: object) -> No
     for endpoint in ("ipc:///tmp/x", "inproc://x", "tcp://[::1]:notaport"):
         assert local.nearest(endpoint) == endpoint
     assert local.ipc_twin("inproc://x") is None
+
+
+def test_socket_files_nobody_listens_on_are_removed_when_a_process_starts(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The folder of a user whose processes were killed: the first use of the folder by a new
+    process removes their socket files; a live one, one just bound (maybe not listening yet)
+    and other files stay."""
+    monkeypatch.setenv("XDG_RUNTIME_DIR", str(tmp_path))
+    folder = tmp_path / f"miro-{os.getuid()}"
+    folder.mkdir(mode=0o700)
+    long_ago = time.time() - 3600
+
+    def socket_file(name: str, listen: bool, age: float | None = long_ago) -> socket.socket:
+        s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        s.bind(str(folder / name))
+        if listen:
+            s.listen()
+        else:
+            s.close()  # as a killed process leaves it: the file, nobody behind it
+        if age is not None:
+            os.utime(folder / name, (age, age))
+        return s
+
+    dead = [f"0-127.0.0.1-{port}" for port in range(40000, 40150)]  # 150 killed processes
+    for name in dead:
+        socket_file(name, listen=False)
+    live = socket_file("0-127.0.0.1-2809", listen=True)
+    socket_file("0-127.0.0.1-1", listen=False, age=None)  # bound a moment ago
+    (folder / "notes.txt").write_text("not a socket")
+    local._folder.cache_clear()
+    try:
+        assert local.ipc_twin("tcp://127.0.0.1:5") is not None
+    finally:
+        local._folder.cache_clear()  # the other tests' folder is the real one
+        live.close()
+    left = sorted(p.name for p in folder.iterdir())
+    assert left == ["0-127.0.0.1-1", "0-127.0.0.1-2809", "notes.txt"]
+
+
+def test_sweeping_looks_at_a_bounded_number_of_files(tmp_path: Path) -> None:
+    for port in range(30):
+        s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        s.bind(str(tmp_path / f"0-127.0.0.1-{port}"))
+        s.close()
+        os.utime(tmp_path / f"0-127.0.0.1-{port}", (0, 0))
+    assert local.sweep(str(tmp_path), limit=10) == 10
+    assert local.sweep(str(tmp_path), limit=100) == 20
+    assert not list(tmp_path.iterdir())

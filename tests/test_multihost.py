@@ -48,14 +48,16 @@ class Hosts:
         self.prefix = f"miro-{os.getpid()}{tag}-"
         self.created: list[str] = []
         self.procs: list[subprocess.Popen[str]] = []
-        self.env = service_env(MIRO_KEYS=str(key))
+        # multicast DNS, off for the tests (conftest.py), stays inside these namespaces
+        self.env = service_env(MIRO_KEYS=str(key), MIRO_DISCOVERY="1")
 
     def ns(self, host: str) -> str:
         return self.prefix + host
 
     def wrapper(self, host: str) -> list[str]:
-        """What runs a command in `host`'s namespace with the fleet's key."""
-        return ["ip", "netns", "exec", self.ns(host), "env", f"MIRO_KEYS={self.env['MIRO_KEYS']}"]
+        """What runs a command in `host`'s namespace with the fleet's key (and multicast DNS)."""
+        env = [f"MIRO_KEYS={self.env['MIRO_KEYS']}", "MIRO_DISCOVERY=1"]
+        return ["ip", "netns", "exec", self.ns(host), "env", *env]
 
     def add(self, host: str) -> subprocess.CompletedProcess[str]:
         done = subprocess.run(

@@ -278,6 +278,32 @@ def test_includes_resolve_through_include_dirs(tmp_path: Path) -> None:
     assert out.returncode == 1 and "parent 'Base' of DerivedParameters" in out.stderr
 
 
+def test_svc_parameters_is_the_projects_own_when_it_compiles_it_too(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A clone of miro-gen with miro-gen installed from it (not editable): the services'
+    `miro/SvcParameters.h` is the clone's params/SvcParameters.xml, which the same run compiles,
+    not the copy installed elsewhere (two files for one module Miro.SvcParameters)."""
+    from miro_gen import resources
+    from miro_gen.cli import params
+
+    installed = tmp_path / "site-packages" / "miro_gen" / "params" / "xml"
+    installed.mkdir(parents=True)
+    (installed / "SvcParameters.xml").write_bytes((REPO / "params/SvcParameters.xml").read_bytes())
+    monkeypatch.setattr(resources, "params_dir", lambda: installed)
+    clone = tmp_path / "clone"
+    for name in ("params/SvcParameters.xml", "services/gps/GpsParameters.xml"):
+        (clone / name).parent.mkdir(parents=True, exist_ok=True)
+        (clone / name).write_bytes((REPO / name).read_bytes())
+    monkeypatch.chdir(clone)
+    argv = ["-I", str(REPO / "idl"), "-o", "generated"]
+    assert params.main([*argv, "params/SvcParameters.xml", "services/gps/GpsParameters.xml"]) == 0
+    assert (clone / "generated/Miro/GpsParameters.py").is_file()
+    # a project of its own, without SvcParameters.xml, still finds the installed copy
+    (clone / "params/SvcParameters.xml").unlink()
+    assert params.main([*argv, "services/gps/GpsParameters.xml"]) == 0
+
+
 def test_dummy_items_are_checked_against_the_idl_package(tmp_path: Path) -> None:
     src = write(
         tmp_path / "D.xml",

@@ -9,6 +9,7 @@ import sys
 from collections.abc import Sequence
 from typing import Any
 
+from miro_gen.cli.eventargs import add_length_options, length_limit
 from miro_gen.cli.liveargs import connect
 from miro_gen.live.remote import LiveError, Robot
 from miro_gen.live.show import Signature, dump, flow, signatures
@@ -33,7 +34,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--timeout", type=float, default=10.0, metavar="S", help="seconds to wait (default 10)"
     )
-    p.add_argument("--json", action="store_true", help="print the result as JSON")
+    p.add_argument("--json", action="store_true", help="print the result as JSON (sequences whole)")
+    add_length_options(p)
     return p
 
 
@@ -42,6 +44,7 @@ def call_main(argv: Sequence[str]) -> int:
     robot, ns = connect(p, "miro call", argv)
     if ns.timeout <= 0:
         p.error("--timeout must be more than 0 seconds")
+    length_limit(p, ns)  # checked
     robot.timeout = ns.timeout
     try:
         return _call(robot, ns)
@@ -86,7 +89,8 @@ def _call(robot: Robot, ns: argparse.Namespace) -> int:
     if not names:
         return 0
     values = [result] if len(names) == 1 else list(result)
-    results = {n: to_plain(v) for n, v in zip(names, values, strict=True)}
+    limit = None if ns.json or ns.full_length else ns.truncate_length
+    results = {n: to_plain(v, limit) for n, v in zip(names, values, strict=True)}
     print(dump(results["return"] if names == ["return"] else results, ns.json))
     return 0
 

@@ -7,6 +7,7 @@ import os
 import re
 import sys
 import traceback
+from collections.abc import Sequence
 from typing import Any
 
 from miro_gen.diagnostics import Diagnostics
@@ -58,3 +59,13 @@ class VersionAction(argparse.Action):
     def __call__(self, parser: argparse.ArgumentParser, *args: Any, **kw: Any) -> None:
         print(f"{parser.prog} {package_version()}")
         parser.exit()
+
+
+def piped(command: Any, argv: Sequence[str]) -> int:
+    """Run `command(argv)`; a reader that went away (`| head`) ends it quietly."""
+    try:
+        return int(command(argv))
+    except BrokenPipeError:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())  # so that the exit's flush does not fail again
+        return 0

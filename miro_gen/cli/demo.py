@@ -21,7 +21,7 @@ import threading
 from collections.abc import Sequence
 from typing import IO
 
-from miro_gen.cli.run import services_dir
+from miro_gen import resources
 from miro_gen.launch.console import Console
 from miro_gen.transport.options import DEFAULT_NAMING, UsageError, naming_endpoint
 
@@ -99,7 +99,7 @@ def demo_main(argv: Sequence[str]) -> int:
         address = naming_address(ns.naming)
     except UsageError as e:
         p.error(str(e))
-    folder = services_dir()
+    folder = resources.services_dir()
     if folder is None or not (folder / "demo.toml").is_file():
         print(
             "miro demo: the examples (miro_gen/services/demo.toml, exampleA.py ...) are missing "

@@ -1,10 +1,9 @@
 """What the event-log commands share: topic arguments, the common options, a server, the
-event channel (waited for), opening a log, and quiet ends of pipes."""
+event channel (waited for), opening a log, how long sequences are shown."""
 
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 from collections.abc import Sequence
@@ -16,14 +15,29 @@ from miro_gen.transport.options import UsageError, parse_common_options
 COMMON = "Accepts the common options (--naming tcp://HOST:PORT, -MNC NAME, -MLL N, --host ADDR)."
 
 
-def piped(command: Any, argv: Sequence[str]) -> int:
-    """Run `command(argv)`; a reader that went away (`| head`) ends it quietly."""
-    try:
-        return int(command(argv))
-    except BrokenPipeError:
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())  # so that the exit's flush does not fail again
-        return 0
+def add_length_options(p: argparse.ArgumentParser) -> None:
+    """-l/--truncate-length and -f/--full-length, as `ros2 topic echo` has them."""
+    from miro_gen.eventlog.show import TRUNCATE
+
+    p.add_argument(
+        "-l",
+        "--truncate-length",
+        type=int,
+        default=TRUNCATE,
+        metavar="N",
+        help="show a sequence or byte string of more than N elements as its length and first N "
+        f"(default {TRUNCATE})",
+    )
+    p.add_argument(
+        "-f", "--full-length", action="store_true", help="show sequences and byte strings whole"
+    )
+
+
+def length_limit(p: argparse.ArgumentParser, ns: argparse.Namespace) -> int | None:
+    """The elements shown of a long sequence (None: all), from add_length_options' options."""
+    if ns.truncate_length < 0:
+        p.error("--truncate-length must be 0 or more")
+    return None if ns.full_length else int(ns.truncate_length)
 
 
 def topic_arg(text: str) -> tuple[str, str]:

@@ -27,8 +27,10 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from miro_gen import resources
+
 STAMP = Path(".miro") / "fresh.json"
-_TOOL_SOURCES = ("codegen", "idl", "params", "templates")  # what decides the generated code
+_TOOL_SOURCES = ("codegen", "idl", "params/compiler")  # in miro_gen: what decides generated code
 
 
 class StaleError(Exception):
@@ -94,16 +96,25 @@ def _digest(paths: Sequence[Path]) -> dict[str, str]:
     return out
 
 
+def _tool_sources() -> list[Path]:
+    """The folders of the generator this process runs (wherever it is installed): the IDL
+    front end, the code generator, the parameter compiler, the templates, and the
+    SvcParameters.xml that `miro/SvcParameters.h` includes find when a project has none."""
+    folders = [resources.PACKAGE / name for name in _TOOL_SOURCES] + [resources.template_dir()]
+    shipped = resources.params_dir()
+    return folders if shipped is None else [*folders, shipped]
+
+
 def _tool_digest() -> str:
-    """One hash of the sources that decide what the compilers write (the templates, the front
-    ends and back ends): another version of miro-gen makes other code."""
-    package = Path(__file__).resolve().parent
-    h = hashlib.sha256()
-    for name in _TOOL_SOURCES:
-        folder = package / name
+    """One hash of the sources that decide what the compilers write: another version of
+    miro-gen (an upgrade, an edited template) makes other code."""
+    from miro_gen import __version__  # in the first line of every generated file
+
+    h = hashlib.sha256(__version__.encode())
+    for folder in _tool_sources():
         for p in sorted(folder.rglob("*")):
             if p.is_file() and p.suffix in (".py", ".j2", ".lark", ".xml"):
-                h.update(str(p.relative_to(package)).encode())
+                h.update(p.relative_to(folder.parent).as_posix().encode())
                 h.update(p.read_bytes())
     return h.hexdigest()
 

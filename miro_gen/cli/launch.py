@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import signal
 import sys
 import threading
@@ -109,13 +110,17 @@ def launch_main(argv: Sequence[str]) -> int:
 
 
 def describe(spec: LaunchSpec, part: object) -> str:
-    """What `--check` prints: each service to start here, its command and what it waits for."""
-    from miro_gen.launch.supervisor import Part
+    """What `--check` prints: each service to start here, its command (placeholders filled in
+    as they will be) and what it waits for."""
+    from miro_gen.launch.supervisor import Part, fill, placeholders
 
     assert isinstance(part, Part)
+    naming = part.naming_url or os.environ.get("MIRO_NAMING", "")
     rows: list[Row] = [("SERVICE", "AFTER", "RESTART", "COMMAND")]
     for s in part.services:
-        command = " ".join(_short(a) for a in s.argv)
+        params = f"<{s.name}.xml, written at start>" if s.params_file or s.parameters else ""
+        values = placeholders(spec, s, naming, params)
+        command = " ".join(_short(fill(a, values)) for a in s.argv)
         policy = s.restart.when
         if s.restart.when != "never" and s.restart.limit is not None:
             policy += f" (at most {s.restart.limit})"

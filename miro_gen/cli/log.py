@@ -9,9 +9,10 @@ from collections.abc import Sequence
 from typing import Any
 
 from miro_gen.cli.eventargs import (
+    add_length_options,
+    length_limit,
     log_warning,
     open_log,
-    piped,
     read_status,
     topic_arg,
 )
@@ -33,7 +34,7 @@ def main(argv: Sequence[str]) -> int:
     args = list(argv)
     if args and args[0] in ("record", "play", "info", "echo"):
         run = {"record": _record, "play": _play, "info": info_main, "echo": echo_main}
-        return piped(run[args[0]], args[1:])
+        return int(run[args[0]](args[1:]))  # a closed pipe: quiet (miro_gen.cli.main)
     ns = p.parse_args(args)
     if ns.command is None:
         p.print_help()
@@ -125,7 +126,9 @@ def echo_main(argv: Sequence[str]) -> int:
         "topics", nargs="*", type=topic_arg, metavar="TOPIC", help="DOMAIN/TYPE (default all)"
     )
     p.add_argument("-n", "--count", type=int, default=0, help="stop after N events")
+    add_length_options(p)
     ns = p.parse_args(argv)
+    limit = length_limit(p, ns)
     from miro_gen.eventlog.reader import LogError
     from miro_gen.eventlog.show import clock_text, payload_text
     from miro_gen.eventlog.types import matches
@@ -144,7 +147,7 @@ def echo_main(argv: Sequence[str]) -> int:
                     matches(f, topic.domain, topic.type_name) for f in ns.topics
                 ):
                     continue
-                text = payload_text(topic.type_hash, message.data)
+                text = payload_text(topic.type_hash, message.data, limit)
                 print(f"{clock_text(message.log_time)} {topic.topic} #{message.sequence} {text}")
                 shown += 1
                 if ns.count and shown >= ns.count:

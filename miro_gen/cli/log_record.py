@@ -24,7 +24,13 @@ def record_main(argv: Sequence[str]) -> int:
         description="Record the events of a channel into an MCAP file, a channel per "
         "DOMAIN/TYPE topic, until Ctrl-C (or SIGTERM), which finishes the file. " + COMMON,
     )
-    p.add_argument("-o", "--output", required=True, metavar="FILE", help="the MCAP file")
+    p.add_argument(
+        "-o",
+        "--output",
+        metavar="FILE",
+        help="the MCAP file (default: CONTEXT_YYYY-MM-DD_HH-MM-SS.mcap, of the naming context "
+        "and the time it starts, in $MIRO_LOG or else this folder)",
+    )
     p.add_argument("-f", "--force", action="store_true", help="overwrite FILE if it exists")
     p.add_argument("--channel", default="EventChannel", metavar="NAME", help="default EventChannel")
     p.add_argument(
@@ -35,13 +41,15 @@ def record_main(argv: Sequence[str]) -> int:
         help="DOMAIN/TYPE to record, * for any part (robot1/*, */Odometry); default all",
     )
     ns = p.parse_args(split_common(p, argv))
-    if os.path.exists(ns.output) and not ns.force:
+    if ns.output is not None and os.path.exists(ns.output) and not ns.force:
         p.error(f"{ns.output} exists (use --force to overwrite it)")
     from miro_gen.eventlog.progress import StatusLine
     from miro_gen.eventlog.recorder import Recorder
     from miro_gen.eventlog.writer import LogWriter
 
     server = make_server(p, prog, argv)
+    if ns.output is None:
+        ns.output = default_output(server.options.naming_context)
     try:
         writer = LogWriter(ns.output)
     except OSError as e:
@@ -80,3 +88,17 @@ def record_main(argv: Sequence[str]) -> int:
         f"{time.monotonic() - recorder.started:.1f} s"
     )
     return 0
+
+
+def default_output(context: str) -> str:
+    """Where a recording goes when no file is named, as rosbag2 and Miro's LogNotify name
+    theirs: `<context>_<date>_<time>.mcap` in $MIRO_LOG, else in the working folder (a
+    number added when a recording of the same second is there already)."""
+    folder = os.environ.get("MIRO_LOG") or "."
+    stem = f"{context.replace('/', '-')}_{time.strftime('%Y-%m-%d_%H-%M-%S')}"
+    path = os.path.join(folder, f"{stem}.mcap")
+    n = 1
+    while os.path.exists(path):
+        n += 1
+        path = os.path.join(folder, f"{stem}_{n}.mcap")
+    return path

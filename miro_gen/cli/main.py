@@ -6,7 +6,7 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from miro_gen.cli.common import VersionAction
+from miro_gen.cli.common import VersionAction, piped
 
 # The live tools: sub-command -> (module, function)
 LIVE = {
@@ -82,9 +82,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run a sub-command; 130 after Ctrl-C (128 + the signal), without a traceback."""
+    """Run a sub-command; 130 after Ctrl-C (128 + the signal), without a traceback; quietly
+    when the reader of its output goes away (`miro call ... | head`)."""
     try:
-        return dispatch(list(sys.argv[1:] if argv is None else argv))
+        return piped(dispatch, list(sys.argv[1:] if argv is None else argv))
     except KeyboardInterrupt:
         from miro_gen import lifecycle
 
@@ -144,9 +145,8 @@ def dispatch(args: list[str]) -> int:
         return log.main(args[1:])
     if args and args[0] in ("echo", "hz"):
         from miro_gen.cli import live
-        from miro_gen.cli.eventargs import piped
 
-        return piped(live.echo_main if args[0] == "echo" else live.hz_main, args[1:])
+        return live.echo_main(args[1:]) if args[0] == "echo" else live.hz_main(args[1:])
     if args and args[0] == "bridge":
         from miro_gen.cli import bridge
 

@@ -8,12 +8,13 @@ import argparse
 import sys
 import time
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 from miro_gen.cli.liveargs import connect
 from miro_gen.live.remote import LiveError, Robot
 
-SUBSCRIBER_WAIT = 2.0  # seconds a single event waits for a subscriber to appear
+MAX_WAIT = 10.0  # seconds the first event waits for its subscribers, by default
 
 
 def parser() -> argparse.ArgumentParser:
@@ -37,15 +38,34 @@ def parser() -> argparse.ArgumentParser:
         default=0,
         help="events to publish (default: 1, or with --rate until Ctrl-C)",
     )
+    p.add_argument(
+        "-w",
+        "--wait-matching-subscriptions",
+        "--wait-matching",
+        dest="wait_matching",
+        type=int,
+        metavar="N",
+        help="before the first event, wait until N consumers subscribe to it (default: 1 when "
+        "the events are counted, one or --count, so that each reaches a consumer already "
+        "listening; 0 with --rate until Ctrl-C)",
+    )
+    p.add_argument(
+        "--max-wait",
+        type=float,
+        default=MAX_WAIT,
+        metavar="S",
+        help=f"wait that long at most, then publish anyway (default {MAX_WAIT:g} s; 0: no limit)",
+    )
     return p
 
 
 def pub_main(argv: Sequence[str]) -> int:
     p = parser()
     robot, ns = connect(p, "miro pub", argv)
-    if ns.rate < 0 or ns.count < 0:
-        p.error("--rate and --count must be 0 or more")
+    if ns.rate < 0 or ns.count < 0 or ns.max_wait < 0 or (ns.wait_matching or 0) < 0:
+        p.error("--rate, --count, --wait-matching and --max-wait must be 0 or more")
     count = ns.count or (0 if ns.rate else 1)
+    wanted = ns.wait_matching if ns.wait_matching is not None else (1 if count else 0)
     domain, _, type_name = ns.topic.rpartition("/")
     domain = domain or robot.options.naming_context
     if not type_name or "*" in ns.topic:
@@ -58,7 +78,9 @@ def pub_main(argv: Sequence[str]) -> int:
         return 1
     finally:
         robot.close()
-    return _publish(argv, domain, type_name, payload, ns.channel or channel_name, ns.rate, count)
+    channel_name = ns.channel or channel_name
+    wait = Wait(wanted, ns.max_wait)
+    return _publish(argv, domain, type_name, payload, channel_name, ns.rate, count, wait)
 
 
 def _payload(robot: Robot, domain: str, type_name: str, given: str | None) -> tuple[Any, str]:
@@ -66,24 +88,16 @@ def _payload(robot: Robot, domain: str, type_name: str, given: str | None) -> tu
     from miro_gen.live.schemas import SchemaError, compile_schema, data_class
 
     offers = [
-        (s, o)
-        for s in robot.services()
-        if s.description is not None
-        for o in s.description.offers
-        if o.type_name == type_name and (given is None or o.payload == given)
+        (s, o) for s, o in robot.offers([("*", type_name)]) if given is None or o.payload == given
     ]
     exact = [(s, o) for s, o in offers if o.domain == domain]
     chosen = (exact or offers)[:1]
     if chosen:
         service, offer = chosen[0]
-        import MiroService
-
-        from miro_gen.exceptions import SystemException
-
+        text = robot.data_schema(service, offer.type_hash)
         try:
-            text = robot.service_at(service.entry.endpoint).type_schema(offer.type_hash)
             return data_class(compile_schema(text), offer.payload), offer.channel
-        except (MiroService.NotFound, SystemException, SchemaError) as e:
+        except SchemaError as e:
             raise LiveError(f"the type of {type_name} from {service.name}: {e}") from None
     if given is None:
         raise LiveError(
@@ -124,6 +138,15 @@ def _value(cls: Any, text: str) -> Any:
         raise LiveError(str(e)) from None
 
 
+@dataclass
+class Wait:
+    """What the first event waits for: `subscriptions` matching it, at most `limit` seconds
+    (0: no limit)."""
+
+    subscriptions: int
+    limit: float
+
+
 def _publish(
     argv: Sequence[str],
     domain: str,
@@ -132,6 +155,7 @@ def _publish(
     channel_name: str,
     rate: float,
     count: int,
+    wait: Wait,
 ) -> int:
     from miro_gen.cli.eventargs import make_server, resolve_or_wait
     from miro_gen.transport.events import StructuredPushSupplier
@@ -159,16 +183,37 @@ def _publish(
             server.shutdown()
 
     reactor = server.reactor()
-    if rate:
-        reactor.schedule_timer(0.0, 1.0 / rate, push)
+
+    def begin() -> None:
+        if rate:
+            reactor.schedule_timer(0.0, 1.0 / rate, push)
+        else:
+            push()
+
+    if not wait.subscriptions:
+        reactor.call_soon(begin)
     else:
+        started = time.monotonic()
+        told = [False]
+        many = f"{wait.subscriptions} subscription{'s' if wait.subscriptions > 1 else ''}"
 
-        def when_subscribed(_: object = None) -> None:
-            if supplier.has_subscribers(type_name) or time.monotonic() >= give_up:
+        def matching(_: object = None) -> None:
+            have = supplier.subscriptions(type_name)
+            waited = time.monotonic() - started
+            if have >= wait.subscriptions or (wait.limit and waited >= wait.limit):
                 reactor.cancel_timer(waiting)
-                push()
+                if have < wait.subscriptions:
+                    print(
+                        f"miro pub: {have} of {many} to {topic} after {wait.limit:g} s "
+                        "(--max-wait): publishing anyway",
+                        file=sys.stderr,
+                        flush=True,
+                    )
+                begin()
+            elif not told[0] and waited >= 0.5:
+                told[0] = True
+                print(f"miro pub: waiting for {many} to {topic}", file=sys.stderr, flush=True)
 
-        give_up = time.monotonic() + SUBSCRIBER_WAIT
-        waiting = reactor.schedule_timer(0.0, 0.02, when_subscribed)
+        waiting = reactor.schedule_timer(0.0, 0.02, matching)
     server.run()
     return 0 if delivered[0] or count != 1 else 1

@@ -21,7 +21,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from miro_gen import lifecycle
+from miro_gen import lifecycle, resources
 from miro_gen.scaffold.names import name_problem
 
 USAGE = """usage: miro run NAME [ARGS...]
@@ -31,13 +31,6 @@ $MIRO_SERVICES names), else the one shipped with miro-gen, as Python would run i
 services.NAME for a package, python services/NAME for a folder or a file), with the project's
 generated code on the path. ARGS are the service's own and the common options (--naming,
 -MNC, -MLL, -MCF ...); `miro run NAME --help` lists them."""
-
-
-def services_dir() -> Path | None:
-    """The folder of the manual's examples: `miro_gen/services`, shipped in the package (in a
-    checkout, a link to the top-level `services/`)."""
-    folder = (Path(__file__).parents[1] / "services").resolve()
-    return folder if (folder / "exampleA.py").is_file() else None
 
 
 @dataclass
@@ -50,7 +43,7 @@ class Service:
 def find(name: str, project: Path, folder: str) -> Service | None:
     """The service called `name`: the project's first, then the shipped ones."""
     places = [(project, project / folder)]
-    shipped = services_dir()
+    shipped = resources.services_dir()
     if shipped is not None:
         places.append((shipped.parent, shipped))
     for root, services in places:
@@ -66,7 +59,7 @@ def find(name: str, project: Path, folder: str) -> Service | None:
 
 def available(project: Path, folder: str) -> list[str]:
     names: set[str] = set()
-    for services in (project / folder, services_dir()):
+    for services in (project / folder, resources.services_dir()):
         if services is None or not services.is_dir():
             continue
         for entry in services.iterdir():

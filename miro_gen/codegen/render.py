@@ -11,12 +11,11 @@ from __future__ import annotations
 import textwrap
 from collections.abc import Iterable
 from functools import cache, lru_cache
-from pathlib import Path
 from typing import Any
 
 import jinja2
 
-from miro_gen import __version__
+from miro_gen import __version__, resources
 from miro_gen.cache import cache_dir
 from miro_gen.codegen.contexts import ModuleContext, PackageContext
 from miro_gen.codegen.layout import bracket, wrap
@@ -32,14 +31,6 @@ LINE = 100
 # rules apply is the project's choice. The layout is the templates' too (`# fmt: off`, to the end
 # of the file: ruff's formatter and black keep it whatever line length the project formats to).
 LINT_EXEMPTIONS = ("E501", "N999", "RUF100")
-
-
-def template_dir() -> Path:
-    """templates/ in a source checkout, or the copy installed inside the package."""
-    checkout = Path(__file__).resolve().parents[2] / "templates"
-    if (checkout / "idl").is_dir():
-        return checkout
-    return Path(__file__).resolve().parents[1] / "templates"
 
 
 def pyrepr(value: Any) -> str:
@@ -91,7 +82,7 @@ def _bytecode_cache() -> jinja2.BytecodeCache | None:
 @cache
 def environment() -> jinja2.Environment:
     env = jinja2.Environment(
-        loader=jinja2.FileSystemLoader(str(template_dir())),
+        loader=jinja2.FileSystemLoader(str(resources.template_dir())),
         trim_blocks=True,
         lstrip_blocks=True,
         keep_trailing_newline=True,

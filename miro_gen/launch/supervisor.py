@@ -301,11 +301,14 @@ class Supervisor:
 
     def _discover(self) -> None:
         """Look for the announced naming service until one is seen (or the launch stops)."""
-        from miro_gen.transport.discovery import FIND_TIMEOUT, browse
+        from miro_gen.transport.discovery import FIND_TIMEOUT, DiscoveryOff, browse
 
         while not self.stopping.is_set():
             try:
                 found = browse(FIND_TIMEOUT, first=True)
+            except DiscoveryOff as e:  # nothing to find: the file must name its naming service
+                self.console.note(f"cannot look for the naming service: {e}")
+                return
             except Exception as e:  # no multicast here: say so once, keep trying
                 self.console.note(f"cannot look for the naming service: {e}")
                 found = []
@@ -436,14 +439,7 @@ class Supervisor:
                     self.workdir / f"{spec.name}.xml", spec.params_file, spec.parameters
                 )
             )
-        values = {
-            "name": spec.name,
-            "naming": env.get("MIRO_NAMING", ""),
-            "context": spec.context or this_host(),
-            "dir": str(self.spec.folder),
-            "host": address or "",
-            "params": params,
-        }
+        values = placeholders(self.spec, spec, env.get("MIRO_NAMING", ""), params)
         argv = [fill(word, values) for word in spec.argv]
         if spec.python:
             if spec.context:
@@ -578,6 +574,23 @@ def _signal(c: Child, sig: int) -> None:
     if c.proc is None:
         return
     send([c.proc.pid], sig)
+
+
+def placeholders(
+    launch: LaunchSpec, service: ServiceSpec, naming: str, params: str
+) -> dict[str, str]:
+    """The values of the placeholders in `service`'s command: its name, the naming service
+    (`naming`), its naming context, the launch file's folder, its host's address and its
+    parameter document (`params`, written when it starts)."""
+    address = launch.hosts.get(service.host or "") if service.host else None
+    return {
+        "name": service.name,
+        "naming": naming,
+        "context": service.context or this_host(),
+        "dir": str(launch.folder),
+        "host": address or "",
+        "params": params,
+    }
 
 
 def fill(word: str, values: dict[str, str]) -> str:

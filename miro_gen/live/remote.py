@@ -108,6 +108,26 @@ class Robot:
         with concurrent.futures.ThreadPoolExecutor(min(len(found), 16)) as pool:
             return list(pool.map(describe, found))
 
+    def offers(self, patterns: list[tuple[str, str]]) -> list[tuple[Running, MiroService.Offer]]:
+        """The events the running services publish whose (domain, type) matches one of
+        `patterns` (`*` for any part), with the service of each."""
+        from miro_gen.eventlog.types import matches
+
+        return [
+            (s, o)
+            for s in self.services()
+            if s.description is not None
+            for o in s.description.offers
+            if any(matches(p, o.domain, o.type_name) for p in patterns)
+        ]
+
+    def data_schema(self, service: Running, type_hash: str) -> str:
+        """The data schema of the type `type_hash` as `service` gives it."""
+        try:
+            return str(self.service_at(service.entry.endpoint).type_schema(type_hash))
+        except (MiroService.NotFound, SystemException) as e:
+            raise LiveError(f"the type {type_hash[:12]} from {service.name}: {e}") from None
+
     def service(self, name: str) -> Running:
         """The service `name` (`gps`, `robot1/gps`, or the name of an object it serves)."""
         services = self.services()

@@ -19,6 +19,8 @@ import typing
 from collections.abc import Callable
 from typing import Any
 
+from miro_gen.eventlog.show import summary
+from miro_gen.live.show import flow
 from miro_gen.runtime.cdr import IdlUnion
 from miro_gen.runtime.rpc import Stub
 
@@ -145,8 +147,13 @@ def _union(cls: type[IdlUnion], data: Any, where: str, resolve: Resolver | None)
     return cls(**{branch: from_plain(hint, value, f"{where}.{branch}", resolve)})
 
 
-def to_plain(value: Any) -> Any:
-    """A value of a generated type as plain data (for YAML and JSON)."""
+def to_plain(value: Any, limit: int | None = None) -> Any:
+    """A value of a generated type as plain data (for YAML and JSON); with `limit`, a sequence
+    or byte string of more elements as a text of its length and first ones."""
+    if limit is not None:
+        short = summary(value, limit, lambda v: flow(to_plain(v, limit)))
+        if short is not None:
+            return short
     if value is None or isinstance(value, bool | str):
         return value
     if isinstance(value, enum.Enum):
@@ -160,11 +167,11 @@ def to_plain(value: Any) -> Any:
         return text if text.isprintable() else list(value)
     if isinstance(value, IdlUnion):
         branch = value._branch()
-        return {branch or "_d": to_plain(value._v if branch else value._d)}
+        return {branch or "_d": to_plain(value._v if branch else value._d, limit)}
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        return {f.name: to_plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
+        return {f.name: to_plain(getattr(value, f.name), limit) for f in dataclasses.fields(value)}
     if isinstance(value, list | tuple | array.array):
-        return [to_plain(v) for v in value]
+        return [to_plain(v, limit) for v in value]
     if isinstance(value, Stub):
         ref = value._ref
         return f"{ref.repo_id} at {ref.endpoint} (key {ref.key.decode('latin-1')})"

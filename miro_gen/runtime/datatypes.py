@@ -108,13 +108,17 @@ class IdlUnion(IdlType):
     __hash__ = None  # type: ignore[assignment]  # mutable
 
     def __repr__(self) -> str:
-        """`U(branch=value)` when the discriminator is the branch's usual one, else `U(d, v)`."""
+        return self._repr_with(repr)
+
+    def _repr_with(self, show: Callable[[Any], str]) -> str:
+        """`U(branch=value)` when the discriminator is the branch's usual one, else `U(d, v)`;
+        the value as `show` gives it (the tools abridge long ones)."""
         name = self._branch()
         if name is not None:
             labels = self._branches[name]
             if self._d == (labels[0] if labels else self._default_discriminator):
-                return f"{type(self).__name__}({name}={self._v!r})"
-        return f"{type(self).__name__}({self._d!r}, {self._v!r})"
+                return f"{type(self).__name__}({name}={show(self._v)})"
+        return f"{type(self).__name__}({self._d!r}, {show(self._v)})"
 
 
 def default_discriminator(kind: str, labels: set[Any], enum_size: int = 0) -> Any:

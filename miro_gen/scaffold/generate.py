@@ -11,7 +11,7 @@ from pathlib import Path
 
 import jinja2
 
-from miro_gen.codegen.render import template_dir
+from miro_gen import resources
 from miro_gen.diagnostics import CompileError, Diagnostics
 from miro_gen.scaffold.interface import WIDTH, Interface, InterfaceError, load_interface
 from miro_gen.scaffold.names import name_problem
@@ -82,7 +82,7 @@ def from_import(module: str, names: list[str]) -> str:
 
 def _environment() -> jinja2.Environment:
     env = jinja2.Environment(
-        loader=jinja2.FileSystemLoader(template_dir() / "service"),
+        loader=jinja2.FileSystemLoader(resources.template_dir() / "service"),
         keep_trailing_newline=True,
         undefined=jinja2.StrictUndefined,
         autoescape=False,

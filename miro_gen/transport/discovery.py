@@ -8,6 +8,9 @@ host, its addresses and port, and its endpoint in the TXT record) unless told no
 announced one (`naming_for`). `diagnose()` says what is visible on this network and, for
 each, whether it answers and why not (no route, nothing listening, packets dropped, another
 network), for `miro doctor`.
+
+`MIRO_DISCOVERY=0` turns multicast DNS off in a process: it neither looks for naming services
+nor announces one (the tests run so: nothing leaves loopback but inside namespaces they make).
 """
 
 from __future__ import annotations
@@ -15,6 +18,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import ipaddress
+import os
 import socket
 import threading
 import time
@@ -29,6 +33,19 @@ FIND_TIMEOUT = 1.5  # seconds a process without a naming service looks for an an
 SETTLE = 0.3  # seconds to wait for more answers after the first
 PROBE_TIMEOUT = 0.5  # seconds a TCP connection to a naming service may take to open
 _log = log.logger("MIRO")
+OFF = "multicast DNS is off here (MIRO_DISCOVERY=0)"
+
+
+def enabled() -> bool:
+    """Whether this process may use multicast DNS (announce, browse): not with MIRO_DISCOVERY=0."""
+    return os.environ.get("MIRO_DISCOVERY", "1") != "0"
+
+
+class DiscoveryOff(RuntimeError):
+    """Looking for naming services was asked for, with multicast DNS turned off."""
+
+    def __init__(self) -> None:
+        super().__init__(OFF)
 
 
 @dataclass
@@ -111,7 +128,9 @@ class Announcer:
         self._info: Any = None
         self._lock = threading.Lock()
         self._closed = False
-        if self.addresses:
+        if not enabled():
+            _log.notice("not announced on the network: %s", OFF)
+        elif self.addresses:
             threading.Thread(target=self._register, name="miro-announce", daemon=True).start()
 
     def _register(self) -> None:
@@ -149,7 +168,10 @@ class Announcer:
 
 def browse(timeout: float = BROWSE_TIMEOUT, first: bool = False) -> list[Announced]:
     """The naming services announced on this machine's networks, waiting up to `timeout`
-    seconds (with `first`, only until one is seen, and a moment more for others)."""
+    seconds (with `first`, only until one is seen, and a moment more for others).
+    DiscoveryOff with MIRO_DISCOVERY=0."""
+    if not enabled():
+        raise DiscoveryOff
     from zeroconf import IPVersion, ServiceBrowser, ServiceStateChange, Zeroconf
 
     found: dict[str, Announced] = {}
@@ -212,7 +234,7 @@ def answers(url: str, timeout: float = PROBE_TIMEOUT) -> str:
 def naming_for(default: str) -> str:
     """The naming service a process should use when none was given: `default` when something
     answers there, else an announced one (with a notice saying which), else `default`."""
-    if not answers(default, timeout=0.2):
+    if not enabled() or not answers(default, timeout=0.2):
         return default
     try:
         found = browse(FIND_TIMEOUT, first=True)

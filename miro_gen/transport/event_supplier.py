@@ -153,6 +153,12 @@ class StructuredPushSupplier:
         """Whether any consumer subscribes to this supplier's events of `type_name`."""
         return self._subscribed(self._topic(type_name))
 
+    def subscriptions(self, type_name: str) -> int:
+        """How many subscriptions (of consumers, through the channel) match this supplier's
+        events of `type_name`; on the reactor thread (`miro pub --wait-matching`)."""
+        frame = self._topic(type_name).frame
+        return sum(n for prefix, n in self._subscriptions.items() if frame.startswith(prefix))
+
     def push(self, type_name: str, payload: Any, stamp: float | None = None) -> bool:
         """Publish `payload` (a generated type) as an event of `type_name`; False when nobody
         subscribes (nothing is encoded then). `stamp`: when the data was taken (default now, on the

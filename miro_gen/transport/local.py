@@ -6,6 +6,10 @@ domain socket whose path is derived from the TCP address and port and from the n
 endpoint, finds the address is one of its own and the twin there, connects to the twin instead:
 large frames cross it faster than TCP over loopback (bench/bench_events.py), and nothing changes
 for peers on other hosts, in other network namespaces or of other users, which keep to TCP.
+
+A killed process leaves its socket files behind: the first time a process uses the folder, it
+removes those nobody listens on (looking at no more than SWEEP_LIMIT of them), so that the
+folder does not grow with every process ever killed.
 """
 
 from __future__ import annotations
@@ -15,13 +19,17 @@ import functools
 import ipaddress
 import os
 import socket
+import stat
 import sys
 import tempfile
+import time
 from typing import Any
 
 import zmq
 
 _MAX_PATH = 100  # bytes of a Unix socket path that every platform takes
+SWEEP_LIMIT = 256  # entries of the folder a process looks at when it starts using it
+_SETTLED = 10.0  # seconds: a younger socket may be one just bound, not yet listening
 
 
 @functools.cache
@@ -38,7 +46,34 @@ def _folder() -> str | None:
         return None
     if info.st_uid != os.getuid() or info.st_mode & 0o077:
         return None  # someone else's, or open to others: not for our sockets
+    sweep(folder)
     return folder
+
+
+def sweep(folder: str, limit: int = SWEEP_LIMIT) -> int:
+    """Remove the socket files in `folder` that nobody listens on (left by killed processes),
+    looking at `limit` entries at most; how many were removed."""
+    removed = 0
+    settled = time.time() - _SETTLED
+    try:
+        entries = os.scandir(folder)
+    except OSError:
+        return 0
+    with entries:
+        for n, entry in enumerate(entries):
+            if n >= limit:
+                break
+            try:
+                info = entry.stat(follow_symlinks=False)
+            except OSError:
+                continue
+            if not stat.S_ISSOCK(info.st_mode) or info.st_mtime > settled:
+                continue
+            if _refused(entry.path):
+                with contextlib.suppress(OSError):
+                    os.unlink(entry.path)
+                    removed += 1
+    return removed
 
 
 @functools.cache
@@ -106,6 +141,20 @@ def _listening(path: str) -> bool:
         except OSError:
             return False
     return True
+
+
+def _refused(path: str) -> bool:
+    """Whether the Unix socket `path` refuses connections: nobody listens there (another error,
+    a full backlog, no permission, says nothing)."""
+    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as probe:
+        probe.setblocking(False)  # a listener with a full backlog: no waiting for it
+        try:
+            probe.connect(path)
+        except ConnectionRefusedError:
+            return True
+        except OSError:
+            return False
+    return False
 
 
 def bind_twin(sock: zmq.Socket[Any], endpoint: str) -> str | None:

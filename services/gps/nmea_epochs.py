@@ -6,13 +6,16 @@ until a sentence carries a new one; fields never received (or left empty by the 
 or 0, as the IDL says.
 
 *When a reading goes out*: once per epoch, when the next epoch starts or at `flush()`, which the
-driver calls when the receiver has been silent for a quarter of a second. It is a fix if, at one
-of the moments gpsd would report the epoch, it was one, and it is the reading as it was at the
-last such moment. Those moments come from the receiver's rhythm (services/gps/nmea_cycle.py):
-its cycle end, learnt from the first epochs, and the sentences that follow it; until the cycle
-end is known, every sentence with a position or a fix mode. An epoch cut short before its cycle
-end (a receiver that skipped its last sentence, a log that stops) is not a fix, as gpsd does not
-report it either.
+driver calls when the receiver has been silent for a quarter of a second. Silence also ends the
+epoch: a sentence after it starts the next one unless it carries the same time (a late sentence of
+the fix that went out), so that a receiver acquiring satellites, which sends a GGA without time or
+fix every second, gives a no-fix reading for each, and its first fix after them goes out too.
+It is a fix if, at one of the moments gpsd would report the epoch, it was one, and it is the
+reading as it was at the last such moment. Those moments come from the receiver's rhythm
+(services/gps/nmea_cycle.py): its cycle end, learnt from the first epochs, and the sentences that
+follow it; until the cycle end is known, every sentence with a position or a fix mode. An epoch
+cut short before its cycle end (a receiver that skipped its last sentence, a log that stops) is
+not a fix, as gpsd does not report it either.
 
 *Valid*: at that moment, the epoch has a position, the last sentence that said anything about the
 fix said there is one (services/gps/nmea.py lists what each says), no sentence said the position
@@ -112,6 +115,10 @@ class NmeaParser:
             self.counts.ignored += 1
         else:
             self.counts.good += 1
+            if epoch.published and (s.time_of_day is None or s.time_of_day != epoch.time_of_day):
+                # The epoch went out when the receiver fell silent: what comes after the
+                # silence is the next one (a timeless epoch has no time to tell them apart).
+                epoch = self._epoch = Epoch()
             if s.time_of_day is not None and s.time_of_day != epoch.time_of_day:
                 if epoch.time_of_day is not None:
                     out += self._close()

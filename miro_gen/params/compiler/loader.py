@@ -22,6 +22,7 @@ from pathlib import Path
 
 from lxml import etree
 
+from miro_gen import resources
 from miro_gen.diagnostics import Diagnostics, SourcePos
 from miro_gen.params.compiler.model import Constructor, Include, ItemDecl, ParamDecl, ParamsFile
 from miro_gen.params.runtime.xmlsafe import XmlError, read_xml
@@ -35,15 +36,6 @@ _INCLUDE_KINDS = ("include", "Include", "src_Include")
 _IDENT = re.compile(r"[A-Za-z_]\w*$")
 _SCOPED = re.compile(r"(::)?[A-Za-z_]\w*(::[A-Za-z_]\w*)*$")
 _NAMESPACE = re.compile(r"[A-Za-z_]\w*(::[A-Za-z_]\w*)*$")
-
-
-def builtin_params_dir() -> Path | None:
-    """The project's `params/` (SvcParameters.xml): the checkout's, or the installed copy."""
-    here = Path(__file__).resolve()
-    for candidate in (here.parents[3] / "params", here.parents[1] / "xml"):
-        if (candidate / "SvcParameters.xml").is_file():
-            return candidate
-    return None
 
 
 def display_path(path: Path) -> str:
@@ -91,7 +83,7 @@ class Loader:
 
     def __init__(self, include_dirs: list[str], diag: Diagnostics) -> None:
         self.include_dirs = [Path(d) for d in include_dirs]
-        self.builtin = builtin_params_dir()
+        self.builtin = resources.params_dir()  # Miro's SvcParameters.xml, shipped
         self.diag = diag
         self.files: dict[Path, ParamsFile] = {}
         self._loading: set[Path] = set()
@@ -207,8 +199,9 @@ class Loader:
         """Where the C++ compiler would have found the header's source: the including file's
         folder and the -I folders; then the folders above the including file and their
         `src/` (Miro's builds gave `-I$MIRO_ROOT -I$MIRO_ROOT/src`), with the header's folder
-        (`miro/X.xml`); then the first folders without it; last the project's `params/` (for
-        `SvcParameters.xml` only: its other files are the project's own)."""
+        (`miro/X.xml`); then the first folders without it. `SvcParameters.xml` last of all in a
+        `params/` folder above the including file (the project's own, as in a clone of
+        miro-gen, which compiles it too), else in the copy miro-gen ships."""
         sub = f"{folder_part}/{name}" if folder_part else name
         here = f.path.resolve().parent
         near = [here, *self.include_dirs]
@@ -216,8 +209,10 @@ class Loader:
         candidates += [d / sub for up in here.parents for d in (up, up / "src")]
         if folder_part:
             candidates += [d / name for d in near]
-        if self.builtin is not None and name == "SvcParameters.xml":
-            candidates.append(self.builtin / name)
+        if name == "SvcParameters.xml":
+            candidates += [up / "params" / name for up in (here, *here.parents)]
+            if self.builtin is not None:
+                candidates.append(self.builtin / name)
         me = f.path.resolve()
         for candidate in candidates:
             if candidate.is_file() and candidate.resolve() != me:
