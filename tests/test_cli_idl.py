@@ -201,6 +201,8 @@ def test_modules_nested_too_deep_for_the_file_system(tmp_path: Path) -> None:
     assert run_miro_idl("--ast-json", str(idl)).returncode == 0
     out_dir = tmp_path / "out"
     line = _one_error_line(run_miro_idl("-o", str(out_dir), str(idl)))
-    assert line.startswith("miro-idl: error: cannot generate IDL module M0_xxxxxxxxxxxxxxxxxxxxxxxx::")
+    assert line.startswith(
+        "miro-idl: error: cannot generate IDL module M0_xxxxxxxxxxxxxxxxxxxxxxxx::"
+    )
     assert line.endswith("(the file system allows 4095); nest fewer modules")
     assert not out_dir.exists()
