@@ -35,12 +35,13 @@ from miro_gen.exceptions import (
     TRANSIENT,
     CompletionStatus,
 )
-from miro_gen.log import logger
+from miro_gen.log import PeerWarnings, logger
 from miro_gen.runtime import rpc
 from miro_gen.runtime.cdr import BE, LE
 from miro_gen.runtime.cdrstream import CdrInput, CdrOutput
 
 _log = logger("MIRO")
+_peer_warnings = PeerWarnings(_log)  # what peers send: rate-limited, with counts
 
 DEFAULT_WORKERS = 16
 _OBJECT = "IDL:omg.org/CORBA/Object:1.0"
@@ -159,12 +160,12 @@ class IIOPServer:
                 try:
                     h, msg = conn.read_message()
                 except NotGiop as e:
-                    _log.warning("IIOP: %s; closing the connection", e)
+                    _peer_warnings.warning("IIOP: %s; closing the connection", e)
                     if not e.zmq:  # a ZeroMQ peer would not understand it
                         conn.send_quietly(giop.encode_simple(1, MsgType.MESSAGE_ERROR))
                     return
                 except GiopError as e:
-                    _log.warning("IIOP: %s: %s; answered with MessageError", conn.peer, e)
+                    _peer_warnings.warning("IIOP: %s: %s; answered with MessageError", conn.peer, e)
                     conn.send_quietly(giop.encode_simple(1, MsgType.MESSAGE_ERROR))
                     return
                 except (EOFError, OSError):
@@ -173,7 +174,7 @@ class IIOPServer:
                     if not self._message(conn, h, msg):
                         return
                 except GiopError as e:
-                    _log.warning("IIOP: %s: %s; answered with MessageError", conn.peer, e)
+                    _peer_warnings.warning("IIOP: %s: %s; answered with MessageError", conn.peer, e)
                     conn.send_quietly(giop.encode_simple(h.minor, MsgType.MESSAGE_ERROR))
                     return
                 except OSError:
@@ -202,7 +203,7 @@ class IIOPServer:
                 conn.cancelled.clear()
         elif h.type in (MsgType.CLOSE_CONNECTION, MsgType.MESSAGE_ERROR):
             if h.type == MsgType.MESSAGE_ERROR:
-                _log.warning("IIOP: %s could not read a message of ours", conn.peer)
+                _peer_warnings.warning("IIOP: %s could not read a message of ours", conn.peer)
             return False
         else:
             raise GiopError(f"a client sent a {h.type.name} message")
