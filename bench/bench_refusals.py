@@ -5,16 +5,16 @@
 Each case is a file written to a temporary folder (the texts of tests/test_attack_compilers.py):
 macro expansion that doubles at each level (the issue's 20 lines of `#define`, and 2 KB using
 them), nesting thousands deep (modules, parentheses; makeParams includes, types, constructor
-blocks). Ours is the tool of this checkout, run as a process as a user runs it (start-up
-included); the reference in the same run is the same tool compiling a small valid file, so
-the ratio says what a refusal costs beyond an ordinary run. All cases and the references run
-interleaved, `--repeat` times; printed: the median seconds, their spread (min-max), peak memory,
-the ratio, and the first error line.
+blocks). Ours is the tool of this checkout (miro-idl generating, with -o), run as a process
+as a user runs it (start-up included); the reference in the same run is the same tool on a
+small valid file, so the ratio says what a refusal costs beyond an ordinary run. All cases and
+the references run interleaved, `--repeat` times; printed: the median seconds, their spread
+(min-max), peak memory, the ratio, and the first error line.
 
-`--cpp` also runs gcc's `cpp -P` on the preprocessor cases (what a C preprocessor, which has
-no budget, does with them; at most 10 s and 4 GiB each). `--baseline DIR` runs the tools of
-another source tree (e.g. `git archive <commit-before-issue-33> | tar -x -C DIR`) once per case,
-at most `--baseline-timeout` seconds each: the before figures.
+`--cpp` also runs gcc's preprocessor (`cc1 -E -P`, what `cpp -P` runs) on the macro cases:
+what a C preprocessor, which has no budget, does with them (at most 10 s and 4 GiB each).
+`--baseline DIR` runs the tools of another source tree (e.g. `git archive <commit-before-issue-33>
+| tar -x -C DIR`) once per case, at most `--baseline-timeout` seconds each: the before figures.
 
 Targets (issue 33): each IDL refusal within a second; miro-params, whose start-up alone takes
 about a second on a loaded machine, refuses each case in no more than 1.5 times a normal run.
@@ -179,10 +179,13 @@ def write_cases(folder: Path) -> None:
 
 
 def commands(python: list[str]) -> list[Case]:
-    idl = [*python, "-m", "miro_gen.cli.idl", "--ast-json"]
+    idl = [*python, "-m", "miro_gen.cli.idl", "-o"]  # generating, as the issue measured
     params = [*python, "-m", "miro_gen.cli.params", "-o"]
-    cases = [Case("reference: miro-idl, small valid file", [*idl, "small.idl"], None)]
-    cases += [Case(name, [*idl, f"c{i}.idl"], cases[0].name) for i, name in enumerate(IDL_CASES)]
+    cases = [Case("reference: miro-idl, small valid file", [*idl, "gen-small", "small.idl"], None)]
+    cases += [
+        Case(name, [*idl, f"gen{i}", f"c{i}.idl"], cases[0].name)
+        for i, name in enumerate(IDL_CASES)
+    ]
     ref = Case(
         "reference: miro-params, small valid file", [*params, "out-small", "small/I0.xml"], None
     )
@@ -288,12 +291,11 @@ def main() -> int:
                 what = "timed out" if code == -1 else f"exit {code}"
                 print(f"{c.name:40} {elapsed:9.2f} s {peak:8.0f} MB  {what}  {first[:90]}")
 
-    if missed:
-        print(
-            f"\ntarget (each refusal within {TARGET_S:.0f} s, exit 1) missed: {', '.join(missed)}"
-        )
-    else:
-        print(f"\ntarget (each refusal within {TARGET_S:.0f} s, exit 1): met")
+    target = (
+        f"each miro-idl refusal within {TARGET_S:.0f} s, each miro-params one within "
+        f"{PARAMS_RATIO}x a normal run, all exit 1"
+    )
+    print(f"\ntarget ({target}): " + (f"missed: {', '.join(missed)}" if missed else "met"))
     return 1 if args.check and missed else 0
 
 
