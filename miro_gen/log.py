@@ -16,9 +16,13 @@ is
 
 from __future__ import annotations
 
+import atexit
 import logging
 import sys
-from collections.abc import Iterable
+import threading
+import time
+import weakref
+from collections.abc import Callable, Iterable
 from typing import Any, TextIO
 
 LL_EMERGENCY = 0
@@ -133,3 +137,113 @@ class _MiroFormatter(logging.Formatter):
         if record.exc_info:
             text += "\n" + self.formatException(record.exc_info)
         return text
+
+
+# -- warnings about peers, rate-limited -------------------------------------------------------
+
+PEER_WARNING_PERIOD = 10.0  # seconds: at most one line per kind of warning and period
+_MAX_KINDS = 256
+
+
+class _Kind:
+    """One kind of peer warning: when its period ends, what was counted since its last line."""
+
+    __slots__ = ("count", "ends", "last")
+
+    def __init__(self, ends: float) -> None:
+        self.ends = ends
+        self.count = 0
+        self.last: tuple[str, tuple[object, ...]] = ("", ())
+
+
+class PeerWarnings:
+    """Warnings about what peers send (malformed frames, unknown types, refused requests): the
+    one owner of their rate limit. A peer decides how often these happen, so each is not a line:
+    the first of a kind is logged as it is; the others within `period` seconds are counted,
+    and at the end of the period one line says how many and shows the last ("1,234 more like
+    this in the last 10 s; the last: dropped an event frame on X: ..."). 20,000 bad frames in a
+    few seconds make two lines. A kind is the message's format string, or `key`. Counts still
+    pending are logged by `flush()` and when the process exits. Thread-safe; the summary is
+    logged from a timer thread."""
+
+    def __init__(
+        self,
+        log: logging.Logger | logging.LoggerAdapter[logging.Logger],
+        period: float = PEER_WARNING_PERIOD,
+        level: int = logging.WARNING,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.log = log
+        self.period = period
+        self.level = level
+        self._clock = clock
+        self._lock = threading.Lock()
+        self._kinds: dict[str, _Kind] = {}
+        self.seen: dict[str, int] = {}  # kind -> warnings in all, logged or counted
+        _all_peer_warnings.add(self)
+
+    def warning(self, msg: str, *args: object, key: str | None = None) -> None:
+        kind = key if key is not None else msg
+        now = self._clock()
+        with self._lock:
+            if kind not in self._kinds and len(self._kinds) >= _MAX_KINDS:
+                kind = "(other kinds)"
+            self.seen[kind] = self.seen.get(kind, 0) + 1
+            state = self._kinds.get(kind)
+            if state is not None and (now < state.ends or state.count):
+                state.count += 1
+                state.last = (msg, args)
+                if state.count == 1:  # the first counted in this period: a line at its end
+                    timer = threading.Timer(max(0.0, state.ends - now), self._summarise, (kind,))
+                    timer.daemon = True
+                    timer.start()
+                return
+            self._kinds[kind] = _Kind(now + self.period)
+        self.log.log(self.level, msg, *args)
+
+    def _summarise(self, kind: str) -> None:
+        with self._lock:
+            state = self._kinds.get(kind)
+            if state is None or not state.count:
+                return
+            count, (msg, args) = state.count, state.last
+            state.ends, state.count = self._clock() + self.period, 0
+        self._summary(count, msg, args)
+
+    def _summary(self, count: int, msg: str, args: tuple[object, ...]) -> None:
+        try:
+            last = msg % args if args else msg
+        except (TypeError, ValueError):
+            last = msg
+        self.log.log(
+            self.level,
+            "%s more like this in the last %g s; the last: %s",
+            f"{count:,}",
+            self.period,
+            last,
+        )
+
+    def flush(self) -> None:
+        """Log the counts still pending now (at the end of a flood, a test, the process)."""
+        with self._lock:
+            pending = [(s.count, s.last) for s in self._kinds.values() if s.count]
+            for s in self._kinds.values():
+                s.count = 0
+        for count, (msg, args) in pending:
+            self._summary(count, msg, args)
+
+
+_all_peer_warnings: weakref.WeakSet[PeerWarnings] = weakref.WeakSet()
+
+
+@atexit.register
+def _flush_peer_warnings() -> None:
+    # Only where logging was set up (a service's -MLL handler): a stream may be closed at exit
+    # already (a test runner's capture), and then nothing is said rather than a logging error.
+    raising, logging.raiseExceptions = logging.raiseExceptions, False
+    try:
+        for w in list(_all_peer_warnings):
+            if w.log.hasHandlers():
+                w.flush()
+    finally:
+        logging.raiseExceptions = raising

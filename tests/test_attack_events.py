@@ -5,6 +5,7 @@ byte-bounded queues, events larger than a message, and CURVE keeping strangers o
 
 from __future__ import annotations
 
+import queue
 import signal
 import subprocess
 import sys
@@ -295,6 +296,149 @@ def test_an_event_larger_than_a_message_is_a_counted_drop(naming: NamingProcess)
     finally:
         small.stop()
         host.stop()
+
+
+def test_a_flood_of_bad_frames_is_two_warning_lines_with_counts(naming: NamingProcess) -> None:
+    """Before: 20,000 malformed frames made a consumer print 10,000 warning lines. Now the
+    first is a line, the rest are counted, and the count is said at the end of the period (or,
+    here, when the consumer stops): 20,000 frames, two lines."""
+    host = RunningServer(naming.endpoint, "r")
+    printer = HERE / "procs" / "event_printer.py"
+    consumer = subprocess.Popen(
+        [sys.executable, str(printer), "--naming", naming.endpoint, "r/Bad", "r/ExampleEvent"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=service_env(),
+    )
+    rogue = zmq.Context.instance().socket(zmq.PUB)
+    type_hash = Miro.ExampleEventIDL._type_hash
+    try:
+        channel = EventChannelFactory(host.server).create_channel("Bad")
+        assert consumer.stdout is not None
+        assert consumer.stdout.readline().strip() == "READY"
+        lines = _lines_of(consumer)
+        rogue.setsockopt(zmq.LINGER, 0)
+        rogue.connect(channel.supplier_endpoint)
+        head = topic("r", "ExampleEvent")
+
+        def marker(seq: int) -> None:
+            """A good event, and its line from the consumer: what came before is handled."""
+            rogue.send_multipart(
+                [head, pack_batch(7, type_hash, [(seq, 0, 0, event(seq).serialize())])]
+            )
+            deadline = time.monotonic() + 30
+            while time.monotonic() < deadline:
+                if f'"seq": {seq},' in _next(lines, 0.2):
+                    return
+                if seq == 0:  # until the rogue's connection is up, send it again
+                    rogue.send_multipart(
+                        [head, pack_batch(7, type_hash, [(0, 0, 0, event(0).serialize())])]
+                    )
+            raise AssertionError(f"the consumer did not print event {seq}")
+
+        marker(0)
+        sent = 0
+        # 10 bad frames, then a good one to wait for: no queue on the way overflows (the
+        # channel's hold 16 frames of the largest size)
+        for batch in range(1, 2001):
+            for n in range(10):
+                rogue.send_multipart([head, b"not a batch %d" % n])
+            sent += 10
+            marker(batch)
+        consumer.send_signal(signal.SIGTERM)
+        consumer.wait(30)
+        assert consumer.stderr is not None
+        err = consumer.stderr.read()  # (its stdout is the reading thread's)
+    finally:
+        rogue.close()
+        if consumer.poll() is None:
+            consumer.kill()
+            consumer.communicate()
+        host.stop()
+    warnings = [ln for ln in err.splitlines() if ln.startswith("[WARNING")]
+    assert len(warnings) == 2, err[-3000:]
+    assert warnings[0].startswith("[WARNING MIRO] dropped an event frame on r/Bad: ")
+    assert warnings[1].startswith(
+        f"[WARNING MIRO] {sent - 1:,} more like this in the last 10 s; the last: dropped an "
+        "event frame on r/Bad: "
+    ), warnings[1]
+
+
+def _lines_of(proc: subprocess.Popen[str]) -> queue.Queue[str]:
+    """The lines of `proc`'s stdout, read by a thread of their own as they come."""
+    lines: queue.Queue[str] = queue.Queue()
+    assert proc.stdout is not None
+    stdout = proc.stdout
+    threading.Thread(target=lambda: [lines.put(ln) for ln in stdout], daemon=True).start()
+    return lines
+
+
+def _next(lines: queue.Queue[str], timeout: float) -> str:
+    """The next line, or "" when none comes within `timeout` seconds."""
+    try:
+        return lines.get(timeout=timeout)
+    except queue.Empty:
+        return ""
+
+
+def test_the_recorder_names_ten_made_up_types_and_counts_the_rest(
+    naming: NamingProcess, tmp_path: Path
+) -> None:
+    """Before: events under 21,000 made-up type hashes made 21,000 warning lines when the
+    recorder stopped. Now ten are named and the rest counted."""
+    host = RunningServer(naming.endpoint, "r")
+    output = tmp_path / "made-up.mcap"
+    command = ["log", "record", "-o", str(output), "--naming", naming.endpoint]
+    recorder = subprocess.Popen(
+        [sys.executable, "-m", "miro_gen.cli.main", *command, "--channel", "r/Made"],
+        stderr=subprocess.PIPE,
+        text=True,
+        env=service_env(),
+    )
+    rogue = zmq.Context.instance().socket(zmq.PUB)
+    try:
+        channel = EventChannelFactory(host.server).create_channel("Made")
+        assert recorder.stderr is not None
+        assert recorder.stderr.readline().startswith("recording */* from ")
+        rogue.setsockopt(zmq.LINGER, 0)
+        rogue.connect(channel.supplier_endpoint)
+        time.sleep(0.5)
+        data = event(1).serialize()
+        for n in range(300):
+            made_up = n.to_bytes(4, "big").hex() * 8  # 32 bytes, no type has it
+            rogue.send_multipart([topic("r", f"T{n}"), pack_batch(1, made_up, [(0, 0, 0, data)])])
+            time.sleep(0.002)
+        eventually(lambda: output.stat().st_size > 0 and _recorded(output) >= 0, 10)
+        time.sleep(1.5)  # the last events into a closed chunk
+        recorder.send_signal(signal.SIGINT)
+        _, err = recorder.communicate(timeout=30)
+    finally:
+        rogue.close()
+        if recorder.poll() is None:
+            recorder.kill()
+            recorder.communicate()
+        host.stop()
+    named = [ln for ln in err.splitlines() if "no generated type here has the type hash" in ln]
+    counted = [ln for ln in err.splitlines() if "more topics or type hashes" in ln]
+    assert len(named) == 10, err[-3000:]
+    recorded = _recorded(output)
+    assert recorded > 10, err[-3000:]
+    assert counted == [
+        f"miro log record: warning: {recorded - 10:,} more topics or type hashes without a "
+        "generated type here, recorded without a schema"
+    ]
+
+
+def _recorded(path: Path) -> int:
+    """Topics in the (finished) log."""
+    from miro_gen.eventlog.reader import LogError, LogReader
+
+    try:
+        with LogReader(str(path)) as log:
+            return len(log.topics())
+    except LogError:
+        return -1
 
 
 def test_with_curve_a_process_without_the_key_cannot_call_publish_or_subscribe(

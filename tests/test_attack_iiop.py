@@ -184,7 +184,10 @@ def _naming(lan: Hosts, port: int, *options: str) -> str:
     endpoint = f"tcp://{LAN['nsbox']}:{port}"
     proc = lan.popen("nsbox", "-m", "miro_gen.cli.main", "naming", "--endpoint", endpoint, *options)
     assert proc.stdout is not None
-    assert proc.stdout.readline().startswith(f"naming service at {endpoint}")
+    lines = [proc.stdout.readline()]
+    while "WARNING" in lines[-1] and len(lines) < 5:  # --insecure's warnings come first
+        lines.append(proc.stdout.readline())
+    assert lines[-1].startswith(f"naming service at {endpoint}"), lines
     return endpoint
 
 

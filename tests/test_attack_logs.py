@@ -225,3 +225,121 @@ def test_topics_past_the_channel_limit_are_refused_and_the_rest_recorded(
         assert sum(1 for _ in log.messages()) == MAX_CHANNELS + 1
     with open(path, "rb") as f:
         assert sum(1 for _ in make_reader(f).iter_messages()) == MAX_CHANNELS + 1
+
+
+# -- miro log info and damaged chunks (issue 33) ------------------------------------------------
+def _damaged_copies(tmp_path: Path) -> tuple[Path, dict[str, Path], int]:
+    """A good log and copies of it damaged in its third chunk (of six): a bit of its zstd data
+    flipped, its record length changed, its first log time changed. The summary is intact."""
+    good = tmp_path / "good.mcap"
+    write_log(good)
+    data = good.read_bytes()
+    with open(good, "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None and len(summary.chunk_indexes) == 6
+    index = summary.chunk_indexes[2]
+    at = index.chunk_start_offset
+    copies = {}
+    for name, offset, bit in (
+        ("flipped", at + index.chunk_length - 20, 0x10),  # in its compressed data
+        ("length", at + 1, 0x01),  # its record's length
+        ("time", at + 9, 0x01),  # its header's first log time
+    ):
+        damaged = bytearray(data)
+        damaged[offset] ^= bit
+        copies[name] = tmp_path / f"{name}.mcap"
+        copies[name].write_bytes(damaged)
+    return good, copies, at
+
+
+def test_info_check_reads_every_chunk(tmp_path: Path) -> None:
+    """Before: `miro log info` called a file with a damaged chunk "finished" (it read the
+    summary only). With --check, every chunk is read: each damaged one is an error line that
+    names it, and the exit status is 1; a good file says what was checked."""
+    good, copies, at = _damaged_copies(tmp_path)
+    ok = run_miro("log", "info", "--check", str(good))
+    assert ok.returncode == 0, ok.stderr
+    assert ok.stderr == ""
+    assert "(finished)" in ok.stdout
+    assert "checked:   6 chunks, 300 events: readable, as the summary says" in ok.stdout
+    for name, path in copies.items():
+        r = run_miro("log", "info", "--check", str(path))
+        assert r.returncode == 1, (name, r.stderr)
+        assert "Traceback" not in r.stderr
+        assert f"({'damaged'})" in r.stdout, r.stdout
+        errors = r.stderr.splitlines()
+        assert errors and all(ln.startswith(f"{path}: error: ") for ln in errors), r.stderr
+        assert errors[0].startswith(f"{path}: error: chunk 3 (at byte {at}, log time "), r.stderr
+
+
+def test_info_warns_when_a_cheap_check_finds_damage(tmp_path: Path) -> None:
+    """Without --check, each chunk's header is compared with the index, and the data
+    section's CRC (which our recorder writes) with its bytes: a damaged file is no longer
+    "finished", with warning lines and a pointer to --check; the summary is still shown."""
+    good, copies, at = _damaged_copies(tmp_path)
+    ok = run_miro("log", "info", str(good))
+    assert ok.returncode == 0 and ok.stderr == "", ok.stderr
+    assert "(finished)" in ok.stdout
+    for name, path in copies.items():
+        r = run_miro("log", "info", str(path))
+        assert r.returncode == 0, (name, r.stderr)
+        assert "(finished, but its summary and chunks disagree)" in r.stdout, r.stdout
+        assert "events:    300" in r.stdout
+        lines = r.stderr.splitlines()
+        warnings = [ln for ln in lines if ln.startswith(f"{path}: warning: ")]
+        assert warnings and lines[-1] == f"{path}: note: 'miro log info --check' reads every chunk"
+        assert len(warnings) == len(lines) - 1, r.stderr
+        if name == "flipped":  # only the CRC can tell
+            assert warnings == [
+                f"{path}: warning: summary and chunks disagree: the data section's CRC does "
+                "not match its bytes: some were changed after writing"
+            ]
+        else:
+            assert warnings[0].startswith(
+                f"{path}: warning: summary and chunks disagree: chunk 3 (at byte {at}, "
+            ), r.stderr
+
+
+def test_info_check_finds_a_chunk_the_index_leaves_out(tmp_path: Path) -> None:
+    """A file whose summary (intact, its CRC right) leaves out its second chunk: the summary
+    agrees with itself, --check finds the chunk it does not count."""
+    path = tmp_path / "extra.mcap"
+    with open(path, "wb") as f:
+        w = Writer(f, chunk_size=1 << 20)
+        w.start()
+        sid = w.register_schema("S", "omgidl", b"struct S { long a; };")
+        cid = w.register_channel("robot/S", "cdr", sid)
+        finalize = w._Writer__finalize_chunk  # type: ignore[attr-defined]
+        for t in (1, 2):
+            w.add_message(cid, t, b"\0\1\0\0\1\0\0\0", t)
+            finalize()
+        w._Writer__chunk_indices.pop()  # type: ignore[attr-defined]
+        stats = w._Writer__statistics  # type: ignore[attr-defined]
+        stats.message_count -= 1
+        stats.chunk_count -= 1
+        stats.message_end_time = 1
+        stats.channel_message_counts[cid] -= 1
+        w.finish()
+    quick = run_miro("log", "info", str(path))
+    assert quick.returncode == 0 and quick.stderr == "", quick.stderr
+    assert "events:    1" in quick.stdout
+    r = run_miro("log", "info", "--check", str(path))
+    assert r.returncode == 1, r.stderr
+    assert r.stderr.splitlines() == [
+        f"{path}: error: a chunk at byte {_chunk_offsets(path)[1]} (log time 2 to 2 ns) is not in "
+        "the file's index: the summary does not count its events"
+    ]
+
+
+def _chunk_offsets(path: Path) -> list[int]:
+    """Where the chunk records of the file's data section start (walked record by record)."""
+    data = path.read_bytes()
+    at, found = len(MAGIC), []
+    while at < len(data):
+        opcode, length = struct.unpack_from("<BQ", data, at)
+        if opcode == 0x06:  # Chunk
+            found.append(at)
+        elif opcode == 0x0F:  # DataEnd
+            break
+        at += 9 + length
+    return found

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from miro_gen.corba.events import CosEventConsumer, CosEventSupplier, EventChannel
-from miro_gen.log import logger
+from miro_gen.log import PeerWarnings, logger
 from miro_gen.transport.events import (
     KEEP_ALL,
     StructuredEvent,
@@ -26,6 +26,7 @@ from miro_gen.transport.events import (
 )
 
 _log = logger("MIRO")
+_peer_warnings = PeerWarnings(_log)  # what peers send: rate-limited, with counts
 QUEUE = 10_000  # events waiting to go to the CORBA channel; beyond, the newest are dropped
 
 
@@ -76,7 +77,7 @@ class _ToCorba(StructuredPushConsumer):
             try:
                 self.supplier.push(payload)
             except Exception as e:
-                _log.warning(
+                _peer_warnings.warning(
                     "cannot push a %s into the CORBA channel: %s", type(payload).__name__, e
                 )
 

@@ -45,10 +45,20 @@ def main(argv: Sequence[str]) -> int:
 def info_main(argv: Sequence[str]) -> int:
     p = argparse.ArgumentParser(
         prog="miro log info",
-        description="Summarise an event log: topics, types, counts, time span and rates.",
+        description="Summarise an event log: topics, types, counts, time span and rates. A "
+        "finished file is summarised from its summary; each chunk's header is compared with it "
+        "(a warning when they disagree). Exit status 1 when the file cannot be read or, with "
+        "--check, when a chunk is damaged.",
     )
     p.add_argument("file", help="an MCAP file")
+    p.add_argument(
+        "--check",
+        action="store_true",
+        help="read every chunk (CRC, decompression, records) and count its events against the "
+        "summary: each damaged chunk is an error line",
+    )
     ns = p.parse_args(argv)
+    from miro_gen.eventlog.check import damage, disagreements
     from miro_gen.eventlog.reader import LogError
     from miro_gen.eventlog.show import date_text
 
@@ -58,6 +68,9 @@ def info_main(argv: Sequence[str]) -> int:
     counts: dict[int, int] = {}
     first = last = None
     error = None
+    problems: list[str] = []  # --check: damage found (errors)
+    disagree: list[str] = []  # otherwise: the summary and the chunks' headers disagree
+    checked = ""
     with log:
         if log.summary is not None and log.summary.statistics is not None:
             stats = log.summary.statistics
@@ -73,12 +86,23 @@ def info_main(argv: Sequence[str]) -> int:
                     last = t if last is None else max(last, t)
             except LogError as e:
                 error = str(e)
+            checked = "every chunk read (the file has no summary to compare)"
         topics = log.topics()
+        if log.summary is not None:
+            if ns.check:
+                problems, chunks, events = damage(ns.file, log.summary)
+                checked = f"{chunks} chunks, {events} events: readable, as the summary says"
+            else:
+                disagree = disagreements(ns.file, log.summary)
     total = sum(counts.values())
     duration = (last - first) / 1e9 if first is not None and last is not None else 0.0
     state = "finished"
     if log.unfinished or log.damaged_summary:
         state = "unfinished (no summary)" if log.unfinished else "summary damaged"
+    elif problems:
+        state = "damaged"
+    elif disagree:
+        state = "finished, but its summary and chunks disagree"
     print(f"file:      {ns.file} ({state})")
     print(f"events:    {total}")
     if first is not None and last is not None:
@@ -96,7 +120,24 @@ def info_main(argv: Sequence[str]) -> int:
             f"  {t.topic:<{width}}  {t.schema_name or '(no schema)':<{type_width}}  "
             f"{n:8d} events{rate}  hash {t.type_hash[:12]}"
         )
+    if ns.check and error is None and not problems:
+        print(f"checked:   {checked}")
+    for line in _at_most(disagree, 10):
+        print(f"{ns.file}: warning: summary and chunks disagree: {line}", file=sys.stderr)
+    if disagree:
+        print(f"{ns.file}: note: 'miro log info --check' reads every chunk", file=sys.stderr)
+    if problems:
+        for line in _at_most(problems, 20):
+            print(f"{ns.file}: error: {line}", file=sys.stderr)
+        return 1
     return read_status(ns.file, log, error)
+
+
+def _at_most(lines: list[str], n: int) -> list[str]:
+    """The first `n` lines, and one that counts the rest."""
+    if len(lines) <= n:
+        return lines
+    return [*lines[:n], f"... and {len(lines) - n} more"]
 
 
 def _compile_missing_types(path: str, log: Any) -> None:

@@ -16,6 +16,8 @@ from miro_gen.cli.eventargs import (
     topic_arg,
 )
 
+SHOWN_UNKNOWN = 10  # topics without a generated type named one by one at the end
+
 
 def record_main(argv: Sequence[str]) -> int:
     prog = "miro log record"
@@ -69,10 +71,17 @@ def record_main(argv: Sequence[str]) -> int:
     shown = " ".join(f"{d}/{t}" for d, t in subs)
     print(f"recording {shown} from {channel.name} into {ns.output}", file=sys.stderr)
     recorder.run()
-    for topic, type_hash in sorted(writer.unknown_types):
+    unknown = sorted(writer.unknown_types)
+    for topic, type_hash in unknown[:SHOWN_UNKNOWN]:  # a peer may make up thousands
         print(
             f"{prog}: warning: {topic}: no generated type here has the type hash "
             f"{type_hash[:12]}; recorded without a schema (Foxglove cannot decode it)",
+            file=sys.stderr,
+        )
+    if len(unknown) > SHOWN_UNKNOWN:
+        print(
+            f"{prog}: warning: {len(unknown) - SHOWN_UNKNOWN:,} more topics or type hashes "
+            "without a generated type here, recorded without a schema",
             file=sys.stderr,
         )
     if writer.refused:

@@ -29,12 +29,13 @@ from miro_gen.corba.anys import read_any, write_any
 from miro_gen.corba.bodies import body_input, call
 from miro_gen.corba.ior import IOR, ior_from_ref, ref_from_ior
 from miro_gen.exceptions import BAD_OPERATION, MARSHAL, UserException
-from miro_gen.log import logger
+from miro_gen.log import PeerWarnings, logger
 from miro_gen.runtime import rpc
 from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.runtime.cdrstream import CdrOutput
 
 _log = logger("MIRO")
+_peer_warnings = PeerWarnings(_log)  # what peers send: rate-limited, with counts
 
 _ADMIN = "IDL:omg.org/CosEventChannelAdmin/"
 EVENT_CHANNEL = _ADMIN + "EventChannel:1.0"
@@ -168,7 +169,7 @@ class CosEventConsumer(rpc.Servant):
             value = read_any(inp)
         except MARSHAL as e:
             self.undecodable += 1
-            _log.warning("dropped an event that does not decode: %s", e)
+            _peer_warnings.warning("dropped an event that does not decode: %s", e)
             return _EMPTY
         self.received += 1
         try:

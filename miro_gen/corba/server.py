@@ -48,12 +48,13 @@ from miro_gen.exceptions import (
     TRANSIENT,
     CompletionStatus,
 )
-from miro_gen.log import logger
+from miro_gen.log import PeerWarnings, logger
 from miro_gen.runtime import rpc
 from miro_gen.runtime.cdr import BE, LE
 from miro_gen.runtime.cdrstream import CdrInput, CdrOutput
 
 _log = logger("MIRO")
+_peer_warnings = PeerWarnings(_log)  # what peers send: rate-limited, with counts
 
 DEFAULT_WORKERS = 16
 DEFAULT_BUDGET = 160 << 20  # bytes of requests (reserved twice their size) and unsent replies
@@ -237,7 +238,7 @@ class IIOPServer:
                 conn.cancelled.clear()
         elif h.type in (MsgType.CLOSE_CONNECTION, MsgType.MESSAGE_ERROR):
             if h.type == MsgType.MESSAGE_ERROR:
-                _log.warning("IIOP: %s could not read a message of ours", conn.peer)
+                _peer_warnings.warning("IIOP: %s could not read a message of ours", conn.peer)
             return False, False
         else:
             raise GiopError(f"a client sent a {h.type.name} message")

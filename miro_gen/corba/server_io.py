@@ -39,16 +39,16 @@ from miro_gen.corba import giop
 from miro_gen.corba.connection import NotGiop
 from miro_gen.corba.giop import GiopError, MsgType
 from miro_gen.corba.inbound import Budget, Inbound, Message, Refused
-from miro_gen.log import logger
+from miro_gen.log import PeerWarnings, logger
 
 _log = logger("MIRO")
+_peer_warnings = PeerWarnings(_log)  # what peers cause: rate-limited, with counts
 
 MAX_RUNNING = 64  # requests of one connection in hand (waiting or running) before it is not read
 OUT_LIMIT = 1 << 20  # bytes of replies a connection has not taken before it is not read
 STALL = 15.0  # seconds a connection may be silent part-way through a message (or not read)
 _ACCEPTS = 64  # connections accepted in one turn of the loop
 _BACKOFF = (0.05, 1.0)  # seconds accepting pauses when descriptors run out: first, at most
-_NOTICE_EVERY = 10.0  # seconds between two warnings of one kind
 _OUT_OF_DESCRIPTORS = {errno.EMFILE, errno.ENFILE, errno.ENOBUFS, errno.ENOMEM}
 
 
@@ -110,7 +110,6 @@ class ConnectionLoop:
         self._closing = False
         self._backoff = 0.0
         self._accept_at: float | None = None  # when accepting resumes, while paused
-        self._noticed: dict[str, float] = {}
         listener.setblocking(False)
         self._selector.register(listener, selectors.EVENT_READ)
         self._selector.register(self._wake_r, selectors.EVENT_READ)
@@ -261,11 +260,10 @@ class ConnectionLoop:
                 f"{self.max_connections} connections are open"
             ):
                 self.refused += 1
-                self._notice(
-                    "cap",
+                _peer_warnings.warning(
                     "IIOP: refused a connection from %s: %d connections are open, all with calls "
                     "in hand (%d refused so far)",
-                    peer, len(self._conns), self.refused,
+                    peer, len(self._conns), self.refused, key="iiop-cap"
                 )  # fmt: skip
                 with contextlib.suppress(OSError):
                     sock.setblocking(False)
@@ -289,11 +287,10 @@ class ConnectionLoop:
         for conn in self._conns:
             if conn.evictable:
                 self.evicted += 1
-                self._notice(
-                    "evict",
+                _peer_warnings.warning(
                     "IIOP: %s: closing the connections heard from least recently to make room "
                     "(%d so far)",
-                    why, self.evicted,
+                    why, self.evicted, key="iiop-evict"
                 )  # fmt: skip
                 self._close(conn, giop.encode_simple(2, MsgType.CLOSE_CONNECTION))
                 return True
@@ -303,11 +300,10 @@ class ConnectionLoop:
         self._backoff = min(max(self._backoff * 2, _BACKOFF[0]), _BACKOFF[1])
         self._accept_at = time.monotonic() + self._backoff
         self._selector.unregister(self.listener)
-        self._notice(
-            "fds",
+        _peer_warnings.warning(
             "IIOP: cannot accept connections (%s) with %d open, all with calls in hand: "
             "pausing %.2f s",
-            os.strerror(e.errno or 0), len(self._conns), self._backoff,
+            os.strerror(e.errno or 0), len(self._conns), self._backoff, key="iiop-fds"
         )  # fmt: skip
 
     # ---- reading and writing --------------------------------------------------------------------
@@ -334,11 +330,11 @@ class ConnectionLoop:
                     self._close(conn)
                     return
         except NotGiop as e:
-            _log.warning("IIOP: %s; closing the connection", e)
+            _peer_warnings.warning("IIOP: %s; closing the connection", e)
             self._close(conn, None if e.zmq else giop.encode_simple(1, MsgType.MESSAGE_ERROR))
             return
         except GiopError as e:
-            _log.warning("IIOP: %s: %s; answered with MessageError", conn.peer, e)
+            _peer_warnings.warning("IIOP: %s: %s; answered with MessageError", conn.peer, e)
             self._close(conn, giop.encode_simple(1, MsgType.MESSAGE_ERROR))
             return
         except Exception:  # a defect of ours: logged, and this connection only ends
@@ -371,9 +367,9 @@ class ConnectionLoop:
         for conn in list(self._conns):
             if (conn.inbound.busy or conn.out_bytes) and now - conn.progress > self.stall:
                 what = "part-way through a message" if conn.inbound.busy else "taking no reply"
-                self._notice(
-                    "stall", "IIOP: %s has been silent %s for %.0f s: closing the connection",
-                    conn.peer, what, self.stall,
+                _peer_warnings.warning(
+                    "IIOP: %s has been silent %s for %.0f s: closing the connection",
+                    conn.peer, what, self.stall, key="iiop-stall"
                 )  # fmt: skip
                 self._close(conn)
 
@@ -407,10 +403,3 @@ class ConnectionLoop:
         self.listener.close()
         self._wake_r.close()
         self._wake_w.close()
-
-    def _notice(self, kind: str, message: str, *args: object) -> None:
-        """A warning, at most one of each kind every _NOTICE_EVERY seconds."""
-        now = time.monotonic()
-        if now - self._noticed.get(kind, -_NOTICE_EVERY) >= _NOTICE_EVERY:
-            self._noticed[kind] = now
-            _log.warning(message, *args)

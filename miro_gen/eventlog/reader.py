@@ -238,7 +238,7 @@ class LogReader:
             check_against_index(chunk, index)
             records = chunk_records(chunk, messages_only=True)
         except ChunkError as e:
-            raise LogError(_chunk_fault(number, index.chunk_start_offset, index, e)) from None
+            raise LogError(chunk_fault(number, index.chunk_start_offset, index, e)) from None
         return [r for r in records if isinstance(r, Message)]
 
     def _streamed(
@@ -261,7 +261,7 @@ class LogReader:
                     try:
                         records = chunk_records(outer)
                     except ChunkError as e:
-                        raise LogError(_chunk_fault(number, at, outer, e)) from None
+                        raise LogError(chunk_fault(number, at, outer, e)) from None
                 else:
                     records = [outer]
                 for record in records:
@@ -296,7 +296,7 @@ class LogReader:
                 self._topics = dict(topics)
 
 
-def _chunk_fault(number: int, offset: int, chunk: Chunk | ChunkIndex, e: ChunkError) -> str:
+def chunk_fault(number: int, offset: int, chunk: Chunk | ChunkIndex, e: ChunkError) -> str:
     """The error for a chunk that cannot be believed, naming it."""
     return (
         f"chunk {number} (at byte {offset}, log time {chunk.message_start_time} to "

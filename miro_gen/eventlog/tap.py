@@ -15,7 +15,7 @@ from typing import Any
 import zmq
 
 from miro_gen.eventlog.types import matches
-from miro_gen.log import logger
+from miro_gen.log import PeerWarnings, logger
 from miro_gen.transport import sockets
 from miro_gen.transport.channel_link import ChannelLink
 from miro_gen.transport.event_frames import FrameError, RawEvent, parse_batch, split_topic
@@ -23,6 +23,7 @@ from miro_gen.transport.events import EventChannel, subscription_prefix
 from miro_gen.transport.gaps import GapCounter
 
 _log = logger("MIRO")
+_peer_warnings = PeerWarnings(_log)  # what peers send: rate-limited, with counts
 # A recorder would rather queue than drop while it writes a chunk: up to this many bytes of
 # frames of the largest size (batched frames of small events count as frames too).
 QUEUE_BYTES = 1 << 30
@@ -76,7 +77,7 @@ class RawEventTap:
                 events = self._parse(parts)
             except FrameError as e:
                 self.bad_frames += 1
-                _log.warning("dropped an event frame on %s: %s", self.channel.name, e)
+                _peer_warnings.warning("dropped an event frame on %s: %s", self.channel.name, e)
                 continue
             if events:
                 self.received += len(events)

@@ -42,7 +42,14 @@ class LogWriter:
     def __init__(self, path: str, chunk_seconds: float = CHUNK_SECONDS) -> None:
         self.path = path
         self._file: IO[bytes] = open(path, "wb")  # noqa: SIM115 - closed by finish()
-        self._mcap = Writer(self._file, chunk_size=CHUNK_BYTES, compression=CompressionType.ZSTD)
+        # With the data section's CRC, `miro log info` sees a changed byte anywhere in the
+        # chunks without opening them (eventlog/check.py).
+        self._mcap = Writer(
+            self._file,
+            chunk_size=CHUNK_BYTES,
+            compression=CompressionType.ZSTD,
+            enable_data_crcs=True,
+        )
         self._mcap.start(profile=PROFILE, library=LIBRARY)
         self._channels: dict[tuple[str, str, str], int] = {}  # (domain, type, hash) -> id
         self._schemas: dict[str, int] = {}  # type hash -> schema id (0: unknown type)

@@ -93,18 +93,23 @@ def strip_comments(text: str) -> str:
     return "".join(out)
 
 
+# What matters inside a macro call's arguments; the rest is skipped in C, not char by char.
+_ARG_MARK = re.compile(r"""[(),"']""")
+
+
 def split_args(text: str, open_paren: int) -> tuple[list[str], int]:
     """Split a macro call's arguments; returns (args, index after ')') or ([], -1)."""
     depth = 0
     args: list[str] = []
     start = open_paren + 1
-    i = open_paren
-    n = len(text)
-    while i < n:
+    find = _ARG_MARK.search
+    m = find(text, open_paren)
+    while m is not None:
+        i = m.start()
         c = text[i]
         if c in "\"'":
-            m = LEXEME.match(text, i)
-            i = m.end() if m else i + 1
+            literal = LEXEME.match(text, i)
+            m = find(text, literal.end() if literal else i + 1)
             continue
         if c == "(":
             depth += 1
@@ -113,8 +118,8 @@ def split_args(text: str, open_paren: int) -> tuple[list[str], int]:
             if depth == 0:
                 args.append(text[start:i])
                 return args, i + 1
-        elif c == "," and depth == 1:
+        elif depth == 1:  # ','
             args.append(text[start:i])
             start = i + 1
-        i += 1
+        m = find(text, i + 1)
     return [], -1

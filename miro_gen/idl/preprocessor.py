@@ -13,21 +13,17 @@ Comments are left in place for the lexer, which needs doc comments.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
-from typing import NamedTuple
 
 from miro_gen.diagnostics import Diagnostics, SourcePos
 from miro_gen.idl.pp_conditions import MAX_CONDITION_DEPTH as MAX_CONDITION_DEPTH
 from miro_gen.idl.pp_conditions import ConditionError, ConditionParser
-from miro_gen.idl.pp_lexemes import (
-    IDENT,
-    LEXEME,
-    comment_segments,
-    split_args,
-    strip_comments,
-    substitute_params,
-)
+from miro_gen.idl.pp_expand import MAX_EXPANDED_LINE as MAX_EXPANDED_LINE
+from miro_gen.idl.pp_expand import MAX_EXPANSION_DEPTH as MAX_EXPANSION_DEPTH
+from miro_gen.idl.pp_expand import ExpansionBudgetExceeded, Macro, MacroExpander
+from miro_gen.idl.pp_lexemes import IDENT, comment_segments, strip_comments
 from miro_gen.idl.source_text import SourceText as SourceText  # importable from here as before
 
 MAX_INCLUDE_DEPTH = 200
@@ -35,8 +31,6 @@ MAX_INCLUDE_DEPTH = 200
 # below (TAO's files: at most about 100); include chains without guards double with
 # each level and would otherwise run for minutes.
 MAX_INCLUSIONS = 10_000
-MAX_EXPANSION_DEPTH = 200
-MAX_EXPANDED_LINE = 1_000_000
 
 # `__OMNIIDL__` too, with omniidl 4.2's value: ORB IDL trees (Debian's omniORB tree) choose their
 # workarounds by it (`typedef Object _Factory;`, `#include <ir.idl>`), and miro-idl reads IDL as
@@ -45,12 +39,6 @@ PREDEFINED_MACROS = {"__MIRO_IDL__": "1", "__OMNIIDL__": "0x2630"}
 
 _DIRECTIVE = re.compile(r"\s*#\s*([A-Za-z_]\w*)?\s*(.*)$", re.S)
 _PASSED_PRAGMAS = ("prefix", "version", "ID")
-
-
-class Macro(NamedTuple):
-    name: str
-    params: tuple[str, ...] | None  # None for object-like macros
-    body: str
 
 
 class _Cond:
@@ -89,7 +77,6 @@ class Preprocessor:
     # -- public -------------------------------------------------------------------------------
     def run(self, path: str) -> SourceText:
         self.macros = dict(self._initial_macros)
-        self._macro_re: re.Pattern[str] | None = None
         self._out: list[str] = []
         self._map: list[tuple[int, int, int]] = []
         self._paths: list[str] = []
@@ -105,11 +92,14 @@ class Preprocessor:
         # while the table is as it was on its first entry would repeat itself forever.
         self._chain: list[tuple[str, str, int]] = [(os.path.realpath(path), path, 0)]
         self._macro_gen = 0
+        self._expander = MacroExpander(self.macros, self.diag)
         text = self._read(path)
         if text is None:
             self.diag.error(None, f"cannot read '{path}'")
         else:
-            self._process(path, text)
+            # Past the expansion budget (reported), the rest would be expanded wrongly: stop.
+            with contextlib.suppress(ExpansionBudgetExceeded):
+                self._process(path, text)
         return SourceText(
             "\n".join(self._out) + "\n", self._map, self._paths, self._includes, self._col_maps
         )
@@ -159,6 +149,7 @@ class Preprocessor:
     def _process(self, path: str, text: str) -> None:
         pid = self._path_id(path)
         self._includes.setdefault(path, [])
+        self._expander.add_source(len(text))
         instance = self._instances
         self._instances += 1
         lines = text.split("\n")
@@ -218,9 +209,9 @@ class Preprocessor:
                     if opened is not None:
                         comment_start = SourcePos(path, src_line, opened + 1)
                 if active:
-                    if self.macros and self._macro_pattern().search(raw):
-                        raw, cmap = self._expand_line(
-                            raw, start_in_comment, SourcePos(path, src_line, 1)
+                    if self._expander.uses_macros(raw):
+                        raw, cmap = self._expander.expand_line(
+                            raw, start_in_comment, SourcePos(path, src_line, 1), self._macro_gen
                         )
                         self._col_maps[len(out)] = cmap
                     out.append(raw)
@@ -306,7 +297,6 @@ class Preprocessor:
             if ident:
                 if self.macros.pop(ident.group(0), None) is not None:
                     self._macro_gen += 1
-                self._macro_re = None
             else:
                 self.diag.error(pos, "#undef needs a macro name")
             return None
@@ -346,7 +336,7 @@ class Preprocessor:
 
     def _include(self, rest: str, pos: SourcePos, current: str) -> None:
         if rest and rest[0] not in '"<' and self.macros:
-            rest = self._expand_text(rest, pos).strip()
+            rest = self._expander.expand_text(rest, pos, self._macro_gen).strip()
         m = re.match(r'"([^"]+)"|<([^>]+)>', rest)
         if not m:
             self.diag.error(pos, '#include expects "FILE" or <FILE>')
@@ -434,116 +424,6 @@ class Preprocessor:
         if self.macros.get(name) != macro:
             self.macros[name] = macro
             self._macro_gen += 1
-            self._macro_re = None
-
-    # -- macro expansion ----------------------------------------------------------------------
-    def _macro_pattern(self) -> re.Pattern[str]:
-        if self._macro_re is None:
-            names = sorted(self.macros, key=len, reverse=True)
-            self._macro_re = re.compile(r"\b(?:" + "|".join(map(re.escape, names)) + r")\b")
-        return self._macro_re
-
-    def _expand_line(
-        self, line: str, in_comment: bool, pos: SourcePos
-    ) -> tuple[str, list[tuple[int, int, bool]]]:
-        """Expand macros in the code parts of `line` (not in comments or literals).
-
-        Also returns the line's column map: (output column, source column, verbatim) pieces,
-        so that positions in expanded text point back into the original line.
-        """
-        segments, _, _ = comment_segments(line, in_comment)
-        out: list[str] = []
-        cmap: list[tuple[int, int, bool]] = []
-        out_len = src_off = 0
-        for text, code in segments:
-            if code:
-                pieces: list[tuple[int, int, bool]] = []
-                try:
-                    expanded = self._expand_text(text, pos, pieces=pieces)
-                except _ExpansionError as e:
-                    self.diag.error(pos, str(e))
-                    expanded, pieces = text, [(0, 0, True)]
-                cmap.extend((out_len + o, src_off + src, v) for o, src, v in pieces)
-            else:
-                expanded = text
-                cmap.append((out_len, src_off, True))
-            out.append(expanded)
-            out_len += len(expanded)
-            src_off += len(text)
-        return "".join(out), cmap
-
-    def _expand_text(
-        self,
-        text: str,
-        pos: SourcePos,
-        hide: frozenset[str] = frozenset(),
-        pieces: list[tuple[int, int, bool]] | None = None,
-        depth: int = 0,
-    ) -> str:
-        """Expand macros in a code fragment without comments; string literals are kept.
-
-        `pieces` (top level only) receives (output offset, source offset, verbatim) for each
-        piece of output: verbatim text, or the expansion of the macro invoked at that offset.
-        """
-        if depth > MAX_EXPANSION_DEPTH:
-            raise _ExpansionError(f"macro expansion nested more than {MAX_EXPANSION_DEPTH} deep")
-        out: list[str] = []
-        out_len = 0
-
-        def emit(piece: str, src: int, verbatim: bool) -> None:
-            nonlocal out_len
-            if not piece:
-                return
-            if pieces is not None:
-                pieces.append((out_len, src, verbatim))
-            out.append(piece)
-            out_len += len(piece)
-            if out_len > MAX_EXPANDED_LINE:
-                raise _ExpansionError("macro expansion is too large (over 1 MB on one line)")
-
-        i = verbatim_from = 0
-        n = len(text)
-        while True:
-            m = LEXEME.search(text, i)
-            if m is None:
-                break
-            tok = m.group(0)
-            i = m.end()
-            macro = self.macros.get(tok)
-            if macro is None or tok in hide or not (tok[0].isalpha() or tok[0] == "_"):
-                continue
-            if macro.params is None:
-                end = i
-                expansion = self._expand_text(macro.body, pos, hide | {tok}, None, depth + 1)
-            else:
-                # Function-like: needs "(" args ")" on the same line; otherwise not a call.
-                j = i
-                while j < n and text[j] in " \t":
-                    j += 1
-                if j >= n or text[j] != "(":
-                    continue
-                args, end = split_args(text, j)
-                if end < 0:
-                    self.diag.error(pos, f"unterminated argument list for macro '{tok}'")
-                    break
-                if len(args) != len(macro.params) and not (not macro.params and args == [""]):
-                    self.diag.error(
-                        pos,
-                        f"macro '{tok}' expects {len(macro.params)} arguments, got {len(args)}",
-                    )
-                    i = end
-                    continue
-                expanded_args = {
-                    p: self._expand_text(a.strip(), pos, hide, None, depth + 1)
-                    for p, a in zip(macro.params, args, strict=False)
-                }
-                body = substitute_params(macro.body, expanded_args)
-                expansion = self._expand_text(body, pos, hide | {tok}, None, depth + 1)
-            emit(text[verbatim_from : m.start()], verbatim_from, True)
-            emit(expansion, m.start(), False)
-            verbatim_from = i = end
-        emit(text[verbatim_from:], verbatim_from, True)
-        return "".join(out)
 
     # -- #if expressions ----------------------------------------------------------------------
     def _eval_condition(self, expr: str, pos: SourcePos) -> bool:
@@ -552,13 +432,9 @@ class Preprocessor:
             return "1" if (m.group(1) or m.group(2)) in self.macros else "0"
 
         expr = re.sub(r"\bdefined\s*(?:\(\s*([A-Za-z_]\w*)\s*\)|([A-Za-z_]\w*))", repl, expr)
-        expr = self._expand_text(expr, pos)
+        expr = self._expander.expand_text(expr, pos, self._macro_gen)
         try:
             return ConditionParser(expr).parse() != 0
         except ConditionError as e:
             self.diag.error(pos, f"invalid #if expression: {e}")
             return False
-
-
-class _ExpansionError(Exception):
-    """Macro expansion that would not end or would not fit."""

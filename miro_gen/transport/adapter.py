@@ -30,7 +30,7 @@ from miro_gen.exceptions import (
     TRANSIENT,
     CompletionStatus,
 )
-from miro_gen.log import logger
+from miro_gen.log import PeerWarnings, logger
 from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.runtime.rpc import (
     Invoker,
@@ -44,6 +44,7 @@ from miro_gen.transport.dispatch import Dispatcher
 from miro_gen.transport.reactor import Reactor
 
 _log = logger("MIRO")
+_peer_warnings = PeerWarnings(_log)  # what peers send: rate-limited, with counts
 
 DEFAULT_WORKERS = 16
 MAX_PENDING = 10_000  # requests queued for workers; beyond this, TRANSIENT (try again later)
@@ -116,13 +117,13 @@ class ObjectAdapter:
     def _receive(self, parts: list[bytes]) -> _Call | list[bytes] | None:
         """A message: the call to run, an immediate reply, or None (dropped)."""
         if len(parts) != 3:
-            _log.warning("dropped a request of %d frames", len(parts) - 1)
+            _peer_warnings.warning("dropped a request of %d frames", len(parts) - 1)
             return None
         peer, header, body = parts
         try:
             req = frames.decode_request(header)
         except frames.FrameError as e:
-            _log.warning("dropped a request: %s", e)
+            _peer_warnings.warning("dropped a request: %s", e)
             return None
         servant = self._servants.get(req.key)
         if servant is None:

@@ -15,7 +15,7 @@ from typing import Any
 
 import zmq
 
-from miro_gen.log import logger
+from miro_gen.log import PeerWarnings, logger
 from miro_gen.runtime import registry
 from miro_gen.runtime.datatypes import IdlType
 from miro_gen.transport import offers, sockets
@@ -34,6 +34,7 @@ from miro_gen.transport.event_supplier import HWM, LARGE_EVENT
 from miro_gen.transport.gaps import GapCounter, gap
 
 _log = logger("MIRO")
+_peer_warnings = PeerWarnings(_log)  # what peers send: rate-limited, with counts
 
 TURN_EVENTS = 4096  # events a consumer delivers per reactor turn, so other handlers get a turn
 TURN_FRAMES = 256  # frames a consumer reads per reactor turn
@@ -156,7 +157,7 @@ class StructuredPushConsumer:
             try:
                 self._parse(parts)
             except (ValueError, StructError, UnicodeDecodeError) as e:
-                _log.warning("dropped an event frame on %s: %s", self.channel.name, e)
+                _peer_warnings.warning("dropped an event frame on %s: %s", self.channel.name, e)
         else:
             self._schedule()  # more frames may wait: read them next turn
         if len(queue):
@@ -183,7 +184,7 @@ class StructuredPushConsumer:
             try:
                 event.payload = w.cls.deserialize(event.payload)
             except Exception as e:  # MARSHAL: a corrupt payload is reported, not delivered
-                _log.warning("dropped an undecodable %s event: %s", event.type_name, e)
+                _peer_warnings.warning("dropped an undecodable %s event: %s", event.type_name, e)
                 continue
             n += 1
             self.lag = time.time() - event.publish_time
@@ -218,7 +219,7 @@ class StructuredPushConsumer:
                 pass  # its frames wait for the search (_hold)
             elif (type_name, type_hash) not in self._unknown and len(self._unknown) < 1000:
                 self._unknown.add((type_name, type_hash))
-                _log.warning(
+                _peer_warnings.warning(
                     "events %s/%s have type hash %s, which no imported generated type has: "
                     "dropped (import the type's generated module, or regenerate it)",
                     domain,
@@ -309,7 +310,7 @@ class StructuredPushConsumer:
             try:
                 self._parse(parts)
             except (ValueError, StructError, UnicodeDecodeError) as e:
-                _log.warning("dropped an event frame on %s: %s", self.channel.name, e)
+                _peer_warnings.warning("dropped an event frame on %s: %s", self.channel.name, e)
         if len(self.queue):
             self._deliver()
 

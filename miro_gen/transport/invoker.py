@@ -32,12 +32,13 @@ import zmq
 from zmq.backend import Socket as _Socket
 
 from miro_gen.exceptions import COMM_FAILURE, MARSHAL, TIMEOUT, TRANSIENT, CompletionStatus
-from miro_gen.log import logger
+from miro_gen.log import PeerWarnings, logger
 from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.runtime.rpc import Reply, ReplyStatus, Servant
 from miro_gen.transport import frames, sockets
 
 _log = logger("MIRO")
+_peer_warnings = PeerWarnings(_log)  # what peers send: rate-limited, with counts
 
 CONNECT_TIMEOUT = 2.0  # seconds a call waits for a connection before TRANSIENT
 # The minor code of a TRANSIENT for a connection refused at the handshake (no key, or the
@@ -269,12 +270,14 @@ class ZmqInvoker:
         """A message that is not an ok reply to `request_id`: an exception reply to it, or
         None (a late reply to an earlier call, or a malformed one: logged and dropped)."""
         if len(parts) != 2:
-            _log.warning("dropped a reply of %d frames from %s", len(parts), conn.endpoint)
+            _peer_warnings.warning(
+                "dropped a reply of %d frames from %s", len(parts), conn.endpoint
+            )
             return None
         try:
             head = frames.decode_reply(parts[0])
         except frames.FrameError as e:
-            _log.warning("dropped a reply from %s: %s", conn.endpoint, e)
+            _peer_warnings.warning("dropped a reply from %s: %s", conn.endpoint, e)
             return None
         if head.request_id != request_id:  # a late reply to an earlier call
             return None

@@ -26,7 +26,7 @@ import MiroNaming
 import MiroNaming__POA
 
 from miro_gen.exceptions import BAD_PARAM, COMM_FAILURE, NO_RESOURCES, TIMEOUT, TRANSIENT
-from miro_gen.log import logger
+from miro_gen.log import PeerWarnings, logger
 from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.runtime.rpc import nonblocking
 from miro_gen.transport.adapter import ObjectAdapter
@@ -34,6 +34,7 @@ from miro_gen.transport.invoker import REFUSED_MINOR, ZmqInvoker
 from miro_gen.transport.reactor import Reactor
 
 _log = logger("MIRO")
+_peer_warnings = PeerWarnings(_log)  # what peers send: rate-limited, with counts
 
 NAMING_KEY = b"NameService"
 NAMING_OWNER = "miro-naming"  # the owner of the entries the naming service binds itself
@@ -99,7 +100,6 @@ class Registry(MiroNaming__POA.Registry):
         self._counts: dict[str, int] = {}  # owner -> live entries
         self._lock = threading.Lock()
         self.refused = 0  # binds refused: another owner's name, a quota, the table's size
-        self._warned = 0.0
 
     @nonblocking
     def bind(self, binding: MiroNaming.Entry, owner: str, lease_ms: int) -> None:
@@ -136,10 +136,7 @@ class Registry(MiroNaming__POA.Registry):
 
     def _refuse(self, text: str, *args: object) -> None:
         self.refused += 1
-        now = time.monotonic()
-        if now - self._warned >= 10:  # a flood must not flood the log too
-            self._warned = now
-            _log.warning("refused to bind " + text, *args)
+        _peer_warnings.warning("refused to bind " + text, *args, key="refused to bind")
 
     def keep(self, binding: MiroNaming.Entry) -> None:
         """Bind an entry of the naming service's own (a channel it hosts), without a lease."""

@@ -26,7 +26,6 @@ import os
 import queue
 import socket
 import threading
-import time
 import weakref
 from dataclasses import dataclass
 from typing import Any
@@ -35,12 +34,13 @@ import zmq
 from zmq.utils import z85
 from zmq.utils.monitor import parse_monitor_message
 
-from miro_gen.log import logger
+from miro_gen.log import PeerWarnings, logger
 from miro_gen.transport.keyfiles import DEFAULT_KEY as DEFAULT_KEY  # (its users look here)
 from miro_gen.transport.keyfiles import read_key_pair
 from miro_gen.transport.options import UsageError
 
 _log = logger("MIRO")
+_peer_warnings = PeerWarnings(_log)  # what peers send: rate-limited, with counts
 
 DEFAULT_MAX_MESSAGE_SIZE = 8 << 20  # bytes: a 1080p RGB image fits; omniORB's default is 2 MB
 QUEUE_BYTES_PER_PEER = 128 << 20  # what a socket may hold for one peer, at most
@@ -283,7 +283,6 @@ def _say_once(line: str) -> None:
 
 ZAP_ENDPOINT = "inproc://zeromq.zap.01"
 _EVENTS = zmq.EVENT_ACCEPTED | zmq.EVENT_DISCONNECTED | zmq.EVENT_MONITOR_STOPPED
-_NOTICE_EVERY = 10.0  # seconds between two warnings about refused connections
 _domains = itertools.count(1)
 
 
@@ -300,7 +299,6 @@ class Admission(threading.Thread):
         self._new: queue.SimpleQueue[tuple[bytes, zmq.Socket[Any]]] = queue.SimpleQueue()
         self._live: dict[bytes, set[int]] = {}  # domain -> descriptors of its connections
         self._monitors: dict[zmq.Socket[Any], bytes] = {}
-        self._noticed = 0.0
         self._ready = threading.Event()
         self._zap: zmq.Socket[Any] | None = None
         self.start()
@@ -402,14 +400,9 @@ class Admission(threading.Thread):
             self.admitted += 1
         zap.send_multipart([b"1.0", request_id, status, text, b"", b""])
         if status != b"200":
-            now = time.monotonic()
-            if now - self._noticed >= _NOTICE_EVERY:
-                self._noticed = now
-                _log.warning(
-                    "refused a connection from %s: %s",
-                    address.decode(errors="replace"),
-                    text.decode(),
-                )
+            _peer_warnings.warning(
+                "refused a connection from %s: %s", address.decode(errors="replace"), text.decode()
+            )
 
 
 _admissions: dict[int, Admission] = {}

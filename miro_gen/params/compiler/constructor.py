@@ -28,6 +28,7 @@ from miro_gen.params.compiler.ctor_exprs import (
 from miro_gen.params.compiler.cxx_numbers import parse_number
 from miro_gen.params.compiler.expressions import parser
 from miro_gen.params.compiler.model import ItemDecl
+from miro_gen.params.compiler.nesting import MAX_NESTING, too_deep
 
 
 def compile_constructor(
@@ -43,6 +44,12 @@ def compile_constructor(
     translator: Translator | None = None
     out: list[str] = []
     for block in item.constructors:
+        deep = too_deep(block.text)
+        if deep is not None:
+            own.error(
+                _pos(block.pos, *deep), f"constructor: brackets nested more than {MAX_NESTING} deep"
+            )
+            continue
         try:
             tree = parser().parse(block.text, start="start")
             if translator is None:

@@ -31,6 +31,7 @@ from miro_gen.params.compiler.cxx_numbers import (
     parse_number,
     typed,
 )
+from miro_gen.params.compiler.nesting import MAX_NESTING, too_deep
 
 __all__ = [
     "ExprError",
@@ -192,6 +193,8 @@ def parser() -> lark.Lark:
 
 def evaluate_args(text: str, lookup: Lookup | None = None) -> list[Value]:
     """The values of `text`: one expression, or several separated by commas."""
+    if too_deep(text):
+        raise ExprError(f"brackets nested more than {MAX_NESTING} deep")
     try:
         tree = parser().parse(text, start="default_args")
         evaluator = Evaluator(lookup)

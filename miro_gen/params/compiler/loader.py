@@ -33,6 +33,9 @@ _PARAM_ATTRS = frozenset(
     ["name", "type", "default", "measure", "values", "static_const", "inherited", "fullname"]
 )
 _INCLUDE_KINDS = ("include", "Include", "src_Include")
+# Files being read at once through includes (as the IDL preprocessor's limit): a chain of
+# thousands of files would otherwise end in Python's recursion limit, with no position.
+MAX_INCLUDE_DEPTH = 200
 _IDENT = re.compile(r"[A-Za-z_]\w*$")
 _SCOPED = re.compile(r"(::)?[A-Za-z_]\w*(::[A-Za-z_]\w*)*$")
 _NAMESPACE = re.compile(r"[A-Za-z_]\w*(::[A-Za-z_]\w*)*$")
@@ -87,6 +90,8 @@ class Loader:
         self.diag = diag
         self.files: dict[Path, ParamsFile] = {}
         self._loading: set[Path] = set()
+        # each file's items by class name (the test for an item defined twice)
+        self._classes: dict[Path, dict[str, ItemDecl]] = {}
 
     def load(self, path: Path, pos: SourcePos | None = None) -> ParamsFile | None:
         key = path.resolve()
@@ -190,7 +195,9 @@ class Loader:
             inc.idl_file = self._find(f, folder_part, stem[:-1] + ".idl")
             return
         found = self._find(f, folder_part, stem + ".xml")
-        if found is not None:
+        if found is not None and len(self._loading) >= MAX_INCLUDE_DEPTH:
+            self.diag.error(inc.pos, f"includes nested more than {MAX_INCLUDE_DEPTH} deep")
+        elif found is not None:
             loaded = self.load(found, inc.pos)
             if loaded is not None:
                 inc.params_file = found
@@ -250,12 +257,13 @@ class Loader:
         if item.parent and not _SCOPED.match(item.parent.removesuffix("::")):
             self.diag.error(pos, f"parent {item.parent!r} is not a C++ class name")
             return
-        for other in f.items:
-            if other.class_name == item.class_name:
-                self.diag.error(
-                    pos, f"{item.class_name} is defined twice (first on line {other.pos.line})"
-                )
-                return
+        classes = self._classes.setdefault(f.path, {})
+        other = classes.get(item.class_name)
+        if other is not None:
+            self.diag.error(
+                pos, f"{item.class_name} is defined twice (first on line {other.pos.line})"
+            )
+            return
         seen: dict[str, ParamDecl] = {}
         for child in elem:
             if not isinstance(child.tag, str) or child.tag == "documentation":
@@ -280,6 +288,7 @@ class Loader:
             else:
                 self._unexpected(f, child, "config_item")
         f.items.append(item)
+        classes[item.class_name] = item
 
     def _param(self, f: ParamsFile, elem: etree._Element) -> ParamDecl | None:
         pos = f.pos(elem.sourceline)
