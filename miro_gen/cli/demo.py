@@ -126,11 +126,11 @@ def demo_main(argv: Sequence[str]) -> int:
     colour = ns.colour == "always" or (ns.colour == "auto" and sys.stdout.isatty())
     console = DemoConsole(sys.stdout, [s.name for s in part.services], colour)
     supervisor = Supervisor(spec, part, console)
-    interrupted = threading.Event()
+    interrupted: list[int] = []  # (no Event: a handler must not take locks, see stop_from_signal)
 
-    def on_signal(*_: object) -> None:
-        interrupted.set()
-        supervisor.stop()
+    def on_signal(signum: int, _frame: object) -> None:
+        interrupted.append(signum)
+        supervisor.stop_from_signal()
 
     old = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
     if ns.duration:  # counted from when every example is up, as a user watching would
@@ -148,6 +148,6 @@ def demo_main(argv: Sequence[str]) -> int:
         for sig, handler in old.items():
             signal.signal(sig, handler)
     console.line("naming", "stopped")
-    if status == 0 and interrupted.is_set() and not supervisor.all_came_up:
+    if status == 0 and interrupted and not supervisor.all_came_up:
         return 128 + signal.SIGINT  # Ctrl-C before every example was up
     return status

@@ -95,7 +95,7 @@ def launch_main(argv: Sequence[str]) -> int:
     )
     supervisor = Supervisor(spec, part, console)
     old = {
-        s: signal.signal(s, lambda *_: supervisor.stop())
+        s: signal.signal(s, lambda *_: supervisor.stop_from_signal())
         for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
     }
     if ns.duration > 0:

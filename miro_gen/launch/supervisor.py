@@ -15,6 +15,7 @@ stops them in the same way when the launch itself is killed.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import signal
@@ -270,6 +271,9 @@ class Supervisor:
         self.started_order: list[Child] = []
         self.naming_url = part.naming_url
         self.tree: ProcessTree | None = None  # from run(): the process groups it owns
+        self._signals = os.pipe()  # stop_from_signal -> _stop_on_signals
+        self._signals_closed = False
+        threading.Thread(target=self._stop_on_signals, name="launch-signals", daemon=True).start()
 
     # ---- the loop -------------------------------------------------------------------------------
 
@@ -294,6 +298,8 @@ class Supervisor:
                 self.watcher.close()
             shutil.rmtree(self.workdir, ignore_errors=True)
             self.console.close()
+            self._signals_closed = True  # (before the close: handlers run on this thread too)
+            os.close(self._signals[1])  # its thread reads the end of the pipe and returns
         if self.failure is not None:
             self.console.note(f"stopped: {self.failure}")
             return 1
@@ -322,11 +328,34 @@ class Supervisor:
                 return
 
     def stop(self) -> None:
-        """Stop everything (from a signal handler or another thread); a second call kills."""
+        """Stop everything (from another thread; a signal handler calls `stop_from_signal`);
+        a second call kills."""
         if self.stopping.is_set():
             self.force.set()
         self.stopping.set()
         self.wake.set()
+
+    def stop_from_signal(self) -> None:
+        """`stop()`, safe in a signal handler. A handler runs on the main thread between two
+        bytecodes, possibly while that thread holds the lock of the Event it is waiting on;
+        `Event.set()` there would wait for that lock forever. So the handler only writes a
+        byte to a pipe (no lock) and a thread of the supervisor calls `stop()`."""
+        if not self._signals_closed:
+            with contextlib.suppress(OSError):
+                os.write(self._signals[1], b"s")
+
+    def _stop_on_signals(self) -> None:
+        """The thread behind `stop_from_signal`: one `stop()` per byte, until the pipe closes."""
+        while True:
+            try:
+                got = os.read(self._signals[0], 16)
+            except OSError:
+                return
+            if not got:
+                os.close(self._signals[0])
+                return
+            for _ in got:
+                self.stop()
 
     def _all_finished(self) -> bool:
         services = [c for c in self.children if c.name != NAMING_LABEL]
