@@ -144,9 +144,7 @@ def resolve(t: Any, dims: list[int] | tuple[int, ...] = ()) -> Ty:
             raise TypeError(f"not a codec type: {t.name}")
         return Ty("prim", prim=t.name)
     if isinstance(t, ast.StringType):
-        if t.wide:
-            raise TypeError("not a codec type: wstring")
-        return Ty("string", bound=t.bound)
+        return Ty("wstring" if t.wide else "string", bound=t.bound)
     if isinstance(t, ast.SequenceType):
         return Ty("seq", elem=resolve(t.element), bound=t.bound)
     if isinstance(t, ast.NamedType):
@@ -343,6 +341,13 @@ def fit_utf8(text: str, bound: int | None) -> str:
     return text.encode("utf-8")[:bound].decode("utf-8", "ignore")
 
 
+def fit_utf16(text: str, bound: int | None) -> str:
+    """`text` cut to at most `bound` UTF-16 code units (on a character boundary)."""
+    while bound is not None and len(text.encode("utf-16-le")) > 2 * bound:
+        text = text[:-1]
+    return text
+
+
 STRING_CHARS = st.characters(exclude_characters="\0", exclude_categories=("Cs",))
 
 
@@ -390,6 +395,9 @@ def _values(ty: Ty, oracle: bool, depth: int) -> st.SearchStrategy[Any]:
     if k == "string":
         size = MAX_LEN * 2 if ty.bound is None else ty.bound
         return st.text(STRING_CHARS, max_size=size).map(lambda s: fit_utf8(s, ty.bound))
+    if k == "wstring":  # the bound counts UTF-16 units
+        size = MAX_LEN * 2 if ty.bound is None else ty.bound
+        return st.text(STRING_CHARS, max_size=size).map(lambda s: fit_utf16(s, ty.bound))
     if k == "seq":
         assert ty.elem is not None
         size = MAX_LEN if ty.bound is None else min(ty.bound, MAX_LEN + 2)

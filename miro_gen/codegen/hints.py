@@ -75,7 +75,7 @@ class TypeHints:
             case "prim":
                 assert shape.prim is not None
                 return shape.prim.py
-            case "string":
+            case "string" | "wstring":
                 return "str"
             case "octets":
                 return "bytes"
@@ -115,7 +115,7 @@ class TypeHints:
             case "prim":
                 assert shape.prim is not None
                 return Default(shape.prim.default)
-            case "string":
+            case "string" | "wstring":
                 return Default('""')
             case "octets":
                 return Default('b""')
@@ -146,7 +146,7 @@ class TypeHints:
         if elem.kind == "object":
             m.use("cdr")
             return f"[_cdr.ObjectRef()] * {n}"
-        if elem.kind in ("prim", "string", "octets", "enum"):
+        if elem.kind in ("prim", "string", "wstring", "octets", "enum"):
             return f"[{self.default(elem, m).value}] * {n}"
         if elem.kind == "seq":
             fresh = self._zeros(elem, m) if elem.numbers is not None else "[]"

@@ -45,9 +45,12 @@ Record = TypeVar("Record", StructContext, ExceptionContext)
 class DataLowering:
     """Contexts of data declarations, written into the module contexts passed in."""
 
-    def __init__(self, scope: Scope, hints: TypeHints) -> None:
+    def __init__(
+        self, scope: Scope, hints: TypeHints, ros2_hashes: dict[str, str] | None = None
+    ) -> None:
         self.scope = scope
         self.hints = hints
+        self.ros2_hashes = ros2_hashes or {}  # RIHS01 type hashes of ROS 2 structs
 
     # ---- enums, typedefs, constants --------------------------------------------------------
     def enum(self, d: ast.Enum, m: ModuleContext, nested: bool) -> EnumContext:
@@ -104,6 +107,10 @@ class DataLowering:
         _check_xcdr1(d, members)
         struct = self._record(StructContext, d, members, names.STRUCT_ATTRIBUTES, m, nested)
         struct.bases = [self.scope.ref(d.base, m)] if d.base is not None else []
+        ros2_hash = self.ros2_hashes.get(d.scoped_name)
+        if ros2_hash is not None:
+            struct.ros2_type = "/".join(d.scope_path)
+            struct.ros2_type_hash = ros2_hash
         return struct
 
     def exception(self, d: ast.Exception_, m: ModuleContext, nested: Nested) -> ExceptionContext:

@@ -16,12 +16,18 @@ from typing import Any
 from miro_gen.diagnostics import SourcePos
 from miro_gen.idl import ast
 
-_IGNORED = frozenset(("pos", "doc", "instance", "pragmas"))
+# Where and how a declaration was written, and (once resolved) what its names stand for.
+_IGNORED = frozenset(("pos", "doc", "instance", "pragmas", "decl", "full", "enum"))
 
 
 def drop_identical(definitions: list[ast.Definition]) -> list[ast.Definition]:
     """`definitions` without the declarations that repeat an earlier one exactly."""
     return _walk(definitions, (), {})
+
+
+def same_declaration(a: ast.Decl, b: ast.Decl) -> bool:
+    """Whether two declarations say the same, positions and comments aside."""
+    return _signature(a) == _signature(b)
 
 
 def _walk(
