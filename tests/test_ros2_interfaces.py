@@ -13,6 +13,7 @@ test_msgs and what they use; the `ros2` extra installs them).
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 import json
 import sys
@@ -318,8 +319,8 @@ def to_rosbags(store: Any, ty: H.Ty, v: Any) -> Any:
 
 def plain(v: Any) -> Any:
     """Values of both sides as nested lists and tuples of Python numbers and strings."""
-    if hasattr(v, "__dataclass_fields__"):
-        return tuple(plain(getattr(v, f)) for f in v.__dataclass_fields__ if f != "__msgtype__")
+    if dataclasses.is_dataclass(v):  # rosbags' constants are ClassVars, not fields
+        return tuple(plain(getattr(v, f.name)) for f in dataclasses.fields(v))
     if isinstance(v, bytes | bytearray):
         return list(v)
     if hasattr(v, "tolist"):
