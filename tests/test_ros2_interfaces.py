@@ -320,7 +320,8 @@ def to_rosbags(store: Any, ty: H.Ty, v: Any) -> Any:
 def plain(v: Any) -> Any:
     """Values of both sides as nested lists and tuples of Python numbers and strings."""
     if dataclasses.is_dataclass(v):  # rosbags' constants are ClassVars, not fields
-        return tuple(plain(getattr(v, f.name)) for f in dataclasses.fields(v))
+        fields = [f.name for f in dataclasses.fields(v) if f.name != "__msgtype__"]
+        return tuple(plain(getattr(v, name)) for name in fields)
     if isinstance(v, bytes | bytearray):
         return list(v)
     if hasattr(v, "tolist"):
