@@ -27,7 +27,7 @@ def drop_identical(definitions: list[ast.Definition]) -> list[ast.Definition]:
 
 def same_declaration(a: ast.Decl, b: ast.Decl) -> bool:
     """Whether two declarations say the same, positions and comments aside."""
-    return _signature(a) == _signature(b)
+    return bool(_signature(a) == _signature(b))
 
 
 def _walk(
