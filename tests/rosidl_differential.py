@@ -1,10 +1,11 @@
 """miro-idl against ROS 2's own tools on ROS 2 interface files (the Kilted wheels from PyPI).
 
-Shared by tests/test_ros2_interfaces.py and runnable on its own over any `share` folder:
+Shared by tests/test_ros2_interfaces.py and runnable on its own (with the ROS 2 environment of
+tests/ros2_env.py, made if it is not there):
 
-    python tests/rosidl_differential.py [SHARE]
+    python tests/rosidl_differential.py
 
-For each interface of each package under SHARE (`<pkg>/msg/*.msg`, `srv/*.srv`,
+For each interface of each package under the environment's `share/` (`<pkg>/msg/*.msg`, `srv/*.srv`,
 `action/*.action`, and the `.idl` files rosidl_adapter made of them or that stand alone):
 - the `.msg`/`.srv`/`.action` and its `.idl` (with `--ros2`) give the same AST JSON, apart from
   files and lines;
@@ -22,6 +23,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
+import ros2_env
+from ros2_env import Ros2Env
+
 from miro_gen.idl import ast, compile_idl
 from miro_gen.idl.ast_json import specifications_json
 
@@ -31,22 +35,6 @@ ROSIDL_BASIC = {
     "short": "int16", "unsigned short": "uint16", "long": "int32", "unsigned long": "uint32",
     "long long": "int64", "unsigned long long": "uint64",
 }  # fmt: skip
-
-
-def default_share() -> Path | None:
-    """The `share` folder the ROS 2 wheels installed into this environment, if they did."""
-    share = Path(sys.prefix) / "share"
-    return share if (share / "std_msgs" / "msg" / "Header.idl").is_file() else None
-
-
-def rosidl_unavailable() -> str | None:
-    if default_share() is None:
-        return "the ROS 2 interface wheels are not installed (pip install -e '.[ros2]')"
-    try:
-        import rosidl_parser.parser  # noqa: F401
-    except ImportError as e:
-        return f"rosidl_parser is not importable ({e}): pip install -e '.[ros2]'"
-    return None
 
 
 def interface_files(share: Path) -> list[Path]:
@@ -135,75 +123,29 @@ def _miro_type(t: Any, dims: list[int] | None = None) -> str:
     raise AssertionError(t)
 
 
-def rosidl_structs(path: Path, share: Path) -> dict[str, Any]:
-    """The same, from rosidl_parser's parse of an `.idl` file (with the types it derives; the
-    service and action structs of the type descriptions are miro-idl's alone)."""
-    from rosidl_parser import definition as rd
-    from rosidl_parser.parser import parse_idl_file
-
-    content = parse_idl_file(rd.IdlLocator(share, path.relative_to(share))).content
-    out: dict[str, Any] = {}
-
-    def message(msg: Any) -> None:
-        s = msg.structure
-        name = "::".join(s.namespaced_type.namespaced_name())
-        members = [(m.name, _rosidl_type(m.type), _rosidl_default(m)) for m in s.members]
-        # rosidl_parser types a string constant `string<len(value)>` (`const string` in the
-        # .idl): compared as the `string` it is declared.
-        consts = [
-            (c.name, _rosidl_type(c.type).split("<")[0], _plain(c.value)) for c in msg.constants
-        ]
-        out[name] = (members, consts)
-
-    def service(srv: Any) -> None:
-        for msg in (srv.request_message, srv.response_message, srv.event_message):
-            message(msg)
-
-    for el in content.elements:
-        if isinstance(el, rd.Message):
-            message(el)
-        elif isinstance(el, rd.Service):
-            service(el)
-        elif isinstance(el, rd.Action):
-            for msg in (el.goal, el.result, el.feedback, el.feedback_message):
-                message(msg)
-            service(el.send_goal_service)
-            service(el.get_result_service)
-    return out
+def rosidl_structs(env: Ros2Env, paths: list[Path]) -> dict[Path, Any]:
+    """The same, from rosidl_parser's parse of each `.idl` file (with the types it derives; the
+    service and action structs of the type descriptions are miro-idl's alone), by file: run in
+    the ROS 2 environment (tests/ros2/rosidl_structs.py), in JSON's shapes."""
+    rel = [str(p.relative_to(env.share)) for p in paths]
+    got = env.run_json("rosidl_structs.py", str(env.share), *rel)
+    return {env.share / f: structs for f, structs in got.items()}
 
 
-def _rosidl_default(m: Any) -> Any:
-    return (
-        _plain(m.get_annotation_value("default")["value"]) if m.has_annotation("default") else None
-    )
+def as_json(structs: dict[str, Any]) -> Any:
+    """miro's side in the shapes the JSON of rosidl's has (lists for tuples)."""
+    return json.loads(json.dumps(structs))
 
 
-def _rosidl_type(t: Any) -> str:
-    from rosidl_parser import definition as rd
-
-    if isinstance(t, rd.Array):
-        return f"{_rosidl_type(t.value_type)}[{t.size}]"
-    if isinstance(t, rd.BoundedSequence):
-        return f"sequence<{_rosidl_type(t.value_type)}, {t.maximum_size}>"
-    if isinstance(t, rd.UnboundedSequence):
-        return f"sequence<{_rosidl_type(t.value_type)}>"
-    if isinstance(t, rd.BoundedString):
-        return f"string<{t.maximum_size}>"
-    if isinstance(t, rd.BoundedWString):
-        return f"wstring<{t.maximum_size}>"
-    if isinstance(t, rd.UnboundedString):
-        return "string"
-    if isinstance(t, rd.UnboundedWString):
-        return "wstring"
-    if isinstance(t, rd.BasicType):
-        return str(t.typename)
-    if isinstance(t, rd.NamespacedType):
-        return "::".join(t.namespaced_name())
-    raise AssertionError(t)
+def agrees(spec: ast.Specification, theirs: dict[str, Any]) -> bool:
+    """miro-idl's structs of a file are rosidl_parser's (`theirs`, from `rosidl_structs`) and
+    the service and action structs only miro-idl makes (for their type descriptions)."""
+    return as_json(miro_structs(spec)) == theirs | as_json(service_structs(spec))
 
 
-def compare(share: Path) -> dict[str, int]:
-    """Run every check over `share`; the counts, and the problems printed."""
+def compare(env: Ros2Env) -> dict[str, int]:
+    """Run every check over the environment's `share`; the counts, and the problems printed."""
+    share = env.share
     counts = {"interface files": 0, "idl files": 0, "same AST": 0, "rosidl agrees": 0}
     counts |= {"hashes": 0, "hashes equal": 0, "problems": 0}
 
@@ -219,10 +161,12 @@ def compare(share: Path) -> dict[str, int]:
             counts["same AST"] += 1
         else:
             problem(f"{f}: the AST differs from its .idl's")
-    for f in idl_files(share):
+    idls = idl_files(share)
+    theirs = rosidl_structs(env, idls)
+    for f in idls:
         counts["idl files"] += 1
         spec = compile_file(f, share)
-        if miro_structs(spec) == rosidl_structs(f, share) | _service_structs(spec):
+        if agrees(spec, theirs[f]):
             counts["rosidl agrees"] += 1
         else:
             problem(f"{f}: the structs differ from rosidl_parser's")
@@ -236,7 +180,7 @@ def compare(share: Path) -> dict[str, int]:
     return counts
 
 
-def _service_structs(spec: ast.Specification) -> dict[str, Any]:
+def service_structs(spec: ast.Specification) -> dict[str, Any]:
     """miro-idl's structs for the services and actions themselves (type descriptions only)."""
     wanted = ("request_message", "send_goal_service")
     out = {}
@@ -251,9 +195,10 @@ def _service_structs(spec: ast.Specification) -> dict[str, Any]:
 
 
 if __name__ == "__main__":
-    share = Path(sys.argv[1]) if len(sys.argv) > 1 else default_share()
-    if share is None:
-        sys.exit(f"no share folder: {rosidl_unavailable()}")
-    counts = compare(share)
+    try:
+        ros2 = ros2_env.make()
+    except ros2_env.Ros2EnvUnavailable as e:
+        sys.exit(f"no ROS 2 environment: {e}")
+    counts = compare(ros2)
     print(", ".join(f"{k}: {v}" for k, v in counts.items()))
     sys.exit(1 if counts["problems"] else 0)

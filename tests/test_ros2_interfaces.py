@@ -1,14 +1,18 @@
 """ROS 2 interfaces (`.msg`, `.srv`, `.action` and rosidl's `.idl`) against ROS 2's own tools,
 on every interface file the Kilted wheels from PyPI ship (common_interfaces, rcl_interfaces,
-test_msgs and what they use; the `ros2` extra installs them).
+test_msgs and what they use), installed in a virtual environment of their own
+(tests/ros2_env.py) and read from its `share/` folder.
 
 - Each `.msg`/`.srv`/`.action` compiles to the AST its `.idl` (rosidl_adapter's) compiles to.
 - Each `.idl` compiles, and its structs agree with rosidl_parser's parse
   (tests/rosidl_differential.py).
 - Every RIHS01 hash in the wheels' `.json` files equals miro-idl's, and the generated classes carry
   them (`_ros2_type`, `_ros2_type_hash`).
+- A new message of every type holds what rosidl_generator_py's class gives it (zeros and the
+  interface file's default values).
 - The generated CDR equals rosbags' (an independent ROS 2 codec, reading the `.msg` files) for
-  random values of every message type rosbags reads, and each side decodes the other's bytes.
+  random values of every message type, those rosidl derives for services and actions included,
+  and each side decodes the other's bytes.
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ from typing import Any
 
 import codegen_helpers as H
 import pytest
+import ros2_env
 import rosidl_differential as R
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -31,11 +36,11 @@ from miro_cli import run_miro_idl
 from miro_gen.diagnostics import CompileError, Diagnostics
 from miro_gen.idl import ast, compile_idl
 
-REASON = R.rosidl_unavailable()
-pytestmark = pytest.mark.skipif(REASON is not None, reason=REASON or "")
-SHARE = R.default_share() or Path("/nonexistent")
-INTERFACES = R.interface_files(SHARE) if REASON is None else []
-IDLS = R.idl_files(SHARE) if REASON is None else []
+ROS2, REASON = ros2_env.available()
+pytestmark = pytest.mark.skipif(ROS2 is None, reason=REASON or "")
+SHARE = ROS2.share if ROS2 is not None else Path("/nonexistent")
+INTERFACES = R.interface_files(SHARE)
+IDLS = R.idl_files(SHARE)
 
 
 def _id(p: Path) -> str:
@@ -51,10 +56,18 @@ def test_interface_file_gives_the_ast_of_its_idl(path: Path) -> None:
     assert R.miro_hashes(spec).items() >= R.json_hashes(path).items()
 
 
+@pytest.fixture(scope="module")
+def rosidl_parsed(ros2: ros2_env.Ros2Env) -> dict[Path, Any]:
+    """rosidl_parser's structs of every `.idl` file, by file (one run in the ROS 2 environment)."""
+    return R.rosidl_structs(ros2, IDLS)
+
+
 @pytest.mark.parametrize("path", IDLS, ids=_id)
-def test_idl_agrees_with_rosidl_parser_and_its_hashes(path: Path) -> None:
+def test_idl_agrees_with_rosidl_parser_and_its_hashes(
+    path: Path, rosidl_parsed: dict[Path, Any]
+) -> None:
     spec = R.compile_file(path, SHARE)
-    assert R.miro_structs(spec) == R.rosidl_structs(path, SHARE) | R._service_structs(spec)
+    assert R.agrees(spec, rosidl_parsed[path])
     want = R.json_hashes(path)
     assert {k: R.miro_hashes(spec).get(k) for k in want} == want
 
@@ -174,11 +187,20 @@ def test_cli_generates_ros2_types_with_their_hashes(tmp_path: Path) -> None:
     assert r.returncode == 0, r.stderr
     from_idl = {k: v.replace(b".idl", b".msg") for k, v in H.tree(idl_out).items()}
     assert from_idl == H.tree(out)  # the same code, but for the name of the source
+    r = run_miro_idl("-I", str(SHARE), "--ast-json", str(files[0]))
+    assert r.returncode == 0, r.stderr
+    by_name = {d["name"]: d for d in json.loads(r.stdout)["declarations"]}
+    want = R.json_hashes(files[0])
+    assert by_name["std_msgs::msg::Header"]["ros2_type_hash"] == want["std_msgs/msg/Header"]
+    time_hash = by_name["builtin_interfaces::msg::Time"]["ros2_type_hash"]
+    assert time_hash == R.json_hashes(files[1])["builtin_interfaces/msg/Time"]
     sys.path.insert(0, str(out))
     try:
         header = importlib.import_module("std_msgs.msg").Header
-        want = R.json_hashes(SHARE / "std_msgs/msg/Header.msg")["std_msgs/msg/Header"]
-        assert (header._ros2_type, header._ros2_type_hash) == ("std_msgs/msg/Header", want)
+        assert (header._ros2_type, header._ros2_type_hash) == (
+            "std_msgs/msg/Header",
+            want["std_msgs/msg/Header"],
+        )
     finally:
         sys.path.remove(str(out))
         for name in [
@@ -207,9 +229,16 @@ def rosbags_types() -> dict[str, Any]:
         sections: list[list[str]] = [[]]
         for line in f.read_text(encoding="utf-8").splitlines():
             sections.append([]) if line == "---" else sections[-1].append(line)
+        package = f.parent.parent.name
         for lines, suffix in zip(sections, SECTIONS[kind], strict=True):
-            name = f"{f.parent.parent.name}/{kind}/{f.stem}{suffix}"
-            types.update(get_types_from_msg("\n".join(lines), name))
+            # rosbags reads a section as a message `pkg/msg/...`: so it resolves the section's
+            # package-relative names to `pkg/msg/`, as rosidl does (given `pkg/srv/X` it would
+            # name the type `pkg/srv/msg/X`, and `pkg/action/X` resolves them to `pkg/action/`).
+            # The type is registered under its ROS 2 name.
+            as_msg = f"{package}/msg/{f.stem}{suffix}"
+            parsed = get_types_from_msg("\n".join(lines), as_msg)
+            types[f"{package}/{kind}/{f.stem}{suffix}"] = parsed.pop(as_msg)
+            types.update(parsed)
     for f in IDLS:
         if not any(f.with_suffix(s).exists() for s in (".msg", ".srv", ".action")):
             try:
@@ -219,21 +248,66 @@ def rosbags_types() -> dict[str, Any]:
     return types
 
 
-ROSBAGS_TYPES = sorted(rosbags_types()) if REASON is None else []
+# The messages rosidl derives for each service and action: rosbags reads no file that holds
+# them, so their rosbags definitions are made from the structs miro-idl compiled (which
+# test_idl_agrees_with_rosidl_parser_and_its_hashes compares with rosidl_parser's).
+DERIVED = {
+    "srv": ["_Event"],
+    "action": [
+        "_SendGoal_Request", "_SendGoal_Response", "_SendGoal_Event", "_GetResult_Request",
+        "_GetResult_Response", "_GetResult_Event", "_FeedbackMessage",
+    ],
+}  # fmt: skip
+DERIVED_TYPES = [
+    f"{f.parent.parent.name}/{f.parent.name}/{f.stem}{suffix}"
+    for f in INTERFACES
+    for suffix in DERIVED.get(f.parent.name, [])
+]
+ROSBAGS_TYPES = sorted(rosbags_types()) if ROS2 is not None else []
 # rosbags has no wstring codec (its typesys says so): that message is checked on its own.
 NO_ROSBAGS_CODEC = {"test_msgs/msg/WStrings"}
-CDR_TYPES = [t for t in ROSBAGS_TYPES if t not in NO_ROSBAGS_CODEC]
+CDR_TYPES = [t for t in ROSBAGS_TYPES if t not in NO_ROSBAGS_CODEC] + DERIVED_TYPES
+
+# rosbags' names of the IDL types of ROS 2's primitives
+ROS_PRIMS = {
+    "boolean": "bool", "octet": "byte", "uint8": "uint8", "int8": "int8", "short": "int16",
+    "unsigned short": "uint16", "long": "int32", "unsigned long": "uint32", "long long": "int64",
+    "unsigned long long": "uint64", "float": "float32", "double": "float64",
+}  # fmt: skip
+
+
+def rosbags_definition(decl: ast.Struct) -> Any:
+    """A struct as rosbags' type store takes a message definition: (constants, fields)."""
+    from rosbags.interfaces import Nodetype
+
+    def node(ty: H.Ty) -> Any:
+        if ty.kind == "prim":
+            return (Nodetype.BASE, (ROS_PRIMS[ty.prim], 0))
+        if ty.kind == "string":
+            return (Nodetype.BASE, ("string", ty.bound or 0))
+        if ty.kind == "seq" and ty.elem is not None:
+            return (Nodetype.SEQUENCE, (node(ty.elem), ty.bound or 0))
+        if ty.kind == "array" and ty.elem is not None and len(ty.dims) == 1:
+            return (Nodetype.ARRAY, (node(ty.elem), ty.dims[0]))
+        assert ty.kind == "struct", ty
+        return (Nodetype.NAME, "/".join(ty.decl.scope_path))
+
+    fields = [(m.name, node(t)) for m, t in zip(H.members(decl), H.member_types(decl), strict=True)]
+    return ([], fields)
 
 
 class Structs(dict[str, Any]):
-    """The generated structs by ROS 2 type name (a short repr for hypothesis' reports)."""
+    """The generated structs by ROS 2 type name (a short repr for hypothesis' reports), and the
+    folder their code was generated into."""
+
+    out = Path()
 
     def __repr__(self) -> str:
         return f"<{len(self)} ROS 2 structs>"
 
 
 @pytest.fixture(scope="module")
-def generated(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]]:
+def generated(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Structs]:
     """Every interface generated into one folder; the resolved structs by ROS 2 type name."""
     out = tmp_path_factory.mktemp("ros2") / "out"
     idl_only = [
@@ -249,6 +323,7 @@ def generated(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, An
         for d in s.declarations
         if isinstance(d, ast.Struct) and d.pos.path == s.main_file
     )
+    structs.out = out
     sys.path.insert(0, str(out))
     try:
         with H.registered(specs):
@@ -258,11 +333,12 @@ def generated(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, An
 
 
 @pytest.fixture(scope="module")
-def typestore() -> Any:
+def typestore(generated: Structs) -> Any:
     from rosbags.typesys import Stores, get_typestore
 
     store = get_typestore(Stores.EMPTY)
     store.register(rosbags_types())
+    store.register({name: rosbags_definition(generated[name]) for name in DERIVED_TYPES})
     return store
 
 
@@ -280,18 +356,46 @@ def test_every_generated_type_carries_its_hash(generated: dict[str, Any]) -> Non
     assert checked == len(generated) >= 280
 
 
-def test_generated_code_passes_ruff_and_mypy_strict(
-    generated: dict[str, Any], tmp_path: Path
+def test_new_messages_hold_what_rosidl_generator_py_gives(
+    generated: Structs, ros2: ros2_env.Ros2Env
 ) -> None:
+    """A new message of every type holds the values rosidl_generator_py's class (the Python the
+    wheels ship) gives one: zeros, and the `@default` values of the interface file."""
+    theirs = ros2.run_json("py_defaults.py", *sorted(generated))
+    checked = 0
+    for name, values in theirs.items():
+        if values is None:  # the service and action types themselves: no message class there
+            continue
+        assert as_rosidl_py(H.pyclass(generated[name])()) == values, name
+        checked += 1
+    assert checked >= 250
+
+
+def as_rosidl_py(v: Any) -> Any:
+    """A generated value in py_defaults.py's JSON shapes. rosidl_generator_py's classes hide the
+    member rosidl gives an empty message (`structure_needs_at_least_one_member`, on the wire):
+    so does this."""
+    if dataclasses.is_dataclass(v):
+        names = [f.name for f in dataclasses.fields(v)]
+        if names == ["structure_needs_at_least_one_member"]:
+            return []
+        return [as_rosidl_py(getattr(v, n)) for n in names]
+    if isinstance(v, list):
+        return [as_rosidl_py(x) for x in v]
+    return json.loads(json.dumps(plain(v)))
+
+
+def test_generated_code_passes_ruff_and_mypy_strict(generated: Structs, tmp_path: Path) -> None:
     import generated_checks as G
 
-    out = Path(H.pyclass(generated["std_msgs/msg/Header"]).__module__ and sys.path[0])
-    assert not G.ruff_problems(out)
-    assert not G.mypy_problems(out, tmp_path / "mypy-cache")
+    assert not G.ruff_problems(generated.out)
+    assert not G.mypy_problems(generated.out, tmp_path / "mypy-cache")
 
 
+# numpy's names of the IDL types of numbers. rosbags holds ROS 2's `byte` (IDL `octet`, 0..255
+# on the wire and in rosidl_generator_py) as ROS 1's signed int8: the same bytes.
 DTYPES = {
-    "boolean": "bool", "octet": "uint8", "uint8": "uint8", "int8": "int8", "short": "int16",
+    "boolean": "bool", "octet": "int8", "uint8": "uint8", "int8": "int8", "short": "int16",
     "unsigned short": "uint16", "long": "int32", "unsigned long": "uint32", "long long": "int64",
     "unsigned long long": "uint64", "float": "float32", "double": "float64",
 }  # fmt: skip
@@ -303,7 +407,7 @@ def to_rosbags(store: Any, ty: H.Ty, v: Any) -> Any:
 
     if ty.kind in ("seq", "array") and ty.elem is not None:
         if ty.elem.kind == "prim":
-            data = list(v)
+            data = [to_rosbags(store, ty.elem, x) for x in v]
             return numpy.array(data, dtype=DTYPES[ty.elem.prim])
         return [to_rosbags(store, ty.elem, x) for x in v]
     if ty.kind == "struct":
@@ -314,14 +418,43 @@ def to_rosbags(store: Any, ty: H.Ty, v: Any) -> Any:
             for f, t in zip(H.fields_of(decl), H.member_types(decl), strict=True)
         ]
         return cls(*parts)
+    if ty.kind == "prim" and ty.prim == "octet":
+        return v - 256 if v > 127 else v
     return v
 
 
+def from_rosbags(ty: H.Ty, v: Any) -> Any:
+    """A value rosbags decoded, in `plain`'s shapes of the generated value."""
+    if ty.kind in ("seq", "array") and ty.elem is not None:
+        return (
+            [from_rosbags(ty.elem, x) for x in plain(v)]
+            if ty.elem.kind == "prim"
+            else [from_rosbags(ty.elem, x) for x in v]
+        )
+    if ty.kind == "struct":
+        values = plain_fields(v)
+        types = H.member_types(ty.decl)
+        return tuple(from_rosbags(t, x) for t, x in zip(types, values, strict=True))
+    if ty.kind == "prim" and ty.prim == "octet":
+        return v & 0xFF
+    return plain(v)
+
+
+def plain_fields(v: Any) -> list[Any]:
+    """The values of a dataclass's fields. rosbags' constants and __msgtype__ are ClassVars,
+    but annotated as strings in the classes it makes at run time, where dataclasses takes them
+    for fields."""
+    return [
+        getattr(v, f.name)
+        for f in dataclasses.fields(v)
+        if not str(f.type).startswith(("ClassVar", "typing.ClassVar"))
+    ]
+
+
 def plain(v: Any) -> Any:
-    """Values of both sides as nested lists and tuples of Python numbers and strings."""
-    if dataclasses.is_dataclass(v):  # rosbags' constants are ClassVars, not fields
-        fields = [f.name for f in dataclasses.fields(v) if f.name != "__msgtype__"]
-        return tuple(plain(getattr(v, name)) for name in fields)
+    """Values as nested lists and tuples of Python numbers and strings."""
+    if dataclasses.is_dataclass(v):
+        return tuple(plain(x) for x in plain_fields(v))
     if isinstance(v, bytes | bytearray):
         return list(v)
     if hasattr(v, "tolist"):
@@ -343,9 +476,9 @@ def test_cdr_equals_rosbags_both_ways(
     ours = value.serialize()
     theirs = typestore.serialize_cdr(to_rosbags(typestore, ty, value), name)
     assert ours == bytes(theirs)
-    back = typestore.deserialize_cdr(ours, name)
-    assert plain(back) == plain(H.pyclass(decl).deserialize(bytes(theirs)))
-    assert plain(H.pyclass(decl).deserialize(bytes(theirs))) == plain(value)
+    decoded = plain(H.pyclass(decl).deserialize(bytes(theirs)))
+    assert from_rosbags(ty, typestore.deserialize_cdr(ours, name)) == decoded
+    assert decoded == plain(value)
 
 
 def test_wstrings_as_the_rmws_write_them(generated: dict[str, Any]) -> None:
