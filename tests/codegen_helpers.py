@@ -228,12 +228,22 @@ def registered(specs: list[ast.Specification]) -> Iterator[None]:
             elif not isinstance(d, ast.Forward):
                 _other_decls.setdefault(d.scoped_name, d)
     _enum_decls.cache_clear()
+    packages = {path[0] for path in _other_modules}
+    forget_packages(packages)  # packages of the same names another test generated elsewhere
     try:
         yield
     finally:
         _other_decls.clear()
         _other_modules.clear()
         _enum_decls.cache_clear()
+        forget_packages(packages)
+
+
+def forget_packages(packages: set[str]) -> None:
+    """Drop the imported modules of these top-level packages, so that the next import reads
+    the folder now on sys.path (tests generate packages of the same names into several)."""
+    for name in [m for m in sys.modules if m.split(".")[0] in packages]:
+        del sys.modules[name]
 
 
 def module_paths() -> frozenset[tuple[str, ...]]:

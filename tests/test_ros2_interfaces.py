@@ -194,6 +194,8 @@ def test_cli_generates_ros2_types_with_their_hashes(tmp_path: Path) -> None:
     assert by_name["std_msgs::msg::Header"]["ros2_type_hash"] == want["std_msgs/msg/Header"]
     time_hash = by_name["builtin_interfaces::msg::Time"]["ros2_type_hash"]
     assert time_hash == R.json_hashes(files[1])["builtin_interfaces/msg/Time"]
+    packages = {"std_msgs", "builtin_interfaces"}
+    H.forget_packages(packages)  # other tests generate packages of these names elsewhere
     sys.path.insert(0, str(out))
     try:
         header = importlib.import_module("std_msgs.msg").Header
@@ -203,10 +205,7 @@ def test_cli_generates_ros2_types_with_their_hashes(tmp_path: Path) -> None:
         )
     finally:
         sys.path.remove(str(out))
-        for name in [
-            m for m in sys.modules if m.split(".")[0] in ("std_msgs", "builtin_interfaces")
-        ]:
-            del sys.modules[name]
+        H.forget_packages(packages)
 
 
 # ---- CDR against rosbags -------------------------------------------------------------------
