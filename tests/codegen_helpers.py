@@ -144,9 +144,7 @@ def resolve(t: Any, dims: list[int] | tuple[int, ...] = ()) -> Ty:
             raise TypeError(f"not a codec type: {t.name}")
         return Ty("prim", prim=t.name)
     if isinstance(t, ast.StringType):
-        if t.wide:
-            raise TypeError("not a codec type: wstring")
-        return Ty("string", bound=t.bound)
+        return Ty("wstring" if t.wide else "string", bound=t.bound)
     if isinstance(t, ast.SequenceType):
         return Ty("seq", elem=resolve(t.element), bound=t.bound)
     if isinstance(t, ast.NamedType):
@@ -230,12 +228,22 @@ def registered(specs: list[ast.Specification]) -> Iterator[None]:
             elif not isinstance(d, ast.Forward):
                 _other_decls.setdefault(d.scoped_name, d)
     _enum_decls.cache_clear()
+    packages = {path[0] for path in _other_modules}
+    forget_packages(packages)  # packages of the same names another test generated elsewhere
     try:
         yield
     finally:
         _other_decls.clear()
         _other_modules.clear()
         _enum_decls.cache_clear()
+        forget_packages(packages)
+
+
+def forget_packages(packages: set[str]) -> None:
+    """Drop the imported modules of these top-level packages, so that the next import reads
+    the folder now on sys.path (tests generate packages of the same names into several)."""
+    for name in [m for m in sys.modules if m.split(".")[0] in packages]:
+        del sys.modules[name]
 
 
 def module_paths() -> frozenset[tuple[str, ...]]:
@@ -343,6 +351,13 @@ def fit_utf8(text: str, bound: int | None) -> str:
     return text.encode("utf-8")[:bound].decode("utf-8", "ignore")
 
 
+def fit_utf16(text: str, bound: int | None) -> str:
+    """`text` cut to at most `bound` UTF-16 code units (on a character boundary)."""
+    while bound is not None and len(text.encode("utf-16-le")) > 2 * bound:
+        text = text[:-1]
+    return text
+
+
 STRING_CHARS = st.characters(exclude_characters="\0", exclude_categories=("Cs",))
 
 
@@ -390,6 +405,9 @@ def _values(ty: Ty, oracle: bool, depth: int) -> st.SearchStrategy[Any]:
     if k == "string":
         size = MAX_LEN * 2 if ty.bound is None else ty.bound
         return st.text(STRING_CHARS, max_size=size).map(lambda s: fit_utf8(s, ty.bound))
+    if k == "wstring":  # the bound counts UTF-16 units
+        size = MAX_LEN * 2 if ty.bound is None else ty.bound
+        return st.text(STRING_CHARS, max_size=size).map(lambda s: fit_utf16(s, ty.bound))
     if k == "seq":
         assert ty.elem is not None
         size = MAX_LEN if ty.bound is None else min(ty.bound, MAX_LEN + 2)

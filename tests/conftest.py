@@ -91,3 +91,18 @@ def peer_gen(tmp_path_factory: pytest.TempPathFactory) -> Iterator[object]:
 
     with peer_types(tmp_path_factory.mktemp("peer_generated")) as types:
         yield types
+
+
+# ---- the ROS 2 peer (tests/ros2_env.py) ------------------------------------------------------
+
+
+@pytest.fixture(scope="session")
+def ros2() -> object:
+    """The ROS 2 environment of tests/ros2_env.py (its python, `share/` folder and process
+    environment), made if it is not there; the test is skipped, saying why, if it cannot be."""
+    from ros2_env import available
+
+    env, reason = available()
+    if env is None:
+        pytest.skip(reason or "no ROS 2 environment")
+    return env

@@ -74,6 +74,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="identifiers that differ only in case are distinct (DDS and ROS 2 files, as idlc's "
         "-f case-sensitive): `Header header;` is a member named like its type",
     )
+    p.add_argument(
+        "--ros2",
+        action="store_true",
+        help="read .idl files as ROS 2's rosidl does (each file once, identical redeclarations, "
+        "the types derived from services and actions, RIHS01 type hashes); .msg, .srv and "
+        ".action files are always read so (give the folder holding their packages with -I)",
+    )
     mode = p.add_mutually_exclusive_group()
     mode.add_argument(
         "--check",
@@ -135,7 +142,12 @@ def _run(args: argparse.Namespace, defines: dict[str, str | None], diag: Diagnos
         try:
             specs.append(
                 compile_idl(
-                    path, args.include_dirs, defines, diag, case_sensitive=args.case_sensitive
+                    path,
+                    args.include_dirs,
+                    defines,
+                    diag,
+                    case_sensitive=args.case_sensitive,
+                    ros2=args.ros2,
                 )
             )
         except CompileError:
@@ -181,7 +193,12 @@ def _generate(args: argparse.Namespace, specs: list[Any], defines: dict[str, str
 
         def compile_dependency(path: str, into: Diagnostics) -> Any:
             return compile_idl(
-                path, args.include_dirs, defines, into, case_sensitive=args.case_sensitive
+                path,
+                args.include_dirs,
+                defines,
+                into,
+                case_sensitive=args.case_sensitive,
+                ros2=args.ros2,
             )
 
         checks.refused_dependencies(specs, modules, missing, compile_dependency, refusals)

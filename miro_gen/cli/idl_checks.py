@@ -154,6 +154,7 @@ def clashing_declarations(specs: list[Any], diag: Diagnostics) -> None:
     that name: their generated modules would land in one package, one hiding the other's names.
     Reported once per pair of files, at the first clash."""
     from miro_gen.idl import ast
+    from miro_gen.idl.rosidl.redeclarations import same_declaration
 
     first: dict[str, Any] = {}
     clashes: dict[tuple[str, str], list[tuple[Any, Any]]] = {}
@@ -163,7 +164,10 @@ def clashing_declarations(specs: list[Any], diag: Diagnostics) -> None:
                 continue
             seen = first.setdefault(d.scoped_name, d)
             both_modules = isinstance(seen, ast.Module) and isinstance(d, ast.Module)
-            if seen is not d and seen.pos.path != d.pos.path and not both_modules:
+            # ROS 2 files repeat identical typedefs (`double__36` in several geometry_msgs
+            # files), as rosidl accepts: one hides the other harmlessly.
+            repeated = isinstance(d, ast.Typedef) and spec.ros2_hashes and same_declaration(seen, d)
+            if seen is not d and seen.pos.path != d.pos.path and not both_modules and not repeated:
                 clashes.setdefault((seen.pos.path, d.pos.path), []).append((seen, d))
     for (earlier, _), pairs in clashes.items():
         seen, d = pairs[0]

@@ -35,6 +35,7 @@ from miro_gen.codegen.steps import (
     GetOctets,
     GetSequence,
     GetString,
+    GetWString,
     Pack,
     PackCheck,
     PutArray,
@@ -48,6 +49,7 @@ from miro_gen.codegen.steps import (
     PutOctets,
     PutSequence,
     PutString,
+    PutWString,
     Unpack,
 )
 from miro_gen.idl import ast
@@ -184,6 +186,8 @@ class CodecPlanner:
         match shape.kind:
             case "string":
                 return [PutString(bound=shape.bound, expr=expr, what=what)]
+            case "wstring":
+                return [PutWString(bound=shape.bound, expr=expr, what=what)]
             case "octets":
                 return [PutOctets(bound=shape.bound, expr=expr, what=what)]
             case "object":
@@ -307,6 +311,8 @@ class CodecPlanner:
         match shape.kind:
             case "string":
                 return [GetString(bound=shape.bound, var=var, what=what)]
+            case "wstring":
+                return [GetWString(bound=shape.bound, var=var, what=what)]
             case "octets":
                 return [GetOctets(bound=shape.bound, var=var, what=what)]
             case "object":

@@ -149,6 +149,10 @@ class StructContext(RecordContext):
     idl_kind = "struct"
 
     bases: list[str] = field(default_factory=list)  # the base struct, if any
+    # ROS 2 interfaces only (miro-idl --ros2, .msg/.srv/.action): the ROS 2 type name
+    # (`std_msgs/msg/Header`) and its RIHS01 type hash; "" otherwise.
+    ros2_type: str = ""
+    ros2_type_hash: str = ""
 
 
 @dataclass

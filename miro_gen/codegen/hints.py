@@ -8,6 +8,8 @@ steps (`codec.py`) for the same shapes.
 
 from __future__ import annotations
 
+import math
+from ast import literal_eval as ast_literal
 from dataclasses import dataclass
 
 from miro_gen.codegen import names
@@ -75,7 +77,7 @@ class TypeHints:
             case "prim":
                 assert shape.prim is not None
                 return shape.prim.py
-            case "string":
+            case "string" | "wstring":
                 return "str"
             case "octets":
                 return "bytes"
@@ -115,7 +117,7 @@ class TypeHints:
             case "prim":
                 assert shape.prim is not None
                 return Default(shape.prim.default)
-            case "string":
+            case "string" | "wstring":
                 return Default('""')
             case "octets":
                 return Default('b""')
@@ -135,6 +137,29 @@ class TypeHints:
                 return Default(factory="_cdr.ObjectRef")
         raise AssertionError(shape.kind)  # pragma: no cover
 
+    def given(self, shape: Shape, value: ast.ConstValue, m: ModuleContext) -> Default:
+        """The default a ROS 2 interface gives a field (its `@default`, which
+        rosidl_generator_py makes the field's default in Python): a number, boolean or string,
+        or for a sequence or array the text of a Python tuple of them, as rosidl writes it."""
+        match shape.kind:
+            case "prim":
+                assert shape.prim is not None
+                return Default(_literal(shape.prim.py, value))
+            case "string" | "wstring":
+                return Default(repr(str(value)))
+            case "octets":
+                return Default(repr(bytes(int(v) for v in _items(value))))
+            case "seq" | "array" if shape.elem is not None:
+                items = [self.given(shape.elem, v, m).value for v in _items(value)]
+                if shape.numbers is not None:
+                    m.use("arrays")
+                    code = shape.numbers.code
+                    return Default(
+                        factory=f'lambda: _arrays.to_array("{code}", [{", ".join(items)}])'
+                    )
+                return Default(factory=f"lambda: [{', '.join(items)}]")
+        raise AssertionError(f"no @default for a {shape.kind}")  # pragma: no cover
+
     def _array_value(self, shape: Shape, m: ModuleContext) -> str:
         elem = shape.elem
         assert elem is not None
@@ -146,7 +171,7 @@ class TypeHints:
         if elem.kind == "object":
             m.use("cdr")
             return f"[_cdr.ObjectRef()] * {n}"
-        if elem.kind in ("prim", "string", "octets", "enum"):
+        if elem.kind in ("prim", "string", "wstring", "octets", "enum"):
             return f"[{self.default(elem, m).value}] * {n}"
         if elem.kind == "seq":
             fresh = self._zeros(elem, m) if elem.numbers is not None else "[]"
@@ -164,3 +189,21 @@ class TypeHints:
     def enumerator(self, enum: ast.Enum, name: str, m: ModuleContext) -> str:
         """An enumerator as a value: `Color.RED`, through the enum's class."""
         return f"{self.scope.ref(enum, m)}.{enumerator_name(name)}"
+
+
+def _items(value: ast.ConstValue) -> list[bool | int | float | str]:
+    """The elements of a sequence's or array's `@default`: rosidl writes the text of a tuple."""
+    items = ast_literal(value) if isinstance(value, str) else None
+    assert isinstance(items, tuple), value
+    return list(items)
+
+
+def _literal(py: str, value: ast.ConstValue) -> str:
+    """A number or boolean default as a Python expression of the field's annotation `py`."""
+    assert isinstance(value, bool | int | float), value
+    if py == "bool":
+        return "True" if value else "False"
+    if py == "float":
+        f = float(value)
+        return repr(f) if math.isfinite(f) else f'float("{f}")'
+    return repr(int(value))

@@ -32,7 +32,7 @@ class _Lowering:
         self.spec = spec
         self.scope = Scope(spec, source)
         hints = TypeHints(self.scope)
-        self.data = DataLowering(self.scope, hints)
+        self.data = DataLowering(self.scope, hints, spec.ros2_hashes)
         self.interfaces = InterfaceLowering(self.scope, hints, spec.declarations)
         # Class attributes each container gets for what is nested in it: (name, value).
         self.nested: dict[int, list[tuple[str, str]]] = {}

@@ -45,9 +45,12 @@ Record = TypeVar("Record", StructContext, ExceptionContext)
 class DataLowering:
     """Contexts of data declarations, written into the module contexts passed in."""
 
-    def __init__(self, scope: Scope, hints: TypeHints) -> None:
+    def __init__(
+        self, scope: Scope, hints: TypeHints, ros2_hashes: dict[str, str] | None = None
+    ) -> None:
         self.scope = scope
         self.hints = hints
+        self.ros2_hashes = ros2_hashes or {}  # RIHS01 type hashes of ROS 2 structs
 
     # ---- enums, typedefs, constants --------------------------------------------------------
     def enum(self, d: ast.Enum, m: ModuleContext, nested: bool) -> EnumContext:
@@ -104,6 +107,10 @@ class DataLowering:
         _check_xcdr1(d, members)
         struct = self._record(StructContext, d, members, names.STRUCT_ATTRIBUTES, m, nested)
         struct.bases = [self.scope.ref(d.base, m)] if d.base is not None else []
+        ros2_hash = self.ros2_hashes.get(d.scoped_name)
+        if ros2_hash is not None:
+            struct.ros2_type = "/".join(d.scope_path)
+            struct.ros2_type_hash = ros2_hash
         return struct
 
     def exception(self, d: ast.Exception_, m: ModuleContext, nested: Nested) -> ExceptionContext:
@@ -123,7 +130,7 @@ class DataLowering:
     ) -> Record:
         """A struct or exception: its own members as fields; `members` (with the base
         struct's) encoded in order."""
-        fields = self._fields(d.members, reserved, m)
+        fields = self._fields(d.members, reserved, m, ros2=d.scoped_name in self.ros2_hashes)
         encode, decode, args = self._codec(d, members, reserved, m)
         return kind(
             name=self.scope.place(d).cls,
@@ -139,14 +146,23 @@ class DataLowering:
         )
 
     def _fields(
-        self, members: list[ast.Member], reserved: frozenset[str], m: ModuleContext
+        self,
+        members: list[ast.Member],
+        reserved: frozenset[str],
+        m: ModuleContext,
+        ros2: bool = False,
     ) -> list[FieldContext]:
+        """The dataclass fields of `members`; a ROS 2 type's (`ros2`) take their `@default`
+        values, as rosidl_generator_py's classes do (other IDL keeps `@default` an annotation)."""
         out = []
         for member in members:
             shape = member_shape(member)
             annotation = self.hints.annotation(shape, m, use_alias=not member.dims)
             name = m.ambiguous(names.py_name(member.name, reserved), "E741")
-            default = self.hints.default(shape, m)
+            given = _ros2_default(member) if ros2 else None
+            default = (
+                self.hints.default(shape, m) if given is None else self.hints.given(shape, given, m)
+            )
             out.append(FieldContext(name, annotation, default.value, default.factory, member.doc))
         return out
 
@@ -278,3 +294,11 @@ def _check_xcdr1(d: ast.Struct | ast.Exception_ | ast.Union_, members: list[ast.
                     f"member '{member.name}' of '{d.scoped_name}' is @{a.short_name}: "
                     "XCDR2 encoding is not supported yet",
                 )
+
+
+def _ros2_default(member: ast.Member) -> ast.ConstValue | None:
+    """The value of a member's `@default` annotation (ROS 2 interfaces), if it has one."""
+    for a in member.annotations:
+        if a.short_name == "default":
+            return a.params.get("value")
+    return None

@@ -73,8 +73,11 @@ def poa_package_name(modules: tuple[str, ...]) -> str:
 
 
 def module_stem(idl_path: str) -> str:
-    """`idl/Example.idl` -> "Example_idl"."""
-    base = re.sub(r"\.idl$", "", idl_path.replace("\\", "/").rsplit("/", 1)[-1], flags=re.I)
+    """`idl/Example.idl` -> "Example_idl"; a ROS 2 interface file too (`msg/Header.msg` ->
+    "Header_idl", as rosidl's `Header.idl` of it)."""
+    base = re.sub(
+        r"\.(idl|msg|srv|action)$", "", idl_path.replace("\\", "/").rsplit("/", 1)[-1], flags=re.I
+    )
     stem = re.sub(r"\W", "_", base)
     if not stem or stem[0].isdigit():
         stem = "_" + stem

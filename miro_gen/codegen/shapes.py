@@ -80,9 +80,9 @@ PACKED_NUMBERS_MAX = 16
 class Shape:
     """A type as the codec sees it (typedefs followed); `alias` is the typedef it came from.
 
-    kind: prim, enum, string, octets (`sequence<octet>`), seq, array, struct, union, exception
-    or object; `prim` for prim, `decl` for enum, the data kinds and object, `elem` for seq and
-    array, `bound` for string, octets and seq, `dims` for array.
+    kind: prim, enum, string, wstring, octets (`sequence<octet>`), seq, array, struct, union,
+    exception or object; `prim` for prim, `decl` for enum, the data kinds and object, `elem` for
+    seq and array, `bound` for string, wstring, octets and seq, `dims` for array.
     """
 
     kind: str
@@ -166,7 +166,7 @@ class Shape:
         """The fewest bytes a value can take (to cap claimed sequence lengths)."""
         if self.fixed:
             return self.unit.size * (self.count if self.kind == "array" else 1)
-        if self.kind in ("string", "octets", "seq"):
+        if self.kind in ("string", "wstring", "octets", "seq"):
             return 4
         if self.kind == "object":
             return 12
@@ -199,9 +199,7 @@ def shape_of(
             what = UNSUPPORTED_BASE.get(t.name, t.name)
             raise Unsupported(pos, f"{what} is not supported by the CDR codec")
         case ast.StringType():
-            if t.wide:
-                raise Unsupported(pos, "wstring is not supported by the CDR codec")
-            return Shape("string", bound=t.bound)
+            return Shape("wstring" if t.wide else "string", bound=t.bound)
         case ast.SequenceType():
             elem = shape_of(t.element, pos)
             if elem.kind == "prim" and elem.prim is not None and elem.prim.idl == "octet":

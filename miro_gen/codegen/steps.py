@@ -87,6 +87,10 @@ class PutString(PutBounded):
     function = "_cdr.put_string"
 
 
+class PutWString(PutBounded):
+    function = "_cdr.put_wstring"
+
+
 class PutOctets(PutBounded):
     function = "_cdr.put_octets"
 
@@ -248,6 +252,10 @@ class GetBounded(DecodeStep, Bounded):
 
 class GetString(GetBounded):
     function = "_cdr.get_string"
+
+
+class GetWString(GetBounded):
+    function = "_cdr.get_wstring"
 
 
 class GetOctets(GetBounded):

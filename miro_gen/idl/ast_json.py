@@ -157,7 +157,8 @@ def declaration_json(d: ast.Decl) -> JsonObj:
 def specifications_json(files: list[str], specs: list[ast.Specification]) -> JsonObj:
     """The AST JSON document for the given command-line files and their resolved units.
 
-    A declaration reached by several units (a shared include) is listed once.
+    A declaration reached by several units (a shared include) is listed once. A struct of a
+    ROS 2 interface also has its RIHS01 type hash (`ros2_type_hash`).
     """
     seen: set[tuple[str, int, int, str, str]] = set()
     declarations: list[JsonObj] = []
@@ -167,7 +168,11 @@ def specifications_json(files: list[str], specs: list[ast.Specification]) -> Jso
             if key in seen:
                 continue
             seen.add(key)
-            declarations.append(declaration_json(d))
+            out = declaration_json(d)
+            ros2_hash = spec.ros2_hashes.get(d.scoped_name)
+            if ros2_hash is not None and isinstance(d, ast.Struct):
+                out["ros2_type_hash"] = ros2_hash
+            declarations.append(out)
     return {"files": list(files), "declarations": declarations}
 
 

@@ -180,7 +180,7 @@ class LeafBuilder:
 
     def string_value(self, tok: Token) -> str:
         try:
-            return decode_string(str(tok))
+            return decode_string(str(tok), latin1=not self.case_sensitive)
         except LiteralError as e:
             self.diag.error(self.pos(tok), str(e))
             return ""

@@ -11,6 +11,7 @@ from miro_gen.idl import ast
 from miro_gen.idl.parser import parse
 from miro_gen.idl.preprocessor import Preprocessor
 from miro_gen.idl.resolver import Resolver
+from miro_gen.idl.rosidl.unit import compile_ros2, is_interface_file
 
 
 def compile_idl(
@@ -20,17 +21,23 @@ def compile_idl(
     diagnostics: Diagnostics | None = None,
     *,
     case_sensitive: bool = False,
+    ros2: bool = False,
 ) -> ast.Specification:
     """Parse and resolve one IDL file (one translation unit, with its includes).
 
     Problems are collected in `diagnostics`; `CompileError` is raised if any of them is an error.
     `case_sensitive` reads DDS and ROS 2 files as Cyclone's `idlc -f case-sensitive` does:
     identifiers that differ in case are distinct, and only exact keywords are reserved.
+    `ros2` reads a `.idl` as ROS 2's rosidl does (`rosidl/unit.py`: each file once, identical
+    redeclarations, the types derived from services and actions, RIHS01 hashes); `.msg`,
+    `.srv` and `.action` files are always read so.
     """
     diag = diagnostics if diagnostics is not None else Diagnostics()
     resolver = Resolver(diag, case_sensitive)
     try:
         with _recursion_limit(RECURSION_LIMIT):
+            if ros2 or is_interface_file(path):
+                return compile_ros2(path, include_dirs, defines, diag)
             return _compile(path, include_dirs, defines, diag, resolver)
     except RecursionError:
         where = resolver.last_pos or SourcePos(path, 1, 1)

@@ -92,13 +92,15 @@ def decode_char(text: str) -> str:
     return value
 
 
-def decode_string(text: str) -> str:
-    """One string literal token (`"..."` or `L"..."`) -> its value."""
+def decode_string(text: str, latin1: bool = True) -> str:
+    """One string literal token (`"..."` or `L"..."`) -> its value; `latin1=False` lets
+    narrow literals hold any character (DDS and ROS 2 files are UTF-8: rosidl writes
+    `@default (value="ハローワールド")` for a wstring)."""
     wide = text[0] == "L"
     body = text[2:-1] if wide else text[1:-1]
     value = decode_escapes(body, wide)
     if "\0" in value:
         raise LiteralError("string literals may not contain a NUL character")
-    if not wide and any(ord(c) > 255 for c in value):
+    if latin1 and not wide and any(ord(c) > 255 for c in value):
         raise LiteralError("narrow string literals may only hold ISO Latin-1 characters")
     return value

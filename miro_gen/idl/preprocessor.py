@@ -60,8 +60,12 @@ class Preprocessor:
         include_dirs: list[str] | tuple[str, ...] = (),
         defines: dict[str, str | None] | None = None,
         diagnostics: Diagnostics | None = None,
+        once: set[str] | None = None,
     ) -> None:
+        """`once`: read every file at most once (the real paths read so far, shared by the
+        runs of this preprocessor and updated by them), as ROS 2's guardless `.idl` files need."""
         self.include_dirs = list(include_dirs)
+        self.once = once
         self.diag = diagnostics if diagnostics is not None else Diagnostics()
         self._initial_macros = {
             name: Macro(name, None, value) for name, value in PREDEFINED_MACROS.items()
@@ -83,7 +87,7 @@ class Preprocessor:
         self._path_index: dict[str, int] = {}
         self._includes: dict[str, list[str]] = {}
         self._col_maps: dict[int, list[tuple[int, int, bool]]] = {}
-        self._once: set[str] = set()
+        self._once: set[str] = self.once if self.once is not None else set()
         self._instances = 0
         self._depth = 0
         self._inclusions = 0
@@ -96,7 +100,7 @@ class Preprocessor:
         text = self._read(path)
         if text is None:
             self.diag.error(None, f"cannot read '{path}'")
-        else:
+        elif self.once is None or os.path.realpath(path) not in self.once:
             # Past the expansion budget (reported), the rest would be expanded wrongly: stop.
             with contextlib.suppress(ExpansionBudgetExceeded):
                 self._process(path, text)
@@ -150,6 +154,8 @@ class Preprocessor:
         pid = self._path_id(path)
         self._includes.setdefault(path, [])
         self._expander.add_source(len(text))
+        if self.once is not None:
+            self.once.add(self._realpath(path))
         instance = self._instances
         self._instances += 1
         lines = text.split("\n")

@@ -22,6 +22,8 @@ from itertools import chain
 from struct import Struct
 from struct import error as StructError
 from struct import pack as struct_pack
+from struct import unpack as struct_unpack
+from struct import unpack_from as struct_unpack_from
 from typing import Any, Final, NamedTuple
 
 from miro_gen.exceptions import BAD_PARAM, MARSHAL, CompletionStatus
@@ -206,6 +208,46 @@ def get_string(
     if "\0" in text:
         raise MARSHAL(f"{what}: string holds a NUL before its end")
     return text, end
+
+
+def put_wstring(buf: bytearray, value: str, bound: int | None, what: str) -> None:
+    """A wide string as the ROS 2 RMWs write it (rosidl_typesupport_fastrtps, rmw_cyclonedds):
+    an aligned ulong count of UTF-16 code units, then each unit as a ulong; no NUL. A bound
+    counts code units."""
+    if not isinstance(value, str):
+        raise BAD_PARAM(f"{what}: expected str, got {type(value).__name__}")
+    try:
+        raw = value.encode("utf-16-le")
+    except UnicodeEncodeError:
+        raise BAD_PARAM(f"{what}: wide strings cannot hold lone surrogates") from None
+    n = len(raw) // 2
+    if bound is not None and n > bound:
+        raise BAD_PARAM(f"{what}: {n} UTF-16 units is longer than the bound {bound}")
+    if "\0" in value:
+        raise BAD_PARAM(f"{what}: wide strings cannot contain NUL characters")
+    buf += ZEROS[-len(buf) & 3]
+    buf += _U32_LE.pack(n)
+    buf += struct_pack(f"<{n}I", *struct_unpack(f"<{n}H", raw))
+
+
+def get_wstring(
+    data: bytes | bytearray | memoryview, off: int, e: int, bound: int | None, what: str
+) -> tuple[str, int]:
+    off += -off & 3
+    (n,) = _U32[e].unpack_from(data, off)
+    off += 4
+    if n > (len(data) - off) // 4:
+        raise MARSHAL(f"{what}: wide string of {n} units exceeds the {len(data) - off} bytes left")
+    if bound is not None and n > bound:
+        raise MARSHAL(f"{what}: wide string of {n} units exceeds its bound {bound}")
+    units = struct_unpack_from(("<" if e == LE else ">") + f"{n}I", data, off)
+    if any(u > 0xFFFF for u in units):
+        raise MARSHAL(f"{what}: a wide character above 0xFFFF is not a UTF-16 unit")
+    try:
+        text = struct_pack(f"<{n}H", *units).decode("utf-16-le")
+    except UnicodeDecodeError:
+        raise MARSHAL(f"{what}: wide string is not valid UTF-16") from None
+    return text, off + 4 * n
 
 
 # ---- sequences ---------------------------------------------------------------------------------

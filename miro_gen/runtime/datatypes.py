@@ -28,6 +28,11 @@ class IdlType:
     _type_name: ClassVar[str] = ""
     _type_hash: ClassVar[str] = ""
     _data_schema: ClassVar[str] = ""
+    # ROS 2 types only (from .msg/.srv/.action files, or .idl with miro-idl --ros2): the ROS 2
+    # type name (`std_msgs/msg/Header`; DDS names it `std_msgs::msg::dds_::Header_`) and its
+    # RIHS01 type hash, as rosidl_generator_type_description computes it.
+    _ros2_type: ClassVar[str] = ""
+    _ros2_type_hash: ClassVar[str] = ""
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)

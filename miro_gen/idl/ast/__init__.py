@@ -75,7 +75,7 @@ class Specification(Node):
     """A resolved translation unit: its main file, its top-level definitions in order, and every
     declaration (including nested ones and those of included files) in source order."""
 
-    __slots__ = ("declarations", "definitions", "includes", "main_file")
+    __slots__ = ("declarations", "definitions", "includes", "main_file", "ros2_hashes")
 
     def __init__(
         self,
@@ -88,3 +88,5 @@ class Specification(Node):
         self.definitions = definitions
         self.declarations: list[Decl] = declarations if declarations is not None else []
         self.includes: dict[str, list[str]] = includes if includes is not None else {}
+        # ROS 2 interfaces only: the RIHS01 type hash of each struct, by scoped name.
+        self.ros2_hashes: dict[str, str] = {}
