@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import os
 import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -14,6 +15,19 @@ import zmq
 GENERATED = str(Path(__file__).resolve().parents[1] / "generated")
 if GENERATED not in sys.path:
     sys.path.insert(0, GENERATED)
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _session_state(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
+    """The naming services the tests start (themselves, or through `miro launch`) keep their
+    logs of owners in a folder of this session's ($XDG_STATE_HOME), not in the user's."""
+    old = os.environ.get("XDG_STATE_HOME")
+    os.environ["XDG_STATE_HOME"] = str(tmp_path_factory.mktemp("state"))
+    yield
+    if old is None:
+        os.environ.pop("XDG_STATE_HOME", None)
+    else:
+        os.environ["XDG_STATE_HOME"] = old
 
 
 @pytest.fixture(scope="module")

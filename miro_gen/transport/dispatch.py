@@ -74,9 +74,25 @@ class Task(Protocol):
         ...
 
 
-# What the owner of the socket makes of a message: a task to run, frames to send back at once,
-# or None (dropped, or nothing to answer).
-Receive = Callable[[Frames], "Task | Frames | None"]
+# What ZeroMQ knows of the connection a message came on: its peer address and the user id the
+# admission thread gave it (transport.caller); asked for only by dispatchers that identify.
+Peer = tuple[str, str]
+
+# What the owner of the socket makes of a message (and its peer, when asked for): a task to
+# run, frames to send back at once, or None (dropped, or nothing to answer).
+Receive = Callable[[Frames, "Peer | None"], "Task | Frames | None"]
+
+
+def _peer(frame: zmq.Frame) -> Peer:
+    try:
+        address = str(frame.get("Peer-Address"))
+    except zmq.ZMQError:
+        address = ""
+    try:
+        user = str(frame.get("User-Id"))
+    except zmq.ZMQError:  # the admission thread gave none (no key)
+        user = ""
+    return address, user
 
 
 class _Closed(Exception):
@@ -95,7 +111,8 @@ class _Worker:
 
 class Dispatcher:
     """Serves `socket` (a ROUTER) with up to `workers` threads running servants at once;
-    `receive` turns each message into a task or an immediate reply."""
+    `receive` turns each message (and, when `identify`, its peer) into a task or an immediate
+    reply."""
 
     def __init__(
         self,
@@ -104,9 +121,11 @@ class Dispatcher:
         workers: int,
         max_pending: int,
         max_pending_bytes: int = 1 << 62,
+        identify: bool = False,
     ) -> None:
         self.socket = socket
         self._receive = receive
+        self._identify = identify
         self._workers = max(1, workers)
         self._max_pending = max_pending
         self._max_pending_bytes = max_pending_bytes
@@ -198,12 +217,12 @@ class Dispatcher:
             if self._closed:
                 self._close_socket()
                 raise _Closed
-            parts = self._recv_message()
+            parts, last = self._recv_message()
             if len(parts) > 1 and parts[1] == token:  # from a thread of ours
                 if len(parts) > 2:
                     self._send(parts[2:])  # a reply handed back
                 continue
-            out = self._receive(parts)
+            out = self._receive(parts, _peer(last) if self._identify else None)
             if out is None:
                 continue
             if isinstance(out, list):
@@ -286,14 +305,15 @@ class Dispatcher:
 
     # ---- socket I/O (by the leader only) -------------------------------------------------------
 
-    def _recv_message(self) -> Frames:
+    def _recv_message(self) -> tuple[Frames, zmq.Frame]:
+        """A message's frames, and the last one (which knows the connection it came on)."""
         sock = self.socket
         frame = _recv(sock, 0, False)
         parts = [frame.bytes]
         while frame.more:
             frame = _recv(sock, _NOBLOCK, False)
             parts.append(frame.bytes)
-        return parts
+        return parts, frame
 
     def _send(self, frames: Frames | None) -> None:
         if frames is None or self._closed:

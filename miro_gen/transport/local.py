@@ -6,6 +6,11 @@ domain socket whose path is derived from the TCP address and port and from the n
 endpoint, finds the address is one of its own and the twin there, connects to the twin instead:
 large frames cross it faster than TCP over loopback (bench/bench_events.py), and nothing changes
 for peers on other hosts, in other network namespaces or of other users, which keep to TCP.
+
+A naming service has a twin of another kind (`naming_socket`): a Linux abstract socket, named
+after its port, that every user of the machine can reach and nobody leaves behind as a file.
+Processes on its machine call it there for what needs an owner, because over a Unix socket the
+kernel tells it which user calls (`transport.caller`).
 """
 
 from __future__ import annotations
@@ -70,7 +75,7 @@ def ipc_twin(endpoint: str) -> str | None:
 
 
 @functools.cache
-def _is_local(address: str) -> bool:
+def is_local_address(address: str) -> bool:
     """Whether `address` is one of this host's (in this network namespace)."""
     try:
         ip = ipaddress.ip_address(address)
@@ -92,7 +97,7 @@ def nearest(endpoint: str) -> str:
     else `endpoint` itself."""
     twin = ipc_twin(endpoint)
     parts = _split(endpoint)
-    if twin is None or parts is None or not _is_local(parts[0]):
+    if twin is None or parts is None or not is_local_address(parts[0]):
         return endpoint
     return twin if _listening(twin[len("ipc://") :]) else endpoint
 
@@ -120,3 +125,21 @@ def bind_twin(sock: zmq.Socket[Any], endpoint: str) -> str | None:
     except zmq.ZMQError:  # the twin is an optimisation: TCP serves anyway
         return None
     return twin
+
+
+def naming_socket(endpoint: str) -> str | None:
+    """The abstract Unix socket (`ipc://@miro-naming-PORT`, in this network namespace) beside a
+    naming service at `endpoint` (tcp://HOST:PORT); None off Linux or for another transport."""
+    parts = _split(endpoint)
+    if parts is None or not sys.platform.startswith("linux") or not parts[1].isdigit():
+        return None
+    return f"ipc://@miro-naming-{parts[1]}"
+
+
+def local_naming_socket(endpoint: str) -> str | None:
+    """`naming_socket(endpoint)` when the naming service runs on this machine (its address is
+    one of ours), else None: where this process makes its owner's calls."""
+    parts = _split(endpoint)
+    if parts is None or not (parts[0] in ("0.0.0.0", "*") or is_local_address(parts[0])):
+        return None
+    return naming_socket(endpoint)
