@@ -1,5 +1,5 @@
-"""`miro naming` (the naming service, optionally hosting event channels) and `miro nslist`
-(what it holds, as a tree)."""
+"""`miro naming` (the naming service, optionally hosting event channels), `miro nslist` (what it
+holds, as a tree) and `miro nsunbind` (free names kept for a server of yours that stopped)."""
 
 from __future__ import annotations
 
@@ -292,3 +292,54 @@ def nslist_main(argv: Sequence[str]) -> int:
     if not entries:
         print("(no names bound)")
     return 0
+
+
+def nsunbind_main(argv: Sequence[str]) -> int:
+    import uuid
+
+    from miro_gen.transport.server import Client
+
+    p = argparse.ArgumentParser(
+        prog="miro nsunbind",
+        description="Free names that the naming service keeps for a server of yours that "
+        "stopped without unbinding them. After its lease ends, such a name stays kept for its "
+        "user (or host) and service for an hour (`miro naming --hold`), so that no stranger "
+        "takes it between a crash and a restart; a service that was renamed, or moved to "
+        "another program, gets it once it is freed. Live names are their servers' to unbind. "
+        "Accepts the common options: --naming, -MNC.",
+    )
+    p.add_argument("names", nargs="+", metavar="NAME", help="a path, or a name in -MNC")
+    try:
+        client = Client(["miro nsunbind", *argv])
+    except UsageError as e:
+        p.error(str(e))
+    ns = p.parse_args(client.argv[1:])
+    if not hasattr(client.naming, "registry_stub"):
+        client.close()
+        p.error("a CORBA naming service keeps no names for stopped servers")
+    registry = client.naming.registry_stub(client.invoker, 5.0, owner=True)
+    who = MiroNaming.Owner("miro-nsunbind", uuid.uuid4().hex)
+    status = 0
+    try:
+        for name in ns.names:
+            full = client.naming.full_name(name)
+            try:
+                with naming_errors(client.options.naming, f"unbind {full}"):
+                    registry.unbind_as(full, who)
+                print(f"freed {full}")
+            except MiroNaming.NotFound:
+                print(
+                    f"miro nsunbind: {full} is not kept for you (a live name is its server's to "
+                    "unbind; one kept for another user or host is theirs)",
+                    file=sys.stderr,
+                )
+                status = 1
+            except MiroNaming.InvalidName:
+                print(f"miro nsunbind: {name!r} is not a valid name", file=sys.stderr)
+                status = 1
+    except SystemException as e:
+        print(f"miro nsunbind: {e.message}", file=sys.stderr)
+        return 1
+    finally:
+        client.close()
+    return status

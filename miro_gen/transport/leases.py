@@ -331,4 +331,10 @@ class Leases:
                 with contextlib.suppress(SystemException, MiroNaming.NotFound):
                     registry.unbind_as(w.entry.name, self.owner)
                 continue
-            _log.notice("bound %s in the naming service after %.1f s", w.entry.name, now - w.since)
+            # Said as loudly as the warning that it was held, so that whoever saw that one
+            # sees this one too.
+            _log.warning(
+                "bound %s in the naming service after %.1f s: it is this server's now",
+                w.entry.name,
+                now - w.since,
+            )

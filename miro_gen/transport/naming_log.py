@@ -9,8 +9,8 @@ One JSON object per line, after a first line `{"miro-naming-log": 1}`:
     {"op": "free", "name": ...}                           # unbound, or no longer kept
 
 Binds, lapses and frees are appended as they happen (written to the kernel at once: a naming
-service killed outright loses nothing); renewals are not, but the file's time is touched every
-second, so that a naming service reading it back knows what may be left of each live lease.
+service killed outright loses nothing); renewals are not: an entry that was live when the log
+is read back gets a new lease, in which its server, if it runs, renews it.
 When the log has grown to twice the table, and when it is opened, it is rewritten as the table
 it describes (a new file renamed over the old one). The file is the user's (mode 0600 in a 0700
 folder), locked (`PATH.lock`) while a naming service uses it; a line that does not parse (a
@@ -39,7 +39,6 @@ _log = logger("MIRO")
 HEADER = {"miro-naming-log": 1}
 _CREATE = os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC
 MIN_COMPACT_LINES = 1000  # a log shorter than this is never rewritten while running
-TOUCH_EVERY = 1.0  # seconds between two marks of the log's time
 
 
 class LogError(Exception):
@@ -72,7 +71,6 @@ class OwnersLog:
         self.path = path
         self.table = table
         self._lines = 0
-        self._touched = 0.0
         folder = os.path.dirname(path) or "."
         try:
             os.makedirs(folder, mode=0o700, exist_ok=True)
@@ -96,12 +94,11 @@ class OwnersLog:
 
     # ---- reading back -------------------------------------------------------------------------
 
-    def restore(self, mono: float) -> Restored:
+    def restore(self, mono: float, lease: float) -> Restored:
         """Fill the table from the log (`mono`: the monotonic time now), then rewrite the log
-        as the table. An entry that was live keeps what may be left of its lease, counted
-        from when the naming service was last known to run (the log's time, which it touches
-        every second), so that its server, if alive, renews it before it ends; the others are
-        kept for their owners, as they were."""
+        as the table. An entry that was live gets a lease of `lease` seconds (or its own, if
+        longer) from now, in which its server, if it still runs, renews it: while the naming
+        service was down, nobody could. The others stay kept for their owners."""
         done = Restored()
         records: dict[str, tuple[dict[str, Any], float | None]] = {}  # name -> bind, lapsed at
         self._file.seek(0)
@@ -122,15 +119,12 @@ class OwnersLog:
                 done.skipped += 1
                 _log.warning("%s:%d: skipped a line that does not parse", self.path, number)
         now = time.time()
-        last_run = min(now, os.fstat(self._file.fileno()).st_mtime)
         for name, (record, lapsed_at) in records.items():
-            left = _lease(record) - (now - last_run)
-            if lapsed_at is None and left > 0:  # its lease may still run
-                b = _binding(record, mono + left, now)
-                kept = False
+            kept = lapsed_at is not None
+            if kept:
+                b = _binding(record, 0.0, lapsed_at or 0.0)
             else:
-                b = _binding(record, 0.0, last_run if lapsed_at is None else lapsed_at)
-                kept = True
+                b = _binding(record, mono + max(lease, _lease(record)), now)
             if b is None:
                 done.skipped += 1
                 _log.warning("%s: skipped the entry of %s, which is not valid", self.path, name)
@@ -144,14 +138,6 @@ class OwnersLog:
                 done.bindings += 1
         self.compact()
         return done
-
-    def touch(self, now: float) -> None:
-        """Mark the log with the time `now`: the naming service still runs (at most once a
-        second)."""
-        if now - self._touched >= TOUCH_EVERY:
-            self._touched = now
-            with contextlib.suppress(OSError):
-                os.utime(self._file.fileno(), (now, now))
 
     # ---- writing ------------------------------------------------------------------------------
 

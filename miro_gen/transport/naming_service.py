@@ -30,6 +30,7 @@ from miro_gen.transport.invoker import ZmqInvoker
 from miro_gen.transport.local import naming_socket
 from miro_gen.transport.naming import (
     DEFAULT_HOLD,
+    DEFAULT_LEASE,
     DEFAULT_MAX_NAMES,
     DEFAULT_QUOTA,
     MAX_PAGE,
@@ -145,8 +146,6 @@ class Registry(MiroNaming__POA.Registry):
         now = time.time()
         with self._lock:
             lapsed, gone = self.table.lapse(time.monotonic(), now)
-            if self.log is not None:
-                self.log.touch(now)
             for name in lapsed:
                 b = self.table.get(name)
                 if self.log is not None and b is not None:
@@ -217,7 +216,7 @@ class NamingService:
         try:
             if log_path is not None:
                 self.log = OwnersLog(log_path, self.table)
-                restored = self.log.restore(time.monotonic())
+                restored = self.log.restore(time.monotonic(), DEFAULT_LEASE)
                 if restored.bindings or restored.kept:
                     _log.notice(
                         "%d names read back from %s (%d kept for servers that stopped)",

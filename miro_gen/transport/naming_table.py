@@ -10,13 +10,15 @@ An owner (`Holder`) is a *principal*, checked by the naming service (`transport.
 |-----------------------|-------------------------|-----------------------|-----------------|
 | live, by this run     | rebound                 | -                     | -               |
 | live, by another run  | taken over if take_over | AlreadyBound          | AlreadyBound    |
-| kept (lease ended)    | taken back              | taken                 | AlreadyBound    |
+| kept (lease ended)    | taken back              | AlreadyBound          | AlreadyBound    |
 
-A binding whose lease ends is *kept* for its principal for `hold` seconds after it was last
-renewed: resolve no longer finds it, but nobody else may bind the name meanwhile, so a
-stranger that polls cannot take the name of a server between its crash and its restart.
-Kept bindings count in their principal's quota; a principal at its quota, or a full table,
-gives up its oldest kept binding (the table's oldest, when full) before refusing a new name.
+A binding whose lease ends is *kept* for its owner for `hold` seconds after it was last renewed:
+resolve no longer finds it, but nobody else may bind the name meanwhile, so a stranger that
+polls cannot take the name of a server between its crash and its restart. Any process of the
+same principal may release a kept binding (`unbind`, `miro nsunbind`): a service renamed, or
+moved to another program. Kept bindings count in their principal's quota; a principal at its
+quota, or a full table, gives up its oldest kept binding (the table's oldest, when full)
+before refusing a new name.
 """
 
 from __future__ import annotations
@@ -46,9 +48,6 @@ class Holder:
     principal: str
     service: str
     run: str
-
-    def same_owner(self, other: Holder) -> bool:
-        return self.principal == other.principal and self.service == other.service
 
 
 @dataclass
@@ -182,10 +181,16 @@ class Table:
                 raise MiroNaming.AlreadyBound(name, "the naming service itself")
             why = "its server stopped; the name is kept for it" if kept else "live"
             raise MiroNaming.AlreadyBound(name, f"another user or host ({why})")
-        if kept:
-            return  # a kept binding: any service of its principal may take it
         if b.holder.service != holder.service:
+            if kept:
+                raise MiroNaming.AlreadyBound(
+                    name,
+                    f"{b.holder.service}, another service of yours, kept since its server "
+                    f"stopped (`miro nsunbind {name}` frees it)",
+                )
             raise MiroNaming.AlreadyBound(name, f"{b.holder.service}, another service of yours")
+        if kept:
+            return  # its service's, whose server stopped: taken back
         if b.holder.run != holder.run and not take_over:
             raise MiroNaming.AlreadyBound(name, f"another run of {holder.service}")
 
@@ -195,12 +200,13 @@ class Table:
         self._add(Binding(entry, Holder(SERVICE_PRINCIPAL, "miro-naming", ""), math.inf, now))
 
     def unbind(self, name: str, holder: Holder) -> bool:
-        """Remove `name` if this run of `holder` holds it, or it is kept for the same owner;
-        whether it was."""
+        """Remove `name` if this run of `holder` holds it, or it is kept for the same
+        principal; whether it was."""
         b = self._bindings.get(name)
         if b is None or b.holder.principal == SERVICE_PRINCIPAL:
             return False
-        if b.holder != holder and not (name in self._kept and b.holder.same_owner(holder)):
+        kept = name in self._kept
+        if b.holder != holder and not (kept and b.holder.principal == holder.principal):
             return False
         self.remove(name)
         return True
