@@ -156,6 +156,11 @@ class ObjectAdapter:
         caller = None if peer is None else caller_of(*peer)
         return _Call(self, servant, routing, req, body, kind, quick, caller)
 
+    def drain(self, timeout: float) -> bool:
+        """Refuse new requests (TRANSIENT, completed NO) and wait up to `timeout` seconds for
+        the calls being served to finish and be answered; whether they all were."""
+        return self._dispatcher.drain(timeout)
+
     def close(self) -> None:
         """Stop serving (from any thread; the socket closes when its owner is free)."""
         self._dispatcher.close()
@@ -220,8 +225,8 @@ class _Call:
             reply = system_exception_reply(too_large)
         return _reply_frames(self.peer, req, reply)
 
-    def refuse(self) -> list[bytes] | None:
-        busy = TRANSIENT(f"{self.adapter.endpoint} is overloaded", completed=CompletionStatus.NO)
+    def refuse(self, why: str = "is overloaded") -> list[bytes] | None:
+        busy = TRANSIENT(f"{self.adapter.endpoint} {why}", completed=CompletionStatus.NO)
         return _reply_frames(self.peer, self.request, system_exception_reply(busy))
 
 

@@ -46,6 +46,7 @@ from miro_gen.transport.reactor import Reactor
 
 StubT = TypeVar("StubT", bound=Stub)
 WAIT_STEP = 0.5  # at most this many seconds between two looks for a name being waited for
+DRAIN_TIMEOUT = 2.0  # seconds the calls being served may take to finish when a server stops
 _log = log.logger("MIRO")
 
 
@@ -228,6 +229,7 @@ class Server(Client):
                 self._unreachable,
             )
             self.naming.before_first_call = self.leases.wait_for_naming
+        self.drain_timeout = DRAIN_TIMEOUT
         self._armed = False
         self._cleaned = False
         self._on_shutdown: list[Callable[[], object]] = []
@@ -316,9 +318,10 @@ class Server(Client):
         self._on_shutdown.append(fn)
 
     def run(self) -> None:
-        """Serve until SIGINT, SIGTERM or `shutdown()`; then unbind this server's names. A
-        signal that came before (see `miro_gen.lifecycle`) ends it at once; one that comes
-        during the clean-up does not interrupt it."""
+        """Serve until SIGINT, SIGTERM or `shutdown()`; then unbind this server's names and
+        let the calls it is running finish and be answered (at most `drain_timeout` seconds:
+        2). A signal that came before (see `miro_gen.lifecycle`) ends it at once; one that
+        comes during the clean-up does not interrupt it."""
         with lifecycle.signals_stop(self.shutdown) as signals:
             try:
                 if not signals.pending:
@@ -340,6 +343,13 @@ class Server(Client):
         self.service.join()  # a bind of the service object still under way
         if self.leases is not None:
             self.leases.stop()
+        # Its names gone, the calls it is running finish and are answered (bounded); others
+        # are refused, completed NO, so that their callers may go elsewhere.
+        if not self.adapter.drain(self.drain_timeout):
+            _log.warning(
+                "calls still running %g s after the server was told to stop: abandoned",
+                self.drain_timeout,
+            )
         for fn in reversed(self._on_shutdown):
             try:
                 fn()
