@@ -125,6 +125,8 @@ def naming_errors(endpoint: str, what: str) -> Iterator[None]:
     try:
         yield
     except (TRANSIENT, COMM_FAILURE, TIMEOUT) as e:
+        if NAMING_HINT in e.message or e.message.startswith(f"cannot {what}: "):
+            raise  # said already, by an inner naming_errors
         if e.minor == REFUSED_MINOR:  # it runs, but will not have us: say why
             raise TRANSIENT(f"cannot {what}: {e.message}", e.minor, e.completed) from None
         reason = e.message.rsplit(": ", 1)[-1] if ": " in e.message else e.message
