@@ -33,6 +33,8 @@ from miro_gen.transport.naming_service import NamingService
 from miro_gen.transport.options import DEFAULT_NAMING, UsageError, byte_size, naming_endpoint
 from miro_gen.transport.reactor import Reactor
 
+_log = log.logger("MIRO")
+
 
 def naming_main(argv: Sequence[str]) -> int:
     p = argparse.ArgumentParser(
@@ -221,6 +223,16 @@ def naming_main(argv: Sequence[str]) -> int:
     lines = [f"naming service at {bound}{note}", *(f"event channel {n}" for n in ns.channel)]
     # Said once the reactor runs: a signal from whoever waited for these lines then stops it.
     reactor.call_soon(lambda: print("\n".join(lines), flush=True))
+    restored = service.restored
+    if restored.bindings or restored.kept:
+        reactor.call_soon(
+            lambda: _log.notice(
+                "%d names read back from %s (%d kept for servers that stopped)",
+                restored.bindings + restored.kept,
+                log_path,
+                restored.kept,
+            )
+        )
     announcer = None
     if announce and not re.search(r"://(127\.|localhost)", bound):
         from miro_gen.transport.discovery import Announcer

@@ -47,7 +47,8 @@ def _folder() -> str | None:
 
 
 @functools.cache
-def _namespace() -> str:
+def network_namespace() -> str:
+    """This process's network namespace (the inode of `/proc/self/ns/net`; "0" off Linux)."""
     try:
         return str(os.stat("/proc/self/ns/net").st_ino)
     except OSError:
@@ -70,7 +71,7 @@ def ipc_twin(endpoint: str) -> str | None:
     if parts is None or folder is None:
         return None
     address, port = parts
-    path = os.path.join(folder, f"{_namespace()}-{address.replace(':', '_')}-{port}")
+    path = os.path.join(folder, f"{network_namespace()}-{address.replace(':', '_')}-{port}")
     return f"ipc://{path}" if len(path.encode()) <= _MAX_PATH else None
 
 

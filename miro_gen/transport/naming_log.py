@@ -32,6 +32,7 @@ import MiroNaming
 
 from miro_gen.exceptions import BAD_PARAM
 from miro_gen.log import logger
+from miro_gen.transport.local import network_namespace
 from miro_gen.transport.naming_table import MAX_LEASE_MS, Binding, Holder, Table, check_entry
 
 _log = logger("MIRO")
@@ -47,12 +48,23 @@ class LogError(Exception):
 
 def default_path(endpoint: str) -> str:
     """`$XDG_STATE_HOME/miro/naming-PORT.log` (`~/.local/state/...`) for a naming service at
-    `endpoint`."""
+    `endpoint`; `naming-PORT-NETNS.log` in a network namespace other than the machine's own
+    (NETNS its inode: naming services of two namespaces on one port keep logs of their own)."""
     base = os.environ.get("XDG_STATE_HOME") or os.path.join(
         os.path.expanduser("~"), ".local", "state"
     )
     port = endpoint.rpartition(":")[2]
-    return os.path.join(base, "miro", f"naming-{port}.log")
+    suffix = "" if _machines_own_namespace() else f"-{network_namespace()}"
+    return os.path.join(base, "miro", f"naming-{port}{suffix}.log")
+
+
+def _machines_own_namespace() -> bool:
+    """Whether this process's network namespace is the machine's (init's), as far as it can
+    tell (another user's init cannot be looked at: then yes)."""
+    try:
+        return os.stat("/proc/1/ns/net").st_ino == os.stat("/proc/self/ns/net").st_ino
+    except OSError:
+        return True
 
 
 @dataclass

@@ -36,7 +36,7 @@ from miro_gen.transport.naming import (
     MAX_PAGE,
     NAMING_KEY,
 )
-from miro_gen.transport.naming_log import OwnersLog
+from miro_gen.transport.naming_log import OwnersLog, Restored
 from miro_gen.transport.naming_table import Holder, Table, check_entry, check_name
 from miro_gen.transport.reactor import Reactor
 
@@ -213,17 +213,11 @@ class NamingService:
         self.endpoint = self.adapter.endpoint
         self.local_socket = next(iter(self.adapter.also_bound), None)
         self.log: OwnersLog | None = None
+        self.restored = Restored()
         try:
             if log_path is not None:
                 self.log = OwnersLog(log_path, self.table)
-                restored = self.log.restore(time.monotonic(), DEFAULT_LEASE)
-                if restored.bindings or restored.kept:
-                    _log.notice(
-                        "%d names read back from %s (%d kept for servers that stopped)",
-                        restored.bindings + restored.kept,
-                        log_path,
-                        restored.kept,
-                    )
+                self.restored = self.log.restore(time.monotonic(), DEFAULT_LEASE)
         except BaseException:
             self.adapter.close()
             raise
