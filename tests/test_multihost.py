@@ -48,14 +48,20 @@ class Hosts:
         self.prefix = f"miro-{os.getpid()}{tag}-"
         self.created: list[str] = []
         self.procs: list[subprocess.Popen[str]] = []
-        self.env = service_env(MIRO_KEYS=str(key))
+        # Its naming services keep their logs of owners beside the key: a namespace deleted
+        # frees its inode, which a later one (of another test, with another key) may get.
+        self.env = service_env(MIRO_KEYS=str(key), XDG_STATE_HOME=str(key.parent))
 
     def ns(self, host: str) -> str:
         return self.prefix + host
 
     def wrapper(self, host: str) -> list[str]:
         """What runs a command in `host`'s namespace with the fleet's key."""
-        return ["ip", "netns", "exec", self.ns(host), "env", f"MIRO_KEYS={self.env['MIRO_KEYS']}"]
+        return [
+            *("ip", "netns", "exec", self.ns(host), "env"),
+            f"MIRO_KEYS={self.env['MIRO_KEYS']}",
+            f"XDG_STATE_HOME={self.env['XDG_STATE_HOME']}",
+        ]
 
     def add(self, host: str) -> subprocess.CompletedProcess[str]:
         done = subprocess.run(

@@ -48,23 +48,28 @@ class LogError(Exception):
 
 def default_path(endpoint: str) -> str:
     """`$XDG_STATE_HOME/miro/naming-PORT.log` (`~/.local/state/...`) for a naming service at
-    `endpoint`; `naming-PORT-NETNS.log` in a network namespace other than the machine's own
-    (NETNS its inode: naming services of two namespaces on one port keep logs of their own)."""
+    `endpoint`; `naming-PORT-NAME.log` in the network namespace `ip netns` named NAME, so that
+    naming services of two namespaces on one port keep logs of their own."""
     base = os.environ.get("XDG_STATE_HOME") or os.path.join(
         os.path.expanduser("~"), ".local", "state"
     )
     port = endpoint.rpartition(":")[2]
-    suffix = "" if _machines_own_namespace() else f"-{network_namespace()}"
-    return os.path.join(base, "miro", f"naming-{port}{suffix}.log")
+    name = _namespace_name()
+    return os.path.join(base, "miro", f"naming-{port}{f'-{name}' if name else ''}.log")
 
 
-def _machines_own_namespace() -> bool:
-    """Whether this process's network namespace is the machine's (init's), as far as it can
-    tell (another user's init cannot be looked at: then yes)."""
-    try:
-        return os.stat("/proc/1/ns/net").st_ino == os.stat("/proc/self/ns/net").st_ino
-    except OSError:
-        return True
+def _namespace_name() -> str | None:
+    """The name `ip netns` gave this process's network namespace (which lasts, where the
+    inodes of deleted namespaces are given to new ones), or None (the machine's own, or one
+    of a container)."""
+    inode = network_namespace()
+    for folder in ("/run/netns", "/var/run/netns"):
+        with contextlib.suppress(OSError):
+            for entry in os.scandir(folder):
+                with contextlib.suppress(OSError):
+                    if str(entry.stat().st_ino) == inode:
+                        return entry.name
+    return None
 
 
 @dataclass
