@@ -353,6 +353,29 @@ def test_a_restarted_server_gets_its_names_back_at_once_and_a_stranger_never(
         victim.stop()
 
 
+def test_a_second_copy_of_a_service_takes_its_names_and_the_first_says_so(
+    naming: NamingProcess,
+) -> None:
+    """The same user and service name is the same owner: a second copy started by hand while
+    the first runs takes the names over (as a restart would), and the first, finding them
+    gone at its next renewal, says so loudly and keeps trying instead of taking them back."""
+    first = Victim(naming, "A")
+    c = client(naming)
+    try:
+        second = Victim(naming, "A")
+        mine = c.naming.resolve("r/A").endpoint
+        eventually(lambda: any("r/A was taken by another run" in line for line in first.err))
+        time.sleep(2 * float(LEASE))  # the first keeps trying: the name stays with the second
+        assert c.naming.resolve("r/A").endpoint == mine
+        assert first.proc.poll() is None  # still serving
+        second.stop()  # unbinds: the first, still trying, gets it
+        eventually(lambda: _endpoint(c, "r/A") not in (mine, None))
+        assert any("bound r/A in the naming service after" in line for line in first.err)
+    finally:
+        c.close()
+        first.stop()
+
+
 def test_a_server_whose_name_is_taken_keeps_trying_and_says_so() -> None:
     """Before: AlreadyBound after a lease, and exit (a crash loop under `miro launch`). Now a
     warning naming the holder, the server runs, and it binds the name once it is free."""
