@@ -210,6 +210,8 @@ class OwnersLog:
     def close(self) -> None:
         self.compact()
         self._file.close()
+        with contextlib.suppress(OSError):  # held: nobody else uses the log meanwhile
+            os.unlink(f"{self.path}.lock")
         os.close(self._lock)
 
 
