@@ -108,6 +108,12 @@ class NO_RESOURCES(SystemException):
     _repo_id = "IDL:omg.org/CORBA/NO_RESOURCES:1.0"
 
 
+class NO_PERMISSION(SystemException):
+    """The caller may not do this (the naming service: an owner's call it cannot check)."""
+
+    _repo_id = "IDL:omg.org/CORBA/NO_PERMISSION:1.0"
+
+
 class UNKNOWN(SystemException):
     """The servant raised an exception that is not declared in IDL."""
 
@@ -126,6 +132,7 @@ SYSTEM_EXCEPTIONS: dict[str, type[SystemException]] = {
         BAD_PARAM,
         NO_IMPLEMENT,
         NO_RESOURCES,
+        NO_PERMISSION,
         UNKNOWN,
     )
 }
@@ -136,6 +143,7 @@ __all__ = [
     "COMM_FAILURE",
     "MARSHAL",
     "NO_IMPLEMENT",
+    "NO_PERMISSION",
     "NO_RESOURCES",
     "OBJECT_NOT_EXIST",
     "SYSTEM_EXCEPTIONS",

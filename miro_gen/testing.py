@@ -21,7 +21,7 @@ from types import TracebackType
 import zmq
 
 from miro_gen.transport.invoker import ZmqInvoker
-from miro_gen.transport.naming import NamingService
+from miro_gen.transport.naming_service import NamingService
 from miro_gen.transport.reactor import Reactor
 
 

@@ -21,6 +21,19 @@ if GENERATED not in sys.path:
 os.environ["MIRO_DISCOVERY"] = "0"
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _session_state(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
+    """The naming services the tests start (themselves, or through `miro launch`) keep their
+    logs of owners in a folder of this session's ($XDG_STATE_HOME), not in the user's."""
+    old = os.environ.get("XDG_STATE_HOME")
+    os.environ["XDG_STATE_HOME"] = str(tmp_path_factory.mktemp("state"))
+    yield
+    if old is None:
+        os.environ.pop("XDG_STATE_HOME", None)
+    else:
+        os.environ["XDG_STATE_HOME"] = old
+
+
 @pytest.fixture(scope="module")
 def naming() -> Iterator[str]:
     """The endpoint of a `miro naming` process shared by a test module."""

@@ -4,10 +4,12 @@ they start, a `miro naming` process, and waiting for a condition."""
 from __future__ import annotations
 
 import os
+import shutil
 import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from collections.abc import Callable
@@ -35,12 +37,24 @@ def service_env(**extra: str) -> dict[str, str]:
 
 class NamingProcess:
     """`miro naming` in a process of its own, serving on 127.0.0.1 (on `port`, or a free one);
-    `options` are more of its command line (`--channel NAME`)."""
+    `options` are more of its command line (`--channel NAME`). Its log of owners is a file of
+    its own (`log_file`, in a fresh folder unless given), which `restart` keeps."""
 
-    def __init__(self, port: int | None = None, options: tuple[str, ...] = ()) -> None:
+    def __init__(
+        self, port: int | None = None, options: tuple[str, ...] = (), log_file: str | None = None
+    ) -> None:
         self.port = free_port() if port is None else port
         self.endpoint = f"tcp://127.0.0.1:{self.port}"
-        self.proc = subprocess.Popen(
+        self.options = options
+        self._folder = None
+        if log_file is None:
+            self._folder = tempfile.mkdtemp(prefix="miro-naming-")
+            log_file = os.path.join(self._folder, "owners.log")
+        self.log_file = log_file
+        self.proc = self._start()
+
+    def _start(self) -> subprocess.Popen[str]:
+        proc = subprocess.Popen(
             [
                 sys.executable,
                 "-m",
@@ -48,17 +62,32 @@ class NamingProcess:
                 "naming",
                 "--endpoint",
                 self.endpoint,
-                *options,
+                "--log-file",
+                self.log_file,
+                *self.options,
             ],
             stdout=subprocess.PIPE,
             text=True,
             env=service_env(),
         )
-        assert self.proc.stdout is not None
-        assert self.proc.stdout.readline().startswith("naming service at")
+        assert proc.stdout is not None
+        line = proc.stdout.readline()
+        assert line.startswith("naming service at"), line
+        return proc
+
+    def restart(self, sig: int = signal.SIGKILL) -> None:
+        """Stop it (killed by default) and start it again on the same port and log."""
+        self._halt(sig)
+        self.proc = self._start()
 
     def stop(self, sig: int = signal.SIGKILL) -> None:
-        self.proc.send_signal(sig)
+        self._halt(sig)
+        if self._folder is not None:
+            shutil.rmtree(self._folder, ignore_errors=True)
+
+    def _halt(self, sig: int) -> None:
+        if self.proc.poll() is None:
+            self.proc.send_signal(sig)
         self.proc.wait(10)
 
 

@@ -11,7 +11,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
-from loopback import eventually, free_port, run_miro, service_env
+from loopback import NamingProcess, eventually, free_port, run_miro, service_env
 
 SERVICES = Path(__file__).resolve().parents[1] / "services"
 HINT = "is `miro naming` running? see --naming / MIRO_NAMING"
@@ -64,22 +64,73 @@ def one_line(stderr: str) -> str:
     return lines[0]
 
 
-@pytest.mark.parametrize("script", ["exampleA.py", "exampleC.py", "gps_position.py"])
-def test_a_server_without_a_naming_service_says_so_in_one_line(script: str) -> None:
-    done = run(script, "--naming", nobody())
+@pytest.mark.parametrize("script", ["exampleA.py", "exampleC.py", "exampleD.py", "gps_position.py"])
+def test_a_server_told_not_to_wait_for_its_naming_service_says_so_in_one_line(
+    script: str,
+) -> None:
+    done = run(script, "--naming", nobody(), "--wait-naming", "0")
     assert done.returncode == 1
     line = one_line(done.stderr)
     assert line.startswith(script.removesuffix(".py") + ": cannot ")
     assert "cannot be reached (connection refused)" in line and line.endswith(HINT)
 
 
-@pytest.mark.parametrize(("script", "args"), [("exampleB.py", ()), ("exampleD.py", ())])
-def test_a_client_without_a_naming_service_says_so_in_one_line(
-    script: str, args: tuple[str, ...]
-) -> None:
-    done = run(script, "--naming", nobody(), *args)
+def test_a_client_without_a_naming_service_says_so_in_one_line() -> None:
+    done = run("exampleB.py", "--naming", nobody())
     assert done.returncode == 1
     assert one_line(done.stderr).endswith(HINT)
+
+
+@pytest.mark.parametrize("script", ["exampleA.py", "gps_position.py"])
+def test_a_server_started_before_its_naming_service_waits_for_it(script: str) -> None:
+    """Before: TRANSIENT "cannot be reached", status 1. Now, as ROS 1 nodes do for their
+    master: one line saying where the naming service is expected and what to start, then the
+    server binds when it appears (issue 34)."""
+    from miro_gen import Client
+
+    port = free_port()
+    endpoint = f"tcp://127.0.0.1:{port}"
+    server = start(script, "--naming", endpoint, "-MNC", "early")
+    assert server.stderr is not None
+    said = server.stderr.readline()
+    assert f"the naming service at {endpoint} does not answer" in said, said
+    assert "miro naming" in said and "--wait-naming" in said
+    naming = NamingProcess(port)
+    client = Client(["t", "--naming", endpoint])
+    try:
+        service = "exampleA" if script == "exampleA.py" else "gps_position"
+        eventually(lambda: _bound(client, f"early/_services/{service}"), 60)
+        if script == "exampleA.py":
+            assert _bound(client, "early/ExampleA")
+        server.send_signal(signal.SIGINT)
+        _, err = server.communicate(timeout=60)
+        assert server.returncode == 0, err
+        assert "does not answer" not in err and "Traceback" not in err  # said once
+    finally:
+        client.close()
+        naming.stop()
+        if server.poll() is None:
+            server.kill()
+
+
+@pytest.mark.parametrize("background", [False, True])
+def test_ctrl_c_while_a_server_waits_for_its_naming_service(background: bool) -> None:
+    server = start("exampleA.py", "--naming", nobody(), ignore_sigint=background)
+    assert server.stderr is not None
+    assert "does not answer" in server.stderr.readline()
+    server.send_signal(signal.SIGINT)
+    _, err = server.communicate(timeout=60)
+    assert server.returncode == 130 and "Traceback" not in err, err
+
+
+def _bound(client: object, name: str) -> bool:
+    import MiroNaming
+
+    try:
+        client.naming.resolve(name)  # type: ignore[attr-defined]
+    except MiroNaming.NotFound:
+        return False
+    return True
 
 
 def test_a_name_not_bound_is_one_line(naming: str) -> None:
@@ -153,7 +204,7 @@ def test_a_server_interrupted_while_it_imports_binds_nothing(naming: str) -> Non
     assert server.returncode == 130 and err == ""
     client = Client(["t", "--naming", naming])
     try:
-        assert [e.name for e in client.naming.registry._list("early/")] == []
+        assert [e.name for e in client.naming.entries("early/")] == []
     finally:
         client.close()
 
@@ -218,6 +269,6 @@ def test_a_server_interrupted_between_binding_and_running_unbinds(naming: str) -
     assert proc.returncode == 130 and err == ""
     client = Client(["t", "--naming", naming])
     try:
-        assert client.naming.registry._list("between/") == []
+        assert client.naming.entries("between/") == []
     finally:
         client.close()

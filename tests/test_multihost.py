@@ -48,16 +48,24 @@ class Hosts:
         self.prefix = f"miro-{os.getpid()}{tag}-"
         self.created: list[str] = []
         self.procs: list[subprocess.Popen[str]] = []
-        # multicast DNS, off for the tests (conftest.py), stays inside these namespaces
-        self.env = service_env(MIRO_KEYS=str(key), MIRO_DISCOVERY="1")
+        # multicast DNS, off for the tests (conftest.py), stays inside these namespaces; their
+        # naming services keep their logs of owners beside the key: a namespace deleted frees its
+        # inode, which a later one (of another test, with another key) may get.
+        self.env = service_env(
+            MIRO_KEYS=str(key), MIRO_DISCOVERY="1", XDG_STATE_HOME=str(key.parent)
+        )
 
     def ns(self, host: str) -> str:
         return self.prefix + host
 
     def wrapper(self, host: str) -> list[str]:
         """What runs a command in `host`'s namespace with the fleet's key (and multicast DNS)."""
-        env = [f"MIRO_KEYS={self.env['MIRO_KEYS']}", "MIRO_DISCOVERY=1"]
-        return ["ip", "netns", "exec", self.ns(host), "env", *env]
+        return [
+            *("ip", "netns", "exec", self.ns(host), "env"),
+            f"MIRO_KEYS={self.env['MIRO_KEYS']}",
+            "MIRO_DISCOVERY=1",
+            f"XDG_STATE_HOME={self.env['XDG_STATE_HOME']}",
+        ]
 
     def add(self, host: str) -> subprocess.CompletedProcess[str]:
         done = subprocess.run(

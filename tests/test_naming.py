@@ -113,12 +113,13 @@ def test_a_stopped_server_unbinds_and_a_killed_one_expires(naming: Naming) -> No
     c.close()
 
 
-def test_a_restarted_naming_service_is_repopulated(naming: Naming) -> None:
+def test_a_naming_service_restarted_without_its_log_is_repopulated(naming: Naming) -> None:
+    """Its log lost, a naming service learns the names again from the servers' renewals."""
     service = Service(naming, "-MNC", "r")
     port = int(naming.endpoint.rsplit(":", 1)[1])
     naming.stop()
     time.sleep(0.2)
-    again = Naming(port)
+    again = Naming(port)  # a log of its own: empty
     try:
         c = client(again)
         eventually(lambda: resolves(c, "r/ExampleA"))
@@ -128,7 +129,7 @@ def test_a_restarted_naming_service_is_repopulated(naming: Naming) -> None:
         c.close()
     finally:
         service.stop()
-        naming.proc = again.proc  # the fixture stops this one
+        again.stop()
 
 
 def test_no_naming_service_is_transient(naming: Naming) -> None:

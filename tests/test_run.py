@@ -53,12 +53,10 @@ def test_a_service_with_sibling_modules(tmp_path: Path) -> None:
     assert done.stdout.startswith("usage: gps")
 
 
-def test_a_shipped_server_without_a_naming_service(tmp_path: Path) -> None:
+def test_a_shipped_server_told_not_to_wait_for_its_naming_service(tmp_path: Path) -> None:
     naming = f"tcp://127.0.0.1:{free_port()}"
-    done = run(
-        [sys.executable, "-m", "miro_gen.cli.main", "run", "exampleA", "--naming", naming],
-        tmp_path,
-    )
+    command = ["run", "exampleA", "--naming", naming, "--wait-naming", "0"]
+    done = run([sys.executable, "-m", "miro_gen.cli.main", *command], tmp_path)
     assert done.returncode == 1
     assert done.stderr.count("\n") == 1 and "is `miro naming` running?" in done.stderr
 

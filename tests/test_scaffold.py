@@ -240,8 +240,11 @@ def test_a_scaffolded_service_parses_its_own_options(project: Path) -> None:
     assert "my_server: error: unrecognized arguments: --colour blue" in wrong.stderr
 
 
-def test_a_scaffolded_server_without_a_naming_service_is_one_line(project: Path) -> None:
-    done = miro(project, "run", "my_server", "--naming", f"tcp://127.0.0.1:{free_port()}")
+def test_a_scaffolded_server_told_not_to_wait_for_its_naming_service_is_one_line(
+    project: Path,
+) -> None:
+    naming = f"tcp://127.0.0.1:{free_port()}"
+    done = miro(project, "run", "my_server", "--naming", naming, "--wait-naming", "0")
     assert done.returncode == 1
     assert done.stderr.count("\n") == 1 and "Traceback" not in done.stderr
     assert done.stderr.startswith("my_server: cannot bind ")

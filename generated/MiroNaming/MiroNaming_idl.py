@@ -21,12 +21,20 @@ __all__ = [
     "InvalidName",
     "NameSeq",
     "NotFound",
+    "Owner",
+    "Page",
     "Registry",
 ]
 
-_S0 = _cdr.pair("I")
+_S0 = _cdr.pair("?")
 _P0 = _S0[0].pack
 _U0 = (_S0[0].unpack_from, _S0[1].unpack_from)
+_S1 = _cdr.pair("I?")
+_P1 = _S1[0].pack
+_U1 = (_S1[0].unpack_from, _S1[1].unpack_from)
+_S2 = _cdr.pair("I")
+_P2 = _S2[0].pack
+_U2 = (_S2[0].unpack_from, _S2[1].unpack_from)
 
 
 @_dc.dataclass(slots=True)
@@ -137,6 +145,167 @@ NameSeq: _t.TypeAlias = list[str]
 """Full names."""
 
 
+@_dc.dataclass(slots=True)
+class Owner(_cdr.IdlType):
+    """Who binds, as the binding server says it. The naming service adds the caller's
+    principal, which it checks; the owner of an entry is the principal and `service`.
+    """
+
+    service: str = ""
+    """The service, such as `robot1/exampleA`: the same across its restarts."""
+    run: str = ""
+    """This run of the service (a random id per process): tells a restarted service from
+    the run it replaces, and a second copy from the first.
+    """
+
+    _repo_id = "IDL:MiroNaming/Owner:1.0"
+    _type_name = "MiroNaming::Owner"
+    _type_hash = "4d17ee70ce24442edb707477add1b2293ba8db22480995a0110041d389fbb6d1"
+    _data_schema = (
+        "module MiroNaming {\n"
+        "  struct Owner {\n"
+        "    string service;\n"
+        "    string run;\n"
+        "  };\n"
+        "};\n"
+    )
+
+    def serialize(self) -> bytes:
+        """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
+        try:
+            _enc_Owner(_buf, self)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.encode_error("MiroNaming::Owner", _x) from None
+
+    @classmethod
+    def deserialize(cls, data: _cdr.Buffer) -> Owner:
+        """A value from CDR (either byte order); MARSHAL if the data is malformed."""
+        _e, _off = _cdr.body_header(data)
+        try:
+            return _dec_Owner(data, _off, _e)[0]
+        except _cdr.DecodeErrors as _x:
+            raise _cdr.marshal_error("MiroNaming::Owner", _x) from None
+
+
+def _enc_Owner(_buf: bytearray, _v: Owner) -> None:
+    _cdr.put_string(_buf, _v.service, None, "MiroNaming::Owner.service")
+    _cdr.put_string(_buf, _v.run, None, "MiroNaming::Owner.run")
+
+
+def _dec_Owner(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Owner, int]:
+    _f0, _off = _cdr.get_string(
+        _data,
+        _off,
+        _e,
+        None,
+        "MiroNaming::Owner.service",
+    )
+    _f1, _off = _cdr.get_string(
+        _data,
+        _off,
+        _e,
+        None,
+        "MiroNaming::Owner.run",
+    )
+    return Owner(_f0, _f1), _off
+
+
+@_dc.dataclass(slots=True)
+class Page(_cdr.IdlType):
+    """Entries of a listing, in name order, and whether more follow."""
+
+    entries: EntrySeq = _dc.field(default_factory=list)
+    """At most the number asked for, and never more than one message holds."""
+    more: bool = False
+    """Whether names after the last one remain: ask again with `after` set to it."""
+
+    _repo_id = "IDL:MiroNaming/Page:1.0"
+    _type_name = "MiroNaming::Page"
+    _type_hash = "c59b1b04d80385e8293d3ae82883a3b83425b407e0d28a1065fdf82614c511db"
+    _data_schema = (
+        "module MiroNaming {\n"
+        "  struct Entry {\n"
+        "    string name;\n"
+        "    string repo_id;\n"
+        "    string endpoint;\n"
+        "    sequence<octet> key;\n"
+        "    string type_hash;\n"
+        "  };\n"
+        "};\n"
+        "module MiroNaming {\n"
+        "  typedef sequence<MiroNaming::Entry> EntrySeq;\n"
+        "};\n"
+        "module MiroNaming {\n"
+        "  struct Page {\n"
+        "    MiroNaming::EntrySeq entries;\n"
+        "    boolean more;\n"
+        "  };\n"
+        "};\n"
+    )
+
+    def serialize(self) -> bytes:
+        """This value in CDR: XCDR1, little-endian, after the 4-byte encapsulation header."""
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        self._encode(_buf)
+        return _buf.value()
+
+    def _encode(self, _buf: _cdr.Encoder) -> None:
+        """Append this value's CDR to `_buf`, which ends with the encapsulation header."""
+        try:
+            _enc_Page(_buf, self)
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.encode_error("MiroNaming::Page", _x) from None
+
+    @classmethod
+    def deserialize(cls, data: _cdr.Buffer) -> Page:
+        """A value from CDR (either byte order); MARSHAL if the data is malformed."""
+        _e, _off = _cdr.body_header(data)
+        try:
+            return _dec_Page(data, _off, _e)[0]
+        except _cdr.DecodeErrors as _x:
+            raise _cdr.marshal_error("MiroNaming::Page", _x) from None
+
+
+def _enc_Page(_buf: bytearray, _v: Page) -> None:
+    _cdr.put_count(_buf, _v.entries, None, "MiroNaming::Page.entries")
+    for _x0 in _v.entries:
+        try:
+            _enc_Entry(_buf, _x0)
+        except _cdr.NestedErrors as _x:
+            raise _cdr.nested_error("MiroNaming::Page.entries", _x) from None
+    try:
+        _buf += _P0(_v.more)
+    except _cdr.EncodeErrors as _x:
+        raise _cdr.pack_error(
+            _x,
+            ("MiroNaming::Page.more", "?", lambda: (_v.more,)),
+        ) from None
+
+
+def _dec_Page(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[Page, int]:
+    _n3, _off = _cdr.get_length(
+        _data,
+        _off,
+        _e,
+        None,
+        20,
+        "MiroNaming::Page.entries",
+    )
+    _f1 = []
+    for _ in range(_n3):
+        _x2, _off = _dec_Entry(_data, _off, _e)
+        _f1.append(_x2)
+    _t4 = _U0[_e](_data, _off)
+    _off += 1
+    return Page(_f1, _t4[0]), _off
+
+
 @_dc.dataclass(eq=False)
 class NotFound(_exc.UserException, _cdr.IdlType):
     """No entry has this name."""
@@ -198,18 +367,23 @@ def _dec_NotFound(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[NotFound, int
 
 @_dc.dataclass(eq=False)
 class AlreadyBound(_exc.UserException, _cdr.IdlType):
-    """The name is held by another owner's live entry."""
+    """The name is held by another owner."""
 
     name: str = ""
     """The name asked for."""
+    holder: str = ""
+    """Who holds it, as far as the caller may know: another run of the same service,
+    another service of the same principal, or another principal.
+    """
 
     _repo_id = "IDL:MiroNaming/AlreadyBound:1.0"
     _type_name = "MiroNaming::AlreadyBound"
-    _type_hash = "fddbb10404166b7254e6216ad1c982a6958a7d06153d797307ec6569b5847dd4"
+    _type_hash = "50da25c5c1d672b85b7b0c79d4aedc702a5137ad99fab61e1f66714723b5db5a"
     _data_schema = (
         "module MiroNaming {\n"
         "  struct AlreadyBound {\n"
         "    string name;\n"
+        "    string holder;\n"
         "  };\n"
         "};\n"
     )
@@ -242,6 +416,12 @@ class AlreadyBound(_exc.UserException, _cdr.IdlType):
 
 def _enc_AlreadyBound(_buf: bytearray, _v: AlreadyBound) -> None:
     _cdr.put_string(_buf, _v.name, None, "MiroNaming::AlreadyBound.name")
+    _cdr.put_string(
+        _buf,
+        _v.holder,
+        None,
+        "MiroNaming::AlreadyBound.holder",
+    )
 
 
 def _dec_AlreadyBound(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[AlreadyBound, int]:
@@ -252,7 +432,14 @@ def _dec_AlreadyBound(_data: _cdr.Buffer, _off: int, _e: int) -> tuple[AlreadyBo
         None,
         "MiroNaming::AlreadyBound.name",
     )
-    return AlreadyBound(_f0), _off
+    _f1, _off = _cdr.get_string(
+        _data,
+        _off,
+        _e,
+        None,
+        "MiroNaming::AlreadyBound.holder",
+    )
+    return AlreadyBound(_f0, _f1), _off
 
 
 @_dc.dataclass(eq=False)
@@ -318,62 +505,42 @@ class Registry(_rpc.Stub):
     """The naming service: one per robot or per network of robots."""
 
     __slots__ = ()
-    _repo_id = "IDL:MiroNaming/Registry:1.0"
-    _interface_hash = "8e04bda82db4843215481ad4c6bd697217660d1231736a247aa2a9af5868bee7"
+    _repo_id = "IDL:MiroNaming/Registry:2.0"
+    _interface_hash = "a6c89bbc7d6db37c62ee5d467f965e729ab88809055a87ebe05b0fbb47a79b75"
 
-    def bind(self, binding: Entry, owner: str, lease_ms: int) -> None:
-        """Bind a name that is free (or already held by the same owner).
+    def bind_as(self, binding: Entry, who: Owner, lease_ms: int, take_over: bool) -> None:
+        """Bind a name for `who`: one that is free, held by that owner (this run, or another
+        run of the same service when `take_over`, or a run whose lease has ended), or kept
+        for the caller's principal after its server stopped.
 
         @param binding What the name is bound to.
-        @param owner The binding server's unique id; its leases are renewed together.
+        @param who Who binds it; its leases are renewed together.
         @param lease_ms How long the entry lives unless renewed.
+        @param take_over Replace a live entry of another run of the same service (a service
+          starting, whose predecessor may have been killed); without it, AlreadyBound.
         """
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             try:
                 _enc_Entry(_buf, binding)
             except _cdr.NestedErrors as _x:
-                raise _cdr.nested_error("MiroNaming::Registry::bind(binding)", _x) from None
-            _cdr.put_string(_buf, owner, None, "MiroNaming::Registry::bind(owner)")
-            _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
+                raise _cdr.nested_error("MiroNaming::Registry::bind_as(binding)", _x) from None
             try:
-                _buf += _P0(lease_ms)
-            except _cdr.EncodeErrors as _x:
-                raise _cdr.pack_error(
-                    _x,
-                    ("MiroNaming::Registry::bind(lease_ms)", "I", lambda: (lease_ms,)),
-                ) from None
-        except _cdr.EncodeErrors as _x:
-            raise _cdr.encode_error("MiroNaming::Registry::bind", _x) from None
-        self._call("bind", _buf.value(), (AlreadyBound, InvalidName))
-
-    def rebind(self, binding: Entry, owner: str, lease_ms: int) -> None:
-        """Bind a name, replacing what the same owner bound before (Miro's addToNameService);
-        a name that another owner holds live is refused.
-        """
-        _buf = _cdr.Encoder(_cdr.HEADER_LE)
-        try:
-            try:
-                _enc_Entry(_buf, binding)
+                _enc_Owner(_buf, who)
             except _cdr.NestedErrors as _x:
-                raise _cdr.nested_error("MiroNaming::Registry::rebind(binding)", _x) from None
-            _cdr.put_string(
-                _buf,
-                owner,
-                None,
-                "MiroNaming::Registry::rebind(owner)",
-            )
+                raise _cdr.nested_error("MiroNaming::Registry::bind_as(who)", _x) from None
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
             try:
-                _buf += _P0(lease_ms)
+                _buf += _P1(lease_ms, take_over)
             except _cdr.EncodeErrors as _x:
                 raise _cdr.pack_error(
                     _x,
-                    ("MiroNaming::Registry::rebind(lease_ms)", "I", lambda: (lease_ms,)),
+                    ("MiroNaming::Registry::bind_as(lease_ms)", "I", lambda: (lease_ms,)),
+                    ("MiroNaming::Registry::bind_as(take_over)", "?", lambda: (take_over,)),
                 ) from None
         except _cdr.EncodeErrors as _x:
-            raise _cdr.encode_error("MiroNaming::Registry::rebind", _x) from None
-        self._call("rebind", _buf.value(), (AlreadyBound, InvalidName))
+            raise _cdr.encode_error("MiroNaming::Registry::bind_as", _x) from None
+        self._call("bind_as", _buf.value(), (AlreadyBound, InvalidName))
 
     def resolve(self, name: str) -> Entry:
         """The entry bound to a full name."""
@@ -391,77 +558,98 @@ class Registry(_rpc.Stub):
             raise _cdr.marshal_error("MiroNaming::Registry::resolve", _x) from None
         return _r
 
-    def unbind(self, name: str, owner: str) -> None:
-        """Remove a name that `owner` bound (NotFound if `owner` holds no such live entry)."""
+    def unbind_as(self, name: str, who: Owner) -> None:
+        """Remove a name that this run of `who` holds (NotFound otherwise); it is free then."""
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
-            _cdr.put_string(_buf, name, None, "MiroNaming::Registry::unbind(name)")
             _cdr.put_string(
                 _buf,
-                owner,
+                name,
                 None,
-                "MiroNaming::Registry::unbind(owner)",
+                "MiroNaming::Registry::unbind_as(name)",
             )
+            try:
+                _enc_Owner(_buf, who)
+            except _cdr.NestedErrors as _x:
+                raise _cdr.nested_error("MiroNaming::Registry::unbind_as(who)", _x) from None
         except _cdr.EncodeErrors as _x:
-            raise _cdr.encode_error("MiroNaming::Registry::unbind", _x) from None
-        self._call("unbind", _buf.value(), (NotFound, InvalidName))
+            raise _cdr.encode_error("MiroNaming::Registry::unbind_as", _x) from None
+        self._call("unbind_as", _buf.value(), (NotFound, InvalidName))
 
-    def _list(self, prefix: str) -> EntrySeq:
-        """The entries whose names start with `prefix` (all for an empty prefix), in name order."""
+    def list_page(self, prefix: str, after: str, how_many: int) -> Page:
+        """The entries whose names start with `prefix` and come after `after` (from the first
+        for ""), in name order: at most `how_many`, and never more than one message holds.
+        """
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
             _cdr.put_string(
                 _buf,
                 prefix,
                 None,
-                "MiroNaming::Registry::list(prefix)",
+                "MiroNaming::Registry::list_page(prefix)",
             )
-        except _cdr.EncodeErrors as _x:
-            raise _cdr.encode_error("MiroNaming::Registry::list", _x) from None
-        _data = self._call("list", _buf.value(), ())
-        try:
-            _e, _off = _cdr.body_header(_data)
-            _n4, _off = _cdr.get_length(
-                _data,
-                _off,
-                _e,
+            _cdr.put_string(
+                _buf,
+                after,
                 None,
-                20,
-                "MiroNaming::Registry::list result",
+                "MiroNaming::Registry::list_page(after)",
             )
-            _f2 = []
-            for _ in range(_n4):
-                _x3, _off = _dec_Entry(_data, _off, _e)
-                _f2.append(_x3)
-            _r: EntrySeq = _f2
-        except _cdr.DecodeErrors as _x:
-            raise _cdr.marshal_error("MiroNaming::Registry::list", _x) from None
-        return _r
-
-    def renew(self, owner: str, names: NameSeq, lease_ms: int) -> NameSeq:
-        """Extend the leases of the entries `names` of `owner` by `lease_ms`.
-
-        @return the names of `names` that the service does not hold for `owner` (it has
-        restarted, a lease ran out, another owner holds the name now): the owner binds them
-        again.
-        """
-        _buf = _cdr.Encoder(_cdr.HEADER_LE)
-        try:
-            _cdr.put_string(_buf, owner, None, "MiroNaming::Registry::renew(owner)")
-            _cdr.put_count(_buf, names, None, "MiroNaming::Registry::renew(names)")
-            for _x0 in names:
-                _cdr.put_string(_buf, _x0, None, "MiroNaming::Registry::renew(names)")
             _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
             try:
-                _buf += _P0(lease_ms)
+                _buf += _P2(how_many)
             except _cdr.EncodeErrors as _x:
                 raise _cdr.pack_error(
                     _x,
-                    ("MiroNaming::Registry::renew(lease_ms)", "I", lambda: (lease_ms,)),
+                    ("MiroNaming::Registry::list_page(how_many)", "I", lambda: (how_many,)),
                 ) from None
         except _cdr.EncodeErrors as _x:
-            raise _cdr.encode_error("MiroNaming::Registry::renew", _x) from None
-        _data = self._call("renew", _buf.value(), ())
+            raise _cdr.encode_error("MiroNaming::Registry::list_page", _x) from None
+        _data = self._call("list_page", _buf.value(), ())
+        try:
+            _e, _off = _cdr.body_header(_data)
+            _f3, _off = _dec_Page(_data, _off, _e)
+            _r: Page = _f3
+        except _cdr.DecodeErrors as _x:
+            raise _cdr.marshal_error("MiroNaming::Registry::list_page", _x) from None
+        return _r
+
+    def renew_as(self, who: Owner, names: NameSeq, lease_ms: int) -> NameSeq:
+        """Extend the leases of the entries `names` of this run of `who` by `lease_ms`.
+
+        @return the names of `names` that the service does not hold for this run (a lease
+        ran out, another run took the name over): the owner binds them again, without
+        taking over.
+        """
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        try:
+            try:
+                _enc_Owner(_buf, who)
+            except _cdr.NestedErrors as _x:
+                raise _cdr.nested_error("MiroNaming::Registry::renew_as(who)", _x) from None
+            _cdr.put_count(
+                _buf,
+                names,
+                None,
+                "MiroNaming::Registry::renew_as(names)",
+            )
+            for _x0 in names:
+                _cdr.put_string(
+                    _buf,
+                    _x0,
+                    None,
+                    "MiroNaming::Registry::renew_as(names)",
+                )
+            _buf += _cdr.ZEROS[(4 - len(_buf)) & 3]
+            try:
+                _buf += _P2(lease_ms)
+            except _cdr.EncodeErrors as _x:
+                raise _cdr.pack_error(
+                    _x,
+                    ("MiroNaming::Registry::renew_as(lease_ms)", "I", lambda: (lease_ms,)),
+                ) from None
+        except _cdr.EncodeErrors as _x:
+            raise _cdr.encode_error("MiroNaming::Registry::renew_as", _x) from None
+        _data = self._call("renew_as", _buf.value(), ())
         try:
             _e, _off = _cdr.body_header(_data)
             _n9, _off = _cdr.get_length(
@@ -470,7 +658,7 @@ class Registry(_rpc.Stub):
                 _e,
                 None,
                 4,
-                "MiroNaming::Registry::renew result",
+                "MiroNaming::Registry::renew_as result",
             )
             _f7 = []
             for _ in range(_n9):
@@ -479,10 +667,10 @@ class Registry(_rpc.Stub):
                     _off,
                     _e,
                     None,
-                    "MiroNaming::Registry::renew result",
+                    "MiroNaming::Registry::renew_as result",
                 )
                 _f7.append(_x8)
             _r: NameSeq = _f7
         except _cdr.DecodeErrors as _x:
-            raise _cdr.marshal_error("MiroNaming::Registry::renew", _x) from None
+            raise _cdr.marshal_error("MiroNaming::Registry::renew_as", _x) from None
         return _r

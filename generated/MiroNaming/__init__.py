@@ -26,14 +26,18 @@ _EXPORTS: dict[str, str] = {
     "InvalidName": "MiroNaming.MiroNaming_idl",
     "NameSeq": "MiroNaming.MiroNaming_idl",
     "NotFound": "MiroNaming.MiroNaming_idl",
+    "Owner": "MiroNaming.MiroNaming_idl",
+    "Page": "MiroNaming.MiroNaming_idl",
     "Registry": "MiroNaming.MiroNaming_idl",
 }
 # type hash -> the data type that has it: how event consumers find the class of a payload
 _TYPE_HASHES: dict[str, str] = {
     "129cde27241907313a910df5bf0da772791cc0046b4b8c5a598754612a216d13": "NotFound",
+    "4d17ee70ce24442edb707477add1b2293ba8db22480995a0110041d389fbb6d1": "Owner",
+    "50da25c5c1d672b85b7b0c79d4aedc702a5137ad99fab61e1f66714723b5db5a": "AlreadyBound",
     "63992faffcfa28e8f8fc2be3f96ce79595b841d6b3dfbbf609b458e83d930ab6": "Entry",
     "6e94d6e0ad60fd8ae5f45c56a471e617481a26adc9b4b30afa8ef2f33bcab952": "InvalidName",
-    "fddbb10404166b7254e6216ad1c982a6958a7d06153d797307ec6569b5847dd4": "AlreadyBound",
+    "c59b1b04d80385e8293d3ae82883a3b83425b407e0d28a1065fdf82614c511db": "Page",
 }
 # the package's *_idl modules and subpackages
 _SUBMODULES: frozenset[str] = frozenset(
@@ -49,6 +53,8 @@ __all__ = [
     "InvalidName",
     "NameSeq",
     "NotFound",
+    "Owner",
+    "Page",
     "Registry",
 ]
 

@@ -18,16 +18,19 @@ __all__ = [
     "Registry",
 ]
 
-_S0 = _cdr.pair("I")
+_S0 = _cdr.pair("I?")
 _P0 = _S0[0].pack
 _U0 = (_S0[0].unpack_from, _S0[1].unpack_from)
+_S1 = _cdr.pair("I")
+_P1 = _S1[0].pack
+_U1 = (_S1[0].unpack_from, _S1[1].unpack_from)
 
 
 class Registry(_rpc.Servant):
     """The naming service: one per robot or per network of robots."""
 
-    _repo_id = "IDL:MiroNaming/Registry:1.0"
-    _interface_hash = "8e04bda82db4843215481ad4c6bd697217660d1231736a247aa2a9af5868bee7"
+    _repo_id = "IDL:MiroNaming/Registry:2.0"
+    _interface_hash = "a6c89bbc7d6db37c62ee5d467f965e729ab88809055a87ebe05b0fbb47a79b75"
     _interface_schema = (
         "module MiroNaming {\n"
         "  struct Entry {\n"
@@ -39,8 +42,15 @@ class Registry(_rpc.Servant):
         "  };\n"
         "};\n"
         "module MiroNaming {\n"
+        "  struct Owner {\n"
+        "    string service;\n"
+        "    string run;\n"
+        "  };\n"
+        "};\n"
+        "module MiroNaming {\n"
         "  exception AlreadyBound {\n"
         "    string name;\n"
+        "    string holder;\n"
         "  };\n"
         "};\n"
         "module MiroNaming {\n"
@@ -57,101 +67,77 @@ class Registry(_rpc.Servant):
         "  typedef sequence<MiroNaming::Entry> EntrySeq;\n"
         "};\n"
         "module MiroNaming {\n"
+        "  struct Page {\n"
+        "    MiroNaming::EntrySeq entries;\n"
+        "    boolean more;\n"
+        "  };\n"
+        "};\n"
+        "module MiroNaming {\n"
         "  typedef sequence<string> NameSeq;\n"
         "};\n"
         "module MiroNaming {\n"
         "  interface Registry {\n"
-        "    void bind(\n"
+        "    void bind_as(\n"
         "        in MiroNaming::Entry binding,\n"
-        "        in string owner,\n"
-        "        in unsigned long lease_ms)\n"
-        "        raises (MiroNaming::AlreadyBound, MiroNaming::InvalidName);\n"
-        "    void rebind(\n"
-        "        in MiroNaming::Entry binding,\n"
-        "        in string owner,\n"
-        "        in unsigned long lease_ms)\n"
+        "        in MiroNaming::Owner who,\n"
+        "        in unsigned long lease_ms,\n"
+        "        in boolean take_over)\n"
         "        raises (MiroNaming::AlreadyBound, MiroNaming::InvalidName);\n"
         "    MiroNaming::Entry resolve(\n"
         "        in string name)\n"
         "        raises (MiroNaming::NotFound, MiroNaming::InvalidName);\n"
-        "    void unbind(\n"
+        "    void unbind_as(\n"
         "        in string name,\n"
-        "        in string owner)\n"
+        "        in MiroNaming::Owner who)\n"
         "        raises (MiroNaming::NotFound, MiroNaming::InvalidName);\n"
-        "    MiroNaming::EntrySeq list(in string prefix);\n"
-        "    MiroNaming::NameSeq renew(\n"
-        "        in string owner,\n"
+        "    MiroNaming::Page list_page(\n"
+        "        in string prefix,\n"
+        "        in string after,\n"
+        "        in unsigned long how_many);\n"
+        "    MiroNaming::NameSeq renew_as(\n"
+        "        in MiroNaming::Owner who,\n"
         "        in MiroNaming::NameSeq names,\n"
         "        in unsigned long lease_ms);\n"
         "  };\n"
+        '  typeid Registry "IDL:MiroNaming/Registry:2.0";\n'
         "};\n"
     )
 
     @_abc.abstractmethod
-    def bind(self, binding: _m_MiroNaming_MiroNaming_idl.Entry, owner: str, lease_ms: int) -> None:
-        """Bind a name that is free (or already held by the same owner).
-
-        @param binding What the name is bound to.
-        @param owner The binding server's unique id; its leases are renewed together.
-        @param lease_ms How long the entry lives unless renewed.
-        """
-        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
-
-    def _op_bind(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
-        try:
-            _e, _off = _cdr.body_header(_data)
-            _f0, _off = _m_MiroNaming_MiroNaming_idl._dec_Entry(_data, _off, _e)
-            _f1, _off = _cdr.get_string(
-                _data,
-                _off,
-                _e,
-                None,
-                "MiroNaming::Registry::bind(owner)",
-            )
-            _off += (4 - _off) & 3
-            _t2 = _U0[_e](_data, _off)
-            _off += 4
-            binding = _f0
-            owner = _f1
-            lease_ms = _t2[0]
-        except _cdr.DecodeErrors as _x:
-            raise _cdr.marshal_error("MiroNaming::Registry::bind", _x) from None
-        self.bind(binding, owner, lease_ms)
-        _buf = _cdr.Encoder(_cdr.HEADER_LE)
-        return _buf.value()
-
-    @_abc.abstractmethod
-    def rebind(
+    def bind_as(
         self,
         binding: _m_MiroNaming_MiroNaming_idl.Entry,
-        owner: str,
+        who: _m_MiroNaming_MiroNaming_idl.Owner,
         lease_ms: int,
+        take_over: bool,
     ) -> None:
-        """Bind a name, replacing what the same owner bound before (Miro's addToNameService);
-        a name that another owner holds live is refused.
+        """Bind a name for `who`: one that is free, held by that owner (this run, or another
+        run of the same service when `take_over`, or a run whose lease has ended), or kept
+        for the caller's principal after its server stopped.
+
+        @param binding What the name is bound to.
+        @param who Who binds it; its leases are renewed together.
+        @param lease_ms How long the entry lives unless renewed.
+        @param take_over Replace a live entry of another run of the same service (a service
+          starting, whose predecessor may have been killed); without it, AlreadyBound.
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_rebind(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_bind_as(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         try:
             _e, _off = _cdr.body_header(_data)
             _f0, _off = _m_MiroNaming_MiroNaming_idl._dec_Entry(_data, _off, _e)
-            _f1, _off = _cdr.get_string(
-                _data,
-                _off,
-                _e,
-                None,
-                "MiroNaming::Registry::rebind(owner)",
-            )
+            _f1, _off = _m_MiroNaming_MiroNaming_idl._dec_Owner(_data, _off, _e)
             _off += (4 - _off) & 3
             _t2 = _U0[_e](_data, _off)
-            _off += 4
+            _off += 5
             binding = _f0
-            owner = _f1
+            who = _f1
             lease_ms = _t2[0]
+            take_over = _t2[1]
         except _cdr.DecodeErrors as _x:
-            raise _cdr.marshal_error("MiroNaming::Registry::rebind", _x) from None
-        self.rebind(binding, owner, lease_ms)
+            raise _cdr.marshal_error("MiroNaming::Registry::bind_as", _x) from None
+        self.bind_as(binding, who, lease_ms, take_over)
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         return _buf.value()
 
@@ -185,11 +171,11 @@ class Registry(_rpc.Servant):
         return _buf.value()
 
     @_abc.abstractmethod
-    def unbind(self, name: str, owner: str) -> None:
-        """Remove a name that `owner` bound (NotFound if `owner` holds no such live entry)."""
+    def unbind_as(self, name: str, who: _m_MiroNaming_MiroNaming_idl.Owner) -> None:
+        """Remove a name that this run of `who` holds (NotFound otherwise); it is free then."""
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_unbind(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_unbind_as(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         try:
             _e, _off = _cdr.body_header(_data)
             _f0, _off = _cdr.get_string(
@@ -197,86 +183,91 @@ class Registry(_rpc.Servant):
                 _off,
                 _e,
                 None,
-                "MiroNaming::Registry::unbind(name)",
+                "MiroNaming::Registry::unbind_as(name)",
             )
-            _f1, _off = _cdr.get_string(
-                _data,
-                _off,
-                _e,
-                None,
-                "MiroNaming::Registry::unbind(owner)",
-            )
+            _f1, _off = _m_MiroNaming_MiroNaming_idl._dec_Owner(_data, _off, _e)
             name = _f0
-            owner = _f1
+            who = _f1
         except _cdr.DecodeErrors as _x:
-            raise _cdr.marshal_error("MiroNaming::Registry::unbind", _x) from None
-        self.unbind(name, owner)
+            raise _cdr.marshal_error("MiroNaming::Registry::unbind_as", _x) from None
+        self.unbind_as(name, who)
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         return _buf.value()
 
     @_abc.abstractmethod
-    def _list(self, prefix: str) -> _m_MiroNaming_MiroNaming_idl.EntrySeq:
-        """The entries whose names start with `prefix` (all for an empty prefix), in name order."""
-        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
-
-    def _op_list(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
-        try:
-            _e, _off = _cdr.body_header(_data)
-            _f0, _off = _cdr.get_string(
-                _data,
-                _off,
-                _e,
-                None,
-                "MiroNaming::Registry::list(prefix)",
-            )
-            prefix = _f0
-        except _cdr.DecodeErrors as _x:
-            raise _cdr.marshal_error("MiroNaming::Registry::list", _x) from None
-        _r = self._list(prefix)
-        _buf = _cdr.Encoder(_cdr.HEADER_LE)
-        try:
-            _cdr.put_count(_buf, _r, None, "MiroNaming::Registry::list result")
-            for _x1 in _r:
-                try:
-                    _m_MiroNaming_MiroNaming_idl._enc_Entry(_buf, _x1)
-                except _cdr.NestedErrors as _x:
-                    raise _cdr.nested_error("MiroNaming::Registry::list result", _x) from None
-        except _cdr.ResultErrors as _x:
-            raise _cdr.result_error("MiroNaming::Registry::list", _x) from None
-        return _buf.value()
-
-    @_abc.abstractmethod
-    def renew(
+    def list_page(
         self,
-        owner: str,
-        names: _m_MiroNaming_MiroNaming_idl.NameSeq,
-        lease_ms: int,
-    ) -> _m_MiroNaming_MiroNaming_idl.NameSeq:
-        """Extend the leases of the entries `names` of `owner` by `lease_ms`.
-
-        @return the names of `names` that the service does not hold for `owner` (it has
-        restarted, a lease ran out, another owner holds the name now): the owner binds them
-        again.
+        prefix: str,
+        after: str,
+        how_many: int,
+    ) -> _m_MiroNaming_MiroNaming_idl.Page:
+        """The entries whose names start with `prefix` and come after `after` (from the first
+        for ""), in name order: at most `how_many`, and never more than one message holds.
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_renew(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_list_page(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
         try:
             _e, _off = _cdr.body_header(_data)
+            _f0, _off = _cdr.get_string(
+                _data,
+                _off,
+                _e,
+                None,
+                "MiroNaming::Registry::list_page(prefix)",
+            )
             _f1, _off = _cdr.get_string(
                 _data,
                 _off,
                 _e,
                 None,
-                "MiroNaming::Registry::renew(owner)",
+                "MiroNaming::Registry::list_page(after)",
             )
+            _off += (4 - _off) & 3
+            _t2 = _U1[_e](_data, _off)
+            _off += 4
+            prefix = _f0
+            after = _f1
+            how_many = _t2[0]
+        except _cdr.DecodeErrors as _x:
+            raise _cdr.marshal_error("MiroNaming::Registry::list_page", _x) from None
+        _r = self.list_page(prefix, after, how_many)
+        _buf = _cdr.Encoder(_cdr.HEADER_LE)
+        try:
+            try:
+                _m_MiroNaming_MiroNaming_idl._enc_Page(_buf, _r)
+            except _cdr.NestedErrors as _x:
+                raise _cdr.nested_error("MiroNaming::Registry::list_page result", _x) from None
+        except _cdr.ResultErrors as _x:
+            raise _cdr.result_error("MiroNaming::Registry::list_page", _x) from None
+        return _buf.value()
+
+    @_abc.abstractmethod
+    def renew_as(
+        self,
+        who: _m_MiroNaming_MiroNaming_idl.Owner,
+        names: _m_MiroNaming_MiroNaming_idl.NameSeq,
+        lease_ms: int,
+    ) -> _m_MiroNaming_MiroNaming_idl.NameSeq:
+        """Extend the leases of the entries `names` of this run of `who` by `lease_ms`.
+
+        @return the names of `names` that the service does not hold for this run (a lease
+        ran out, another run took the name over): the owner binds them again, without
+        taking over.
+        """
+        raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
+
+    def _op_renew_as(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+        try:
+            _e, _off = _cdr.body_header(_data)
+            _f1, _off = _m_MiroNaming_MiroNaming_idl._dec_Owner(_data, _off, _e)
             _n4, _off = _cdr.get_length(
                 _data,
                 _off,
                 _e,
                 None,
                 4,
-                "MiroNaming::Registry::renew(names)",
+                "MiroNaming::Registry::renew_as(names)",
             )
             _f2 = []
             for _ in range(_n4):
@@ -285,34 +276,38 @@ class Registry(_rpc.Servant):
                     _off,
                     _e,
                     None,
-                    "MiroNaming::Registry::renew(names)",
+                    "MiroNaming::Registry::renew_as(names)",
                 )
                 _f2.append(_x3)
             _off += (4 - _off) & 3
-            _t5 = _U0[_e](_data, _off)
+            _t5 = _U1[_e](_data, _off)
             _off += 4
-            owner = _f1
+            who = _f1
             names = _f2
             lease_ms = _t5[0]
         except _cdr.DecodeErrors as _x:
-            raise _cdr.marshal_error("MiroNaming::Registry::renew", _x) from None
-        _r = self.renew(owner, names, lease_ms)
+            raise _cdr.marshal_error("MiroNaming::Registry::renew_as", _x) from None
+        _r = self.renew_as(who, names, lease_ms)
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
-            _cdr.put_count(_buf, _r, None, "MiroNaming::Registry::renew result")
+            _cdr.put_count(_buf, _r, None, "MiroNaming::Registry::renew_as result")
             for _x6 in _r:
-                _cdr.put_string(_buf, _x6, None, "MiroNaming::Registry::renew result")
+                _cdr.put_string(
+                    _buf,
+                    _x6,
+                    None,
+                    "MiroNaming::Registry::renew_as result",
+                )
         except _cdr.ResultErrors as _x:
-            raise _cdr.result_error("MiroNaming::Registry::renew", _x) from None
+            raise _cdr.result_error("MiroNaming::Registry::renew_as", _x) from None
         return _buf.value()
 
     _dispatch = _rpc.merge_dispatch(
         {
-            "bind": _op_bind,
-            "rebind": _op_rebind,
+            "bind_as": _op_bind_as,
             "resolve": _op_resolve,
-            "unbind": _op_unbind,
-            "list": _op_list,
-            "renew": _op_renew,
+            "unbind_as": _op_unbind_as,
+            "list_page": _op_list_page,
+            "renew_as": _op_renew_as,
         },
     )

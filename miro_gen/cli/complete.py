@@ -32,7 +32,7 @@ complete -o filenames -F _miro_complete miro
 
 COMMANDS = [
     *("build", "call", "completion", "demo", "echo", "hz", "idl", "launch", "list", "log"),
-    *("naming", "new", "nslist", "param", "params", "pub", "run", "sim"),
+    *("naming", "new", "nslist", "nsunbind", "param", "params", "pub", "run", "sim"),
 ]
 
 

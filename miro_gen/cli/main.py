@@ -40,6 +40,9 @@ def build_parser() -> argparse.ArgumentParser:
     sub.add_parser("naming", help="run the naming service", add_help=False)
     sub.add_parser("nslist", help="print the names bound in the naming service", add_help=False)
     sub.add_parser(
+        "nsunbind", help="free names kept for a server of yours that stopped", add_help=False
+    )
+    sub.add_parser(
         "demo", help="run the manual's examples A to D with a naming service", add_help=False
     )
     sub.add_parser(
@@ -105,11 +108,15 @@ def dispatch(args: list[str]) -> int:
         from miro_gen.cli import params
 
         return params.main(args[1:])
-    if args and args[0] in ("naming", "nslist"):
+    if args and args[0] in ("naming", "nslist", "nsunbind"):
         from miro_gen.cli import naming
 
-        command = naming.naming_main if args[0] == "naming" else naming.nslist_main
-        return command(args[1:])
+        commands = {
+            "naming": naming.naming_main,
+            "nslist": naming.nslist_main,
+            "nsunbind": naming.nsunbind_main,
+        }
+        return commands[args[0]](args[1:])
     if args and args[0] == "new":
         from miro_gen.cli import new
 

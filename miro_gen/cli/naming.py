@@ -1,5 +1,5 @@
-"""`miro naming` (the naming service, optionally hosting event channels) and `miro nslist`
-(what it holds, as a tree)."""
+"""`miro naming` (the naming service, optionally hosting event channels), `miro nslist` (what it
+holds, as a tree) and `miro nsunbind` (free names kept for a server of yours that stopped)."""
 
 from __future__ import annotations
 
@@ -20,18 +20,23 @@ from miro_gen.transport import sockets
 from miro_gen.transport.addresses import server_addresses
 from miro_gen.transport.channels import CHANNEL_REPO_ID, ChannelHost
 from miro_gen.transport.invoker import ZmqInvoker
+from miro_gen.transport.local import naming_socket
 from miro_gen.transport.naming import (
+    DEFAULT_HOLD,
     DEFAULT_MAX_NAMES,
     DEFAULT_QUOTA,
-    NamingService,
     check_name,
     naming_errors,
 )
+from miro_gen.transport.naming_log import LogError, default_path
+from miro_gen.transport.naming_service import NamingService
 from miro_gen.transport.options import DEFAULT_NAMING, UsageError, byte_size, naming_endpoint
 from miro_gen.transport.reactor import Reactor
 
 # What a stranger may do with a naming service served --insecure beyond loopback
 NAMING_SERVES = "list, resolve and bind names, and publish and subscribe on its event channels"
+
+_log = log.logger("MIRO")
 
 
 def naming_main(argv: Sequence[str]) -> int:
@@ -80,7 +85,22 @@ def naming_main(argv: Sequence[str]) -> int:
         type=int,
         default=DEFAULT_QUOTA,
         metavar="N",
-        help=f"names one server may bind (default {DEFAULT_QUOTA})",
+        help=f"names one user of this machine, or one other host, may hold (default "
+        f"{DEFAULT_QUOTA})",
+    )
+    p.add_argument(
+        "--hold",
+        type=float,
+        default=DEFAULT_HOLD,
+        metavar="SECONDS",
+        help="how long the names of a server that stopped without unbinding stay kept for its "
+        f"user or host (default {DEFAULT_HOLD:g})",
+    )
+    p.add_argument(
+        "--log-file",
+        metavar="FILE",
+        help="the log of owners, read back at start so that a restart hands no name to "
+        "another user (default $XDG_STATE_HOME/miro/naming-PORT.log); `none`: keep nothing",
     )
     p.add_argument(
         "--max-names",
@@ -140,6 +160,8 @@ def naming_main(argv: Sequence[str]) -> int:
     announce = not ns.no_announce and ns.multicast != 0
     if ns.quota < 1 or ns.max_names < 1 or ns.max_connections < 1:
         p.error("--quota, --max-names and --max-connections take a number from 1 up")
+    if not 0 <= ns.hold < float("inf"):
+        p.error("--hold takes a number of seconds, 0 or more")
     for name in ns.channel:
         try:
             check_name(name)
@@ -171,10 +193,25 @@ def naming_main(argv: Sequence[str]) -> int:
     reactor = Reactor(zmq.Context.instance())
     sockets.configure(reactor.context, policy)
     invoker = ZmqInvoker(reactor.context)
+    log_path = ns.log_file or default_path(endpoint)
     try:
-        service = NamingService(reactor, invoker, endpoint, ns.host, ns.quota, ns.max_names)
+        service = NamingService(
+            reactor,
+            invoker,
+            endpoint,
+            ns.host,
+            ns.quota,
+            ns.max_names,
+            hold=ns.hold,
+            log_path=None if log_path == "none" else log_path,
+        )
     except zmq.ZMQError as e:
-        print(f"miro naming: cannot serve on {endpoint}: {e}", file=sys.stderr)
+        local = naming_socket(endpoint)
+        also = f" and {local}" if local else ""
+        print(f"miro naming: cannot serve on {endpoint}{also}: {e}", file=sys.stderr)
+        return 1
+    except LogError as e:
+        print(f"miro naming: {e}", file=sys.stderr)
         return 1
     channels = [_host_channel(service, name) for name in ns.channel]
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -186,9 +223,21 @@ def naming_main(argv: Sequence[str]) -> int:
         note += f"; CURVE with the key {policy.keys.path}"
     elif ns.insecure and not sockets.is_loopback(sockets.endpoint_host(bound)):
         note += "; --insecure: in the clear, open to anyone who can reach it"
+    if service.log is None:
+        note += "; no log of owners: after a restart, names go to whoever binds first"
     lines = [f"naming service at {bound}{note}", *(f"event channel {n}" for n in ns.channel)]
     # Said once the reactor runs: a signal from whoever waited for these lines then stops it.
     reactor.call_soon(lambda: print("\n".join(lines), flush=True))
+    restored = service.restored
+    if restored.bindings or restored.kept:
+        reactor.call_soon(
+            lambda: _log.notice(
+                "%d names read back from %s (%d kept for servers that stopped)",
+                restored.bindings + restored.kept,
+                log_path,
+                restored.kept,
+            )
+        )
     announcer = None
     if announce and not re.search(r"://(127\.|localhost)", bound):
         from miro_gen.transport.discovery import Announcer
@@ -242,9 +291,8 @@ def nslist_main(argv: Sequence[str]) -> int:
     ns = p.parse_args(client.argv[1:])
     try:
         with naming_errors(client.options.naming, "list names"):
-            # A CORBA naming service's names are walked (miro_gen.corba.naming.CorbaNaming).
-            list_names = getattr(client.naming, "entries", None) or client.naming.registry._list
-            entries = list_names(ns.prefix)
+            # Page by page; a CORBA naming service's names are walked (corba.naming).
+            entries = client.naming.entries(ns.prefix)
     except SystemException as e:
         print(f"miro nslist: {e.message}", file=sys.stderr)
         return 1
@@ -261,3 +309,54 @@ def nslist_main(argv: Sequence[str]) -> int:
     if not entries:
         print("(no names bound)")
     return 0
+
+
+def nsunbind_main(argv: Sequence[str]) -> int:
+    import uuid
+
+    from miro_gen.transport.server import Client
+
+    p = argparse.ArgumentParser(
+        prog="miro nsunbind",
+        description="Free names that the naming service keeps for a server of yours that "
+        "stopped without unbinding them. After its lease ends, such a name stays kept for its "
+        "user (or host) and service for an hour (`miro naming --hold`), so that no stranger "
+        "takes it between a crash and a restart; a service that was renamed, or moved to "
+        "another program, gets it once it is freed. Live names are their servers' to unbind. "
+        "Accepts the common options: --naming, -MNC.",
+    )
+    p.add_argument("names", nargs="+", metavar="NAME", help="a path, or a name in -MNC")
+    try:
+        client = Client(["miro nsunbind", *argv])
+    except UsageError as e:
+        p.error(str(e))
+    ns = p.parse_args(client.argv[1:])
+    if not hasattr(client.naming, "registry_stub"):
+        client.close()
+        p.error("a CORBA naming service keeps no names for stopped servers")
+    registry = client.naming.registry_stub(client.invoker, 5.0, owner=True)
+    who = MiroNaming.Owner("miro-nsunbind", uuid.uuid4().hex)
+    status = 0
+    try:
+        for name in ns.names:
+            full = client.naming.full_name(name)
+            try:
+                with naming_errors(client.options.naming, f"unbind {full}"):
+                    registry.unbind_as(full, who)
+                print(f"freed {full}")
+            except MiroNaming.NotFound:
+                print(
+                    f"miro nsunbind: {full} is not kept for you (a live name is its server's to "
+                    "unbind; one kept for another user or host is theirs)",
+                    file=sys.stderr,
+                )
+                status = 1
+            except MiroNaming.InvalidName:
+                print(f"miro nsunbind: {name!r} is not a valid name", file=sys.stderr)
+                status = 1
+    except SystemException as e:
+        print(f"miro nsunbind: {e.message}", file=sys.stderr)
+        return 1
+    finally:
+        client.close()
+    return status

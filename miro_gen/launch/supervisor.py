@@ -207,7 +207,7 @@ class NameWatcher:
         from miro_gen.runtime.cdr import ObjectRef
         from miro_gen.transport import sockets
         from miro_gen.transport.invoker import ZmqInvoker
-        from miro_gen.transport.naming import NAMING_KEY
+        from miro_gen.transport.naming import NAMING_KEY, list_entries
         from miro_gen.transport.options import UsageError, parse_common_options
 
         context: zmq.Context[Any] = zmq.Context()
@@ -228,7 +228,7 @@ class NameWatcher:
         try:
             while not self._stop.is_set():
                 try:
-                    names = frozenset(e.name for e in registry._list(""))
+                    names = frozenset(e.name for e in list_entries(registry))
                     answering = True
                 except SystemException:
                     names, answering = frozenset(), False

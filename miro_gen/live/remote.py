@@ -16,6 +16,7 @@ from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.runtime.rpc import Stub
 from miro_gen.transport.events import CHANNEL_REPO_ID
 from miro_gen.transport.introspection import SERVICE_KEY, SERVICES
+from miro_gen.transport.naming import list_entries
 from miro_gen.transport.server import Client
 
 SERVICE_REPO_ID = MiroService.Service._repo_id
@@ -67,7 +68,7 @@ class Robot:
 
     def entries(self, prefix: str = "") -> list[MiroNaming.Entry]:
         try:
-            return list(self.client.naming.registry._list(prefix))
+            return list_entries(self.client.naming.registry, prefix)
         except SystemException as e:
             raise LiveError(f"the naming service at {self.options.naming}: {e}") from None
 

@@ -19,7 +19,7 @@ import itertools
 import os
 import threading
 import time
-from collections.abc import Hashable
+from collections.abc import Callable, Hashable, Sequence
 
 import zmq
 
@@ -40,7 +40,8 @@ from miro_gen.runtime.rpc import (
     system_exception_reply,
 )
 from miro_gen.transport import frames, sockets
-from miro_gen.transport.dispatch import Dispatcher
+from miro_gen.transport.caller import Caller, caller_of, serving
+from miro_gen.transport.dispatch import Dispatcher, Peer
 from miro_gen.transport.reactor import Reactor
 
 _log = logger("MIRO")
@@ -52,9 +53,11 @@ MAX_PENDING_BYTES = 256 << 20  # and bytes of their bodies
 
 
 class ObjectAdapter:
-    """Serves servants on `bind` (a ZeroMQ endpoint, port `*` for any free one), advertising
-    `host` as the address other processes reach it at; at most `workers` servant calls run at
-    once. `reactor` gives the ZeroMQ context."""
+    """Serves servants on `bind` (a ZeroMQ endpoint, port `*` for any free one) and on the
+    endpoints `also_bind` gives for the one bound, advertising `host` as the address other
+    processes reach it at; at most `workers` servant calls run at once. `reactor` gives the
+    ZeroMQ context. With `identify_callers`, servants learn who calls them
+    (`transport.caller.current()`)."""
 
     def __init__(
         self,
@@ -63,6 +66,9 @@ class ObjectAdapter:
         bind: str = "tcp://127.0.0.1:*",
         host: str | None = None,
         workers: int = DEFAULT_WORKERS,
+        *,
+        also_bind: Callable[[str], Sequence[str]] | None = None,
+        identify_callers: bool = False,
     ) -> None:
         self.reactor = reactor
         self.invoker = invoker
@@ -74,6 +80,9 @@ class ObjectAdapter:
         self.max_message_size = sockets.policy(reactor.context).max_message_size
         self.socket.bind(bind)
         self.bound = self.socket.getsockopt_string(zmq.LAST_ENDPOINT)  # what it listens on
+        self.also_bound = list(also_bind(self.bound)) if also_bind is not None else []
+        for endpoint in self.also_bound:
+            self.socket.bind(endpoint)
         self.endpoint = _advertised(self.bound, host)
         self._servants: dict[bytes, Servant] = {}
         self._keys = itertools.count(1)
@@ -82,7 +91,12 @@ class ObjectAdapter:
         self._quick: dict[tuple[type, str], bool] = {}  # (servant class, operation): @nonblocking
         # From here on the socket belongs to the dispatcher's threads.
         self._dispatcher = Dispatcher(
-            self.socket, self._receive, workers, MAX_PENDING, MAX_PENDING_BYTES
+            self.socket,
+            self._receive,
+            workers,
+            MAX_PENDING,
+            MAX_PENDING_BYTES,
+            identify=identify_callers,
         )
 
     # ---- objects --------------------------------------------------------------------------------
@@ -114,12 +128,13 @@ class ObjectAdapter:
 
     # ---- requests (on the thread that owns the socket) ------------------------------------------
 
-    def _receive(self, parts: list[bytes]) -> _Call | list[bytes] | None:
-        """A message: the call to run, an immediate reply, or None (dropped)."""
+    def _receive(self, parts: list[bytes], peer: Peer | None) -> _Call | list[bytes] | None:
+        """A message (and what is known of its sender, when this adapter identifies callers):
+        the call to run, an immediate reply, or None (dropped)."""
         if len(parts) != 3:
             _peer_warnings.warning("dropped a request of %d frames", len(parts) - 1)
             return None
-        peer, header, body = parts
+        routing, header, body = parts
         try:
             req = frames.decode_request(header)
         except frames.FrameError as e:
@@ -128,18 +143,24 @@ class ObjectAdapter:
         servant = self._servants.get(req.key)
         if servant is None:
             missing = OBJECT_NOT_EXIST(f"no object with key {req.key!r} at {self.endpoint}")
-            return _reply_frames(peer, req, system_exception_reply(missing))
+            return _reply_frames(routing, req, system_exception_reply(missing))
         if req.operation not in servant._dispatch:  # answered before anything is cached
             unknown = BAD_OPERATION(
                 f"{servant._repo_id} has no operation '{req.operation[:100]}'",
                 completed=CompletionStatus.NO,
             )
-            return _reply_frames(peer, req, system_exception_reply(unknown))
+            return _reply_frames(routing, req, system_exception_reply(unknown))
         kind = (type(servant), req.operation)
         quick = self._quick.get(kind)
         if quick is None:
             quick = self._quick[kind] = is_nonblocking(servant, req.operation)
-        return _Call(self, servant, peer, req, body, kind, quick)
+        caller = None if peer is None else caller_of(*peer)
+        return _Call(self, servant, routing, req, body, kind, quick, caller)
+
+    def drain(self, timeout: float) -> bool:
+        """Refuse new requests (TRANSIENT, completed NO) and wait up to `timeout` seconds for
+        the calls being served to finish and be answered; whether they all were."""
+        return self._dispatcher.drain(timeout)
 
     def close(self) -> None:
         """Stop serving (from any thread; the socket closes when its owner is free)."""
@@ -152,6 +173,7 @@ class _Call:
     __slots__ = (
         "adapter",
         "body",
+        "caller",
         "kind",
         "peer",
         "quick",
@@ -170,8 +192,10 @@ class _Call:
         body: bytes,
         kind: Hashable,
         quick: bool,
+        caller: Caller | None = None,
     ) -> None:
         self.adapter = adapter
+        self.caller = caller
         self.servant = servant
         self.peer = peer
         self.request = request
@@ -187,7 +211,11 @@ class _Call:
 
     def run(self) -> list[bytes] | None:
         req = self.request
-        reply = self.servant._invoke(req.operation, self.body, self.adapter.invoker)
+        if self.caller is None:
+            reply = self.servant._invoke(req.operation, self.body, self.adapter.invoker)
+        else:  # a servant that asks who calls (transport.caller.current)
+            with serving(self.caller):
+                reply = self.servant._invoke(req.operation, self.body, self.adapter.invoker)
         limit = self.adapter.max_message_size
         if len(reply.body) > limit:
             too_large = MARSHAL(
@@ -198,8 +226,8 @@ class _Call:
             reply = system_exception_reply(too_large)
         return _reply_frames(self.peer, req, reply)
 
-    def refuse(self) -> list[bytes] | None:
-        busy = TRANSIENT(f"{self.adapter.endpoint} is overloaded", completed=CompletionStatus.NO)
+    def refuse(self, why: str = "is overloaded") -> list[bytes] | None:
+        busy = TRANSIENT(f"{self.adapter.endpoint} {why}", completed=CompletionStatus.NO)
         return _reply_frames(self.peer, self.request, system_exception_reply(busy))
 
 

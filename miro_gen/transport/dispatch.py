@@ -46,6 +46,8 @@ _log = logger("MIRO")
 
 TAKEOVER = 0.005  # seconds a servant may keep the leader before another thread takes over
 WATCH_IDLE = 1.0  # seconds without servants after which the watchdog sleeps until the next one
+STOPPING = "is stopping"  # why a draining server refuses a request
+CLOSE_LINGER_MS = 500  # how long replies sent during a drain may take to leave
 
 _send, _recv = _Socket.send, _Socket.recv  # without pyzmq's Python wrappers: a call's cost
 _NOBLOCK = int(zmq.NOBLOCK)
@@ -69,14 +71,31 @@ class Task(Protocol):
         """Run it; the reply's frames (None: nothing to send). Never raises."""
         ...
 
-    def refuse(self) -> Frames | None:
-        """The reply that says the server has too much to do (TRANSIENT)."""
+    def refuse(self, why: str = "is overloaded") -> Frames | None:
+        """The reply that says the server will not run it now (TRANSIENT, completed NO): it
+        has too much to do, or is stopping."""
         ...
 
 
-# What the owner of the socket makes of a message: a task to run, frames to send back at once,
-# or None (dropped, or nothing to answer).
-Receive = Callable[[Frames], "Task | Frames | None"]
+# What ZeroMQ knows of the connection a message came on: its peer address and the user id the
+# admission thread gave it (transport.caller); asked for only by dispatchers that identify.
+Peer = tuple[str, str]
+
+# What the owner of the socket makes of a message (and its peer, when asked for): a task to
+# run, frames to send back at once, or None (dropped, or nothing to answer).
+Receive = Callable[[Frames, "Peer | None"], "Task | Frames | None"]
+
+
+def _peer(frame: zmq.Frame) -> Peer:
+    try:
+        address = str(frame.get("Peer-Address"))
+    except zmq.ZMQError:
+        address = ""
+    try:
+        user = str(frame.get("User-Id"))
+    except zmq.ZMQError:  # the admission thread gave none (no key)
+        user = ""
+    return address, user
 
 
 class _Closed(Exception):
@@ -95,7 +114,8 @@ class _Worker:
 
 class Dispatcher:
     """Serves `socket` (a ROUTER) with up to `workers` threads running servants at once;
-    `receive` turns each message into a task or an immediate reply."""
+    `receive` turns each message (and, when `identify`, its peer) into a task or an immediate
+    reply."""
 
     def __init__(
         self,
@@ -104,9 +124,11 @@ class Dispatcher:
         workers: int,
         max_pending: int,
         max_pending_bytes: int = 1 << 62,
+        identify: bool = False,
     ) -> None:
         self.socket = socket
         self._receive = receive
+        self._identify = identify
         self._workers = max(1, workers)
         self._max_pending = max_pending
         self._max_pending_bytes = max_pending_bytes
@@ -125,6 +147,9 @@ class Dispatcher:
         self._watch_asleep = False
         self._watchdog: threading.Thread | None = None
         self._closed = False
+        self._draining = False  # stopping: requests are refused, running ones finish
+        self._owed = 0  # replies handed to the leader and not sent yet
+        self._drained = threading.Condition(self._lock)  # notified when nothing is owed
         self._socket_closed = threading.Event()
         self._token = os.urandom(16)  # begins what other threads send the leader
         self._inproc = f"inproc://miro-dispatch-{id(self):x}-{self._token.hex()[:8]}"
@@ -170,7 +195,7 @@ class Dispatcher:
                     raise _Closed
                 if self._leader is me:
                     return None
-                while self._pending:
+                while self._pending and not self._draining:
                     task = self._pending.popleft()
                     self._pending_bytes -= task.size
                     if task.late():
@@ -198,16 +223,22 @@ class Dispatcher:
             if self._closed:
                 self._close_socket()
                 raise _Closed
-            parts = self._recv_message()
+            parts, last = self._recv_message()
             if len(parts) > 1 and parts[1] == token:  # from a thread of ours
                 if len(parts) > 2:
                     self._send(parts[2:])  # a reply handed back
+                    self._paid()
+                elif self._draining:
+                    self._refuse_pending()
                 continue
-            out = self._receive(parts)
+            out = self._receive(parts, _peer(last) if self._identify else None)
             if out is None:
                 continue
             if isinstance(out, list):
                 self._send(out)
+            elif self._draining:
+                self._send(out.refuse(STOPPING))
+                self._refuse_pending()
             elif out.quick:
                 self._send(self._run(out))
             elif self._start(out, me) and not self._finished(me, self._run(out)):
@@ -244,6 +275,10 @@ class Dispatcher:
             if self._inline is not None and self._inline[2] is me:
                 self._inline = None
             leading = self._leader is me
+            if frames is not None and not leading:
+                self._owed += 1  # until the leader has sent it
+            elif not self._serving and not self._owed:
+                self._drained.notify_all()
         if frames is not None:
             if leading:
                 self._send(frames)
@@ -286,14 +321,15 @@ class Dispatcher:
 
     # ---- socket I/O (by the leader only) -------------------------------------------------------
 
-    def _recv_message(self) -> Frames:
+    def _recv_message(self) -> tuple[Frames, zmq.Frame]:
+        """A message's frames, and the last one (which knows the connection it came on)."""
         sock = self.socket
         frame = _recv(sock, 0, False)
         parts = [frame.bytes]
         while frame.more:
             frame = _recv(sock, _NOBLOCK, False)
             parts.append(frame.bytes)
-        return parts
+        return parts, frame
 
     def _send(self, frames: Frames | None) -> None:
         if frames is None or self._closed:
@@ -340,6 +376,31 @@ class Dispatcher:
 
     # ---- closing -------------------------------------------------------------------------------
 
+    def drain(self, timeout: float) -> bool:
+        """Stop taking requests (each one that comes, or waits in the queue, is answered
+        TRANSIENT, completed NO: its caller may go elsewhere) and wait up to `timeout` seconds
+        for the servants that run to finish, their replies sent; whether they all did."""
+        with self._lock:
+            self._draining = True
+        self._tell_leader(getattr(self._current, "worker", None), [])  # refuse the queue
+        with self._lock:
+            return self._drained.wait_for(lambda: not self._serving and not self._owed, timeout)
+
+    def _paid(self) -> None:
+        """(leader) A reply handed back has been sent."""
+        with self._lock:
+            self._owed -= 1
+            if not self._serving and not self._owed:
+                self._drained.notify_all()
+
+    def _refuse_pending(self) -> None:
+        """(leader) Answer every queued request TRANSIENT: the server is stopping."""
+        with self._lock:
+            pending, self._pending = list(self._pending), deque()
+            self._pending_bytes = 0
+        for task in pending:
+            self._send(task.refuse(STOPPING))
+
     def close(self, timeout: float = 2.0) -> None:
         """Stop serving: the leader closes the socket (at once, or when its servant returns);
         idle threads end. Waits up to `timeout` seconds for the socket to be closed."""
@@ -357,5 +418,6 @@ class Dispatcher:
             self._socket_closed.wait(timeout)
 
     def _close_socket(self) -> None:
-        self.socket.close(0)
+        # After a drain, the replies just sent still go out (while the process lives).
+        self.socket.close(CLOSE_LINGER_MS if self._draining else 0)
         self._socket_closed.set()

@@ -203,9 +203,9 @@ def _text(elem: etree._Element) -> str:
 def bind_service(server: Server, impl: ServiceImpl, background: bool = False) -> None:
     """Bind the service object as `<context>/_services/<name>` (once). A name held by another
     live process gets this one's pid appended, unless $MIRO_SERVICE named it (a launch's
-    restart: the name is this process's now). A process whose naming service does not answer
-    is left unbound. `background`: from a thread of its own, with sockets of its own, which the
-    server's clean-up waits for (`ServiceImpl.join`)."""
+    restart: the name is taken over from the run before). A process whose naming service does
+    not answer is left unbound. `background`: from a thread of its own, with sockets of its
+    own, which the server's clean-up waits for (`ServiceImpl.join`)."""
     if impl.bound or (server.corba is not None and server.corba.naming is not None):
         return  # (names in a CORBA naming service are CORBA objects': no service object)
     impl.bound = True
@@ -232,27 +232,30 @@ def _bind(server: Server, impl: ServiceImpl, invoker: Any) -> None:
 
     from miro_gen.exceptions import SystemException
 
-    registry = server.naming.registry_stub(invoker, BIND_TIMEOUT)
-    lease = int(server.lease * 1000)
+    if server.leases is None:
+        return
+    registry = server.naming.registry_stub(invoker, BIND_TIMEOUT, owner=True)
+    lease = server.leases.lease_ms
     ref = server.adapter.reference_for(impl)
     full = f"{server.options.naming_context}/{SERVICES}/{impl.name}"
     entry = MiroNaming.Entry(full, ref.repo_id, ref.endpoint, ref.key, impl._interface_hash)
+    # $MIRO_SERVICE names one service (a launch's): its earlier run's name is taken over. A
+    # program's name may be run twice at once: a second copy binds its own name.
+    launched = bool(os.environ.get("MIRO_SERVICE"))
     try:
-        if not os.environ.get("MIRO_SERVICE"):
-            try:
-                registry.bind(entry, server.owner, lease)
-            except MiroNaming.AlreadyBound:
-                entry.name = f"{full}-{os.getpid()}"
         try:
-            registry.rebind(entry, server.owner, lease)
-        except MiroNaming.AlreadyBound:
-            # $MIRO_SERVICE's name, still under the lease of the process this one replaces:
-            # the lease renewal binds it when that lease ends.
-            server.keep_entry(entry)
-            return
+            registry.bind_as(entry, server.owner, lease, launched)
+        except MiroNaming.AlreadyBound as e:
+            if launched:  # another owner's: bound when it is free
+                server.leases.want(entry, e.holder)
+                return
+            entry.name = f"{full}-{os.getpid()}"
+            registry.bind_as(entry, server.owner, lease, False)
         if not server.keep_entry(entry):  # the server stopped meanwhile: leave nothing behind
-            registry.unbind(entry.name, server.owner)
+            registry.unbind_as(entry.name, server.owner)
             return
         _log.notice("bound %s in the naming service", entry.name)
     except (SystemException, MiroNaming.InvalidName, MiroNaming.NotFound) as e:
         _log.debug("the service object is not bound: %s", e)
+    except MiroNaming.AlreadyBound as e:
+        _log.debug("the service object is not bound: %s is held by %s", e.name, e.holder)

@@ -7,8 +7,14 @@ and never replayed (PITFALLS.md, ZeroMQ):
 * `IMMEDIATE`: a request is only queued on a live connection; if none comes up within the
   connect time, or the server's host refuses the connection, the call fails with TRANSIENT
   (completed NO) and nothing is sent later;
-* ZMTP heartbeats, and a socket monitor: a server that dies or vanishes during a call gives
-  COMM_FAILURE (completed MAYBE) within about a heartbeat timeout;
+* one connection per socket: it never reconnects by itself (`RECONNECT_IVL` -1), so its monitor
+  gets each event at most once (made before the socket connects, never swapped, it loses
+  none: a server killed while a call waits is always seen) and cannot fill up;
+* ZMTP heartbeats, and that monitor: a server that dies or vanishes during a call gives
+  COMM_FAILURE (completed MAYBE), at once for a killed process (its kernel closes the
+  connection), within about a heartbeat timeout for a vanished host; never TIMEOUT;
+* a request that finds its connection gone since the last call (nothing is sent) goes once
+  more on a fresh connection: a server restarted at the same endpoint gets it;
 * after a timeout or a failure the socket is closed with linger 0 and a fresh one is made for the
   next call, so a request the caller gave up on is never delivered to a restarted server.
 
@@ -52,17 +58,17 @@ _NOBLOCK = int(zmq.NOBLOCK)
 _MORE = int(zmq.SNDMORE) | _NOBLOCK
 _RCVTIMEO = int(zmq.RCVTIMEO)
 _CONNECTED = int(zmq.EVENT_HANDSHAKE_SUCCEEDED)
-_REFUSED = int(zmq.EVENT_CONNECT_RETRIED)  # before a first connection: nobody listens there
 _DENIED = int(  # the server would not have us: no key, another key, too many connections
     zmq.EVENT_HANDSHAKE_FAILED_AUTH
     | zmq.EVENT_HANDSHAKE_FAILED_PROTOCOL
     | zmq.EVENT_HANDSHAKE_FAILED_NO_DETAIL
 )
-_LOST = int(zmq.EVENT_DISCONNECTED | zmq.EVENT_CLOSED)
-# Once connected, only events that come once per connection: a monitor nobody reads (the
-# socket of a thread that made one call long ago) must not fill up, or libzmq's I/O thread
-# blocks sending to it; reconnecting to a dead server gives an event every RECONNECT_IVL.
-_CONNECTED_EVENTS = int(zmq.EVENT_HANDSHAKE_SUCCEEDED | zmq.EVENT_DISCONNECTED)
+_LOST = int(zmq.EVENT_DISCONNECTED)
+# Before a connection: the one attempt ends closed (refused, or cut during the handshake).
+_CLOSED = int(zmq.EVENT_CLOSED | zmq.EVENT_CONNECT_RETRIED)
+# Each comes at most once in a socket's life: it never reconnects (RECONNECT_IVL -1), so the
+# monitor, read only during calls, cannot fill up (libzmq's I/O thread would block on it).
+_EVENTS = _CONNECTED | _DENIED | _LOST | _CLOSED
 _RECONNECT_STOP = 109  # libzmq 4.3's ZMQ_RECONNECT_STOP (a draft name in pyzmq)
 _STOP_AFTER_HANDSHAKE_FAILED = 2  # ZMQ_RECONNECT_STOP_HANDSHAKE_FAILED
 _EVENT = struct.Struct("=HI")  # a monitor message's first frame: event, value
@@ -70,20 +76,20 @@ _OK = ReplyStatus.OK
 
 
 class _Connection:
-    """A DEALER socket to one endpoint, and the monitor that tells when its peer is lost."""
+    """A DEALER socket to one endpoint, connected once (it never reconnects: a lost
+    connection means a fresh socket), and the monitor that tells how that connection goes."""
 
     def __init__(self, context: zmq.Context[Any], endpoint: str) -> None:
         self.endpoint = endpoint
         self.socket = sockets.connecting_socket(context, zmq.DEALER)
         s = self.socket
         s.setsockopt(zmq.IMMEDIATE, 1)
-        s.setsockopt(zmq.RECONNECT_IVL, 100)
-        s.setsockopt(zmq.RECONNECT_IVL_MAX, 2000)
+        s.setsockopt(zmq.RECONNECT_IVL, -1)
         with contextlib.suppress(zmq.ZMQError):  # denied (no key, the cap): do not retry
             s.setsockopt(_RECONNECT_STOP, _STOP_AFTER_HANDSHAKE_FAILED)
         s.setsockopt(zmq.RCVTIMEO, CHECK_INTERVAL_MS)
         self.rcvtimeo = CHECK_INTERVAL_MS
-        self.monitor = sockets.monitor(s, _CONNECTED | _REFUSED | _DENIED | _LOST)
+        self.monitor = sockets.monitor(s, _EVENTS)
         s.connect(endpoint)
         self.connected = False
         self.refused = False
@@ -99,22 +105,14 @@ class _Connection:
             except struct.error:  # pragma: no cover - libzmq sends well-formed events
                 continue
             if event == _CONNECTED:
-                if not self.connected:
-                    self.connected = True
-                    self._calm_monitor()
-            elif event & _DENIED and not self.connected:
+                self.connected = True
+            elif self.connected:
+                if event & (_LOST | _CLOSED):
+                    self.lost = True
+            elif event & _DENIED:
                 self.denied = self.refused = True
-            elif event == _REFUSED and not self.connected:
+            elif event & _CLOSED:
                 self.refused = True
-            elif event & _LOST and self.connected:
-                self.lost = True
-
-    def _calm_monitor(self) -> None:
-        """Connected: from now on, only the events that come once per connection."""
-        with contextlib.suppress(zmq.ZMQError):
-            self.socket.disable_monitor()
-        self.monitor.close(0)
-        self.monitor = sockets.monitor(self.socket, _CONNECTED_EVENTS)
 
     def wait_connected(self, deadline: float) -> bool:
         while not self.connected and not self.refused:
@@ -186,16 +184,17 @@ class ZmqInvoker:
         if tail is None:
             tail = self._tail(ref.key, operation)
         request_id = next(self._ids)
-        sock = conn.socket
-        try:
-            _send(sock, frames.request_header(tail, request_id, int(wait * 1000), oneway), _MORE)
-            if len(body) < frames.ZERO_COPY_MIN:
-                _send(sock, body, _NOBLOCK)
-            else:  # a large request goes without a copy
-                _send(sock, body, _NOBLOCK, False)
-        except zmq.ZMQError:
+        header = frames.request_header(tail, request_id, int(wait * 1000), oneway)
+        if not _sent(conn.socket, header, body):
+            # Nothing was sent: the connection was lost since the last call (its server was
+            # stopped or killed). Once more on a fresh connection, which finds a server
+            # restarted at the same endpoint, or fails as a refused one does.
             self._drop(conn)
-            raise TRANSIENT(f"cannot send {operation} to {endpoint}") from None
+            conn = self._connection(endpoint)
+            self._connect(conn, operation, start + wait if wait else start + CONNECT_TIMEOUT)
+            if not _sent(conn.socket, header, body):
+                self._drop(conn)
+                raise TRANSIENT(f"cannot send {operation} to {endpoint}")
         if oneway:
             return None
         if wait and wait * 1000 < conn.rcvtimeo:
@@ -315,3 +314,17 @@ class ZmqInvoker:
             conns, self._all = self._all, set()
         for conn in conns:
             conn.close()
+
+
+def _sent(sock: zmq.Socket[Any], header: bytes, body: bytes) -> bool:
+    """Send a request's two frames; False when the socket has no connection to take them
+    (ZMQ_IMMEDIATE: then nothing is queued)."""
+    try:
+        _send(sock, header, _MORE)
+        if len(body) < frames.ZERO_COPY_MIN:
+            _send(sock, body, _NOBLOCK)
+        else:  # a large request goes without a copy
+            _send(sock, body, _NOBLOCK, False)
+    except zmq.ZMQError:
+        return False
+    return True

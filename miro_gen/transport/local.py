@@ -10,6 +10,11 @@ for peers on other hosts, in other network namespaces or of other users, which k
 A killed process leaves its socket files behind: the first time a process uses the folder, it
 removes those nobody listens on (looking at no more than SWEEP_LIMIT of them), so that the
 folder does not grow with every process ever killed.
+
+A naming service has a twin of another kind (`naming_socket`): a Linux abstract socket, named
+after its port, that every user of the machine can reach and nobody leaves behind as a file.
+Processes on its machine call it there for what needs an owner, because over a Unix socket the
+kernel tells it which user calls (`transport.caller`).
 """
 
 from __future__ import annotations
@@ -77,7 +82,8 @@ def sweep(folder: str, limit: int = SWEEP_LIMIT) -> int:
 
 
 @functools.cache
-def _namespace() -> str:
+def network_namespace() -> str:
+    """This process's network namespace (the inode of `/proc/self/ns/net`; "0" off Linux)."""
     try:
         return str(os.stat("/proc/self/ns/net").st_ino)
     except OSError:
@@ -100,12 +106,12 @@ def ipc_twin(endpoint: str) -> str | None:
     if parts is None or folder is None:
         return None
     address, port = parts
-    path = os.path.join(folder, f"{_namespace()}-{address.replace(':', '_')}-{port}")
+    path = os.path.join(folder, f"{network_namespace()}-{address.replace(':', '_')}-{port}")
     return f"ipc://{path}" if len(path.encode()) <= _MAX_PATH else None
 
 
 @functools.cache
-def _is_local(address: str) -> bool:
+def is_local_address(address: str) -> bool:
     """Whether `address` is one of this host's (in this network namespace)."""
     try:
         ip = ipaddress.ip_address(address)
@@ -127,7 +133,7 @@ def nearest(endpoint: str) -> str:
     else `endpoint` itself."""
     twin = ipc_twin(endpoint)
     parts = _split(endpoint)
-    if twin is None or parts is None or not _is_local(parts[0]):
+    if twin is None or parts is None or not is_local_address(parts[0]):
         return endpoint
     return twin if _listening(twin[len("ipc://") :]) else endpoint
 
@@ -169,3 +175,21 @@ def bind_twin(sock: zmq.Socket[Any], endpoint: str) -> str | None:
     except zmq.ZMQError:  # the twin is an optimisation: TCP serves anyway
         return None
     return twin
+
+
+def naming_socket(endpoint: str) -> str | None:
+    """The abstract Unix socket (`ipc://@miro-naming-PORT`, in this network namespace) beside a
+    naming service at `endpoint` (tcp://HOST:PORT); None off Linux or for another transport."""
+    parts = _split(endpoint)
+    if parts is None or not sys.platform.startswith("linux") or not parts[1].isdigit():
+        return None
+    return f"ipc://@miro-naming-{parts[1]}"
+
+
+def local_naming_socket(endpoint: str) -> str | None:
+    """`naming_socket(endpoint)` when the naming service runs on this machine (its address is
+    one of ours), else None: where this process makes its owner's calls."""
+    parts = _split(endpoint)
+    if parts is None or not (parts[0] in ("0.0.0.0", "*") or is_local_address(parts[0])):
+        return None
+    return naming_socket(endpoint)

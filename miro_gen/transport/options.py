@@ -24,6 +24,9 @@ takes what it knows and leaves the service's own ones. The contract (DESIGN.md, 
   `--insecure`: no CURVE even beyond loopback (docs/SECURITY.md);
 * `--max-message-size BYTES` (env `MIRO_MAX_MESSAGE_SIZE`; suffixes K, M, G): the largest
   message a socket accepts (default 8M, like omniORB's `giopMaxMsgSize`);
+* `--wait-naming SECONDS` (env `MIRO_WAIT_NAMING`): how long a server waits for a naming
+  service that does not answer yet before it gives up (default: as long as it takes, saying
+  so once; `0` gives up at once, for scripts);
 * `--clock wall|log|log:CHANNEL`: the time `miro_gen.clock.now()` and reactor timers follow:
   wall time (default), or the clock of a log player (`miro log play`), published on the
   channel `LogClock` (or CHANNEL); see docs/LOGS.md.
@@ -76,6 +79,7 @@ class CommonOptions:
     max_message_size: int | None = None  # --max-message-size, bytes
     naming_url: str | None = None  # the naming service's CORBA URL, when one was given
     iiop_endpoint: str | None = None  # HOST:PORT to serve IIOP on (--iiop-endpoint)
+    wait_naming: float | None = None  # --wait-naming: seconds a server waits (None: no limit)
     ignored: list[str] = field(default_factory=list)  # -ORB options given, for the notice
 
 
@@ -154,6 +158,8 @@ def parse_common_options(
     opts.keys = env.get("MIRO_KEYS") or None
     if env.get("MIRO_MAX_MESSAGE_SIZE"):
         opts.max_message_size = byte_size(env["MIRO_MAX_MESSAGE_SIZE"], "MIRO_MAX_MESSAGE_SIZE")
+    if env.get("MIRO_WAIT_NAMING"):
+        opts.wait_naming = seconds(env["MIRO_WAIT_NAMING"], "MIRO_WAIT_NAMING")
     rest: list[str] = []
     args = list(argv)
     i = 0
@@ -173,9 +179,11 @@ def parse_common_options(
             break
         if name == "--clock":
             opts.clock = _clock(inline if eq else value(name))
-        elif name in ("--bind", "--keys", "--max-message-size"):
+        elif name in ("--bind", "--keys", "--max-message-size", "--wait-naming"):
             text = inline if eq else value(name)
-            if name == "--bind":
+            if name == "--wait-naming":
+                opts.wait_naming = seconds(text, name)
+            elif name == "--bind":
                 opts.bind = text
             elif name == "--keys":
                 opts.keys = text
@@ -239,6 +247,17 @@ def byte_size(text: str, option: str) -> int:
     return n
 
 
+def seconds(text: str, option: str) -> float:
+    """A number of seconds, 0 or more (finite)."""
+    try:
+        n = float(text)
+    except ValueError:
+        n = -1.0
+    if not 0 <= n < float("inf"):
+        raise UsageError(f"{option} takes a number of seconds, 0 or more, not {text!r}")
+    return n
+
+
 def _clock(text: str) -> str:
     kind, sep, channel = text.partition(":")
     if text == "wall" or (kind == "log" and (not sep or channel.strip("/"))):
@@ -273,6 +292,8 @@ COMMON_HELP = (
     ("-MLF CAT [CAT ...]", "log categories to show (-MiroLogFilter; default: all)"),
     ("-MCF FILE", "run-time parameter document (-MiroConfigFile; default: <hostname>.xml)"),
     ("--host ADDR", "the address other machines reach this process at (env MIRO_HOST)"),
+    ("--wait-naming SECONDS", "how long a server waits for its naming service to answer "
+     "(env MIRO_WAIT_NAMING; default: until it does)"),
     ("--clock wall|log|log:CHANNEL", "run on wall time (default) or a log player's time"),
 )  # fmt: skip
 

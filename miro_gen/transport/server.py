@@ -12,16 +12,15 @@ A Server owns the process's reactor and one ROUTER socket for all its objects, b
 advertised as `miro_gen.transport.addresses` decides (reachable from the naming service's host,
 or `--host`); its names live
 under its naming context (`-MNC`, default the host name) with leases that a background thread
-renews, re-binding them when the naming service has restarted. A Client only calls out.
+renews (`transport.leases`): taken over at start from an earlier run of the same service, and
+never given up when another owner holds them. A Client only calls out.
 """
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import os
 import sys
-import threading
 import time
 import uuid
 from collections.abc import Callable, MutableSequence, Sequence
@@ -31,7 +30,7 @@ import MiroNaming
 import zmq
 
 from miro_gen import lifecycle, log
-from miro_gen.exceptions import TRANSIENT, SystemException
+from miro_gen.exceptions import TRANSIENT
 from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.runtime.rpc import Servant, Stub
 from miro_gen.transport import channel_link, sockets
@@ -40,14 +39,14 @@ from miro_gen.transport.addresses import server_addresses
 from miro_gen.transport.channels import EventChannel, resolve_channel
 from miro_gen.transport.introspection import SERVICE_KEY, ServiceImpl, bind_service, service_name
 from miro_gen.transport.invoker import ZmqInvoker
-from miro_gen.transport.naming import DEFAULT_LEASE, NamingClient, naming_errors
+from miro_gen.transport.leases import Leases
+from miro_gen.transport.naming import DEFAULT_LEASE, NamingClient
 from miro_gen.transport.options import CommonOptions, parse_common_options
 from miro_gen.transport.reactor import Reactor
 
 StubT = TypeVar("StubT", bound=Stub)
-RENEW_TIMEOUT = 2.0  # seconds a lease renewal may take
-RETRY_BIND = 0.2  # seconds between attempts to bind a name another owner's lease still holds
 WAIT_STEP = 0.5  # at most this many seconds between two looks for a name being waited for
+DRAIN_TIMEOUT = 2.0  # seconds the calls being served may take to finish when a server stops
 _log = log.logger("MIRO")
 
 
@@ -214,12 +213,24 @@ class Server(Client):
         self.invoker.adapter = self.adapter
         if self.corba is not None:
             self.corba.serve(self.addresses.bind, self.addresses.advertise)
-        self.owner = uuid.uuid4().hex
         self.lease = lease
-        self._names: dict[str, MiroNaming.Entry] = {}
-        self._names_lock = threading.Lock()
-        self._stop = threading.Event()
-        self._renewer: threading.Thread | None = None
+        # The owner of its names: this service (the same across its restarts, by `miro launch`
+        # or by hand) and this run of it; the naming service adds who it checks we are.
+        service = f"{self.options.naming_context}/{service_name(self.argv[0])}"
+        self.owner = MiroNaming.Owner(service, uuid.uuid4().hex)
+        self.leases: Leases | None = None
+        if isinstance(self.naming, NamingClient):
+            self.leases = Leases(
+                self.naming,
+                self.invoker,
+                self.owner,
+                lease,
+                self.options.wait_naming,
+                self._unreachable,
+            )
+            self.naming.before_first_call = self.leases.wait_for_naming
+        self.drain_timeout = DRAIN_TIMEOUT
+        self._armed = False
         self._cleaned = False
         self._on_shutdown: list[Callable[[], object]] = []
         self.hosted_channels: dict[str, EventChannel] = {}  # hosted here, by full name
@@ -249,53 +260,31 @@ class Server(Client):
         return ref
 
     def bind_entry(self, entry: MiroNaming.Entry) -> None:
-        """Bind a naming entry under this server's lease (objects, event channels). A name
-        that another server holds is waited for, up to a lease (the entry of a server killed
-        without unbinding lives that long); AlreadyBound after that."""
+        """Bind a naming entry under this server's lease (objects, event channels), taking it
+        over from an earlier run of this service. A name that another owner holds is not
+        given up on: said loudly, and bound when it is free (`transport.leases`). A naming
+        service that does not answer yet is waited for (`--wait-naming`)."""
         if self.corba is not None and self.corba.naming is not None:
             self.corba.bind(entry)  # CosNaming: no lease; unbound when the server stops
             self._unbind_if_interrupted()
             _log.notice("bound %s in the naming service", entry.name)
             return
-        lease_ms = int(self.lease * 1000)
-        deadline = time.monotonic() + max(self.lease, DEFAULT_LEASE) + 0.5
-        told = False
-        while True:
-            try:
-                with naming_errors(self.options.naming, f"bind {entry.name}"):
-                    self.naming.registry.rebind(entry, self.owner, lease_ms)
-                break
-            except TRANSIENT as e:
-                raise self._unreachable(e) from None
-            except MiroNaming.AlreadyBound:
-                if time.monotonic() >= deadline:
-                    raise
-                if not told:
-                    told = True
-                    _log.notice(
-                        "%s is bound by another server (one killed without unbinding?): "
-                        "waiting for its lease to end",
-                        entry.name,
-                    )
-                time.sleep(RETRY_BIND)
-        self.keep_entry(entry)
-        _log.notice("bound %s in the naming service", entry.name)
+        assert self.leases is not None
+        self._arm_cleanup()
+        if self.leases.bind(entry):
+            _log.notice("bound %s in the naming service", entry.name)
         bind_service(self, self.service)  # with its first name: nothing can come between
 
     def keep_entry(self, entry: MiroNaming.Entry) -> bool:
         """Keep `entry`, bound already, under this server's lease (renewed, bound again in a
         restarted naming service, unbound at the end); False when the server is stopping."""
-        with self._names_lock:
-            if self._stop.is_set():
-                return False
-            self._names[entry.name] = entry
-        self._start_renewing()
-        return True
+        assert self.leases is not None
+        self._arm_cleanup()
+        return self.leases.keep(entry)
 
     def bound_entries(self) -> list[MiroNaming.Entry]:
         """The naming entries this server keeps bound."""
-        with self._names_lock:
-            return list(self._names.values())
+        return [] if self.leases is None else self.leases.held()
 
     def remove_from_name_service(self, name: str) -> None:
         """Unbind `name`, bound by this server, and stop renewing it. Its object is still
@@ -305,13 +294,14 @@ class Server(Client):
         if self.corba is not None and self.corba.naming is not None:
             self.corba.unbind(full)
             return
-        with self._names_lock:
-            self._names.pop(full, None)
-        with (
-            contextlib.suppress(MiroNaming.NotFound),
-            naming_errors(self.options.naming, f"unbind {full}"),
-        ):
-            self.naming.registry.unbind(full, self.owner)
+        assert self.leases is not None
+        self.leases.remove(full)
+
+    def _arm_cleanup(self) -> None:
+        """Unbind this server's names if it is interrupted before it runs."""
+        if not self._armed:
+            self._armed = True
+            lifecycle.at_interrupt(self._cleanup)
 
     def _unbind_if_interrupted(self) -> None:
         """A server whose names live in a CORBA naming service (no leases there) unbinds them
@@ -328,9 +318,10 @@ class Server(Client):
         self._on_shutdown.append(fn)
 
     def run(self) -> None:
-        """Serve until SIGINT, SIGTERM or `shutdown()`; then unbind this server's names. A
-        signal that came before (see `miro_gen.lifecycle`) ends it at once; one that comes
-        during the clean-up does not interrupt it."""
+        """Serve until SIGINT, SIGTERM or `shutdown()`; then unbind this server's names and
+        let the calls it is running finish and be answered (at most `drain_timeout` seconds:
+        2). A signal that came before (see `miro_gen.lifecycle`) ends it at once; one that
+        comes during the clean-up does not interrupt it."""
         with lifecycle.signals_stop(self.shutdown) as signals:
             try:
                 if not signals.pending:
@@ -349,15 +340,16 @@ class Server(Client):
             return
         self._cleaned = True
         lifecycle.forget(self._cleanup)
-        self._stop.set()
         self.service.join()  # a bind of the service object still under way
-        if self._renewer is not None:  # its socket must be closed by no one else while in use
-            self._renewer.join(RENEW_TIMEOUT + 1)
-        with self._names_lock:
-            names, self._names = list(self._names), {}
-        for name in names:
-            with contextlib.suppress(SystemException, MiroNaming.NotFound):
-                self.naming.registry.unbind(name, self.owner)
+        if self.leases is not None:
+            self.leases.stop()
+        # Its names gone, the calls it is running finish and are answered (bounded); others
+        # are refused, completed NO, so that their callers may go elsewhere.
+        if not self.adapter.drain(self.drain_timeout):
+            _log.warning(
+                "calls still running %g s after the server was told to stop: abandoned",
+                self.drain_timeout,
+            )
         for fn in reversed(self._on_shutdown):
             try:
                 fn()
@@ -367,45 +359,3 @@ class Server(Client):
         self.adapter.close()
         self._reactor.close()
         self.close()
-
-    # ---- leases --------------------------------------------------------------------------------
-
-    def _start_renewing(self) -> None:
-        if self._renewer is None:
-            lifecycle.at_interrupt(self._cleanup)  # unbind if interrupted before run()
-            self._registry_for_renewal = self.naming.registry_stub(self.invoker, RENEW_TIMEOUT)
-            self._renewer = threading.Thread(
-                target=self._renew_loop, name="miro-lease", daemon=True
-            )
-            self._renewer.start()
-
-    def _renew_loop(self) -> None:
-        held_elsewhere: set[str] = set()  # lost names another server holds now (said once)
-        while not self._stop.wait(self.lease / 3):
-            lease_ms = int(self.lease * 1000)
-            with self._names_lock:
-                entries = dict(self._names)
-            try:
-                # The naming service says, name by name, which it does not hold for us (it
-                # restarted, a lease ran out while we were cut off): those are bound again.
-                lost = self._registry_for_renewal.renew(self.owner, list(entries), lease_ms)
-                for name in lost:
-                    with self._names_lock:  # (not one removed meanwhile)
-                        entry = self._names.get(name)
-                    if entry is None:
-                        continue
-                    try:
-                        self._registry_for_renewal.rebind(entry, self.owner, lease_ms)
-                    except MiroNaming.AlreadyBound:
-                        if name not in held_elsewhere:
-                            held_elsewhere.add(name)
-                            _log.warning(
-                                "%s is bound by another server now; it is bound again here "
-                                "when that one's lease ends",
-                                name,
-                            )
-                        continue
-                    held_elsewhere.discard(name)
-                    _log.notice("bound %s again in the naming service", name)
-            except SystemException as e:
-                _log.warning("cannot renew names: %s", e)

@@ -385,7 +385,7 @@ class Admission(threading.Thread):
         for monitor, d in list(self._monitors.items()):
             if d == domain:
                 self._read_monitor(monitor, poller)
-        status, text = b"200", b"OK"
+        status, text, user = b"200", b"OK", b""
         if len(self._live.get(domain, ())) > self.policy.max_connections:
             status, text = b"400", b"too many connections"
             self.refused_cap += 1
@@ -398,7 +398,9 @@ class Admission(threading.Thread):
             self.refused_key += 1
         else:
             self.admitted += 1
-        zap.send_multipart([b"1.0", request_id, status, text, b"", b""])
+            if mechanism == b"CURVE" and credentials:  # who it is, for transport.caller
+                user = z85.encode(credentials[0])
+        zap.send_multipart([b"1.0", request_id, status, text, user, b""])
         if status != b"200":
             _peer_warnings.warning(
                 "refused a connection from %s: %s", address.decode(errors="replace"), text.decode()
