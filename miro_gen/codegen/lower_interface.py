@@ -14,7 +14,7 @@ from miro_gen.codegen.contexts import (
     StubContext,
 )
 from miro_gen.codegen.hints import TypeHints
-from miro_gen.codegen.interface_schema import NoInterfaceSchema, interface_schema
+from miro_gen.codegen.interface_schema import InterfaceSchemas, NoInterfaceSchema
 from miro_gen.codegen.python_limits import python_bases
 from miro_gen.codegen.scope import Scope
 from miro_gen.codegen.shapes import shape_of
@@ -44,7 +44,7 @@ class InterfaceLowering:
     def __init__(self, scope: Scope, hints: TypeHints, declarations: list[ast.Decl]) -> None:
         self.scope = scope
         self.hints = hints
-        self.declarations = declarations  # for the interface schemas
+        self.schemas = InterfaceSchemas(declarations)
         self._schemas: dict[int, str] = {}
 
     def schema(self, d: ast.Interface) -> str:
@@ -52,7 +52,7 @@ class InterfaceLowering:
         text = self._schemas.get(id(d))
         if text is None:
             try:
-                text = interface_schema(d, self.declarations)
+                text = self.schemas.of(d)
             except NoInterfaceSchema:  # its service object cannot describe it to callers
                 text = ""
             self._schemas[id(d)] = text
