@@ -127,6 +127,26 @@ def test_an_error_leaves_the_output_folder_as_it_was(tmp_path: Path) -> None:
     assert tree(tmp_path / "gen") == before
 
 
+def test_a_failed_write_leaves_the_output_folder_as_it_was(tmp_path: Path) -> None:
+    """Many folders are written by several threads; when one cannot be made, none of the
+    files is replaced and no temporary file is left behind."""
+    idl = tmp_path / "Many.idl"
+    idl.write_text("".join(f"module M{i} {{ struct S {{ long x; }}; }};\n" for i in range(40)))
+    assert run_miro_idl("-o", "gen", str(idl), cwd=tmp_path).returncode == 0
+    idl.write_text("".join(f"module M{i} {{ struct S {{ short y; }}; }};\n" for i in range(40)))
+    blocker = tmp_path / "gen" / "M17"
+    for f in blocker.iterdir():
+        f.unlink()
+    blocker.rmdir()
+    blocker.write_text("a file where the package's folder goes\n")
+    before = tree(tmp_path / "gen")
+    out = run_miro_idl("-o", "gen", str(idl), cwd=tmp_path)
+    assert out.returncode == 1
+    assert "miro-idl: error: cannot write" in out.stderr and "M17" in out.stderr
+    assert "Traceback" not in out.stderr
+    assert tree(tmp_path / "gen") == before
+
+
 def test_other_tools_files_are_left_alone(tmp_path: Path) -> None:
     gen = tmp_path / "gen"
     assert run_miro_idl("-o", "gen", str(EXAMPLE), cwd=tmp_path).returncode == 0

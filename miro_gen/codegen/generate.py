@@ -8,6 +8,7 @@ renamed into place, so that an error leaves the output folder as it was.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
 from collections.abc import Iterable
@@ -32,6 +33,8 @@ __all__ = [
     "shadowed_modules",
     "write_files",
 ]
+
+WRITERS = 8  # threads writing files, when there are many folders
 
 
 def display_source(path: str) -> str:
@@ -100,32 +103,64 @@ def shadowed_modules(modules: list[ModuleContext]) -> list[str]:
 
 
 def changed_files(files: dict[str, str], outdir: Path) -> list[str]:
-    """The relative paths whose content on disk differs (or that do not exist)."""
+    """The relative paths whose content on disk differs (or that do not exist). Each folder
+    is listed once: only the files it holds are read (a new output folder costs one look)."""
     out = []
+    present: dict[str, frozenset[str]] = {}  # folder -> the names in it
     for rel, content in sorted(files.items()):
-        path = outdir / rel
-        try:
-            if path.read_text(encoding="utf-8") == content:
-                continue
-        except (OSError, UnicodeDecodeError):
-            pass
+        folder, _, name = rel.rpartition("/")
+        names = present.get(folder)
+        if names is None:
+            try:
+                names = frozenset(os.listdir(outdir / folder))
+            except OSError:
+                names = frozenset()
+            present[folder] = names
+        if name in names:
+            try:
+                if (outdir / rel).read_text(encoding="utf-8") == content:
+                    continue
+            except (OSError, UnicodeDecodeError):
+                pass
         out.append(rel)
     return out
 
 
 def write_files(files: dict[str, str], rels: list[str], outdir: Path) -> None:
-    """Write `rels` of `files` under `outdir`: all to temporary files first, then renamed."""
-    staged: list[tuple[Path, Path]] = []
-    try:
+    """Write `rels` of `files` under `outdir`: all to temporary files first, then renamed
+    into place (in the order of `rels`). The temporary files of different folders are written
+    by several threads: making a file or a folder is a wait for the file system (milliseconds
+    each on a busy disk) that threads overlap; the renames that follow are quick."""
+    folders: dict[str, list[str]] = {}
+    for rel in rels:
+        folders.setdefault(os.path.dirname(os.path.join(outdir, rel)), []).append(rel)
+    suffix = f".{os.getpid()}.tmp"
+    staged: dict[str, str] = {}  # rel -> its temporary file, once made
+
+    def stage(folder: str, rels: list[str]) -> None:
+        os.makedirs(folder, exist_ok=True)
         for rel in rels:
-            path = outdir / rel
-            path.parent.mkdir(parents=True, exist_ok=True)
-            tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-            tmp.write_text(files[rel], encoding="utf-8")
-            staged.append((tmp, path))
-        for tmp, path in staged:
-            os.replace(tmp, path)
+            tmp = os.path.join(folder, f".{os.path.basename(rel)}{suffix}")
+            with open(tmp, "w", encoding="utf-8") as fh:
+                staged[rel] = tmp
+                fh.write(files[rel])
+
+    renamed = 0
+    try:
+        if len(folders) < 2 * WRITERS:
+            for folder, in_folder in folders.items():
+                stage(folder, in_folder)
+        else:
+            from concurrent.futures import ThreadPoolExecutor
+
+            with ThreadPoolExecutor(WRITERS) as pool:
+                for done in [pool.submit(stage, f, in_f) for f, in_f in folders.items()]:
+                    done.result()  # the first error, once every thread has stopped
+        for rel in rels:
+            os.replace(staged[rel], os.path.join(outdir, rel))
+            renamed += 1
     finally:
-        for tmp, _ in staged:
-            if tmp.exists():
-                tmp.unlink()
+        for rel in rels[renamed:]:
+            if rel in staged:
+                with contextlib.suppress(OSError):
+                    os.unlink(staged[rel])
