@@ -19,7 +19,7 @@ from miro_gen.codegen.contexts import ModuleContext
 from miro_gen.codegen.lower import lower_file
 from miro_gen.codegen.packages import GENERATED_MARK, package_contexts
 from miro_gen.codegen.render import render_module, render_package_init
-from miro_gen.codegen.shapes import Unsupported
+from miro_gen.codegen.shapes import Unsupported, member_shape
 from miro_gen.diagnostics import Diagnostics
 from miro_gen.idl import ast
 
@@ -52,6 +52,15 @@ def build_modules(
     specs: Iterable[tuple[ast.Specification, str]], diag: Diagnostics
 ) -> list[ModuleContext]:
     """The Python modules of each (specification, main IDL file); refusals become errors."""
+    try:
+        return _build_modules(specs, diag)
+    finally:
+        member_shape.cache_clear()  # the shapes of this compilation's members
+
+
+def _build_modules(
+    specs: Iterable[tuple[ast.Specification, str]], diag: Diagnostics
+) -> list[ModuleContext]:
     modules: list[ModuleContext] = []
     declarations: dict[str, ast.Decl] = {}
     for spec, path in specs:

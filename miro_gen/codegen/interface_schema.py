@@ -60,6 +60,9 @@ class InterfaceSchemas:
             self.by_path[d.scope_path] = d
             if not isinstance(d, ast.Module):
                 self.children.setdefault(tuple(d.scope_path[:-1]), []).append(d)
+        # The text of each declaration as schemas state it (in its modules): the same in every
+        # schema that holds it, so written once.
+        self.texts: dict[int, str] = {}
 
     def of(self, decl: ast.Interface) -> str:
         """The interface schema of `decl`; NoInterfaceSchema when it cannot be written."""
@@ -74,6 +77,7 @@ class _Writer:
     def __init__(self, index: InterfaceSchemas) -> None:
         self.by_path = index.by_path
         self.children = index.children
+        self.texts = index.texts
         self.parts: list[str] = []
         self.done: set[int] = set()
         self.active: list[Any] = []
@@ -143,7 +147,10 @@ class _Writer:
 
     def write(self, decl: Any) -> None:
         self.done.add(id(decl))
-        self.parts.append(_declare(decl, _body(decl, _no_data_scope, refs=True)))
+        text = self.texts.get(id(decl))
+        if text is None:
+            text = self.texts[id(decl)] = _declare(decl, _body(decl, _no_data_scope, refs=True))
+        self.parts.append(text)
 
     def data_deps(self, decl: Any) -> None:
         if isinstance(decl, ast.Typedef):
@@ -188,7 +195,10 @@ class _Writer:
         self.done.add(id(iface))
         for d in nested:
             self.done.add(id(d))
-        self.parts.append(_declare(iface, self.interface_text(iface, nested)))
+        text = self.texts.get(id(iface))
+        if text is None:
+            text = self.texts[id(iface)] = _declare(iface, self.interface_text(iface, nested))
+        self.parts.append(text)
 
     def interface_text(self, iface: Any, nested: list[Any]) -> str:
         word = "abstract interface" if iface.abstract else "interface"
