@@ -147,6 +147,29 @@ def test_a_failed_write_leaves_the_output_folder_as_it_was(tmp_path: Path) -> No
     assert tree(tmp_path / "gen") == before
 
 
+def test_a_large_output_is_checked_and_rewritten_file_by_file(tmp_path: Path) -> None:
+    """Many files are rendered and compared by several processes: --check lists exactly the
+    stale ones, and a run rewrites exactly those."""
+    idl = tmp_path / "Many.idl"
+    modules = [f"module M{i} {{ struct S {{ long x; }}; }};\n" for i in range(40)]
+    idl.write_text("".join(modules))
+    assert run_miro_idl("-o", "gen", str(idl), cwd=tmp_path).returncode == 0
+    fresh = run_miro_idl("-o", "gen", "--check", str(idl), cwd=tmp_path)
+    assert fresh.returncode == 0, fresh.stderr
+    modules[7] = "module M7 { struct S { short x; }; };\n"
+    modules[31] = "module M31 { struct S { long y; }; };\n"
+    idl.write_text("".join(modules))
+    before = tree(tmp_path / "gen")
+    stale = run_miro_idl("-o", "gen", "--check", str(idl), cwd=tmp_path)
+    assert stale.returncode == 1
+    changed = [f"gen/M{i}/{name}" for i in (31, 7) for name in ("Many_idl.py", "__init__.py")]
+    assert stale.stderr.splitlines() == [f"miro-idl: {rel} is out of date" for rel in changed]
+    assert tree(tmp_path / "gen") == before
+    out = run_miro_idl("-o", "gen", str(idl), cwd=tmp_path)
+    assert out.stdout.splitlines() == [f"wrote {rel}" for rel in changed]
+    assert not [p for p in (tmp_path / "gen").rglob(".*")]  # no temporary file left
+
+
 def test_other_tools_files_are_left_alone(tmp_path: Path) -> None:
     gen = tmp_path / "gen"
     assert run_miro_idl("-o", "gen", str(EXAMPLE), cwd=tmp_path).returncode == 0

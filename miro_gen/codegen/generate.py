@@ -1,22 +1,21 @@
 """Generation of Python from resolved IDL: the files `miro-idl` writes, and how it writes them.
 
 The pipeline: each IDL file's resolved specification is lowered into module contexts
-(`lower.py`), the package `__init__`s are built from those (`packages.py`), and everything is
-rendered in memory (`render.py`); only then are files written, each through a temporary file
-renamed into place, so that an error leaves the output folder as it was.
+(`lower.py`), the package `__init__`s are built from those (`packages.py`): together the
+planned files (`planned_files`), each rendered by `render` (`render.py`) and written through
+`output.py`, which leaves the output folder as it was when anything fails.
 """
 
 from __future__ import annotations
 
-import contextlib
-import os
 import sys
-from collections.abc import Iterable
+from collections.abc import Collection, Iterable
 from pathlib import Path
 
 from miro_gen.codegen import python_limits
-from miro_gen.codegen.contexts import ModuleContext
+from miro_gen.codegen.contexts import ModuleContext, PackageContext
 from miro_gen.codegen.lower import lower_file
+from miro_gen.codegen.output import changed_files, update, write_files
 from miro_gen.codegen.packages import GENERATED_MARK, package_contexts
 from miro_gen.codegen.render import render_module, render_package_init
 from miro_gen.codegen.shapes import Unsupported, member_shape
@@ -30,11 +29,12 @@ __all__ = [
     "display_source",
     "generated_files",
     "missing_imports",
+    "planned_files",
+    "render",
     "shadowed_modules",
+    "update",
     "write_files",
 ]
-
-WRITERS = 8  # threads writing files, when there are many folders
 
 
 def display_source(path: str) -> str:
@@ -79,20 +79,39 @@ def _build_modules(
     return modules
 
 
+Planned = tuple[str, ModuleContext | PackageContext | None]  # (relative path, its context)
+
+
+def planned_files(modules: list[ModuleContext], outdir: Path) -> list[Planned]:
+    """Every file to write, package `__init__`s included, by relative path (sorted), with
+    the context it is rendered from (None: an empty file)."""
+    files: dict[str, ModuleContext | PackageContext | None] = {}
+    for m in modules:
+        files.setdefault(m.path, m)  # the same IDL file compiled twice: the first one
+    for package in package_contexts(modules, outdir):
+        files[package.path] = package
+        if "." not in package.package:  # PEP 561: mypy checks against it where installed
+            files[package.package + "/py.typed"] = None
+    return sorted(files.items())
+
+
+def render(context: ModuleContext | PackageContext | None) -> str:
+    """The content of a planned file."""
+    if context is None:
+        return ""
+    if isinstance(context, ModuleContext):
+        return render_module(context)
+    return render_package_init(context)
+
+
 def generated_files(modules: list[ModuleContext], outdir: Path) -> dict[str, str]:
     """Relative path -> content of every file to write, package `__init__`s included."""
-    files: dict[str, str] = {}
-    for m in modules:
-        if m.path not in files:  # the same IDL file compiled twice: the first one
-            files[m.path] = render_module(m)
-    for package in package_contexts(modules, outdir):
-        files[package.path] = render_package_init(package)
-        if "." not in package.package:  # PEP 561: mypy checks against it where installed
-            files[package.package + "/py.typed"] = ""
-    return files
+    return {rel: render(context) for rel, context in planned_files(modules, outdir)}
 
 
-def missing_imports(modules: list[ModuleContext], files: dict[str, str], outdir: Path) -> list[str]:
+def missing_imports(
+    modules: list[ModuleContext], files: Collection[str], outdir: Path
+) -> list[str]:
     """Generated modules imported by these ones that neither this run nor an earlier one wrote
     (an included IDL file that was not compiled)."""
     out = []
@@ -109,67 +128,3 @@ def shadowed_modules(modules: list[ModuleContext]) -> list[str]:
     (IDL `module queue`): wherever the output folder comes first on sys.path, every program
     imports the generated package in its place (miro_gen's `import queue` too)."""
     return sorted({m.package.split(".")[0] for m in modules} & sys.stdlib_module_names)
-
-
-def changed_files(files: dict[str, str], outdir: Path) -> list[str]:
-    """The relative paths whose content on disk differs (or that do not exist). Each folder
-    is listed once: only the files it holds are read (a new output folder costs one look)."""
-    out = []
-    present: dict[str, frozenset[str]] = {}  # folder -> the names in it
-    for rel, content in sorted(files.items()):
-        folder, _, name = rel.rpartition("/")
-        names = present.get(folder)
-        if names is None:
-            try:
-                names = frozenset(os.listdir(outdir / folder))
-            except OSError:
-                names = frozenset()
-            present[folder] = names
-        if name in names:
-            try:
-                if (outdir / rel).read_text(encoding="utf-8") == content:
-                    continue
-            except (OSError, UnicodeDecodeError):
-                pass
-        out.append(rel)
-    return out
-
-
-def write_files(files: dict[str, str], rels: list[str], outdir: Path) -> None:
-    """Write `rels` of `files` under `outdir`: all to temporary files first, then renamed
-    into place (in the order of `rels`). The temporary files of different folders are written
-    by several threads: making a file or a folder is a wait for the file system (milliseconds
-    each on a busy disk) that threads overlap; the renames that follow are quick."""
-    folders: dict[str, list[str]] = {}
-    for rel in rels:
-        folders.setdefault(os.path.dirname(os.path.join(outdir, rel)), []).append(rel)
-    suffix = f".{os.getpid()}.tmp"
-    staged: dict[str, str] = {}  # rel -> its temporary file, once made
-
-    def stage(folder: str, rels: list[str]) -> None:
-        os.makedirs(folder, exist_ok=True)
-        for rel in rels:
-            tmp = os.path.join(folder, f".{os.path.basename(rel)}{suffix}")
-            with open(tmp, "w", encoding="utf-8") as fh:
-                staged[rel] = tmp
-                fh.write(files[rel])
-
-    renamed = 0
-    try:
-        if len(folders) < 2 * WRITERS:
-            for folder, in_folder in folders.items():
-                stage(folder, in_folder)
-        else:
-            from concurrent.futures import ThreadPoolExecutor
-
-            with ThreadPoolExecutor(WRITERS) as pool:
-                for done in [pool.submit(stage, f, in_f) for f, in_f in folders.items()]:
-                    done.result()  # the first error, once every thread has stopped
-        for rel in rels:
-            os.replace(staged[rel], os.path.join(outdir, rel))
-            renamed += 1
-    finally:
-        for rel in rels[renamed:]:
-            if rel in staged:
-                with contextlib.suppress(OSError):
-                    os.unlink(staged[rel])
