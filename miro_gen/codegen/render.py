@@ -10,13 +10,15 @@ from __future__ import annotations
 
 import re
 import textwrap
-from collections.abc import Iterable
+import zlib
+from collections.abc import Iterable, MutableMapping
 from functools import cache
 from pathlib import Path
 from types import FunctionType
 from typing import Any
 
 import jinja2
+import jinja2.filters
 from jinja2.runtime import Macro
 
 from miro_gen import __version__
@@ -89,10 +91,20 @@ def _wrap_block(line: str, width: int) -> list[str]:
     ) or [line]
 
 
-def _bytecode_cache() -> jinja2.BytecodeCache | None:
-    """Templates compiled by an earlier run (checked against their source), per user."""
+def _bytecode_cache(env: jinja2.Environment) -> jinja2.BytecodeCache | None:
+    """Templates compiled by an earlier run, per user. Jinja checks a compiled template against
+    its source only; how a template calls each filter and global (what it passes them) is
+    compiled in too, so the cache's file names hold a digest of those."""
     folder = cache_dir()
-    return jinja2.FileSystemBytecodeCache(folder) if folder is not None else None
+    if folder is None:
+        return None
+    calls = sorted(
+        (kind, name, str(getattr(f, "jinja_pass_arg", "")))
+        for kind, names in (("filter", env.filters), ("global", env.globals))
+        for name, f in names.items()
+    )
+    digest = zlib.crc32(repr(calls).encode())
+    return jinja2.FileSystemBytecodeCache(folder, f"__jinja2_{digest:08x}_%s.cache")
 
 
 class _Context(jinja2.runtime.Context):
@@ -115,9 +127,26 @@ class _Context(jinja2.runtime.Context):
             )
 
 
+class _Environment(jinja2.Environment):
+    """Jinja's environment for templates that render many times in one short run:
+
+    * each template's globals are one dict made when it is loaded (Jinja overlays them on
+      the environment's with a ChainMap, which every `include` and `import` then walks; the
+      environment's globals here are set before any template is loaded and never change);
+    * the filters that have an async variant are their synchronous selves (this environment
+      is not async: the wrapper would only ask, at every call)."""
+
+    def make_globals(self, d: MutableMapping[str, Any] | None) -> MutableMapping[str, Any]:
+        return {**self.globals, **(d or {})}
+
+
+# (The synchronous functions take the same arguments as their async-aware wrappers.)
+_SYNC_FILTERS = {"join": jinja2.filters.sync_do_join, "map": jinja2.filters.sync_do_map}
+
+
 @cache
 def environment() -> jinja2.Environment:
-    env = jinja2.Environment(
+    env = _Environment(
         loader=jinja2.FileSystemLoader(str(template_dir())),
         trim_blocks=True,
         lstrip_blocks=True,
@@ -125,15 +154,16 @@ def environment() -> jinja2.Environment:
         undefined=jinja2.StrictUndefined,
         autoescape=False,
         auto_reload=False,  # templates do not change during a run: no stat per use
-        bytecode_cache=_bytecode_cache(),
     )
     env.context_class = _Context
+    env.filters.update(_SYNC_FILTERS)
     env.filters["pyrepr"] = pyrepr
     env.filters["docstring"] = docstring
     env.filters["wrap"] = wrap
     env.globals["bracket"] = bracket
     env.globals["lint_header"] = lint_header
     env.globals["version"] = __version__
+    env.bytecode_cache = _bytecode_cache(env)
     return env
 
 
