@@ -7,9 +7,10 @@ them is removed again if the run fails.
 
 `update` renders and writes the files of a large run in several processes: rendering is
 Python (one core per process), and making a file or a folder is mostly waiting for the file
-system (milliseconds each on a busy disk), which other processes' work overlaps. Each process
-(forked, so that it shares the contexts already built) renders and stages a share of the
-files; the parent renames them once all have succeeded. Small runs, and systems without
+system (milliseconds each on a busy disk), which other processes' work, and other threads'
+waits, overlap. Each process (forked, so that it shares the contexts already built) renders
+a share of the files, then writes those that changed to temporary files with several
+threads; the parent renames them once all have succeeded. Small runs, and systems without
 `fork`, stay in one process.
 """
 
@@ -29,6 +30,7 @@ T = TypeVar("T")
 
 PARALLEL_FROM = 64  # files; fewer are rendered and written by this process alone
 MAX_PROCESSES = 4
+WRITERS = 8  # threads of a process writing files, when it writes many folders
 
 
 @dataclass
@@ -100,8 +102,7 @@ def _stage(share: _Share[T], outdir: str, *, write: bool, compare: bool = True) 
     what was made and propagates."""
     staged = _Staged()
     listings: dict[str, frozenset[str]] = {}
-    ready: set[str] = set()
-    suffix = f".{os.getpid()}.tmp"
+    folders: dict[str, list[tuple[str, str, str]]] = {}  # folder -> (rel, name, content)
     try:
         for rel, source in share.items:
             content = share.render(source)
@@ -110,21 +111,39 @@ def _stage(share: _Share[T], outdir: str, *, write: bool, compare: bool = True) 
             if compare and _same(path, name, content, _listing(folder, listings)):
                 continue
             staged.changed.append(rel)
-            if not write:
-                continue
-            if folder not in ready:
-                _make_folder(folder, staged.made)
-                ready.add(folder)
-            tmp = os.path.join(folder, f".{name}{suffix}")
-            with open(tmp, "w", encoding="utf-8") as fh:
-                staged.temporary[rel] = tmp
-                fh.write(content)
+            if write:
+                folders.setdefault(folder, []).append((rel, name, content))
+        _write_temporary(folders, staged)
     except OSError as e:
         staged.error = e
     except BaseException:
         _discard([staged], set())
         raise
     return staged
+
+
+def _write_temporary(folders: dict[str, list[tuple[str, str, str]]], staged: _Staged) -> None:
+    """Make each folder and write its files to temporary files, many folders at once by
+    several threads (once this process renders no more: they would wait for it)."""
+    suffix = f".{os.getpid()}.tmp"
+
+    def write(folder: str, files: list[tuple[str, str, str]]) -> None:
+        _make_folder(folder, staged.made)
+        for rel, name, content in files:
+            tmp = os.path.join(folder, f".{name}{suffix}")
+            with open(tmp, "w", encoding="utf-8") as fh:
+                staged.temporary[rel] = tmp
+                fh.write(content)
+
+    if len(folders) < 2 * WRITERS:
+        for folder, files in folders.items():
+            write(folder, files)
+        return
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(WRITERS) as pool:
+        for done in [pool.submit(write, folder, files) for folder, files in folders.items()]:
+            done.result()  # the first error, once every thread has stopped
 
 
 def _listing(folder: str, listings: dict[str, frozenset[str]]) -> frozenset[str]:
