@@ -203,7 +203,7 @@ def _generate(args: argparse.Namespace, specs: list[Any], defines: dict[str, str
             file=sys.stderr,
         )
     try:  # rendered only now, and written only if every file can be
-        changed = generate.update(planned, generate.render, outdir, check=args.check)
+        changed = generate.write_planned(planned, outdir, check=args.check)
     except OSError as e:
         where = checks.shorten(str(e.filename or outdir))
         print(f"miro-idl: error: cannot write '{where}': {e.strerror or e}", file=sys.stderr)

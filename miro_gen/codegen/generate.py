@@ -17,7 +17,7 @@ from miro_gen.codegen.contexts import ModuleContext, PackageContext
 from miro_gen.codegen.lower import lower_file
 from miro_gen.codegen.output import changed_files, update, write_files
 from miro_gen.codegen.packages import GENERATED_MARK, package_contexts
-from miro_gen.codegen.render import render_module, render_package_init
+from miro_gen.codegen.render import preload, render_module, render_package_init
 from miro_gen.codegen.shapes import Unsupported, member_shape
 from miro_gen.diagnostics import Diagnostics
 from miro_gen.idl import ast
@@ -34,6 +34,7 @@ __all__ = [
     "shadowed_modules",
     "update",
     "write_files",
+    "write_planned",
 ]
 
 
@@ -102,6 +103,14 @@ def render(context: ModuleContext | PackageContext | None) -> str:
     if isinstance(context, ModuleContext):
         return render_module(context)
     return render_package_init(context)
+
+
+def write_planned(planned: list[Planned], outdir: Path, *, check: bool) -> list[str]:
+    """Render the planned files and bring `outdir` up to date with them, or with `check` only
+    compare (`output.update`); the paths that differ. The templates are loaded first, once,
+    rather than by each process that renders."""
+    preload()
+    return update(planned, render, outdir, check=check)
 
 
 def generated_files(modules: list[ModuleContext], outdir: Path) -> dict[str, str]:

@@ -20,6 +20,7 @@ import contextlib
 import os
 import pickle
 import sys
+import threading
 import traceback
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -90,7 +91,12 @@ def _identity(text: str) -> str:
 
 
 def _processes(files: int) -> int:
+    """How many processes share `files` files: one for few files, where there is no fork, and
+    in a process with other threads (a forked child holds no thread but the caller's, and so
+    none of the locks they may hold)."""
     if files < PARALLEL_FROM or not hasattr(os, "fork") or not sys.platform.startswith("linux"):
+        return 1
+    if threading.active_count() > 1:
         return 1
     return max(1, min(MAX_PROCESSES, len(os.sched_getaffinity(0))))
 

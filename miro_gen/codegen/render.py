@@ -175,6 +175,14 @@ def lint_header(extra: Iterable[str] = ()) -> str:
     return f"# isort: skip_file\n# fmt: off\n# ruff: noqa: {codes}"
 
 
+def preload() -> None:
+    """Load the code generator's templates now (from the bytecode cache, else compiling them):
+    before processes are forked to render, so that they do not each load them."""
+    env = environment()
+    for name in env.list_templates(filter_func=lambda name: name.startswith("idl/")):
+        env.get_template(name)
+
+
 def render_module(module: ModuleContext) -> str:
     """The code of a module."""
     return environment().get_template("idl/module.py.j2").render(m=module)
