@@ -147,6 +147,19 @@ def test_a_failed_write_leaves_the_output_folder_as_it_was(tmp_path: Path) -> No
     assert tree(tmp_path / "gen") == before
 
 
+def test_a_failed_first_write_leaves_no_new_folder_behind(tmp_path: Path) -> None:
+    """In folders that did not exist, files are written under their own names at once; when
+    the run fails, they and the folders made for them go again."""
+    idl = tmp_path / "Many.idl"
+    idl.write_text("".join(f"module M{i} {{ struct S {{ long x; }}; }};\n" for i in range(40)))
+    (tmp_path / "gen").mkdir()
+    (tmp_path / "gen" / "M17").write_text("a file where the package's folder goes\n")
+    out = run_miro_idl("-o", "gen", str(idl), cwd=tmp_path)
+    assert out.returncode == 1
+    assert "miro-idl: error: cannot write" in out.stderr and "M17" in out.stderr
+    assert [p.name for p in (tmp_path / "gen").iterdir()] == ["M17"]
+
+
 def test_a_large_output_is_checked_and_rewritten_file_by_file(tmp_path: Path) -> None:
     """Many files are rendered and compared by several processes: --check lists exactly the
     stale ones, and a run rewrites exactly those."""

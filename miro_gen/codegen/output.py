@@ -2,8 +2,9 @@
 that an error leaves the folder as it was.
 
 Every changed file is first written to a temporary file beside its place (`.NAME.PID.tmp`);
-only when all of them are written are they renamed into place, in order. A folder made for
-them is removed again if the run fails.
+only when all of them are written are they renamed into place, in order. A folder that did not
+exist gets its files under their own names at once (nothing was there to keep); a folder made
+for them is removed again, with them, if the run fails.
 
 `update` renders and writes the files of a large run in several processes: rendering is
 Python (one core per process), and making a file or a folder is mostly waiting for the file
@@ -41,6 +42,7 @@ class _Staged:
 
     changed: list[str] = field(default_factory=list)
     temporary: dict[str, str] = field(default_factory=dict)  # rel -> its temporary file
+    in_place: list[str] = field(default_factory=list)  # files written in folders that were new
     made: list[str] = field(default_factory=list)
     error: OSError | None = None
     failure: str = ""
@@ -107,7 +109,7 @@ def _stage(share: _Share[T], outdir: str, *, write: bool, compare: bool = True) 
     the result, with what was made until then (the caller removes it); anything else removes
     what was made and propagates."""
     staged = _Staged()
-    listings: dict[str, frozenset[str]] = {}
+    listings: dict[str, frozenset[str] | None] = {}
     folders: dict[str, list[tuple[str, str, str]]] = {}  # folder -> (rel, name, content)
     try:
         for rel, source in share.items:
@@ -119,7 +121,8 @@ def _stage(share: _Share[T], outdir: str, *, write: bool, compare: bool = True) 
             staged.changed.append(rel)
             if write:
                 folders.setdefault(folder, []).append((rel, name, content))
-        _write_temporary(folders, staged)
+        new = {folder for folder in folders if compare and listings[folder] is None}
+        _write(folders, new, staged)
     except OSError as e:
         staged.error = e
     except BaseException:
@@ -128,14 +131,21 @@ def _stage(share: _Share[T], outdir: str, *, write: bool, compare: bool = True) 
     return staged
 
 
-def _write_temporary(folders: dict[str, list[tuple[str, str, str]]], staged: _Staged) -> None:
-    """Make each folder and write its files to temporary files, many folders at once by
-    several threads (once this process renders no more: they would wait for it)."""
+def _write(folders: dict[str, list[tuple[str, str, str]]], new: set[str], staged: _Staged) -> None:
+    """Make each folder and write its files, to temporary files but in the folders that did
+    not exist (`new`); many folders at once by several threads (once this process renders no
+    more: they would wait for it)."""
     suffix = f".{os.getpid()}.tmp"
 
     def write(folder: str, files: list[tuple[str, str, str]]) -> None:
         _make_folder(folder, staged.made)
         for rel, name, content in files:
+            if folder in new:
+                path = os.path.join(folder, name)
+                with open(path, "w", encoding="utf-8") as fh:
+                    staged.in_place.append(path)
+                    fh.write(content)
+                continue
             tmp = os.path.join(folder, f".{name}{suffix}")
             with open(tmp, "w", encoding="utf-8") as fh:
                 staged.temporary[rel] = tmp
@@ -152,19 +162,20 @@ def _write_temporary(folders: dict[str, list[tuple[str, str, str]]], staged: _St
             done.result()  # the first error, once every thread has stopped
 
 
-def _listing(folder: str, listings: dict[str, frozenset[str]]) -> frozenset[str]:
-    names = listings.get(folder)
-    if names is None:
+def _listing(folder: str, listings: dict[str, frozenset[str] | None]) -> frozenset[str] | None:
+    """The names in `folder` (looked up once); None when there is no such folder."""
+    if folder not in listings:
         try:
-            names = frozenset(os.listdir(folder))
+            listings[folder] = frozenset(os.listdir(folder))
+        except FileNotFoundError:
+            listings[folder] = None
         except OSError:
-            names = frozenset()
-        listings[folder] = names
-    return names
+            listings[folder] = frozenset()
+    return listings[folder]
 
 
-def _same(path: str, name: str, content: str, names: frozenset[str]) -> bool:
-    if name not in names:
+def _same(path: str, name: str, content: str, names: frozenset[str] | None) -> bool:
+    if names is None or name not in names:
         return False
     try:
         with open(path, encoding="utf-8") as fh:
@@ -253,20 +264,22 @@ def _commit(rels: Sequence[str], staged: list[_Staged], outdir: str) -> None:
             if s.error is not None:
                 raise s.error
         for rel in rels:
-            os.replace(temporary[rel], os.path.join(outdir, rel))
-            renamed.add(rel)
+            if rel in temporary:
+                os.replace(temporary[rel], os.path.join(outdir, rel))
+                renamed.add(rel)
     except BaseException:
         _discard(staged, renamed)
         raise
 
 
 def _discard(staged: list[_Staged], renamed: set[str]) -> None:
-    """Remove the temporary files (but those `renamed`) and then the folders made, if empty."""
+    """Remove the temporary files (but those `renamed`), the files written in new folders, and
+    then the folders made, if empty."""
     for s in staged:
-        for rel, tmp in s.temporary.items():
-            if rel not in renamed:
-                with contextlib.suppress(OSError):
-                    os.unlink(tmp)
+        left = [tmp for rel, tmp in s.temporary.items() if rel not in renamed]
+        for path in [*left, *s.in_place]:
+            with contextlib.suppress(OSError):
+                os.unlink(path)
     for folder in sorted((f for s in staged for f in s.made), key=len, reverse=True):
         with contextlib.suppress(OSError):
             os.rmdir(folder)  # only if empty: a failed rename leaves files in it
