@@ -13,7 +13,7 @@ from collections.abc import Collection, Iterable
 from pathlib import Path
 
 from miro_gen.codegen import python_limits
-from miro_gen.codegen.contexts import ModuleContext, PackageContext
+from miro_gen.codegen.contexts import InterfaceContext, ModuleContext, PackageContext
 from miro_gen.codegen.lower import lower_file
 from miro_gen.codegen.output import changed_files, update, write_files
 from miro_gen.codegen.packages import GENERATED_MARK, package_contexts
@@ -105,12 +105,26 @@ def render(context: ModuleContext | PackageContext | None) -> str:
     return render_package_init(context)
 
 
+# What making a file costs (on a busy disk), in declarations rendered: for sharing out the work.
+FILE_WEIGHT = 10
+
+
 def write_planned(planned: list[Planned], outdir: Path, *, check: bool) -> list[str]:
     """Render the planned files and bring `outdir` up to date with them, or with `check` only
     compare (`output.update`); the paths that differ. The templates are loaded first, once,
     rather than by each process that renders."""
     preload()
-    return update(planned, render, outdir, check=check)
+    return update(planned, render, outdir, check=check, weight=_weight)
+
+
+def _weight(context: ModuleContext | PackageContext | None) -> int:
+    """About what a planned file costs: making it (as much as rendering ten declarations, on
+    a busy disk), and rendering its declarations, most for the operations of stubs and
+    skeletons."""
+    if isinstance(context, ModuleContext):
+        interfaces = [i for i in context.items if isinstance(i, InterfaceContext)]
+        return FILE_WEIGHT + len(context.items) + 3 * sum(len(i.operations) for i in interfaces)
+    return FILE_WEIGHT + (0 if context is None else 1)
 
 
 def generated_files(modules: list[ModuleContext], outdir: Path) -> dict[str, str]:

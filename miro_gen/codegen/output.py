@@ -70,17 +70,23 @@ def write_files(files: dict[str, str], rels: list[str], outdir: Path) -> None:
 
 
 def update(
-    items: Sequence[tuple[str, T]], render: Callable[[T], str], outdir: Path, *, check: bool
+    items: Sequence[tuple[str, T]],
+    render: Callable[[T], str],
+    outdir: Path,
+    *,
+    check: bool,
+    weight: Callable[[T], int] = lambda _: 1,
 ) -> list[str]:
     """Render each (relative path, context) with `render` and compare it with `outdir`; unless
     `check`, write those that differ. Returns the relative paths that differ, sorted. OSError
-    when a file cannot be written (nothing is then changed)."""
+    when a file cannot be written (nothing is then changed). `weight` estimates what rendering
+    a context costs, so that the processes get shares of equal work."""
     out = str(outdir)
     processes = _processes(len(items))
     if processes == 1:
         staged = [_stage(_Share(items, render), out, write=not check)]
     else:
-        shares = [_Share(items[i::processes], render) for i in range(processes)]
+        shares = [_Share(share, render) for share in _shares(items, processes, weight)]
         staged = _in_processes(shares, out, write=not check)
     changed = sorted(rel for s in staged for rel in s.changed)
     if not check:
@@ -101,6 +107,20 @@ def _processes(files: int) -> int:
     if threading.active_count() > 1:
         return 1
     return max(1, min(MAX_PROCESSES, len(os.sched_getaffinity(0))))
+
+
+def _shares(
+    items: Sequence[tuple[str, T]], count: int, weight: Callable[[T], int]
+) -> list[list[tuple[str, T]]]:
+    """`items` in `count` shares of about equal weight (the heaviest first, each to the share
+    that has least so far), each in the order of `items`."""
+    loads = [0] * count
+    chosen: list[list[int]] = [[] for _ in range(count)]
+    for i in sorted(range(len(items)), key=lambda i: -weight(items[i][1])):
+        least = loads.index(min(loads))
+        loads[least] += weight(items[i][1])
+        chosen[least].append(i)
+    return [[items[i] for i in sorted(share)] for share in chosen]
 
 
 def _stage(share: _Share[T], outdir: str, *, write: bool, compare: bool = True) -> _Staged:
