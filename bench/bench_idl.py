@@ -21,7 +21,8 @@ exits 1 when a target is missed.
 Both are measured as a user runs them: the installed `miro-idl` script (bytecode compiled and the
 grammar tables cached by a warm-up run, as after `pip install`) and Debian's `omniidl`.
 `--miro-idl CMD` measures another `miro-idl` (another checkout: `--miro-idl "env
-PYTHONPATH=/src/old python -m miro_gen.cli.idl"`). Wall-clock medians are the figures; the CPU
+PYTHONPATH=/src/old python -P -m miro_gen.cli.idl"`); `--workdir DIR` puts the files in DIR
+instead of the system's temporary folder. Wall-clock medians are the figures; the CPU
 time (user + system) is printed beside them, the steadier figure on a shared machine.
 """
 
@@ -246,6 +247,12 @@ def main() -> int:
     ap.add_argument("--gen-repeat", type=int, default=3, help="runs of each generator (3)")
     ap.add_argument("--miro-idl", help="the miro-idl command to measure (default: installed)")
     ap.add_argument("--no-lark", action="store_true", help="leave out the parser comparison")
+    ap.add_argument(
+        "--workdir",
+        help="folder for the IDL and the output folders (default: the system's temporary "
+        "folder; where a project's generated/ is, a file system's cost of making files can "
+        "differ: see bench/README.md)",
+    )
     ap.add_argument("--check", action="store_true", help="exit 1 when a target is missed")
     args = ap.parse_args()
 
@@ -255,7 +262,8 @@ def main() -> int:
     tiny = ROOT / "idl" / "Example.idl"
     ok = True
     print(f"load average at the start: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
-    with tempfile.TemporaryDirectory() as tmp:
+    print(f"work folder: {args.workdir or tempfile.gettempdir()}")
+    with tempfile.TemporaryDirectory(dir=args.workdir) as tmp:
         big = Path(tmp) / "big.idl"
         big.write_text("".join(module(i) for i in range(args.modules)))
         lines = big.read_text().count("\n")
