@@ -39,7 +39,8 @@ pytestmark = pytest.mark.skipif(ROS2 is None, reason=REASON or "")
 
 CASES: list[tuple[str, dict[str, Any]]] = [
     ("std_msgs/msg/String", {"data": "hello from miro, ünïcode"}),
-    ("std_msgs/msg/Header", {"stamp": {"sec": 1712345678, "nanosec": 123456789}, "frame_id": "base"}),
+    ("std_msgs/msg/Header", {"stamp": {"sec": 1712345678, "nanosec": 123456789},
+                             "frame_id": "base"}),
     ("geometry_msgs/msg/Twist", {"linear": {"x": 1.5, "y": -2.25, "z": 0.0},
                                  "angular": {"x": 0.0, "y": 0.0, "z": 0.75}}),
     ("geometry_msgs/msg/PoseWithCovariance", {"pose": {"position": {"x": 1.0, "y": 2.0, "z": 3.0},
@@ -185,8 +186,9 @@ def test_rclpy_graph_lists_the_miro_node_its_topics_and_its_service(
         node.subscription(_cls("sensor_msgs/msg/LaserScan"), "scan", lambda m: None)
         Service(node, SetBool, "enable", lambda r: _cls("std_srvs/srv/SetBool_Response")())
         result = _result(
-            _peer(domain, "graph", "/robot/miro_graph", "90", "/robot/enable",
-                  "std_srvs/srv/SetBool")  # fmt: skip
+            _peer(
+                domain, "graph", "/robot/miro_graph", "90", "/robot/enable", "std_srvs/srv/SetBool"
+            )
         )
         ours = node.graph.topics()
     g = result["graph"]

@@ -12,8 +12,14 @@ from collections.abc import Callable
 from typing import Any
 
 from cyclonedds._clayer import ddspy_take, ddspy_write
-from cyclonedds.core import GuardCondition, InstanceState, ReadCondition, SampleState, ViewState
-from cyclonedds.core import WaitSet
+from cyclonedds.core import (
+    GuardCondition,
+    InstanceState,
+    ReadCondition,
+    SampleState,
+    ViewState,
+    WaitSet,
+)
 from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic

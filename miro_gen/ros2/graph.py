@@ -12,6 +12,7 @@ reliable, transient local, keep last 1). `GraphAnnouncer` publishes this process
 from __future__ import annotations
 
 import threading
+from array import array
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -95,8 +96,8 @@ class GraphAnnouncer:
         self._writer.close()
 
 
-def _gid_bytes(gid: bytes) -> bytes:
-    return gid.ljust(16, b"\0")[:16]
+def _gid_bytes(gid: bytes) -> array[int]:
+    return array("B", gid.ljust(16, b"\0")[:16])
 
 
 @dataclass(frozen=True)

@@ -152,9 +152,7 @@ class Node:
 class Publisher(Generic[M]):
     """Publishes messages of one type on one ROS 2 topic."""
 
-    def __init__(
-        self, node: Node, msg_type: type[M], topic: str, qos: ros_qos.QosProfile
-    ) -> None:
+    def __init__(self, node: Node, msg_type: type[M], topic: str, qos: ros_qos.QosProfile) -> None:
         self.topic = topic
         self.msg_type = msg_type
         self._writer = node.writer(

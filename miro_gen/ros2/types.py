@@ -36,7 +36,7 @@ def service_parts(srv: type[Message]) -> tuple[type[Any], type[Any]]:
     """The request and response classes of a generated service type (`pkg/srv/Name`, whose
     members `request_message` and `response_message` are typed with them)."""
     try:
-        probe = srv()  # type: ignore[call-arg]
+        probe: Any = srv()
         return type(probe.request_message), type(probe.response_message)
     except (AttributeError, TypeError):
         raise TypeError(f"{srv.__name__} is not a generated ROS 2 service type") from None

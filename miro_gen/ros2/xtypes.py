@@ -15,9 +15,11 @@ import functools
 from typing import Any
 
 from cyclonedds.idl import IdlStruct, make_idl_struct
-from cyclonedds.idl import types as t
+from cyclonedds.idl import types as _t
 
 from miro_gen.ros2 import names, schema
+
+t: Any = _t  # its generic aliases (`sequence[...]`) are not typed as generic
 
 _PRIMITIVES: dict[str, Any] = {
     "boolean": bool,

@@ -66,9 +66,12 @@ def main() -> None:
     node = Node("rclpy_peer")
     result: dict[str, Any] = {}
     if mode == "sub":
-        cls, topic, count, timeout = sys.argv[2], sys.argv[3], int(sys.argv[4]), float(sys.argv[5])
+        cls, topic = sys.argv[2], sys.argv[3]
+        count, timeout = int(sys.argv[4]), float(sys.argv[5])
         got: list[Any] = []
-        node.create_subscription(message_class(cls), topic, lambda m: got.append(canon.canon(m)), 10)
+        node.create_subscription(
+            message_class(cls), topic, lambda m: got.append(canon.canon(m)), 10
+        )
         deadline = time.monotonic() + timeout
         while len(got) < count and time.monotonic() < deadline:
             rclpy.spin_once(node, timeout_sec=0.1)
