@@ -25,7 +25,14 @@ from typing import Any
 import MiroNaming
 import MiroNaming__POA
 
-from miro_gen.exceptions import BAD_PARAM, COMM_FAILURE, NO_RESOURCES, TIMEOUT, TRANSIENT
+from miro_gen.exceptions import (
+    BAD_PARAM,
+    COMM_FAILURE,
+    NO_RESOURCES,
+    TIMEOUT,
+    TRANSIENT,
+    actionable,
+)
 from miro_gen.log import PeerWarnings, logger
 from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.runtime.rpc import nonblocking
@@ -48,6 +55,17 @@ MAX_FIELD_BYTES = 1024  # of an entry's repository id, endpoint, key and type ha
 MAX_OWNER_BYTES = 128
 Entry = MiroNaming.Entry
 NAMING_HINT = "is `miro naming` running? see --naming / MIRO_NAMING"
+
+# The naming errors a program lets through are the user's to fix: one line each (lifecycle).
+actionable(
+    MiroNaming.NotFound,
+    lambda e: (
+        f"{e.name} is not bound in the naming service: is its server running? "
+        "(`miro nslist` lists what is)"
+    ),
+)
+actionable(MiroNaming.InvalidName, lambda e: f"InvalidName: {e.name}")
+actionable(MiroNaming.AlreadyBound, lambda e: f"AlreadyBound: {e.name}")
 
 
 def check_name(name: str) -> str:

@@ -19,6 +19,7 @@ import pydantic
 from lxml import etree
 
 from miro_gen.diagnostics import Diagnostic
+from miro_gen.exceptions import ActionableError
 from miro_gen.params.runtime import codecs, values
 from miro_gen.params.runtime.codecs import (
     ANGLE,
@@ -36,7 +37,7 @@ from miro_gen.params.runtime.codecs import (
 T = TypeVar("T")
 
 
-class ParamsError(Exception):
+class ParamsError(ActionableError):
     """A run-time document that does not fit the parameter classes; lists every problem as
     `path:line: error: message`. The parameters it was read into are left as they were."""
 
