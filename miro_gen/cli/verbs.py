@@ -13,15 +13,14 @@ from __future__ import annotations
 import argparse
 import importlib
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
-from typing import cast
+from typing import NamedTuple, cast
 
 Run = Callable[[Sequence[str]], int]
 
 
-@dataclass(frozen=True)
-class Verb:
-    """A verb (or a sub-verb) of `miro`."""
+class Verb(NamedTuple):
+    """A verb (or a sub-verb) of `miro` (a named tuple: dataclasses would cost `miro`'s
+    start-up the import of `inspect`)."""
 
     name: str
     help: str  # one line: `miro --help`, the verb's own list of sub-verbs
