@@ -162,3 +162,19 @@ def test_the_run_time_loads_no_compiler() -> None:
     )
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "[]"
+
+
+def test_the_compilers_process_applies_the_policy_itself(hostile: Hostile, tmp_path: Path) -> None:
+    """`python -m miro_gen.compile FOLDER`, however it is started, refuses what the policy
+    refuses, before a compiler is loaded."""
+    (tmp_path / "schema.idl").write_text(f'#include "{hostile.secret_file}"\nmodule M {{}};\n')
+    done = subprocess.run(
+        [sys.executable, "-m", "miro_gen.compile", str(tmp_path)],
+        capture_output=True,
+        text=True,
+        env=service_env(),
+        timeout=60,
+    )
+    assert done.returncode == 1
+    assert done.stderr.strip() == DIRECTIVES and hostile.secret not in done.stderr
+    assert not (tmp_path / "py").exists() and not (tmp_path / "ast.json").exists()

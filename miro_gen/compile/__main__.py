@@ -23,6 +23,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         resource.setrlimit(resource.RLIMIT_AS, (ns.memory, ns.memory))
     if ns.cpu:
         resource.setrlimit(resource.RLIMIT_CPU, (ns.cpu, ns.cpu))
+    if ns.memory or ns.cpu:  # stopped at a limit: no core file left behind
+        resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
     from miro_gen.compile import foreign
 
     text = (ns.folder / foreign.SOURCE).read_text(encoding="utf-8")
