@@ -19,12 +19,17 @@ The cases run interleaved, `--repeat` times; printed: the median seconds, their 
 ratio to the reference, and the load average. `--baseline DIR` runs the same tools from another
 source tree (`git archive <before> | tar -x -C DIR`), once per case and at most 30 s each.
 Target (issue 25): each refusal within a second.
+
+`--scan` times, in this process, the look for directives on text built against it (1 MiB of
+comments left open, of quotes), against the pattern used before (`re.sub` of comments and
+literals, which rescans the rest of the text from every `/*` left open) on a tenth of it.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import re
 import shutil
 import socket
 import statistics
@@ -90,11 +95,39 @@ def run(tree: Path, args: list[str], cache: Path, fresh: bool, timeout: float) -
     return time.perf_counter() - t0
 
 
+# The look for directives before issue 25 (eventlog/types.py at b5e51cb), for --scan.
+_BEFORE = re.compile(r'//[^\n]*|/\*.*?\*/|"(?:\\.|[^"\\\n])*"|\'(?:\\.|[^\'\\\n])*\'', re.S)
+
+
+def scan(repeat: int) -> None:
+    from miro_gen.compile.foreign import MAX_SCHEMA_BYTES, refusal
+
+    n = MAX_SCHEMA_BYTES - 1  # and a `#`, so that the text is looked through
+    texts = {"open comments": "/* " * (n // 3) + "#", "quotes": '"' * n + "#"}
+    head = f"{'look for directives':26} {'1 MiB, ours s':>14} {'spread s':>11}"
+    print(f"{head} {'1/10 MiB, before s':>19}")
+    for name, text in texts.items():
+        ours, before = [], []
+        for _ in range(repeat):
+            t0 = time.perf_counter()
+            assert refusal(text) is None, name
+            ours.append(time.perf_counter() - t0)
+            t0 = time.perf_counter()
+            _BEFORE.sub(" ", text[: len(text) // 10])
+            before.append(time.perf_counter() - t0)
+        spread = f"{min(ours):.3f}-{max(ours):.3f}"
+        row = f"{name:26} {statistics.median(ours):14.3f} {spread:>11}"
+        print(f"{row} {statistics.median(before):19.3f}")
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--repeat", type=int, default=5)
     p.add_argument("--baseline", type=Path, help="another source tree to run once per case")
+    p.add_argument("--scan", action="store_true", help="also time the look for directives")
     ns = p.parse_args()
+    if ns.scan:
+        scan(ns.repeat)
     folder = Path(tempfile.mkdtemp(prefix="bench-foreign-"))
     secret = folder / "secret.idl"
     secret.write_text("secret_content_of_the_file;\n")

@@ -125,12 +125,35 @@ def test_with_the_default_message_size_the_transport_refuses_first(hostile: Host
         "/* a comment */ #include <x>",
         "%:include <x>",  # a digraph
         "??=include <x>",  # a trigraph
+        'const string s = "abc\\\n#include <x>\n";',  # a literal continued: refused too
+        "/* // */ #include <x>",
+        "'#' \"#\" #include <x>",
     ],
 )
 def test_directives_are_refused_wherever_they_hide(text: str) -> None:
     from miro_gen.compile.foreign import refusal
 
     assert refusal(text) == DIRECTIVES
+
+
+@pytest.mark.parametrize(
+    ("text", "in_a_comment"),
+    [
+        ("/* " * 300_000, True),  # comments left open: once scanned in quadratic time
+        ('"' * 1_000_001, False),
+        ("'" * 1_000_001 + "#", False),  # the `#` inside the literal left open
+        ("/*" + "*" * 1_000_000, True),
+    ],
+    ids=["open comments", "quotes", "apostrophes", "stars"],
+)
+def test_text_built_against_the_scan_is_read_once(text: str, in_a_comment: bool) -> None:
+    """What a directive may hide in is scanned in one pass (bench/bench_foreign_schemas.py
+    times it): these are read to the end and have no directive; one on the next line is
+    refused, unless it is inside the comment left open."""
+    from miro_gen.compile.foreign import refusal
+
+    assert refusal(text) is None
+    assert refusal(text + "\n#include <x>") == (None if in_a_comment else DIRECTIVES)
 
 
 def test_a_hash_in_a_comment_or_a_literal_is_no_directive(tmp_path: Path) -> None:

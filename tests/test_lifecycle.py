@@ -272,8 +272,9 @@ def test_what_zeromq_refuses_is_one_line() -> None:
         "from miro_gen.lifecycle import run_main\n"
         "def main():\n"
         "    ctx = zmq.Context()\n"
-        f"    ctx.socket(zmq.REP).bind('tcp://127.0.0.1:{port}')\n"
-        f"    ctx.socket(zmq.REP).bind('tcp://127.0.0.1:{port}')\n"
+        "    first, second = ctx.socket(zmq.REP), ctx.socket(zmq.REP)\n"
+        f"    first.bind('tcp://127.0.0.1:{port}')\n"
+        f"    second.bind('tcp://127.0.0.1:{port}')\n"
         "run_main(main, 'twice')\n"
     )
     done = run_script(script)

@@ -34,8 +34,16 @@ AST = "ast.json"  # in the folder: the resolved declarations (miro-idl --ast-jso
 # The compiler's process (it limits itself first thing: no code runs in this process between
 # fork and exec, which is not safe in a process with threads, as the live tools are).
 COMMAND = [sys.executable, "-m", "miro_gen.compile"]
-# Comments and string or character literals, where a `#` is harmless.
-_INERT = re.compile(r'//[^\n]*|/\*.*?\*/|"(?:\\.|[^"\\\n])*"|\'(?:\\.|[^\'\\\n])*\'', re.S)
+MAX_GIVEN_BYTES = 16 * MAX_SCHEMA_BYTES  # of several schemas before their shared types merge
+# What a directive may hide in: comments and literals, found left to right in one pass (`re.sub`);
+# a comment or a literal left open runs to the end of the file (a comment) or of the line (a
+# literal; an escaped line end does not continue it here, so that nothing after it can pass for
+# text). What remains may hold no `#`, nor its digraph or trigraph.
+_INERT = re.compile(
+    r'//[^\n]*|/\*.*?(?:\*/|\Z)|"(?:\\[^\n]|[^"\\\n])*"?|\'(?:\\[^\n]|[^\'\\\n])*\'?', re.S
+)
+_DIRECTIVE_MARKS = ("#", "%:", "??=")
+_BRACES = re.compile(r"[{};]")
 
 
 class ForeignSchemaError(Exception):
@@ -46,8 +54,8 @@ def refusal(text: str) -> str | None:
     """Why schema text from elsewhere must not be compiled at all, or None."""
     if len(text) > MAX_SCHEMA_BYTES or len(text.encode("utf-8", "replace")) > MAX_SCHEMA_BYTES:
         return f"the schema is larger than {MAX_SCHEMA_BYTES} bytes (the most taken from elsewhere)"
-    bare = _INERT.sub(" ", text)
-    if "#" in bare or "%:" in bare or "??=" in bare:
+    marked = any(mark in text for mark in _DIRECTIVE_MARKS)  # else nothing to look for
+    if marked and any(mark in _INERT.sub(" ", text) for mark in _DIRECTIVE_MARKS):
         return "the schema has preprocessor directives (#include, #define ...): schemas have none"
     return None
 
@@ -67,16 +75,17 @@ def joined(schemas: Sequence[str]) -> str:
 
 def _declarations(schema: str) -> list[str]:
     out, depth, start = [], 0, 0
-    for i, ch in enumerate(schema):
+    for m in _BRACES.finditer(schema):
+        ch = m.group()
         if ch == "{":
             depth += 1
         elif ch == "}":
             depth -= 1
-        elif ch == ";" and depth == 0:
-            block = schema[start : i + 1].strip()
+        elif depth == 0:
+            block = schema[start : m.end()].strip()
             if block:
                 out.append(block)
-            start = i + 1
+            start = m.end()
     return out
 
 
@@ -84,6 +93,11 @@ def compile_foreign(schemas: Sequence[str], folder: Path) -> None:
     """Compile schema text from elsewhere into `folder` (made if missing): its packages in
     `folder/py`, its declarations in `folder/ast.json`. ForeignSchemaError (one line) when it
     is refused, or does not compile within the limits."""
+    if sum(len(s) for s in schemas) > MAX_GIVEN_BYTES:
+        raise ForeignSchemaError(
+            f"the schemas are larger than {MAX_GIVEN_BYTES} bytes together (the most taken "
+            "from elsewhere)"
+        )
     for schema in schemas:
         why = refusal(schema)
         if why is not None:
