@@ -44,6 +44,8 @@ import socket
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
+from miro_gen.exceptions import ActionableError
+
 DEFAULT_NAMING = "tcp://127.0.0.1:2809"
 DEFAULT_LOG_LEVEL = 4
 
@@ -57,8 +59,11 @@ _TCP = re.compile(r"^tcp://(?P<host>\[[^\]]+\]|[^:/\[\]]+):(?P<port>\d+)$")
 _IIOP_DEFAULT_PORT = 2809  # the port corbaloc implies when none is given
 
 
-class UsageError(ValueError):
-    """A common option is missing its value or has one that makes no sense."""
+class UsageError(ActionableError, ValueError):
+    """A common option is missing its value or has one that makes no sense (a bad command
+    line: status 2)."""
+
+    exit_status = 2
 
 
 @dataclass
