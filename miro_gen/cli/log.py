@@ -1,5 +1,5 @@
-"""`miro log record|play|info|echo`: Miro's LogNotify and LogPlayer on MCAP files; this module
-dispatches them and holds the two that only read a file, info and echo."""
+"""`miro log record|play|player|info|echo|cut|merge`: Miro's LogNotify, LogPlayer and
+LogTruncate on MCAP files; this module dispatches them and holds info and echo."""
 
 from __future__ import annotations
 
@@ -25,14 +25,25 @@ def main(argv: Sequence[str]) -> int:
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
     for name, text in (
         ("record", "record events of a channel into an MCAP file (Miro's LogNotify)"),
-        ("play", "replay a log into a channel with its original timing (Miro's LogPlayer)"),
+        ("play", "replay logs into each robot's channel with their original timing (LogPlayer)"),
+        ("player", "the player's window: play, seek, step, cut, plot (Miro's LogPlayer GUI)"),
         ("info", "summarise a log: topics, types, counts, time span, rates"),
         ("echo", "print the events of a log, decoded"),
+        ("cut", "write part of a log to a new one, or repair a log (Miro's LogTruncate)"),
+        ("merge", "merge logs into one, in log-time order"),
     ):
         sub.add_parser(name, help=text, add_help=False)
     args = list(argv)
-    if args and args[0] in ("record", "play", "info", "echo"):
-        run = {"record": _record, "play": _play, "info": info_main, "echo": echo_main}
+    run = {
+        "record": _record,
+        "play": _play,
+        "player": _player,
+        "info": info_main,
+        "echo": echo_main,
+        "cut": _cut,
+        "merge": _merge,
+    }
+    if args and args[0] in run:
         return piped(run[args[0]], args[1:])
     ns = p.parse_args(args)
     if ns.command is None:
@@ -190,3 +201,21 @@ def _play(argv: Sequence[str]) -> int:
     from miro_gen.cli.log_play import play_main
 
     return play_main(argv)
+
+
+def _player(argv: Sequence[str]) -> int:
+    from miro_gen.cli.log_player import player_main
+
+    return player_main(argv)
+
+
+def _cut(argv: Sequence[str]) -> int:
+    from miro_gen.cli.log_edit import cut_main
+
+    return cut_main(argv)
+
+
+def _merge(argv: Sequence[str]) -> int:
+    from miro_gen.cli.log_edit import merge_main
+
+    return merge_main(argv)
