@@ -154,7 +154,7 @@ class LogFile:
         at = len(MAGIC)
         chunks = 0
         run: _Run | None = None
-        told = 0
+        told = -RUN_BYTES * 4  # progress is told at the start, then every 4 MiB
         while at + _RECORD_HEAD.size <= self.size:
             if progress is not None and at - told >= RUN_BYTES * 4:
                 told = at

@@ -148,8 +148,7 @@ class Player:
         self._cond = threading.Condition()
         self._rate = rate
         self._playing = False
-        self._steps = 0  # next() calls waiting for the thread
-        self._prevs = 0  # prev() calls waiting for the thread
+        self._steps: deque[int] = deque()  # next() (+1) and prev() (-1) waiting for the thread
         self._closed = False
         self._gen = 0  # bumped to make the thread read again from the position
         self._epoch = 0
@@ -208,7 +207,6 @@ class Player:
         self._rebase(log_ns)
         self._pos = pos
         self._shown = None
-        self._steps = 0
         self._at_end = False
         self.error = None
         self.ended.clear()
@@ -227,7 +225,7 @@ class Player:
             if not self._playing:
                 self._rebase(self._anchor_log)
                 self._playing = True
-                self._steps = 0
+                self._steps.clear()
                 self._cond.notify_all()
         self._publish()
 
@@ -248,8 +246,8 @@ class Player:
     def stop(self) -> None:
         """Pause and go back to the start of the cut (Miro's Stop)."""
         with self._cond:
-            if self._playing:
-                self._playing = False
+            self._playing = False
+            self._steps.clear()
             start = self.files.cut[0]
             self._jump(start, at_time(start))
         self._publish()
@@ -259,6 +257,7 @@ class Player:
         start, end = self.files.cut
         log_ns = min(max(log_ns, start), end)
         with self._cond:
+            self._steps.clear()
             self._jump(log_ns, at_time(log_ns))
         self._publish()
 
@@ -297,16 +296,14 @@ class Player:
         """Pause, then send the next event (Miro's Next)."""
         self.pause()
         with self._cond:
-            if not self._at_end:
-                self._steps += 1
-                self._cond.notify_all()
+            self._steps.append(1)
+            self._cond.notify_all()
 
     def prev(self) -> None:
         """Pause, then send the event before the one last sent (Miro's Prev)."""
         self.pause()
         with self._cond:
-            self._prevs += 1
-            self._gen += 1
+            self._steps.append(-1)
             self._cond.notify_all()
 
     def _files_changed(self, what: str) -> None:
@@ -355,10 +352,9 @@ class Player:
             with self._cond:
                 if self._closed:
                     return
-                prevs, self._prevs = self._prevs, 0
             try:
-                for _ in range(prevs):
-                    self._step_back()
+                while self._step_back():
+                    pass
                 with self._cond:
                     gen, pos = self._gen, self._pos
                 end = self.files.cut[1]
@@ -394,8 +390,10 @@ class Player:
                         self._shown = event.key
                         return _SEND
                     wait = min(ahead / 1e9 / self._rate, MAX_WAIT)
+                elif self._steps and self._steps[0] < 0:
+                    return _RESTART  # a step back: the thread reads from the new position
                 elif self._steps:
-                    self._steps -= 1
+                    self._steps.popleft()
                     self._rebase(max(event.log_time, self._anchor_log))
                     self._pos = after(event.key)
                     self._shown = event.key
@@ -420,9 +418,13 @@ class Player:
         if self._clock_sent == 0.0:
             self._publish()
 
-    def _step_back(self) -> None:
-        """Send the event before the one last sent; the position moves to just after it."""
+    def _step_back(self) -> bool:
+        """If a step back is the next command: send the event before the one last sent, the
+        position moving to just after it; whether there was one."""
         with self._cond:
+            if not self._steps or self._steps[0] > 0:
+                return False
+            self._steps.popleft()
             pos, shown = self._pos, self._shown
         start = self.files.cut[0]
         earlier = (
@@ -434,11 +436,12 @@ class Player:
         with self._cond:
             if target is None:  # at the start of the cut
                 self._jump(start, at_time(start))
-                return
+                return True
             self._jump(target.log_time, after(target.key))
             self._shown = target.key
         self._deliver(target)
         self._publish()
+        return True
 
     def _end(self, gen: int) -> int:
         """At the end of the cut: loop, or pause there until something moves the position."""
@@ -455,7 +458,12 @@ class Player:
             self.ended.set()
         self._publish()
         with self._cond:
-            while not self._closed and self._gen == gen and not self._prevs:
+            while not self._closed and self._gen == gen:
+                if self._steps and self._steps[0] < 0:
+                    break
+                if self._steps:  # a step forward at the end: nothing to send
+                    self._steps.popleft()
+                    continue
                 self._cond.wait(MAX_WAIT * 5)
             return _CLOSED if self._closed else _RESTART
 
