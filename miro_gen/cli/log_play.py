@@ -142,6 +142,11 @@ def play_main(argv: Sequence[str]) -> int:
         metavar="S",
         help="seconds to let consumers connect before the first event (default 0.5)",
     )
+    p.add_argument(
+        "--wait-subscribed",
+        action="store_true",
+        help="then wait until every topic played has a consumer on its channel (Miro's -a)",
+    )
     ns = p.parse_args(split_common(p, argv))
     if not ns.rate > 0:
         p.error("--rate must be more than 0")
@@ -236,10 +241,16 @@ def _run(p: argparse.ArgumentParser, prog: str, argv: Sequence[str], ns: Any, fi
     signal.signal(signal.SIGTERM, lambda *_: quit_now.set())
     into = ", ".join(sorted({r.channel for r in routes.routes.values()}))
     print(f"playing {' '.join(ns.files)} into {into} at x{ns.rate:g}", file=sys.stderr)
-    time.sleep(max(0.0, ns.wait))
-    player.start()
-    player.play()
+    topics = [t.name for t in files.topics() if t.name not in files.excluded]
+    topics = [t for t in topics if routes.channel_of(t[0]) is not None]
     try:
+        time.sleep(max(0.0, ns.wait))
+        if ns.wait_subscribed and not all(routes.subscribed(*t) for t in topics):
+            print(f"{prog}: waiting for a consumer of every topic", file=sys.stderr)
+            while not quit_now.is_set() and not all(routes.subscribed(*t) for t in topics):
+                quit_now.wait(0.02)
+        player.start()
+        player.play()
         with key_presses(on_key):
             while not quit_now.is_set() and not (player.ended.is_set() and not player.loop):
                 quit_now.wait(0.05)
