@@ -320,7 +320,6 @@ class Player:
             else:  # the same place, read again (the files changed under it)
                 self._rebase(now)
                 self._gen += 1
-                self._at_end = False
                 self._cond.notify_all()
         self._publish()
 
@@ -375,6 +374,9 @@ class Player:
     def _wait_for(self, event: Event, gen: int) -> int:
         """Under the lock: wait until `event` is due (or a step allows it); what to do."""
         with self._cond:
+            if self._at_end:  # the files changed: there is more to play after all
+                self._at_end = False
+                self.ended.clear()
             while True:
                 if self._closed:
                     return _CLOSED

@@ -30,7 +30,7 @@ ROW_HEIGHT = 22
 class Track(QWidget):
     """One topic's events over time (bars), the cut and the position; clicks seek."""
 
-    clicked_at = Signal(int)  # log ns
+    clicked_at = Signal(object)  # log ns (more than 32 bits)
 
     def __init__(self, timeline: Timeline, name: TopicName) -> None:
         super().__init__()
@@ -85,7 +85,7 @@ class Timeline(QWidget):
     """The tracks of all topics (`set_topics`), their densities (`set_densities`) and the
     play position and cut (`set_state`)."""
 
-    seek_requested = Signal(int)  # log ns
+    seek_requested = Signal(object)  # log ns
     exclusion_changed = Signal(object, bool)  # (domain, type), excluded
 
     def __init__(self, parent: QWidget | None = None) -> None:
