@@ -13,6 +13,7 @@ from typing import Any
 
 from miro_gen.cli.eventargs import COMMON, make_server, split_common, topic_arg
 
+SWITCH_INTERVAL = 0.0001  # seconds a thread holds the interpreter before another may take it
 KEYS = (
     "On a terminal: space pauses and resumes, s (or right) sends the next event, p (or left) "
     "the one before, shift+left/right (or [ and ]) seek a 20th of the log, + and - change the "
@@ -173,9 +174,9 @@ def _run(p: argparse.ArgumentParser, prog: str, argv: Sequence[str], ns: Any, fi
     from miro_gen.eventlog.routes import ClockPublisher, Routes
     from miro_gen.exceptions import SystemException
 
-    # Hand the interpreter between the player's thread and the reactor's within 0.5 ms, not
-    # Python's default 5 ms: a replayed event must leave on time.
-    sys.setswitchinterval(0.0005)
+    # Hand the interpreter between the player's thread, the reactor's and the one reading
+    # ahead within 0.1 ms, not Python's default 5 ms: a replayed event must leave on time.
+    sys.setswitchinterval(SWITCH_INTERVAL)
     server = make_server(p, prog, argv)
     routes = Routes(server, ns.channel, channel_mode(ns))
     try:

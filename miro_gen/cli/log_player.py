@@ -9,6 +9,7 @@ from collections.abc import Sequence
 
 from miro_gen.cli.eventargs import COMMON, make_server, split_common
 from miro_gen.cli.log_play import (
+    SWITCH_INTERVAL,
     add_channel_options,
     add_selection_options,
     apply_selection,
@@ -59,7 +60,7 @@ def player_main(argv: Sequence[str]) -> int:
     from miro_gen.qt.bridge import QtEventBridge
     from miro_gen.qt.logplayer import LogPlayerWindow
 
-    sys.setswitchinterval(0.0005)  # replayed events leave on time (see miro log play)
+    sys.setswitchinterval(SWITCH_INTERVAL)  # replayed events leave on time (miro log play)
     app = application("miro log player")
     server = make_server(p, prog, argv)
     routes = Routes(server, ns.channel, channel_mode(ns))

@@ -5,9 +5,8 @@ Every event has a *key*, (log time, file number, segment offset, index in the se
 total order that does not depend on where reading started, so that the player can stand
 between two events (a position is a key: the events at or after it are ahead), step forward
 and back, and seek, over any number of files, with the same answer each time. Reading goes
-segment by segment (eventlog.logfile): `forward(pos)` opens a segment only when the next event
-due could be in it, `backward(pos)` likewise from the other end; the last few segments read
-are kept, so stepping back and forth around the position reads nothing twice. Nothing here
+segment by segment, read ahead and kept (eventlog.segments), so stepping back and forth around
+the position reads nothing twice. Nothing here
 knows about channels or Qt: the player (eventlog.player) plays what this yields, the window
 (miro_gen.qt.logplayer) shows it, and eventlog.edit writes it to a new file.
 
@@ -17,39 +16,18 @@ of each change ("files", "cut", "excluded") after it is made.
 
 from __future__ import annotations
 
-import heapq
 import itertools
 import os
 import threading
-from collections import OrderedDict
 from collections.abc import Callable, Iterator
 from typing import NamedTuple
 
-from mcap.records import Message
-
-from miro_gen.eventlog.logfile import LogFile, Progress, Segment, SegmentError
+from miro_gen.eventlog import segments
+from miro_gen.eventlog.logfile import LogFile, Progress
 from miro_gen.eventlog.reader import LogError, Topic
+from miro_gen.eventlog.segments import START, Event, Key, TopicName, after, at_time
 
-Key = tuple[int, int, int, int]  # log time, file number, segment offset, index in segment
-TopicName = tuple[str, str]  # (domain, type name)
-CACHE_SEGMENTS = 8  # segments kept decoded into events (about 1 MiB of data each)
-START: Key = (-1, -1, -1, -1)  # before every event
-
-
-class Event(NamedTuple):
-    """One logged event, where it is in the set (`key`), its topic and its MCAP message."""
-
-    key: Key
-    topic: Topic
-    message: Message
-
-    @property
-    def log_time(self) -> int:
-        return self.key[0]
-
-    @property
-    def name(self) -> TopicName:
-        return (self.topic.domain, self.topic.type_name)
+__all__ = ["START", "Event", "FileSet", "Key", "TopicInfo", "TopicName", "after", "at_time"]
 
 
 class TopicInfo(NamedTuple):
@@ -61,16 +39,6 @@ class TopicInfo(NamedTuple):
     type_hashes: tuple[str, ...]
 
 
-def at_time(log_ns: int) -> Key:
-    """The position before every event at `log_ns` or later."""
-    return (log_ns, -1, -1, -1)
-
-
-def after(key: Key) -> Key:
-    """The position just after the event `key` (the next one is ahead of it)."""
-    return (key[0], key[1], key[2], key[3] + 1)
-
-
 def topic_text(name: TopicName) -> str:
     return f"{name[0]}/{name[1]}"
 
@@ -78,7 +46,7 @@ def topic_text(name: TopicName) -> str:
 class FileSet:
     """Logs merged in log-time order, with a cut and excluded topics."""
 
-    def __init__(self, cache_segments: int = CACHE_SEGMENTS) -> None:
+    def __init__(self, cache_segments: int = segments.CACHE_SEGMENTS) -> None:
         self._files: list[LogFile] = []  # replaced whole on a change, never changed in place
         self._numbers = itertools.count(1)
         self._lock = threading.Lock()
@@ -86,9 +54,7 @@ class FileSet:
         self._undo: list[tuple[int, int] | None] = []
         self.excluded: frozenset[TopicName] = frozenset()
         self.listeners: list[Callable[[str], object]] = []
-        self._cache: OrderedDict[tuple[int, int], list[Event]] = OrderedDict()
-        self._cache_size = cache_segments
-        self.segments_read = 0  # how many segments were read (not found in the cache)
+        self._cache = segments.SegmentCache(cache_segments)
 
     # ---- files ----------------------------------------------------------------------------------
 
@@ -118,17 +84,16 @@ class FileSet:
             if log is None:
                 raise KeyError(path)
             self._files = [f for f in self._files if f is not log]
-            for key in [k for k in self._cache if k[0] == log.number]:
-                del self._cache[key]
         log.close()
+        self._cache.forget(log.number)
         self._changed("files")
 
     def close(self) -> None:
         with self._lock:
             files, self._files = self._files, []
-            self._cache.clear()
         for f in files:
             f.close()
+        self._cache.close()
 
     def warnings(self) -> list[tuple[str, str]]:
         """(path, warning) of every file that has one."""
@@ -264,82 +229,20 @@ class FileSet:
 
     # ---- reading --------------------------------------------------------------------------------
 
+    @property
+    def segments_read(self) -> int:
+        """How many segments were read from their files (not found among those kept)."""
+        return self._cache.read
+
     def forward(self, pos: Key = START, end_ns: int | None = None) -> Iterator[Event]:
         """The events from position `pos` on (up to log time `end_ns`, included), in key
         order, excluded topics among them (the player skips those when it comes to them)."""
-        chosen = sorted(
-            ((s.start_ns, f.number, s.offset), f, s)
-            for f in self._files
-            for s in f.segments
-            if s.end_ns >= pos[0] and (end_ns is None or s.start_ns <= end_ns)
-        )
-        heap: list[Event] = []
-        i = 0
-        while True:
-            if i < len(chosen) and (not heap or chosen[i][0][0] <= heap[0].key[0]):
-                _, log, seg = chosen[i]
-                i += 1
-                for ev in self._events(log, seg):
-                    if ev.key >= pos and (end_ns is None or ev.key[0] <= end_ns):
-                        heapq.heappush(heap, ev)
-                continue
-            if not heap:
-                return
-            yield heapq.heappop(heap)
+        return segments.forward(self._cache, self._files, pos, end_ns)
 
     def backward(self, pos: Key, start_ns: int | None = None) -> Iterator[Event]:
         """The events before position `pos` (down to log time `start_ns`, included), latest
         first."""
-        chosen = sorted(
-            (
-                ((-s.end_ns, -f.number, -s.offset), f, s)
-                for f in self._files
-                for s in f.segments
-                if s.start_ns <= pos[0] and (start_ns is None or s.end_ns >= start_ns)
-            ),
-            key=lambda item: item[0],
-        )
-        heap: list[tuple[Key, Event]] = []
-        i = 0
-        while True:
-            if i < len(chosen) and (not heap or -chosen[i][0][0] >= -heap[0][0][0]):
-                _, log, seg = chosen[i]
-                i += 1
-                for ev in self._events(log, seg):
-                    if ev.key < pos and (start_ns is None or ev.key[0] >= start_ns):
-                        k = ev.key
-                        heapq.heappush(heap, ((-k[0], -k[1], -k[2], -k[3]), ev))
-                continue
-            if not heap:
-                return
-            yield heapq.heappop(heap)[1]
-
-    def _events(self, log: LogFile, seg: Segment) -> list[Event]:
-        """The events of one segment (from the cache when it was read lately)."""
-        key = (log.number, seg.offset)
-        with self._lock:
-            events = self._cache.get(key)
-            if events is not None:
-                self._cache.move_to_end(key)
-                return events
-        topics = log.topics
-        events = []
-        for i, m in enumerate(log.read(seg)):
-            topic = topics.get(m.channel_id)
-            if topic is None:
-                raise SegmentError(
-                    log.path,
-                    f"chunk {seg.number} (at byte {seg.offset}): a message of the unknown "
-                    f"channel {m.channel_id}",
-                )
-            events.append(Event((m.log_time, log.number, seg.offset, i), topic, m))
-        with self._lock:
-            self.segments_read += 1
-            if log in self._files:  # not one closed meanwhile
-                self._cache[key] = events
-                while len(self._cache) > self._cache_size:
-                    self._cache.popitem(last=False)
-        return events
+        return segments.backward(self._cache, self._files, pos, start_ns)
 
     def series(
         self,
@@ -372,7 +275,7 @@ class FileSet:
         for n, (log, seg) in enumerate(wanted):
             if progress is not None and not progress(n / max(1, len(wanted))):
                 break
-            for ev in self._events(log, seg):
+            for ev in self._cache.events(log, seg):
                 if ev.name != name or not start_ns <= ev.key[0] <= end_ns:
                     continue
                 v = value(ev)

@@ -25,10 +25,10 @@ import struct
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
 
 from mcap.opcode import Opcode
 from mcap.records import Channel, Chunk, ChunkIndex, Message, Schema
+from mcap.summary import Summary
 
 from miro_gen.eventlog.chunks import (
     MAX_CHUNK_BYTES,
@@ -61,19 +61,38 @@ class Cancelled(LogError):
     """Opening was cancelled (the progress callback said so)."""
 
 
-@dataclass(frozen=True, slots=True)
 class Segment:
     """A chunk of the file (`index` is its summary entry, None when found by a scan), or a run
     of message records outside chunks (`chunked` False)."""
 
-    number: int  # 1, 2, ... in file order, for messages that name it
-    offset: int  # of the chunk record, or of the run's first record
-    length: int  # bytes of the chunk record's body, or of the run
-    start_ns: int
-    end_ns: int
-    counts: dict[int, int] = field(default_factory=dict)  # channel id -> events (display only)
-    index: ChunkIndex | None = None
-    chunked: bool = True
+    __slots__ = ("_counts", "chunked", "end_ns", "index", "length", "number", "offset", "start_ns")
+
+    def __init__(
+        self,
+        number: int,  # 1, 2, ... in file order, for messages that name it
+        offset: int,  # of the chunk record, or of the run's first record
+        length: int,  # bytes of the chunk record's body, or of the run
+        start_ns: int,
+        end_ns: int,
+        counts: dict[int, int] | None = None,  # None: told by the index when first asked
+        index: ChunkIndex | None = None,
+        chunked: bool = True,
+    ) -> None:
+        self.number = number
+        self.offset = offset
+        self.length = length
+        self.start_ns = start_ns
+        self.end_ns = end_ns
+        self._counts = counts
+        self.index = index
+        self.chunked = chunked
+
+    @property
+    def counts(self) -> dict[int, int]:
+        """Channel id -> events in the segment (for display, never trusted for more)."""
+        if self._counts is None:
+            self._counts = _index_counts(self.index) if self.index is not None else {}
+        return self._counts
 
 
 class LogFile:
@@ -119,7 +138,7 @@ class LogFile:
                 summary.chunk_indexes or (stats is not None and not stats.message_count)
             ):
                 log.topics = topics
-                log._from_summary(summary.chunk_indexes)
+                log._from_summary(summary)
             else:
                 if reader_warning is not None:
                     log.warnings.append(reader_warning)
@@ -130,23 +149,29 @@ class LogFile:
         log._check_times()
         return log
 
-    def _from_summary(self, indexes: list[ChunkIndex]) -> None:
+    def _from_summary(self, summary: Summary) -> None:
+        """Segments from the chunk indexes (their counts told when first asked), totals from
+        the statistics: nothing more is read."""
         self.indexed = True
-        ordered = sorted(indexes, key=lambda c: c.chunk_start_offset)
-        for n, index in enumerate(ordered, 1):
-            counts = _index_counts(index)
-            self.segments.append(
-                Segment(
-                    n,
-                    index.chunk_start_offset,
-                    index.chunk_length,
-                    index.message_start_time,
-                    index.message_end_time,
-                    counts,
-                    index,
-                )
+        ordered = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
+        self.segments = [
+            Segment(
+                n,
+                c.chunk_start_offset,
+                c.chunk_length,
+                c.message_start_time,
+                c.message_end_time,
+                None,
+                c,
             )
-        self._totals()
+            for n, c in enumerate(ordered, 1)
+        ]
+        stats = summary.statistics
+        if stats is None:
+            self._totals()
+        else:
+            self.count = stats.message_count
+            self.first_ns, self.last_ns = stats.message_start_time, stats.message_end_time
 
     def _scan(self, progress: Progress | None) -> None:
         """Read the file from the start: its schemas, channels and segments."""

@@ -153,6 +153,7 @@ class Player:
         self._gen = 0  # bumped to make the thread read again from the position
         self._epoch = 0
         self._at_end = False
+        self._fresh = True  # the first event played after a start or a jump sets the pace
         start = files.cut[0]
         self._pos: Key = at_time(start)
         self._shown: Key | None = None  # the event just behind the position, if it was sent
@@ -208,6 +209,7 @@ class Player:
         self._pos = pos
         self._shown = None
         self._at_end = False
+        self._fresh = True
         self.error = None
         self.ended.clear()
         self._epoch += 1
@@ -225,6 +227,7 @@ class Player:
             if not self._playing:
                 self._rebase(self._anchor_log)
                 self._playing = True
+                self._fresh = True
                 self._steps.clear()
                 self._cond.notify_all()
         self._publish()
@@ -386,6 +389,11 @@ class Player:
                     self._pos = after(event.key)
                     return _SKIP
                 if self._playing:
+                    if self._fresh and self._now() > event.log_time:
+                        # Reading the first events after a start or a seek took time: play
+                        # from them on time, not in a rush to catch up.
+                        self._rebase(event.log_time)
+                    self._fresh = False
                     ahead = event.log_time - self._now()
                     if ahead <= 0:
                         self._pos = after(event.key)
