@@ -12,7 +12,7 @@ from __future__ import annotations
 import threading
 from typing import Any
 
-from PySide6.QtCore import Signal
+from PySide6.QtCore import Qt, Signal
 from PySide6.QtWidgets import (
     QComboBox,
     QHBoxLayout,
@@ -54,6 +54,7 @@ class Inspector(QWidget):
         super().__init__(parent)
         self.files = files
         self.topic: TopicName | None = None
+        self._names: list[TopicName] = []  # the topic box's entries
         self.shown: Event | None = None
         self.payload: Any = None
         self.plot_path: str | None = None
@@ -66,7 +67,10 @@ class Inspector(QWidget):
         self.image = ImageView()
         self.scan = ScanView()
         self.pictures = QStackedWidget()
-        for view in (QLabel("no image or scan in this event"), self.image, self.scan):
+        nothing = QLabel("no image or range scan in this event")
+        nothing.setWordWrap(True)
+        nothing.setAlignment(Qt.AlignmentFlag.AlignCenter)
+        for view in (nothing, self.image, self.scan):
             self.pictures.addWidget(view)
         self.plot = PlotWidget(span=1.0)
         self.plot.title = "click a numeric field to plot it"
@@ -81,6 +85,7 @@ class Inspector(QWidget):
         split = QSplitter()
         split.addWidget(self.fields)
         split.addWidget(self.pictures)
+        split.setSizes([260, 300])  # the picture a little wider than the fields
         layout = QVBoxLayout(self)
         layout.setContentsMargins(0, 0, 0, 0)
         layout.addLayout(head)
@@ -95,8 +100,9 @@ class Inspector(QWidget):
         names = [t.name for t in topics]
         self.topics.blockSignals(True)
         self.topics.clear()
+        self._names = names
         for name in names:
-            self.topics.addItem(topic_text(name), name)
+            self.topics.addItem(topic_text(name))
         keep = self.topic if self.topic in names else (names[0] if names else None)
         if keep is not None:
             self.topics.setCurrentIndex(names.index(keep))
@@ -104,8 +110,13 @@ class Inspector(QWidget):
         if keep != self.topic:
             self._choose(keep)
 
+    def choose_topic(self, name: TopicName) -> None:
+        """Show topic `name` (as the topic box does when it is picked)."""
+        if name in self._names:
+            self.topics.setCurrentIndex(self._names.index(name))
+
     def _topic_chosen(self, index: int) -> None:
-        self._choose(self.topics.itemData(index))
+        self._choose(self._names[index] if 0 <= index < len(self._names) else None)
 
     def _choose(self, name: TopicName | None) -> None:
         self.topic = name
@@ -118,9 +129,7 @@ class Inspector(QWidget):
     def show_event(self, event: Event) -> None:
         """Show `event` (switching to its topic)."""
         if event.name != self.topic:
-            index = self.topics.findData(event.name)
-            if index >= 0:
-                self.topics.setCurrentIndex(index)
+            self.choose_topic(event.name)
         if event is self.shown:
             return
         self.shown = event
@@ -164,7 +173,7 @@ class Inspector(QWidget):
             return
         whole = self.over.currentIndex() == 0
         start, end = self.files.span() if whole else self.files.cut
-        title = f"{topic_text(name)} {path} {OVER[self.over.currentIndex()]}"
+        title = f"{path} {OVER[self.over.currentIndex()]}"
         self.plot.title = f"{title}: reading..."
         cancel = self._plot_cancel = threading.Event()
         parts = parse_path(path)

@@ -166,6 +166,8 @@ class LogPlayerWindow(QMainWindow):
         self.inspector_dock.setObjectName("event")
         self.inspector_dock.setWidget(self.inspector)
         self.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, self.inspector_dock)
+        self.resizeDocks([self.inspector_dock], [560], Qt.Orientation.Horizontal)
+        self.resizeDocks([self.events_dock], [240], Qt.Orientation.Vertical)
 
     def _build_menus(self) -> None:
         bar = self.menuBar()

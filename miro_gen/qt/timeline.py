@@ -63,9 +63,6 @@ class Track(QWidget):
             excluded = self.name in tl.excluded
             p.fillRect(self.rect(), QColor(245, 245, 245))
             start, end = tl.cut
-            outside = QColor(215, 215, 215)
-            p.fillRect(QRectF(0, 0, self.x_of(start), h), outside)
-            p.fillRect(QRectF(self.x_of(end), 0, w - self.x_of(end), h), outside)
             if self.counts:
                 top = max(self.counts) or 1.0
                 colour = QColor(160, 160, 160) if excluded else QColor(40, 110, 190)
@@ -74,6 +71,9 @@ class Track(QWidget):
                     if n > 0:  # a logarithmic height: a sparse topic is still seen
                         bar = max(2.0, (h - 4) * math.log1p(n) / math.log1p(top))
                         p.fillRect(QRectF(i * width, h - 2 - bar, max(1.0, width), bar), colour)
+            outside = QColor(60, 60, 60, 110)  # what the cut leaves out, greyed over
+            p.fillRect(QRectF(0, 0, self.x_of(start), h), outside)
+            p.fillRect(QRectF(self.x_of(end), 0, w - self.x_of(end), h), outside)
             p.setPen(QPen(QColor(220, 40, 40), 2))
             x = self.x_of(tl.position)
             p.drawLine(round(x), 0, round(x), h)
