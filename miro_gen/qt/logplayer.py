@@ -46,12 +46,14 @@ from miro_gen.eventlog.edit import write_selection
 from miro_gen.eventlog.fileset import Event, FileSet, TopicInfo, TopicName
 from miro_gen.eventlog.logfile import Cancelled
 from miro_gen.eventlog.player import MAX_HISTORY, RATES, Player
-from miro_gen.eventlog.reader import LogError
+from miro_gen.eventlog.reader import LogError, Topic
 from miro_gen.eventlog.routes import Routes
 from miro_gen.eventlog.show import clock_text
+from miro_gen.eventlog.types import types_from_schemas
 from miro_gen.qt.event_table import EventTable
 from miro_gen.qt.inspector import Inspector
 from miro_gen.qt.timeline import BUCKETS, Timeline
+from miro_gen.runtime import registry
 
 REFRESH_MS = 33
 SLIDER_STEPS = 10_000
@@ -398,6 +400,7 @@ class LogPlayerWindow(QMainWindow):
                 progress.close()
             opened += 1
             self.statusBar().showMessage(f"opened {path}: {log.count} events", 5000)
+            self._make_decodable(path, list(log.topics.values()))
             for text in [*log.warnings, *([log.fault] if log.fault else [])]:
                 self.warn(f"{path}: {text}")
         if self.routes is not None:
@@ -405,6 +408,20 @@ class LogPlayerWindow(QMainWindow):
                 self.warn(problem)
             self._show_channels()
         return opened
+
+    def _make_decodable(self, path: str, topics: list[Topic]) -> None:
+        """Compile the schemas of types not generated here (a log from another project), as
+        `miro log echo` does, so that their events show decoded."""
+        missing = [
+            t
+            for t in topics
+            if t.schema_encoding == "omgidl" and t.type_hash and registry.find(t.type_hash) is None
+        ]
+        if missing:
+            why = types_from_schemas([t.schema.decode("utf-8", "replace") for t in missing])
+            if why is not None:
+                names = ", ".join(sorted({t.topic for t in missing}))
+                self.warn(f"{path}: cannot decode {names}: {why}")
 
     def close_file(self, path: str) -> None:
         self.files.remove(path)
