@@ -430,3 +430,31 @@ def test_a_plot_keeps_the_extremes_of_each_span(files: FileSet) -> None:
     before = files.segments_read
     files.series(A, counter, T0, T0 + 50 * MS, buckets=10)
     assert files.segments_read - before <= 1  # only what holds those times
+
+
+def test_a_damaged_chunk_of_an_indexed_log_stops_the_player_there(tmp_path: Path) -> None:
+    path = write_log(tmp_path / "bad.mcap", [("robotA", n, n) for n in range(30)], chunk_every=10)
+    fs = FileSet()
+    second = fs.add(str(path)).segments[1]
+    fs.close()
+    data = bytearray(path.read_bytes())
+    data[second.offset + 60] ^= 0xFF  # inside the second chunk's compressed data
+    path.write_bytes(bytes(data))
+    fs = FileSet()
+    assert fs.add(str(path)).fault is None  # the summary is sound: opened without reading
+    sent = Sent()
+    p = Player(fs, sent, rate=1000.0)
+    p.start()
+    try:
+        p.play()
+        assert p.ended.wait(30)
+        assert sent.ids() == [("robotA", n) for n in range(10)]  # the first chunk, then the fault
+        assert p.error is not None and "chunk 2" in str(p.error) and "damaged" in str(p.error)
+        assert getattr(p.error, "path", None) == str(path)
+        p.seek(T0 + 25 * MS)  # past it: plays on
+        p.play()
+        eventually(lambda: len(sent.ids()) == 15)
+        assert p.error is None
+    finally:
+        p.close()
+        fs.close()

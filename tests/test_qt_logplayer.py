@@ -9,6 +9,9 @@ the cut's events and replays them.
 
 from __future__ import annotations
 
+import signal
+import subprocess
+import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -16,7 +19,7 @@ from typing import Any
 import pytest
 import zmq
 from eventlog_helpers import T0, read_events, write_log
-from loopback import run_miro
+from loopback import run_miro, service_env
 from PySide6.QtCore import QPoint, Qt
 from PySide6.QtTest import QTest
 from PySide6.QtWidgets import QFileDialog
@@ -93,6 +96,15 @@ def rig(naming: str) -> Iterator[Rig]:
     r.bridge.stop()
 
 
+@pytest.fixture(autouse=True)
+def stop_consumers(rig: Rig) -> Iterator[None]:
+    """The consumer processes a test started are stopped after it, whatever happened."""
+    yield
+    for p in rig.started:
+        p.stop()
+    rig.started.clear()
+
+
 @pytest.fixture
 def opened(rig: Rig) -> Iterator[Callable[..., LogPlayerWindow]]:
     made: list[LogPlayerWindow] = []
@@ -106,9 +118,6 @@ def opened(rig: Rig) -> Iterator[Callable[..., LogPlayerWindow]]:
         w.player.close()
         w.close()
         w.files.close()
-    for p in rig.started:
-        p.stop()
-    rig.started.clear()
 
 
 def events(p: ServiceProcess) -> list[dict[str, Any]]:
@@ -333,3 +342,44 @@ def test_cut_and_save_as_writes_exactly_the_cut(
     assert window.files.cut == (start, T0 + (50 * (N - 1) + 25) * MS)
     window.undo_action.trigger()
     assert window.files.cut == window.files.span()
+
+
+def test_the_command_plays_the_logs_and_ends_on_sigterm(
+    rig: Rig, logs: tuple[Path, Path], tmp_path: Path
+) -> None:
+    """`miro log player FILE... --play` as a user starts it (offscreen here): robotA's events
+    reach robotA's consumer (through the channel the rig has bound: it is used, not taken
+    over), again and again with --loop; SIGTERM closes the window and the process ends."""
+    robot_a = rig.consumer("robotA")
+    window = subprocess.Popen(
+        [sys.executable, "-m", "miro_gen.cli.main", "log", "player", *map(str, logs),
+         "--naming", rig.naming, "-MNC", "gui", "--play", "--loop", "--rate", "32"],
+        stderr=subprocess.PIPE,
+        text=True,
+        env=service_env(QT_QPA_PLATFORM="offscreen"),
+    )  # fmt: skip
+    try:
+        got = wait_events(robot_a, 2 * N)  # a whole pass, at least, whatever it missed first
+        assert {d for d, _ in got} == {"robotA"}
+        passes = [s for _, s in got]
+        assert any(passes[i : i + N] == list(range(N)) for i in range(len(passes) - N + 1))
+    finally:
+        window.send_signal(signal.SIGTERM)
+        _, err = window.communicate(timeout=30)
+    assert window.returncode == 0, err
+    assert "Traceback" not in err
+
+
+def test_the_command_without_a_display_says_so(logs: tuple[Path, Path]) -> None:
+    env = service_env()
+    for name in ("DISPLAY", "WAYLAND_DISPLAY", "QT_QPA_PLATFORM"):
+        env.pop(name, None)
+    done = subprocess.run(
+        [sys.executable, "-m", "miro_gen.cli.main", "log", "player", str(logs[0])],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=60,
+    )
+    assert done.returncode == 1
+    assert done.stderr.startswith("miro log player: no display")
