@@ -228,6 +228,17 @@ def test_seek_on_the_timeline_and_the_slider_then_step_both_ways(
         received_as_sent(both[0])
         key(window, Qt.Key.Key_Right)  # forward again: the one after it
         received_as_sent(both[1])
+        window.refresh()  # the event list, as its timer shows it
+        table = window.events
+        rows = table.model_rows.rows
+        assert [(r.topic.domain, r.sequence) for r in rows[-2:]] == [both[0], both[1]]
+        clicked = rows[-3]  # an event list row: the player moves to that event
+        cell = table.visualRect(table.model_rows.index(len(rows) - 3, 1))
+        click(table.viewport(), cell.center())
+        assert window.player.position == clicked.key
+        assert window.inspector.shown is not None and window.inspector.shown.key == clicked.key
+        key(window, Qt.Key.Key_Right)  # and it is the next one played
+        received_as_sent((clicked.topic.domain, clicked.sequence))
         here = window.player.log_now()
         key(window, Qt.Key.Key_Right, Qt.KeyboardModifier.ShiftModifier)  # seeks a 20th on
         assert window.player.log_now() == here + (end - start) // 20
@@ -281,7 +292,7 @@ def test_two_robots_merged_into_their_channels_files_opened_and_closed_while_pla
         assert got_a == [("robotA", n) for n in range(N)]
         got_b = seqs(robot_b)
         assert got_b == [("robotB", n) for n in range(got_b[0][1], N)]  # from where it joined
-        rows = [(e.topic.domain, e.message.sequence) for e in window.player.history.rows()]
+        rows = [(r.topic.domain, r.sequence) for r in window.player.history.rows()]
         assert rows[-4:] == [("robotA", 98), ("robotB", 98), ("robotA", 99), ("robotB", 99)]
         window.close_file(str(logs[0]))  # robotA's log closed: only robotB's plays
         assert [t.name for t in window.files.topics()] == [B]

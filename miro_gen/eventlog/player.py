@@ -29,9 +29,10 @@ import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import NamedTuple
 
 from miro_gen.eventlog.fileset import Event, FileSet, Key, TopicName, after, at_time
-from miro_gen.eventlog.reader import LogError
+from miro_gen.eventlog.reader import LogError, Topic
 
 CLOCK_PERIOD = 0.5  # seconds between clock messages while nothing changes
 MAX_WAIT = 0.1  # seconds the play thread sleeps at most (its clock ticks, a close is seen)
@@ -40,6 +41,28 @@ RATES = (1 / 16, 1 / 8, 1 / 4, 1 / 2, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0)  # the spe
 SKIP = 1 / 20  # of the cut's length: how far a skip (shift+arrow) seeks
 MAX_HISTORY = 100_000
 _SEND, _SKIP, _RESTART, _CLOSED = range(4)
+
+
+class Row(NamedTuple):
+    """An event as the event list keeps it: where it is and what it is, not its payload (a
+    history of camera images would hold gigabytes)."""
+
+    key: Key
+    topic: Topic
+    sequence: int
+    size: int  # bytes of its payload
+
+    @property
+    def log_time(self) -> int:
+        return self.key[0]
+
+    @property
+    def name(self) -> TopicName:
+        return (self.topic.domain, self.topic.type_name)
+
+
+def row_of(event: Event) -> Row:
+    return Row(event.key, event.topic, event.message.sequence, len(event.message.data))
 
 
 @dataclass(frozen=True)
@@ -53,13 +76,13 @@ class ClockState:
 
 
 class EventHistory:
-    """The last `length` events sent, oldest first, for the event list. After a seek it holds
-    the events before the new position, read (when asked for) from the file set."""
+    """The last `length` events sent, oldest first, as rows for the event list. After a seek
+    it holds the events before the new position, read (when asked for) from the file set."""
 
     def __init__(self, files: FileSet, length: int = DEFAULT_HISTORY) -> None:
         self.files = files
         self._lock = threading.Lock()
-        self._rows: deque[Event] = deque(maxlen=_check_length(length))
+        self._rows: deque[Row] = deque(maxlen=_check_length(length))
         self._fill_before: Key | None = None  # read the events before this key when asked
         self.version = 0  # changes whenever the rows do
 
@@ -77,8 +100,9 @@ class EventHistory:
             self.version += 1
 
     def append(self, event: Event) -> None:
+        row = row_of(event)
         with self._lock:
-            self._rows.append(event)
+            self._rows.append(row)
             self.version += 1
 
     def restart(self, pos: Key) -> None:
@@ -88,18 +112,18 @@ class EventHistory:
             self._fill_before = pos
             self.version += 1
 
-    def rows(self) -> list[Event]:
+    def rows(self) -> list[Row]:
         """The events, oldest first, excluded topics left out (reads the file set after a
         seek or a longer history: call it from the thread that shows them)."""
         with self._lock:
             fill, self._fill_before = self._fill_before, None
             missing = self.length - len(self._rows)
         if fill is not None and missing > 0:
-            older: list[Event] = []
+            older: list[Row] = []
             start = self.files.cut[0]
             try:
                 for ev in self.files.backward(fill, start):
-                    older.append(ev)
+                    older.append(row_of(ev))
                     if len(older) >= missing:
                         break
             except LogError:
@@ -264,7 +288,7 @@ class Player:
             self._jump(log_ns, at_time(log_ns))
         self._publish()
 
-    def seek_to(self, event: Event) -> None:
+    def seek_to(self, event: Event | Row) -> None:
         """Move to just before `event` (an event list's row): it is the next one played."""
         with self._cond:
             self._jump(event.log_time, event.key)

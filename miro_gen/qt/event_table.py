@@ -12,7 +12,7 @@ from typing import Any
 from PySide6.QtCore import QAbstractTableModel, QModelIndex, QPersistentModelIndex, Qt, Signal
 from PySide6.QtWidgets import QAbstractItemView, QHeaderView, QTableView, QWidget
 
-from miro_gen.eventlog.fileset import Event
+from miro_gen.eventlog.player import Row
 from miro_gen.eventlog.show import clock_text
 
 COLUMNS = ("time stamp", "domain", "type", "event")
@@ -24,9 +24,9 @@ class EventRows(QAbstractTableModel):
 
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
-        self.rows: list[Event] = []
+        self.rows: list[Row] = []
 
-    def set_rows(self, rows: list[Event]) -> None:
+    def set_rows(self, rows: list[Row]) -> None:
         self.beginResetModel()
         self.rows = rows
         self.endResetModel()
@@ -49,7 +49,7 @@ class EventRows(QAbstractTableModel):
         if column == 2:
             return event.topic.type_name
         what = event.topic.schema_name or "no schema"
-        return f"#{event.message.sequence}  {what}, {len(event.message.data)} bytes"
+        return f"#{event.sequence}  {what}, {event.size} bytes"
 
     def headerData(
         self, section: int, orientation: Qt.Orientation, role: int = Qt.ItemDataRole.DisplayRole
@@ -60,7 +60,7 @@ class EventRows(QAbstractTableModel):
 
 
 class EventTable(QTableView):
-    """The event list; `event_clicked(event)` when a row is clicked."""
+    """The event list; `event_clicked(row)` when a row is clicked."""
 
     event_clicked = Signal(object)
 
@@ -80,7 +80,7 @@ class EventTable(QTableView):
         self.clicked.connect(self._clicked)
         self._version = -1
 
-    def show_rows(self, rows: list[Event], version: int, follow: bool) -> None:
+    def show_rows(self, rows: list[Row], version: int, follow: bool) -> None:
         """Show `rows` (if `version` is new); `follow` scrolls to the latest."""
         if version == self._version:
             return

@@ -43,9 +43,9 @@ from PySide6.QtWidgets import (
 )
 
 from miro_gen.eventlog.edit import write_selection
-from miro_gen.eventlog.fileset import Event, FileSet, TopicInfo, TopicName
+from miro_gen.eventlog.fileset import FileSet, TopicInfo, TopicName
 from miro_gen.eventlog.logfile import Cancelled
-from miro_gen.eventlog.player import MAX_HISTORY, RATES, Player
+from miro_gen.eventlog.player import MAX_HISTORY, RATES, Player, Row
 from miro_gen.eventlog.reader import LogError, Topic
 from miro_gen.eventlog.routes import Routes
 from miro_gen.eventlog.show import clock_text
@@ -330,11 +330,19 @@ class LogPlayerWindow(QMainWindow):
         self.player.faster(steps)
         self._show_rate()
 
-    def _row_clicked(self, event: object) -> None:
-        if isinstance(event, Event):
-            self.player.seek_to(event)
+    def _row_clicked(self, row: object) -> None:
+        """A row of the event list: the player moves to its event, which the inspector shows
+        (read again: the list keeps no payloads)."""
+        if isinstance(row, Row):
+            self.player.seek_to(row)
             self._pinned = self.player.sent
-            self.inspector.show_event(event)
+            try:
+                event = next(self.files.forward(row.key), None)
+            except LogError as e:
+                self.warn(str(e))
+                return
+            if event is not None and event.key == row.key:
+                self.inspector.show_event(event)
 
     def set_excluded(self, name: TopicName, excluded: bool) -> None:
         """Take a topic out of the replay (or back in), as its check box or menu entry does."""
