@@ -119,17 +119,19 @@ def test_events_merge_in_one_order_forward_backward_and_from_anywhere(files: Fil
     assert list(files.forward(at_time(T0 + 110 * MS)))[0:2] == forward[21:23]
 
 
-def test_only_the_segments_played_are_read_and_kept(two_robots: tuple[Path, Path]) -> None:
-    fs = FileSet()
+def test_only_the_segments_played_are_read_and_each_once(two_robots: tuple[Path, Path]) -> None:
+    fs = FileSet(cache_segments=16)  # all ten kept: a segment read twice would be a fault
     for path in two_robots:
         fs.add(str(path))
     late = list(fs.forward(at_time(T0 + 300 * MS)))
     assert len(late) == 20 and fs.segments_read == 4  # the last two chunks of each file
     assert list(fs.forward(at_time(T0 + 300 * MS))) == late and fs.segments_read == 4
-    assert ident(next(fs.backward(late[0].key))) == ("robotB", 29)  # a step back: kept
-    assert fs.segments_read == 4
+    assert ident(next(fs.backward(late[0].key))) == ("robotB", 29)  # a step back
+    eventually(lambda: fs.segments_read == 6)  # the chunks before it, read ahead
     assert ident(next(fs.backward(at_time(T0 + 235 * MS)))) == ("robotA", 23)
-    assert fs.segments_read == 6  # the chunks of each file before
+    eventually(lambda: fs.segments_read == 8)  # and the ones before those
+    assert [ident(e) for e in fs.backward(at_time(T0 + 235 * MS))][-1] == ("robotA", 0)
+    assert fs.segments_read == 10
     fs.close()
 
 

@@ -291,6 +291,7 @@ class Player:
     def seek_to(self, event: Event | Row) -> None:
         """Move to just before `event` (an event list's row): it is the next one played."""
         with self._cond:
+            self._steps.clear()
             self._jump(event.log_time, event.key)
         self._publish()
 
