@@ -1,5 +1,6 @@
 """`miro log info` and `miro log echo`, the two `miro log` sub-verbs that only read a file (the
-sub-verbs are listed in cli/verbs.py; record and play are in log_record.py and log_play.py)."""
+sub-verbs are listed in cli/verbs.py; record, play, the player window, cut and merge are in
+log_record.py, log_play.py, log_player.py and log_edit.py)."""
 
 from __future__ import annotations
 

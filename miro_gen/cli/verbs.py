@@ -178,8 +178,13 @@ VERBS: tuple[Verb, ...] = (
             ),
             Verb(
                 "play",
-                "replay a log into a channel with its original timing (Miro's LogPlayer)",
+                "replay logs into each robot's channel with their original timing (LogPlayer)",
                 run="miro_gen.cli.log_play:play_main",
+            ),
+            Verb(
+                "player",
+                "the player's window: play, seek, step, cut, plot (Miro's LogPlayer GUI)",
+                run="miro_gen.cli.log_player:player_main",
             ),
             Verb(
                 "info",
@@ -187,6 +192,16 @@ VERBS: tuple[Verb, ...] = (
                 run="miro_gen.cli.log:info_main",
             ),
             Verb("echo", "print the events of a log, decoded", run="miro_gen.cli.log:echo_main"),
+            Verb(
+                "cut",
+                "write part of a log to a new one, or repair a log (Miro's LogTruncate)",
+                run="miro_gen.cli.log_edit:cut_main",
+            ),
+            Verb(
+                "merge",
+                "merge logs into one, in log-time order",
+                run="miro_gen.cli.log_edit:merge_main",
+            ),
         ),
     ),
     Verb(
