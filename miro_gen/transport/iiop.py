@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import socket
 import threading
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from miro_gen.corba.client import IIOPInvoker
 from miro_gen.corba.ior import CorbaRef
@@ -32,6 +32,10 @@ from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.transport import sockets
 from miro_gen.transport.addresses import LOOPBACK, Addresses, server_addresses
 from miro_gen.transport.options import CommonOptions, UsageError
+
+if TYPE_CHECKING:
+    from miro_gen.transport.channels import EventChannel
+    from miro_gen.transport.notify_door import NotifyDoor
 
 _log = logger("MIRO")
 
@@ -95,6 +99,14 @@ class CorbaSide:
                 return
             self._names.remove(full)
         self.naming.unbind(full)
+
+    def open_door(self, channel: EventChannel) -> NotifyDoor:
+        """Serve `channel` (hosted here) as a CosNotifyChannelAdmin::EventChannel too, under
+        its full name as object key (transport.notify_door)."""
+        from miro_gen.transport.notify_door import NotifyDoor
+
+        server = self.server or self._lazy_server()
+        return NotifyDoor(channel, server, self.iiop, channel.name)
 
     def stub(self, entry: Any, cls: type[rpc.StubT]) -> rpc.StubT:
         ref = getattr(entry, "ref", None) or ObjectRef(entry.repo_id, entry.endpoint, entry.key)
