@@ -59,7 +59,8 @@ _COMPLEX = {
     K.tk_abstract_interface,
     K.tk_local_interface,
 }
-_FIXED_SIZES: dict[int, int] = {K.tk_string: 8, K.tk_wstring: 8, K.tk_fixed: 8}  # the others: their kind only
+# Bytes of the TypeCodes of kinds with parameters but no encapsulation (the others: 4).
+_FIXED_SIZES: dict[int, int] = {K.tk_string: 8, K.tk_wstring: 8, K.tk_fixed: 8}
 
 
 class Backbone(Protocol):
