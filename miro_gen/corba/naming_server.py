@@ -175,8 +175,11 @@ class NamingService:
             path = key[len(CONTEXT_KEY) :].decode()
         except UnicodeDecodeError:
             return None
-        if not path or not self.is_context(path):
+        if not path:
             return None
+        # Served whether or not names are below it now: a reference handed out stays valid
+        # (as a persistent POA's), and a context unbound is destroyed next (nameclt's
+        # remove_context) without failing.
         servant = self._servants.get(path)
         if servant is None:
             if len(self._servants) >= 1024:
@@ -388,7 +391,8 @@ class Context(HandServant):
             raise CORBA_SYSTEM_EXCEPTIONS["BAD_INV_ORDER"]("the root context cannot be destroyed")
         if self.service.children(self.path):
             raise NotEmpty()
-        self.service.drop_context(self.path)
+        # Its binding stays until unbound, as CosNaming has it (nameclt's remove_context
+        # destroys, then unbinds): a context is its path here, which the unbinding frees.
 
     def list(self, inp: CdrInput) -> CdrOutput:
         how_many = inp.ulong()

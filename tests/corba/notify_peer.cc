@@ -11,9 +11,10 @@
 // obtain_subscription_types), and connects; a consumer does the same with subscriptions.
 //
 //   notify_peer supply N [-MNC ctx] [ORB options]   offers ctx/Gps and ctx/Laser; prints what
-//        is subscribed ("SUBSCRIBED ctx Gps 1"), "READY", waits for a line on stdin, pushes N
-//        Miro::GpsDataIDL (type Gps) and N Miro::RangeScanEventIDL (type Laser), "SENT 2N",
-//        then serves subscription changes ("CHANGE + d t") until stdin closes
+//        is subscribed ("SUBSCRIBED ctx Gps 1"), "READY", then for each line on stdin pushes N
+//        Miro::GpsDataIDL (type Gps) and N Miro::RangeScanEventIDL (type Laser), numbered on
+//        from the last, and prints "SENT total"; subscription changes ("CHANGE + d t") are
+//        printed as they come; it ends when stdin closes
 //   notify_peer consume N d/t... [-MNC ctx]        subscribes to d/t... (`*` any); prints
 //        "OFFERED d t" for each type offered, "CONNECTED", then "EVENT d t ..." for each of N
 //        events (or until stdin closes), "OFFER + d t" for offer changes
@@ -290,6 +291,8 @@ static CosNotification::StructuredEvent event_of(const std::string& domain, cons
   return e;
 }
 
+static void burst(Supplier* supplier, const std::string& ctx, int from, int n);
+
 static int supply(CORBA::ORB_ptr orb, const std::string& ctx, int n)
 {
   CosNotifyChannelAdmin::EventChannel_var ec = resolve_channel(orb, ctx);
@@ -298,8 +301,19 @@ static int supply(CORBA::ORB_ptr orb, const std::string& ctx, int n)
   say(std::string("SUBSCRIBED ") + ctx + " Laser " + (supplier->subscribed(ctx, "Laser") ? "1" : "0"));
   say("READY");
   std::string line;
-  if (!std::getline(std::cin, line)) return 1;
-  for (int i = 0; i < n; ++i) {
+  int sent = 0;
+  while (std::getline(std::cin, line)) {
+    burst(supplier, ctx, sent, n);
+    sent += n;
+    say("SENT " + std::to_string(2 * sent));
+  }
+  supplier->disconnect();
+  return 0;
+}
+
+static void burst(Supplier* supplier, const std::string& ctx, int from, int n)
+{
+  for (int i = from; i < from + n; ++i) {
     Miro::GpsDataIDL gps;
     gps.time.sec = 1000 + i;
     gps.time.usec = 500;
@@ -340,11 +354,6 @@ static int supply(CORBA::ORB_ptr orb, const std::string& ctx, int n)
     l.remainder_of_body <<= scan;
     supplier->sendEvent(l);
   }
-  say("SENT " + std::to_string(2 * n));
-  while (std::getline(std::cin, line)) {
-  }
-  supplier->disconnect();
-  return 0;
 }
 
 class Printer : public Consumer
