@@ -20,8 +20,9 @@
 //        events (or until stdin closes), "OFFER + d t" for offer changes
 //   notify_peer subscriptions [-MNC ctx]           prints the channel's subscription types
 //        ("TYPE d t") as a supplier sees them, then "END"
-//   notify_peer bench-supply N SIZE [-MNC ctx]     pushes N NotifyBench::Sample (domain ctx,
-//        type Sample, SIZE bytes of CDR) as fast as the channel takes them; "SENT N SECONDS"
+//   notify_peer bench-supply N SIZE [RATE] [-MNC ctx]   after "READY" and a line on stdin,
+//        pushes N NotifyBench::Sample (domain ctx, type Sample, SIZE bytes of CDR) as fast as
+//        the channel takes them (or RATE a second); "SENT N SECONDS"; ends when stdin closes
 //   notify_peer bench-consume N [-MNC ctx]         receives ctx/Sample; after N events (or 3 s
 //        without any) prints "GOT COUNT SECONDS P50_US" (from its first event to its last)
 
@@ -428,7 +429,7 @@ static int subscriptions(CORBA::ORB_ptr orb, const std::string& ctx)
   return 0;
 }
 
-static int bench_supply(CORBA::ORB_ptr orb, const std::string& ctx, int n, int size)
+static int bench_supply(CORBA::ORB_ptr orb, const std::string& ctx, int n, int size, int rate)
 {
   CosNotifyChannelAdmin::EventChannel_var ec = resolve_channel(orb, ctx);
   Supplier* supplier = new Supplier(ec, types({{ctx, "Sample"}}));
@@ -442,6 +443,10 @@ static int bench_supply(CORBA::ORB_ptr orb, const std::string& ctx, int n, int s
   CosNotification::StructuredEvent e = event_of(ctx, "Sample");
   auto t0 = std::chrono::steady_clock::now();
   for (int i = 0; i < n; ++i) {
+    if (rate > 0) {  // paced: event i leaves at i / rate seconds
+      auto due = t0 + std::chrono::nanoseconds((long long)i * 1000000000LL / rate);
+      while (std::chrono::steady_clock::now() < due) omni_thread::yield();
+    }
     s.sent_ns = now_ns();
     s.seq = i;
     e.remainder_of_body <<= s;
@@ -538,7 +543,9 @@ int main(int argc, char** argv)
     else if (mode == "consume")
       rc = consume(orb, ctx, n, std::vector<std::string>(args.begin() + 2, args.end()));
     else if (mode == "subscriptions") rc = subscriptions(orb, ctx);
-    else if (mode == "bench-supply") rc = bench_supply(orb, ctx, n, args.size() > 2 ? std::atoi(args[2].c_str()) : 100);
+    else if (mode == "bench-supply")
+      rc = bench_supply(orb, ctx, n, args.size() > 2 ? std::atoi(args[2].c_str()) : 100,
+                        args.size() > 3 ? std::atoi(args[3].c_str()) : 0);
     else if (mode == "bench-consume") rc = bench_consume(orb, ctx, n);
     orb->destroy();
     return rc;
