@@ -19,6 +19,7 @@ import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import Miro
 import Miro__POA
@@ -488,3 +489,20 @@ def test_the_channels_host_logged_no_defect(world: World) -> None:
     """Everything above left no traceback in the log of the process hosting the channel."""
     text = world.host_log.read_text(errors="replace")
     assert "Traceback" not in text, text
+
+
+def test_a_python_client_calls_a_cpp_server_that_miro_naming_names(
+    peer_bin: Path, peer_gen: Any, world: World, python: PythonSide
+) -> None:
+    """One naming service for both worlds: a C++ server binds its object through CosNaming
+    (as Miro's Server does), a Python client of the ZeroMQ naming service finds and calls it."""
+    if world.kind != "miro-naming":
+        pytest.skip("with omniNames, Python services use CosNaming already (test_corba_interop)")
+    server = CppPeer(peer_bin, "server", f"{ROBOT}/Echo", naming=world.cpp_naming)
+    try:
+        server.ready()
+        echo = python.server.resolve_name("Echo", peer_gen.Peer.Echo)  # in -MNC robot1
+        assert echo.echo_text("from python") == "from python"
+        assert list(echo.echo_longs([1, 2, 3])) == [1, 2, 3]
+    finally:
+        server.kill()

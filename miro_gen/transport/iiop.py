@@ -23,7 +23,7 @@ import threading
 from typing import TYPE_CHECKING, Any
 
 from miro_gen.corba.client import IIOPInvoker
-from miro_gen.corba.ior import CorbaRef
+from miro_gen.corba.ior import IOR, CorbaRef, ref_from_ior
 from miro_gen.corba.naming import CorbaEntry, CorbaNaming, Peer, corba_naming, decide
 from miro_gen.corba.server import BeyondLoopback, IIOPServer
 from miro_gen.log import logger
@@ -109,7 +109,11 @@ class CorbaSide:
         return NotifyDoor(channel, server, self.iiop, channel.name)
 
     def stub(self, entry: Any, cls: type[rpc.StubT]) -> rpc.StubT:
-        ref = getattr(entry, "ref", None) or ObjectRef(entry.repo_id, entry.endpoint, entry.key)
+        ref = getattr(entry, "ref", None)
+        if ref is None and entry.endpoint.startswith("IOR:"):  # bound through CosNaming
+            ref = ref_from_ior(IOR.from_string(entry.endpoint))
+        if ref is None:
+            ref = ObjectRef(entry.repo_id, entry.endpoint, entry.key)
         return cls(ref, self.iiop)
 
     def close(self) -> None:

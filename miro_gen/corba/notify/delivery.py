@@ -2,11 +2,11 @@
 offer and subscription changes to them and to the suppliers.
 
 Each push consumer has a `Pusher`: a thread of its own and a bounded queue (its depth and what a
-full queue drops are its QoS: `qos.py`), so a slow or dead consumer holds up nobody else. A
-consumer that fails `MAX_FAILURES` pushes in a row (its process killed: connections refused;
-hung: each push times out after `PUSH_TIMEOUT`) is dropped: its proxy disconnects, as one that
-says Disconnected is at once. A push that fails otherwise (the consumer raised) costs that
-event only.
+full queue drops are its QoS: `qos.py`; at most QUEUE_BYTES whatever the depth), so a slow or
+dead consumer holds up nobody else. A consumer that fails `MAX_FAILURES` pushes in a row (its
+process killed: connections refused; hung: each push times out after `PUSH_TIMEOUT`) is
+dropped: its proxy disconnects, as one that says Disconnected is at once. A push that fails
+otherwise (the consumer raised) costs that event only.
 
 Suppliers are told of subscription changes by the channel's `Notifier`, one thread for all of
 them, each call bounded by `NOTIFY_TIMEOUT`; what each was told is remembered, so changes are
@@ -43,6 +43,7 @@ MAX_FAILURES = 3  # calls in a row that find a client gone before it is dropped
 PUSH_TIMEOUT = 5.0  # seconds a consumer may take to take one event
 NOTIFY_TIMEOUT = 2.0  # seconds a client may take to take a change of offers or subscriptions
 RETRY_PAUSE = 0.05  # seconds between two calls to a client that failed, doubling
+QUEUE_BYTES = 64 << 20  # of events waiting for one consumer, whatever its depth
 _GONE = (TRANSIENT, COMM_FAILURE, TIMEOUT, OBJECT_NOT_EXIST)
 _DISCONNECTED = "IDL:omg.org/CosEventComm/Disconnected:1.0"
 
@@ -106,6 +107,7 @@ class Pusher:
         self.dropped = 0
         self.failed = 0  # events that did not get through (the consumer raised, or was gone)
         self._queue: deque[Any] = deque()
+        self._bytes = 0  # of the events waiting
         self._cond = threading.Condition()
         self._changed = False
         self._closed = False
@@ -115,15 +117,19 @@ class Pusher:
         self._thread.start()
 
     def put(self, event: Any) -> None:
+        size = len(event)
         with self._cond:
             if self._closed:
                 return
-            if len(self._queue) >= self.depth:
+            while self._queue and (
+                len(self._queue) >= self.depth or self._bytes + size > QUEUE_BYTES
+            ):
                 self.dropped += 1
                 if self.drop_newest:
                     return
-                self._queue.popleft()
+                self._bytes -= len(self._queue.popleft())
             self._queue.append(event)
+            self._bytes += size
             if len(self._queue) == 1:
                 self._cond.notify()
 
@@ -137,7 +143,7 @@ class Pusher:
         with self._cond:
             self.depth, self.drop_newest = depth, drop_newest
             while len(self._queue) > depth:
-                self._queue.popleft()
+                self._bytes -= len(self._queue.popleft())
                 self.dropped += 1
 
     def close(self) -> None:
@@ -145,6 +151,7 @@ class Pusher:
             self._closed = True
             self.dropped += len(self._queue)
             self._queue.clear()
+            self._bytes = 0
             self._cond.notify()
 
     @property
@@ -161,6 +168,8 @@ class Pusher:
                     return
                 changed, self._changed = self._changed, False
                 event = self._queue.popleft() if self._queue and not changed else None
+                if event is not None:
+                    self._bytes -= len(event)
             if changed:
                 body = self.consumer.pending_change()
                 call: tuple[str, bytes] | None = None if body is None else ("offer_change", body)

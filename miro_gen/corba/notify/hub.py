@@ -99,6 +99,9 @@ class Outgoing:
         self.body = body
         self.source = source  # the CORBA supplier proxy it came from; 0: the other door
 
+    def __len__(self) -> int:
+        return len(self.body)
+
     def as_any(self) -> bytes:
         """The event as a plain `any` (for CosEvent-style consumers): the remainder of an event
         that came as an `any` itself (type %ANY), else the whole structured event."""
