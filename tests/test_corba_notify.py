@@ -464,7 +464,8 @@ def test_nameclt_lists_the_robot_that_miro_naming_alone_names(
         time.sleep(0.05)
     listed = nameclt(world, "list", ROBOT).stdout.split()
     assert "EventChannel" in listed and "Example" in listed
-    assert f"{ROBOT}/" in nameclt(world, "list").stdout.split()
+    root = nameclt(world, "list").stdout.split()
+    assert f"{ROBOT}/" in root and "NotifyEventChannelFactory" in root
     channel_ior = nameclt(world, "resolve", f"{ROBOT}/EventChannel").stdout.strip()
     assert channel_ior.startswith("IOR:")
     # A name of the Python service is its own: a C++ client of the same user (another service)

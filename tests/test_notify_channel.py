@@ -21,12 +21,18 @@ from miro_gen.corba import typecode as tcm
 from miro_gen.corba.bodies import call
 from miro_gen.corba.client import IIOPInvoker
 from miro_gen.corba.ior import IOR, ref_from_ior
-from miro_gen.corba.notify import ChannelCore, NotifyChannel, wire
+from miro_gen.corba.notify import ChannelCore, EventChannelFactory, NotifyChannel, wire
 from miro_gen.corba.notify.delivery import MAX_FAILURES
 from miro_gen.corba.servants import HandServant
 from miro_gen.corba.server import IIOPServer
 from miro_gen.corba.typecode import K, TypeCode
-from miro_gen.exceptions import BAD_PARAM, MARSHAL, NO_IMPLEMENT, OBJECT_NOT_EXIST
+from miro_gen.exceptions import (
+    BAD_PARAM,
+    MARSHAL,
+    NO_IMPLEMENT,
+    NO_PERMISSION,
+    OBJECT_NOT_EXIST,
+)
 from miro_gen.runtime import rpc
 from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.runtime.cdrstream import CdrInput, CdrOutput
@@ -445,3 +451,36 @@ def test_a_vanished_consumer_is_dropped_after_a_few_pushes(rig: Rig) -> None:
         rig.call(proxy, "_get_MyType")
     with pytest.raises(MARSHAL):
         rig.call(pc, "obtain_subscription_types", lambda out: None)
+
+
+def test_the_factory_lists_makes_and_destroys_channels(rig: Rig) -> None:
+    made: list[NotifyChannel] = []
+
+    def maker(qos: dict[str, Any], admin: dict[str, Any]) -> NotifyChannel:
+        core = ChannelCore(f"made{len(made)}", rig.server, rig.invoker, f"m{len(made)}".encode())
+        channel = NotifyChannel(core, destroyable=True)
+        made.append(channel)
+        return channel
+
+    factory = EventChannelFactory(
+        lambda: rig.server.ior(b"factory", wire.EVENT_CHANNEL_FACTORY), maker
+    )
+    rig.server.activate(factory, b"factory")
+    factory.add(rig.channel)
+    fref = ref_from_ior(factory.reference())
+    assert ids(rig.call(fref, "get_all_channels")) == [1]
+    refused = rig.call(fref, "create_channel", lambda out: (
+        wire.write_properties(out, [("PacingInterval", 5)]), wire.write_properties(out, [])
+    ))  # fmt: skip
+    assert refused.endswith("UnsupportedQoS:1.0") and not made
+    inp = rig.call(fref, "create_channel", lambda out: (out.ulong(0), out.ulong(0)))
+    new = ref_from_ior(IOR.read(inp))
+    assert inp.long() == 2 and ids(rig.call(fref, "get_all_channels")) == [1, 2]
+    assert rig.get(new, "_get_MyFactory") == fref
+    rig.call(new, "destroy")
+    assert ids(rig.call(fref, "get_all_channels")) == [1]
+    assert rig.call(fref, "get_event_channel", lambda out: out.long(2)).endswith(
+        "ChannelNotFound:1.0"
+    )
+    with pytest.raises(NO_PERMISSION):  # the hosted channel is its process's to destroy
+        rig.call(rig.ref, "destroy")

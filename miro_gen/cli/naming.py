@@ -286,10 +286,7 @@ def _iiop_endpoint(p: argparse.ArgumentParser, text: str) -> str:
 def _host_channel(service: NamingService, name: str, corba: CorbaDoors | None) -> ChannelHost:
     """Host the event channel `name` in this process and bind it, lease-free, in `service`
     (with its Notification door when CORBA clients are served)."""
-    bound = service.adapter.bound
-    bind_host = bound.split("://", 1)[1].rsplit(":", 1)[0]
-    advertise = service.endpoint.split("://", 1)[1].rsplit(":", 1)[0]
-    host = ChannelHost(service.adapter.reactor.context, bind_host, advertise)
+    host = _channel_host(service)
     entry = MiroNaming.Entry(
         name, CHANNEL_REPO_ID, host.supplier_endpoint, host.consumer_endpoint.encode(), ""
     )
@@ -299,19 +296,36 @@ def _host_channel(service: NamingService, name: str, corba: CorbaDoors | None) -
     return host
 
 
+def _channel_host(service: NamingService) -> ChannelHost:
+    """A channel hosted in this process, bound and advertised as the naming service is."""
+    bound = service.adapter.bound
+    bind_host = bound.split("://", 1)[1].rsplit(":", 1)[0]
+    advertise = service.endpoint.split("://", 1)[1].rsplit(":", 1)[0]
+    return ChannelHost(service.adapter.reactor.context, bind_host, advertise)
+
+
 class CorbaDoors:
     """What `miro naming --iiop-endpoint` serves to CORBA clients: CosNaming over its names,
     and the Notification doors of the channels it hosts (transport.naming_door,
     transport.notify_door)."""
 
-    def __init__(self, server: Any, reactor: Reactor, names: Any) -> None:
+    def __init__(self, server: Any, reactor: Reactor, service: NamingService, names: Any) -> None:
+        from miro_gen.corba.notify.wire import EVENT_CHANNEL_FACTORY
         from miro_gen.transport.naming_door import RENEW_EVERY
+        from miro_gen.transport.notify_door import FACTORY_KEY, serve_factory
 
         self.server = server
         self.reactor = reactor
+        self.service = service
         self.address = f"{server.host}:{server.port}"
         self.doors: list[Any] = []
+        self._made = 0
         self._timer = reactor.schedule_timer(RENEW_EVERY, RENEW_EVERY, names.renew)
+        self.factory = serve_factory(server, self._make)
+        ior = self.factory.reference()
+        service.registry.keep(
+            MiroNaming.Entry(FACTORY_KEY, EVENT_CHANNEL_FACTORY, ior.to_string(), b"", "")
+        )
 
     def open_door(self, name: str, host: ChannelHost) -> Any:
         from miro_gen.transport.channels import EventChannel
@@ -320,9 +334,19 @@ class CorbaDoors:
         channel = EventChannel(
             name, host.supplier_endpoint, host.consumer_endpoint, self.reactor, "", host
         )
-        door = NotifyDoor(channel, self.server, self.server.invoker, name)
+        door = NotifyDoor(channel, self.server, self.server.invoker, name, self.factory)
         self.doors.append(door)
         return door
+
+    def _make(self, qos: dict[str, Any], admin: dict[str, Any]) -> Any:
+        """A channel a CORBA client asks the factory for: both doors, bound nowhere."""
+        self._made += 1
+        host = _channel_host(self.service)
+        door = self.open_door(f"NotifyChannel/{self._made}", host)
+        door.notify.destroyable = True
+        door.notify.core.qos, door.notify.core.admin = qos, admin
+        door.notify.on_close += [door.zmq.close, host.close]  # destroyed, or at the end
+        return door.notify
 
     def close(self) -> None:
         self.reactor.cancel_timer(self._timer)
@@ -347,7 +371,7 @@ def _serve_corba(
     advertise = socket.gethostname() if host in ("0.0.0.0", "::") else host
     server = serve_iiop(iiop, options, host, advertise, int(port))
     iiop.server = server
-    return CorbaDoors(server, reactor, serve_cosnaming(service.registry, server))
+    return CorbaDoors(server, reactor, service, serve_cosnaming(service.registry, server))
 
 
 def nslist_main(argv: Sequence[str]) -> int:

@@ -50,6 +50,7 @@ class CorbaSide:
         if naming_url is not None:
             self.naming = corba_naming(self.iiop, naming_url, client.options.naming_context)
         self.server: IIOPServer | None = None
+        self._factory: Any = None  # the Notification doors' factory, once a channel has one
         self._names: list[str] = []
         self._lock = threading.Lock()
 
@@ -103,10 +104,12 @@ class CorbaSide:
     def open_door(self, channel: EventChannel) -> NotifyDoor:
         """Serve `channel` (hosted here) as a CosNotifyChannelAdmin::EventChannel too, under
         its full name as object key (transport.notify_door)."""
-        from miro_gen.transport.notify_door import NotifyDoor
+        from miro_gen.transport.notify_door import NotifyDoor, serve_factory
 
         server = self.server or self._lazy_server()
-        return NotifyDoor(channel, server, self.iiop, channel.name)
+        if self._factory is None:
+            self._factory = serve_factory(server)
+        return NotifyDoor(channel, server, self.iiop, channel.name, self._factory)
 
     def stub(self, entry: Any, cls: type[rpc.StubT]) -> rpc.StubT:
         ref = getattr(entry, "ref", None)

@@ -35,8 +35,9 @@ import MiroNaming
 import zmq
 
 from miro_gen.corba.ior import TAG_MIRO_ZMQ, Profile
-from miro_gen.corba.notify import ChannelCore, EventType, NotifyChannel
-from miro_gen.corba.notify.wire import EVENT_CHANNEL
+from miro_gen.corba.notify import ChannelCore, EventChannelFactory, EventType, NotifyChannel
+from miro_gen.corba.notify.admins import Maker
+from miro_gen.corba.notify.wire import EVENT_CHANNEL, EVENT_CHANNEL_FACTORY
 from miro_gen.corba.server import IIOPServer
 from miro_gen.log import PeerWarnings, logger
 from miro_gen.runtime import registry
@@ -313,6 +314,8 @@ class ZmqSide:
             time.sleep(0.002)
 
     def close(self) -> None:
+        if self._closed:
+            return
         self._closed = True
         with self._lock:
             suppliers = list(self._suppliers.values())
@@ -337,11 +340,31 @@ def zmq_profile(channel: EventChannel) -> Profile:
     return Profile(TAG_MIRO_ZMQ, out.getvalue())
 
 
+FACTORY_KEY = "NotifyEventChannelFactory"  # the object key, and the name TAO binds it as
+
+
+def serve_factory(server: IIOPServer, maker: Maker | None = None) -> EventChannelFactory:
+    """The EventChannelFactory of this process's channels, served by `server` (`maker`: how to
+    make more, else `create_channel` raises NO_IMPLEMENT)."""
+    factory = EventChannelFactory(
+        lambda: server.ior(FACTORY_KEY.encode(), EVENT_CHANNEL_FACTORY), maker
+    )
+    server.activate(factory, FACTORY_KEY)
+    return factory
+
+
 class NotifyDoor:
     """The Notification door of `channel`, served by `server` under the key `key` (its full
-    name), calling its clients through `invoker`."""
+    name), calling its clients through `invoker`, listed by `factory`."""
 
-    def __init__(self, channel: EventChannel, server: IIOPServer, invoker: Any, key: str) -> None:
+    def __init__(
+        self,
+        channel: EventChannel,
+        server: IIOPServer,
+        invoker: Any,
+        key: str,
+        factory: EventChannelFactory | None = None,
+    ) -> None:
         self.channel = channel
         self.zmq = ZmqSide(channel)
         core = ChannelCore(
@@ -349,6 +372,8 @@ class NotifyDoor:
         )
         self.notify = NotifyChannel(core)
         self.zmq.notify = self.notify
+        if factory is not None:
+            factory.add(self.notify)
 
     def entry(self) -> MiroNaming.Entry:
         """The naming entry of the channel with both its doors."""

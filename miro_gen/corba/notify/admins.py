@@ -485,7 +485,11 @@ class EventChannelFactory(HandServant):
         self._lock = threading.Lock()
 
     def add(self, channel: NotifyChannel) -> int:
+        """List `channel` (once); its id."""
         with self._lock:
+            for known, c in self.channels.items():
+                if c is channel:
+                    return known
             ident = next(self._ids)
             self.channels[ident] = channel
         channel.factory = self
