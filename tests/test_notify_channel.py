@@ -484,3 +484,39 @@ def test_the_factory_lists_makes_and_destroys_channels(rig: Rig) -> None:
     )
     with pytest.raises(NO_PERMISSION):  # the hosted channel is its process's to destroy
         rig.call(rig.ref, "destroy")
+
+
+def test_any_events_and_cosevent_clients_share_the_channel(rig: Rig) -> None:
+    from miro_gen.corba.events import CosEventConsumer, CosEventSupplier, EventChannel
+
+    structured = Consumer()
+    connect_consumer(rig, structured)
+    got: list[Any] = []
+    arrived = threading.Event()
+
+    class Plain(CosEventConsumer):
+        def push_event(self, value: Any) -> None:
+            got.append(value)
+            arrived.set()
+
+    channel = EventChannel(rig.ref, rig.invoker)
+    plain = Plain(channel)  # CosEventChannelAdmin: for_consumers, obtain_push_supplier
+    CosEventSupplier(channel).push(Miro.TimeIDL(5, 6))  # ... for_suppliers, obtain_push_consumer
+    assert structured.wait(1) == [("", "%ANY", Miro.TimeIDL(5, 6))]  # an `any` event: type %ANY
+    assert arrived.wait(WAIT) and got == [Miro.TimeIDL(5, 6)]  # as it came
+    admin = rig.get(rig.ref, "_get_default_supplier_admin")
+    proxy = rig.get(admin, "obtain_notification_push_consumer", ulong(wire.ANY_EVENT))
+    assert rig.call(proxy, "_get_MyType").ulong() == wire.PUSH_ANY
+    rig.call(proxy, "connect_any_push_supplier", lambda out: IOR().write(out))
+    rig.call(proxy, "push", lambda out: anys.write_any(out, 42))
+    assert structured.wait(2)[1] == ("", "%ANY", 42)
+    _, pc = connect_supplier(rig)
+    push(rig, pc, "robot1", "Time", Miro.TimeIDL(7, 8))
+    arrived.clear()
+    while len(got) < 3:  # a structured event reaches an `any` consumer as a StructuredEvent
+        assert arrived.wait(WAIT)
+        arrived.clear()
+    assert got[1] == 42 and isinstance(got[2], dict)
+    header = got[2]["header"]["fixed_header"]
+    assert header["event_type"] == {"domain_name": "robot1", "type_name": "Time"}
+    plain.close()
