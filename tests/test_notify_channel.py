@@ -46,6 +46,9 @@ class Published:
     def __init__(self) -> None:
         self.events: list[tuple[str, str, type, bytes]] = []
 
+    def wants(self, domain: str, type_name: str) -> bool:
+        return True
+
     def publish(self, source: int, domain: str, type_name: str, cls: type, payload: bytes) -> None:
         self.events.append((domain, type_name, cls, payload))
 

@@ -169,6 +169,7 @@ class _Tap:
         for p in prefixes - self.prefixes:
             self.socket.setsockopt(zmq.SUBSCRIBE, p)
         self.prefixes = prefixes
+        self.door.forget_wanted()
 
     def _readable(self) -> None:
         for _ in range(_TURN_FRAMES):
@@ -229,6 +230,7 @@ class ZmqSide:
         self.own: set[int] = set()  # supplier ids of the door's suppliers
         self._suppliers: dict[tuple[int, str], StructuredPushSupplier] = {}
         self._seen: set[EventType] = set()
+        self._wanted: dict[tuple[str, str], bool] = {}  # topics ZeroMQ consumers want, known
         self._lock = threading.Lock()
         self._watch = _Watch(self)
         self._tap = _Tap(self)
@@ -236,9 +238,21 @@ class ZmqSide:
 
     # ---- Backbone ---------------------------------------------------------------------------
 
+    def wants(self, domain: str, type_name: str) -> bool:
+        key = (domain, type_name)
+        wanted = self._wanted.get(key)
+        if wanted is None:
+            frame, mine = topic(domain, type_name), self._tap.prefixes
+            # A prefix both the tap and others subscribe to, only "", counts: anyone's.
+            wanted = any(
+                frame.startswith(p) and (p not in mine or not p) for p in list(self._watch.prefixes)
+            )
+            if len(self._wanted) >= MAX_SEEN:
+                self._wanted = {}
+            self._wanted[key] = wanted
+        return wanted
+
     def publish(self, source: int, domain: str, type_name: str, cls: type, payload: bytes) -> None:
-        if not self._wanted(topic(domain, type_name)):
-            return  # no ZeroMQ consumer subscribes: nothing is sent
         supplier = self._suppliers.get((source, domain))
         if supplier is None:
             supplier = self._supplier(source, domain)
@@ -280,19 +294,16 @@ class ZmqSide:
             if self.notify is not None:
                 self.notify.hub.offers_changed()
 
+    def forget_wanted(self) -> None:
+        """The subscriptions changed: which topics are wanted is worked out anew."""
+        self._wanted = {}
+
     def others_changed(self) -> None:
+        self._wanted = {}
         if self.notify is not None:
             self.notify.hub.others_changed()
 
     # ---- internals --------------------------------------------------------------------------
-
-    def _wanted(self, frame: bytes) -> bool:
-        """Whether a consumer other than the door's tap subscribes to topic `frame` (a prefix
-        both subscribe to, only "", counts: it may be anyone's)."""
-        mine = self._tap.prefixes
-        return any(
-            frame.startswith(p) and (p not in mine or not p) for p in list(self._watch.prefixes)
-        )
 
     def _supplier(self, source: int, domain: str) -> StructuredPushSupplier | None:
         with self._lock:

@@ -215,12 +215,9 @@ class ConsumerAdmin(_Admin):
 
     @rpc.nonblocking
     def subscription_change(self, inp: CdrInput) -> None:
-        start = inp.pos
         with self.lock:
-            apply_changes(self.types, inp)
+            added, removed = apply_changes(self.types, inp)
             proxies = list(self.proxies.values())
-        inp.pos = start
-        added, removed = wire.read_event_types(inp), wire.read_event_types(inp)
         for proxy in proxies:
             if isinstance(proxy, ProxySupplier):
                 proxy.admin_changed(added, removed)
@@ -283,12 +280,9 @@ class SupplierAdmin(_Admin):
 
     @rpc.nonblocking
     def offer_change(self, inp: CdrInput) -> None:
-        start = inp.pos
         with self.lock:
-            apply_changes(self.types, inp)
+            added, removed = apply_changes(self.types, inp)
             proxies = list(self.proxies.values())
-        inp.pos = start
-        added, removed = wire.read_event_types(inp), wire.read_event_types(inp)
         for proxy in proxies:
             with proxy.lock:
                 proxy.types.difference_update(removed)

@@ -268,6 +268,7 @@ class Notifier:
             for ref, told, now in clients:
                 if told.failures >= MAX_FAILURES:
                     continue
+                before = told.types
                 body = told.change(now())
                 if body is None:
                     continue
@@ -275,6 +276,7 @@ class Notifier:
                     self.invoker.invoke(ref, self.operation, body, timeout=NOTIFY_TIMEOUT)
                     told.failures = 0
                 except SystemException as e:
+                    told.types = before  # not told: the difference is sent again next time
                     told.failures += 1
                     _log.debug("%s: %s", self.operation, e)
                     if told.failures >= MAX_FAILURES:

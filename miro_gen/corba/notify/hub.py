@@ -26,6 +26,7 @@ from miro_gen.corba import anys
 from miro_gen.corba import typecode as tcm
 from miro_gen.corba.notify.filters import Fields
 from miro_gen.corba.notify.wire import (
+    ANY_TYPE,
     STRUCTURED_EVENT_TC,
     EventType,
     event_prefix,
@@ -65,6 +66,10 @@ _FIXED_SIZES: dict[int, int] = {K.tk_string: 8, K.tk_wstring: 8, K.tk_fixed: 8}
 
 class Backbone(Protocol):
     """The channel's other door, as the hub sees it (transport.notify_door: ZeroMQ)."""
+
+    def wants(self, domain: str, type_name: str) -> bool:
+        """Whether a consumer at the other door subscribes to events of this topic."""
+        ...
 
     def publish(self, source: int, domain: str, type_name: str, cls: type, payload: bytes) -> None:
         """Publish the event of CORBA supplier `source`: `payload` is `cls`'s CDR (with its
@@ -107,7 +112,7 @@ class Outgoing:
         that came as an `any` itself (type %ANY), else the whole structured event."""
         out = CdrOutput()
         inp = CdrInput(self.body)
-        if self.fields.type_name == "%ANY" and not self.fields.domain:
+        if self.fields.type_name == ANY_TYPE and not self.fields.domain:
             head = read_head(inp)
             inp.pos = head.body_at
             anys.transcode(tcm.simple(K.tk_any), inp, out, anys.GIOP_REFS, anys.GIOP_REFS)
@@ -250,7 +255,7 @@ class Hub:
             return None
         self.received += 1
         value_at = head.body_at + remainder.size
-        if self.backbone is not None:
+        if self.backbone is not None and self.backbone.wants(head.domain, head.type_name):
             self._publish(source, fields, remainder, inp, value_at)
         if inp.e == LE and start % 8 == 0:
             body = bytes(memoryview(inp.data)[start:])

@@ -68,8 +68,8 @@ class Admin(Protocol):
     def proxy_gone(self, proxy: Proxy) -> None: ...
 
 
-def apply_changes(types: set[EventType], inp: CdrInput) -> None:
-    """Read `added` and `removed` and apply them to `types` (bounded)."""
+def apply_changes(types: set[EventType], inp: CdrInput) -> tuple[list[EventType], list[EventType]]:
+    """Read `added` and `removed`, apply them to `types` (bounded), and return them."""
     added, removed = read_event_types(inp), read_event_types(inp)
     types.difference_update(removed)
     types.update(added)
@@ -77,6 +77,7 @@ def apply_changes(types: set[EventType], inp: CdrInput) -> None:
         for t in added:
             types.discard(t)
         raise wire.InvalidEventType(added[0])
+    return added, removed
 
 
 def _types_out(types: frozenset[EventType] | list[EventType]) -> CdrOutput:
@@ -160,8 +161,7 @@ class ProxyConsumer(Proxy):
     _operations: ClassVar[tuple[str, ...]] = ("obtain_subscription_types", "offer_change")
 
     def __init__(self, admin: Admin, ident: int) -> None:
-        super().__init__(admin, ident)
-        self.types = set(admin.types)  # offers
+        super().__init__(admin, ident)  # its types: its offers
         self.told = Told()
         self.core.hub.add_supplier(self)
 
