@@ -164,3 +164,29 @@ def test_the_ext_operations(door: Door) -> None:
     _, inp = call(door.invoker, door.root.ref, "to_url", out)
     assert inp.string() == "corbaname::127.0.0.1:2809#robot1/Gps.v2"
     assert isinstance(door.thing, ObjectRef)
+
+
+def test_no_request_body_makes_the_naming_service_fail(door: Door) -> None:
+    """Random bodies for every CosNaming operation: refused, never UNKNOWN (a defect)."""
+    import random
+
+    from miro_gen.exceptions import UNKNOWN, SystemException
+
+    robot = door.root.bind_new_context(name("robot1"))
+    robot.bind(name("Laser"), door.thing)
+    rng = random.Random(27)
+    servant = door.server._servant(b"NameService")
+    assert servant is not None
+    for op in sorted(servant._dispatch):
+        if op == "destroy":
+            continue
+        for _ in range(30):
+            out = CdrOutput()
+            out.raw(rng.randbytes(rng.choice((0, 3, 8, 40, 200))))
+            try:
+                call(door.invoker, door.root.ref, op, out)
+            except UNKNOWN as e:
+                pytest.fail(f"{op}: {e}")
+            except SystemException:
+                pass
+    assert door.root.resolve(name("robot1/Laser")).key == door.thing.key
