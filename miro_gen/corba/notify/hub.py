@@ -45,6 +45,7 @@ _peer_warnings = PeerWarnings(_log)
 
 MAX_ROUTES = 4096  # topics whose consumers are remembered
 MAX_TYPECODES = 512  # TypeCodes (as bytes) whose meaning is remembered
+MAX_KEY = 4096  # bytes of a TypeCode, or of a topic's names, that a cache keeps as a key
 _COMPLEX = {
     K.tk_objref,
     K.tk_struct,
@@ -324,9 +325,10 @@ class Hub:
                 for c in self._consumers.values()
                 if any(t.matches(domain, type_name) for t in c.subscribed())
             )
-            if len(self._routes) >= MAX_ROUTES:
-                self._routes = {}
-            self._routes[(domain, type_name)] = route
+            if len(domain) + len(type_name) <= MAX_KEY:  # (huge names: found each time)
+                if len(self._routes) >= MAX_ROUTES:
+                    self._routes = {}
+                self._routes[(domain, type_name)] = route
         return route
 
     # ---- TypeCodes --------------------------------------------------------------------------
@@ -340,14 +342,15 @@ class Hub:
         if at + size > inp.end:
             raise MARSHAL("the event's TypeCode is truncated")
         key = (inp.e, bytes(memoryview(inp.data)[at : at + size]))
-        found = self._typecodes.get(key)
+        found = self._typecodes.get(key) if size <= MAX_KEY else None
         if found is None:
             inp.pos = at
             tc = tcm.read_typecode(inp)
             found = _Remainder(tc, anys.class_for(tc), size)
-            if len(self._typecodes) >= MAX_TYPECODES:
-                self._typecodes = {}
-            self._typecodes[key] = found
+            if size <= MAX_KEY:  # (a huge TypeCode is read each time, not kept)
+                if len(self._typecodes) >= MAX_TYPECODES:
+                    self._typecodes = {}
+                self._typecodes[key] = found
         inp.pos = at + size
         return found
 
@@ -357,7 +360,8 @@ class Hub:
         tcm.write_typecode(out, tc)
         at = len(out.buf)
         p = _Prefix(bytes(out.buf), tc, at % tcm.max_alignment(tc) == 0 and not anys.has_refs(tc))
-        if len(self._prefixes) >= MAX_ROUTES:
-            self._prefixes = {}
-        self._prefixes[(domain, type_name, cls)] = p
+        if len(domain) + len(type_name) <= MAX_KEY:
+            if len(self._prefixes) >= MAX_ROUTES:
+                self._prefixes = {}
+            self._prefixes[(domain, type_name, cls)] = p
         return p
