@@ -190,3 +190,25 @@ def test_no_request_body_makes_the_naming_service_fail(door: Door) -> None:
             except SystemException:
                 pass
     assert door.root.resolve(name("robot1/Laser")).key == door.thing.key
+
+
+def test_miro_naming_refuses_iiop_beyond_loopback_in_one_line() -> None:
+    import subprocess
+    import sys
+
+    from loopback import free_port, service_env
+
+    base = [sys.executable, "-m", "miro_gen.cli.main", "naming", "--endpoint",
+            f"tcp://127.0.0.1:{free_port()}", "--log-file", "none"]  # fmt: skip
+    done = subprocess.run(
+        [*base, "--iiop-endpoint", f"0.0.0.0:{free_port()}"],
+        capture_output=True, text=True, timeout=60, env=service_env(),
+    )  # fmt: skip
+    assert done.returncode == 2 and "give --insecure" in done.stderr, done.stderr
+    assert "Traceback" not in done.stderr
+    done = subprocess.run(
+        [*base, "--iiop-endpoint", "no-such-host.invalid:2810"],
+        capture_output=True, text=True, timeout=60, env=service_env(),
+    )  # fmt: skip
+    assert done.returncode == 1 and "Traceback" not in done.stderr, done.stderr
+    assert done.stderr.count("\n") == 1 and "cannot listen for IIOP" in done.stderr

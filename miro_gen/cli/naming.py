@@ -230,6 +230,10 @@ def naming_main(argv: Sequence[str]) -> int:
         except UsageError as e:
             service.close()
             p.error(str(e))
+        except SystemException as e:  # cannot listen there (in use, not an address)
+            service.close()
+            print(f"miro naming: {e.message}", file=sys.stderr)
+            return 1
     channels = [_host_channel(service, name, corba) for name in ns.channel]
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: reactor.stop())
