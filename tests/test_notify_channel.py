@@ -414,7 +414,8 @@ def test_a_malformed_event_is_refused_and_the_channel_goes_on(rig: Rig) -> None:
     connect_consumer(rig, consumer)
     _, pc = connect_supplier(rig)
     for garbage in (b"", b"\x05\x00\x00\x00ab", b"\x00" * 12 + b"\xff\xff\xff\xff" * 3):
-        rig.call(pc, "push_structured_event", lambda out, g=garbage: out.raw(g))
+        with pytest.raises(MARSHAL):  # the supplier is told
+            rig.call(pc, "push_structured_event", lambda out, g=garbage: out.raw(g))
     assert rig.channel.hub.malformed == 3
     push(rig, pc, "robot1", "Gps", 7)
     assert consumer.wait(1) == [("robot1", "Gps", 7)]

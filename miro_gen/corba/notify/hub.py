@@ -242,15 +242,15 @@ class Hub:
     ) -> Outgoing | None:
         """An event a CORBA supplier pushed (`inp` at its start): if `accept` (its supplier's
         filters) lets it in, routed to the consumers here and published at the other door;
-        the event as it goes on (None: it did not read, or was filtered out)."""
+        the event as it goes on (None: filtered out). MARSHAL when it does not read."""
         start = inp.pos
         try:
             head = read_head(inp)
             remainder = self._remainder(inp, head.body_at)
-        except MARSHAL as e:
+        except MARSHAL as e:  # counted, said, and the supplier told (MARSHAL)
             self.malformed += 1
             _peer_warnings.warning("%s: dropped an event that does not read: %s", self.name, e)
-            return None
+            raise
         fields = Fields(head.domain, head.type_name, head.event_name)
         if accept is not None and not accept(fields):
             return None
