@@ -32,6 +32,7 @@ from miro_gen.eventlog.fileset import Event
 from miro_gen.eventlog.player import ClockState
 from miro_gen.eventlog.replay import ReplaySupplier
 from miro_gen.exceptions import SystemException
+from miro_gen.transport.channels import channel_endpoints
 from miro_gen.transport.events import (
     CHANNEL_REPO_ID,
     EventChannel,
@@ -140,12 +141,14 @@ class Routes:
                 entry = registry.resolve(path)
             except MiroNaming.NotFound:
                 continue
-            if entry.repo_id != CHANNEL_REPO_ID:
+            try:  # a ZeroMQ channel's entry, or one bound with its Notification door
+                endpoints = channel_endpoints(entry)
+            except MiroNaming.NotFound:
                 continue
-            return self._channel(entry)
+            return self._channel(entry, endpoints)
         return None
 
-    def _channel(self, entry: MiroNaming.Entry) -> EventChannel:
+    def _channel(self, entry: MiroNaming.Entry, endpoints: tuple[str, str]) -> EventChannel:
         def again() -> EventChannel:
             found = self._find(entry.name, root=False)
             if found is None:
@@ -154,8 +157,7 @@ class Routes:
 
         return EventChannel(
             entry.name,
-            entry.endpoint,
-            bytes(entry.key).decode(),
+            *endpoints,
             self.server.reactor(),
             self.server.options.naming_context,
             resolve=again,

@@ -9,6 +9,7 @@ queues hold at most PROXY_HWM frames per peer, fewer when the largest message al
 
 from __future__ import annotations
 
+import contextlib
 import os
 import threading
 from collections.abc import Callable
@@ -175,8 +176,13 @@ class EventChannelFactory:
         entry = MiroNaming.Entry(
             full, CHANNEL_REPO_ID, ch_host.supplier_endpoint, ch_host.consumer_endpoint.encode(), ""
         )
-        self.server.bind_entry(entry)
         self.server.on_shutdown(ch_host.close)
+        corba = getattr(self.server, "corba", None)
+        if corba is not None:  # an IIOP side: the Notification door too (transport.notify_door)
+            door = corba.open_door(channel)
+            self.server.on_shutdown(door.close)
+            entry = door.entry()
+        self.server.bind_entry(entry)
         self._channels[full] = channel
         return channel
 
@@ -195,13 +201,29 @@ class EventChannelFactory:
 def resolve_channel(server: ChannelServer, name: str = DEFAULT_CHANNEL) -> EventChannel:
     """The channel bound as `name` (naming rules as for objects)."""
     entry = server.naming.resolve(name)
-    if entry.repo_id != CHANNEL_REPO_ID:
-        raise MiroNaming.NotFound(name=f"{entry.name} (bound, but not an event channel)")
+    supplier, consumer = channel_endpoints(entry)
     return EventChannel(
         entry.name,
-        entry.endpoint,
-        bytes(entry.key).decode(),
+        supplier,
+        consumer,
         server.reactor(),
         server.options.naming_context,
         resolve=lambda: resolve_channel(server, entry.name),
     )
+
+
+def channel_endpoints(entry: MiroNaming.Entry) -> tuple[str, str]:
+    """(supplier, consumer) endpoints of a channel's naming entry: a ZeroMQ channel's, or the
+    miro-gen profile of a channel bound with its Notification door (transport.notify_door)."""
+    if entry.repo_id == CHANNEL_REPO_ID:
+        return entry.endpoint, bytes(entry.key).decode()
+    ior = getattr(getattr(entry, "ref", None), "ior", None)
+    if ior is None and entry.endpoint.startswith("IOR:"):
+        from miro_gen.corba.ior import IOR, UrlError
+
+        with contextlib.suppress(UrlError):
+            ior = IOR.from_string(entry.endpoint)
+    found = ior.zmq_profile() if ior is not None else None
+    if found is None:
+        raise MiroNaming.NotFound(name=f"{entry.name} (bound, but not an event channel)")
+    return found[0], bytes(found[1]).decode("utf-8", "replace")

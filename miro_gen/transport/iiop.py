@@ -20,10 +20,10 @@ from __future__ import annotations
 
 import socket
 import threading
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from miro_gen.corba.client import IIOPInvoker
-from miro_gen.corba.ior import CorbaRef
+from miro_gen.corba.ior import IOR, CorbaRef, ref_from_ior
 from miro_gen.corba.naming import CorbaEntry, CorbaNaming, Peer, corba_naming, decide
 from miro_gen.corba.server import BeyondLoopback, IIOPServer
 from miro_gen.log import logger
@@ -32,6 +32,10 @@ from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.transport import sockets
 from miro_gen.transport.addresses import LOOPBACK, Addresses, server_addresses
 from miro_gen.transport.options import CommonOptions, UsageError
+
+if TYPE_CHECKING:
+    from miro_gen.transport.channels import EventChannel
+    from miro_gen.transport.notify_door import NotifyDoor
 
 _log = logger("MIRO")
 
@@ -46,6 +50,7 @@ class CorbaSide:
         if naming_url is not None:
             self.naming = corba_naming(self.iiop, naming_url, client.options.naming_context)
         self.server: IIOPServer | None = None
+        self._factory: Any = None  # the Notification doors' factory, once a channel has one
         self._names: list[str] = []
         self._lock = threading.Lock()
 
@@ -96,8 +101,22 @@ class CorbaSide:
             self._names.remove(full)
         self.naming.unbind(full)
 
+    def open_door(self, channel: EventChannel) -> NotifyDoor:
+        """Serve `channel` (hosted here) as a CosNotifyChannelAdmin::EventChannel too, under
+        its full name as object key (transport.notify_door)."""
+        from miro_gen.transport.notify_door import NotifyDoor, serve_factory
+
+        server = self.server or self._lazy_server()
+        if self._factory is None:
+            self._factory = serve_factory(server)
+        return NotifyDoor(channel, server, self.iiop, channel.name, self._factory)
+
     def stub(self, entry: Any, cls: type[rpc.StubT]) -> rpc.StubT:
-        ref = getattr(entry, "ref", None) or ObjectRef(entry.repo_id, entry.endpoint, entry.key)
+        ref = getattr(entry, "ref", None)
+        if ref is None and entry.endpoint.startswith("IOR:"):  # bound through CosNaming
+            ref = ref_from_ior(IOR.from_string(entry.endpoint))
+        if ref is None:
+            ref = ObjectRef(entry.repo_id, entry.endpoint, entry.key)
         return cls(ref, self.iiop)
 
     def close(self) -> None:
