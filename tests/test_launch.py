@@ -214,6 +214,35 @@ def test_the_floors_keep_a_crash_loop_slow(tmp_path: Path) -> None:
     assert [a.restart.backoff(n) for n in range(1, 7)] == [0.1, 0.2, 0.4, 0.8, 1.0, 1.0]
 
 
+def test_the_naming_service_takes_the_restart_keys_of_a_service(tmp_path: Path) -> None:
+    """[naming] restarts as a service does, with the same keys (not 'unknown key')."""
+    write(
+        tmp_path,
+        "robot.toml",
+        """
+        [naming]
+        restart = "on-failure"
+        restart_delay = 0.2
+        restart_delay_max = 2
+        restart_limit = 3
+        stable_after = 5
+
+        [services.a]
+        command = "true"
+        """,
+    )
+    spec = read_launch_file(tmp_path / "robot.toml")
+    assert spec.naming is not None
+    policy = spec.naming.restart
+    assert (policy.when, policy.delay, policy.delay_max, policy.limit, policy.stable_after) == (
+        "on-failure",
+        0.2,
+        2.0,
+        3,
+        5.0,
+    )
+
+
 # ---- running ---------------------------------------------------------------------------------
 
 

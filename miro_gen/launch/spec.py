@@ -53,7 +53,8 @@ SECONDS_RANGES = {
 }
 
 _LAUNCH_KEYS = {"context", "naming", "grace", "log_level", "colour"}
-_NAMING_KEYS = {"host", "endpoint", "channels", "announce", "restart", "log_level"}
+_RESTART_KEYS = {"restart", "restart_delay", "restart_delay_max", "restart_limit", "stable_after"}
+_NAMING_KEYS = {"host", "endpoint", "channels", "announce", "log_level", *_RESTART_KEYS}
 _HOST_KEYS = {"address"}
 _SERVICE_KEYS = {
     "run",
@@ -67,11 +68,7 @@ _SERVICE_KEYS = {
     "parameters",
     "after",
     "ready",
-    "restart",
-    "restart_delay",
-    "restart_delay_max",
-    "restart_limit",
-    "stable_after",
+    *_RESTART_KEYS,
     "required",
     "env",
     "log_level",
