@@ -51,11 +51,14 @@ def new_main(argv: Sequence[str]) -> int:
         return 1
     for path in written:
         print(f"wrote {path.relative_to(project)}")
-    print(
-        f"\nnext:\n"
-        f"  miro naming &                            # a naming service, if none runs\n"
-        f"  miro run {args.name}                       # start it\n"
-        f"  python -m pytest {args.dir}/{args.name}            # its test\n"
-        f"  edit {args.dir}/{args.name}/ (see its README.md)"
-    )
+    steps = [
+        ("miro naming &", "a naming service, if none runs"),
+        (f"miro run {args.name}", "start it"),
+        (f"python -m pytest {args.dir}/{args.name}", "its test"),
+        (f"edit {args.dir}/{args.name}/", "see its README.md"),
+    ]
+    width = max(len(command) for command, _ in steps) + 2
+    print("\nnext:")
+    for command, why in steps:
+        print(f"  {command:<{width}}# {why}")
     return 0
