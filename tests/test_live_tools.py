@@ -66,19 +66,24 @@ REPORT = re.compile(
 
 def test_hz_prints_the_rate_and_period_spread(naming: str, supplier: ReplaySupplier) -> None:
     hz = miro("hz", "*/ExampleEvent", "--naming", naming)
-    assert hz.stdout is not None
-    lines: list[str] = []
-    threading.Thread(target=lambda: lines.extend(hz.stdout or ()), daemon=True).start()
-    eventually(lambda: supplier.has_subscribers("ExampleEvent"))
-    due = time.monotonic()
-    for n in range(60):  # 50 Hz for 1.2 s
-        due += 0.02
-        time.sleep(max(0.0, due - time.monotonic()))
-        supplier.push("ExampleEvent", event(n))
-    # Its once-a-second report, once it has counted all 60 (59 periods).
-    eventually(lambda: any((m := REPORT.search(x)) and m[5] == "59" for x in lines), 30)
-    hz.send_signal(signal.SIGINT)
-    assert hz.wait(20) == 0, hz.stderr.read() if hz.stderr else ""
+    try:
+        assert hz.stdout is not None
+        lines: list[str] = []
+        threading.Thread(target=lambda: lines.extend(hz.stdout or ()), daemon=True).start()
+        eventually(lambda: supplier.has_subscribers("ExampleEvent"))
+        due = time.monotonic()
+        for n in range(60):  # 50 Hz for 1.2 s
+            due += 0.02
+            time.sleep(max(0.0, due - time.monotonic()))
+            supplier.push("ExampleEvent", event(n))
+        # Its once-a-second report, once it has counted all 60 (59 periods).
+        eventually(lambda: any((m := REPORT.search(x)) and m[5] == "59" for x in lines), 30)
+        hz.send_signal(signal.SIGINT)
+        assert hz.wait(20) == 0, hz.stderr.read() if hz.stderr else ""
+    finally:
+        if hz.poll() is None:  # a failed check leaves no `miro hz` behind
+            hz.kill()
+            hz.wait()
     reports = [m.groups() for x in lines if (m := REPORT.search(x))]
     rate, low, high, std, _, lag, lag_max, missed = next(r for r in reports if r[4] == "59")
     # The figures are of arrival times, which a loaded machine bends: the test checks what
