@@ -4,15 +4,15 @@ the same run, interleaved; sensor_msgs/Image of 16 bytes and of 1 MiB. Loopback 
 (`ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`, a domain of its own).
 
 The receiver stamps nothing: the sender puts its wall-clock time in `header.stamp` as it
-publishes, the receiver subtracts it from its own (one machine, one clock). Publishers send as
-fast as they go for `--seconds`; keep-last 10 reliable, so a slow receiver costs the sender.
+publishes, the receiver subtracts it from its own (one machine, one clock). Each sender sends a
+fixed number of messages, reliable keep-last 10, and waits for the subscriber's acks after every
+WINDOW of them (miro: `Publisher.wait_for_acks`, rclpy: `wait_for_all_acked`): a sender bounded
+so, as both are the same way, cannot flood the rclpy receiver (an unbounded miro sender did:
+the receiver fell behind for minutes). The rate is the receiver's, first to last message.
 Needs the ROS 2 environment of tests/ros2_env.py (made if missing) and the generated
 sensor_msgs types (compiled here from its `share/`).
 
-    python bench/bench_ros2.py [--seconds 3] [--repeats 5]
-
-Not finished: in its first runs the rclpy receiver of a flood from the miro publisher never
-printed its count (and ignored SIGTERM); no figures are taken from it yet.
+    python bench/bench_ros2.py [--repeats 5] [--scale 1]
 """
 
 from __future__ import annotations
@@ -35,6 +35,8 @@ import ros2_env  # noqa: E402
 
 PEER = Path(__file__).resolve().parent / "ros2_peer.py"
 SIZES = {"16 B": 16, "1 MiB": 1 << 20}
+COUNTS = {16: 2000, 1 << 20: 150}  # messages per run, times --scale
+WINDOW = 5  # as bench/ros2_peer.py (0: no waits; a flood then stalls the rclpy receiver)
 
 
 def _peer(env: ros2_env.Ros2Env, domain: int, *args: str) -> subprocess.Popen[str]:
@@ -44,7 +46,7 @@ def _peer(env: ros2_env.Ros2Env, domain: int, *args: str) -> subprocess.Popen[st
                             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)  # fmt: skip
 
 
-def _miro_send(image: Any, size: int, seconds: float) -> None:
+def _miro_send(image: Any, size: int, count: int) -> None:
     from miro_gen.ros2.node import Node
 
     with Node("bench_miro_send") as node:
@@ -52,33 +54,35 @@ def _miro_send(image: Any, size: int, seconds: float) -> None:
         pub.wait_for_subscribers(1, 60)
         time.sleep(0.5)
         msg = image(height=1, width=size, encoding="mono8", step=size, data=bytes(size))
-        end = time.monotonic() + seconds
-        while time.monotonic() < end:
+        for i in range(count):
             msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(time.time_ns(), 10**9)
             pub.publish(msg)
-        time.sleep(0.5)
+            if WINDOW and i % WINDOW == WINDOW - 1:
+                pub.wait_for_acks(30)
+        pub.wait_for_acks(30)
 
 
 def run_once(
-    env: ros2_env.Ros2Env, image: Any, sender: str, size: int, seconds: float
+    env: ros2_env.Ros2Env, image: Any, sender: str, size: int, count: int
 ) -> dict[str, Any]:
     domain = random.randint(120, 230)
     os.environ["ROS_DOMAIN_ID"] = str(domain)
-    recv = _peer(env, domain, "recv", "/bench", str(seconds))
+    recv = _peer(env, domain, "recv", "/bench", str(count))
     assert recv.stdout is not None and recv.stdout.readline().strip() == "ready"
     if sender == "miro":
-        _miro_send(image, size, seconds + 0.5)
+        _miro_send(image, size, count)
     else:
-        send = _peer(env, domain, "send", "/bench", str(size), str(seconds + 0.5))
-        send.wait(timeout=180)
-    out, _ = recv.communicate(timeout=180)
+        send = _peer(env, domain, "send", "/bench", str(size), str(count))
+        send.wait(timeout=300)
+    out, _ = recv.communicate(timeout=300)
     r = json.loads(out.strip().splitlines()[-1])
-    return {"rate": r["count"] / r["seconds"] if r["seconds"] else 0.0, "p50_us": r["p50_us"]}
+    rate = (r["count"] - 1) / r["seconds"] if r["seconds"] else 0.0
+    return {"rate": rate, "p50_us": r["p50_us"], "count": r["count"]}
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--seconds", type=float, default=3.0)
+    ap.add_argument("--scale", type=float, default=1.0, help="times the messages per run")
     ap.add_argument("--repeats", type=int, default=5)
     args = ap.parse_args()
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
@@ -98,7 +102,7 @@ def main() -> None:
         for label, size in SIZES.items():
             for sender in ("miro", "rclpy"):
                 results.setdefault((label, sender), []).append(
-                    run_once(env, Image, sender, size, args.seconds)
+                    run_once(env, Image, sender, size, int(COUNTS[size] * args.scale))
                 )
     print(f"load average: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
     head = f"{'message':8} {'sender':6} {'msgs/s median (min-max)':>28}"
@@ -108,7 +112,8 @@ def main() -> None:
         lats = [r["p50_us"] for r in rows if r["p50_us"] is not None]
         rate = f"{statistics.median(rates):12.0f} ({min(rates):.0f}-{max(rates):.0f})"
         lat = f"{statistics.median(lats):14.0f} ({min(lats):.0f}-{max(lats):.0f})"
-        print(f"{label:8} {sender:6} {rate} {lat}")
+        got = min(r["count"] for r in rows)
+        print(f"{label:8} {sender:6} {rate} {lat}  (fewest received {got})")
     for label in SIZES:
         m = statistics.median(r["rate"] for r in results[(label, "miro")])
         r_ = statistics.median(r["rate"] for r in results[(label, "rclpy")])

@@ -98,10 +98,11 @@ def server_and_channel(
 
 
 def open_log(path: str) -> Any:
+    from miro_gen.cli.log_ros2 import log_file
     from miro_gen.eventlog.reader import LogError, LogReader
 
     try:
-        return LogReader(path)
+        return LogReader(log_file(path))
     except LogError as e:
         print(f"{path}: error: {e}", file=sys.stderr)
         return None

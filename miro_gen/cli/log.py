@@ -155,6 +155,7 @@ def echo_main(argv: Sequence[str]) -> int:
     if log is None:
         return 1
     shown = 0
+    ros_classes: dict[int, Any] = {}  # a rosbag2 file's topics: their generated classes
     with log:
         if ns.topics and not _matching_topics(ns.file, log, ns.topics):
             return 1
@@ -165,7 +166,15 @@ def echo_main(argv: Sequence[str]) -> int:
                     matches(f, topic.domain, topic.type_name) for f in ns.topics
                 ):
                     continue
-                text = payload_text(topic.type_hash, message.data, limit)
+                if topic.ros2 and topic.id not in ros_classes:
+                    ros_classes[topic.id] = _ros2_class(topic)
+                cls = ros_classes.get(topic.id)
+                if topic.ros2 and cls is None:
+                    text = (
+                        f"({len(message.data)} bytes; no generated type here for {topic.type_name})"
+                    )
+                else:
+                    text = payload_text(topic.type_hash, message.data, limit, cls)
                 print(f"{clock_text(message.log_time)} {topic.topic} #{message.sequence} {text}")
                 shown += 1
                 if ns.count and shown >= ns.count:
@@ -176,6 +185,13 @@ def echo_main(argv: Sequence[str]) -> int:
             return 1
     log_warning(ns.file, log)
     return 0
+
+
+def _ros2_class(topic: Any) -> Any:
+    """The generated class of a rosbag2 file's topic, if one is here."""
+    from miro_gen.ros2.bag import message_class
+
+    return message_class(topic.type_name, topic.type_hash)
 
 
 def _matching_topics(path: str, log: Any, wanted: list[tuple[str, str]]) -> bool:

@@ -131,7 +131,13 @@ def play_main(argv: Sequence[str]) -> int:
         "channel: every event at its log time (scaled by --rate), with its recorded domain, "
         "type, sequence number and source stamp. " + KEYS + " " + COMMON,
     )
-    p.add_argument("files", nargs="+", metavar="FILE", help="MCAP files written by miro log record")
+    p.add_argument(
+        "files",
+        nargs="+",
+        metavar="FILE",
+        help="MCAP files written by miro log record, or rosbag2 files (played onto "
+        "their ROS 2 topics)",
+    )
     add_channel_options(p)
     p.add_argument("--rate", type=float, default=1.0, help="speed factor (default 1)")
     p.add_argument("--loop", action="store_true", help="start again at the end")
@@ -152,6 +158,10 @@ def play_main(argv: Sequence[str]) -> int:
     if not ns.rate > 0:
         p.error("--rate must be more than 0")
     check_selection(p, ns)
+    from miro_gen.cli.log_ros2 import is_rosbag, play_ros2
+
+    if is_rosbag(ns.files):  # onto ROS 2 topics, as ros2 bag play
+        return play_ros2(prog, ns)
     from miro_gen.eventlog.fileset import FileSet
 
     files = FileSet()

@@ -15,6 +15,7 @@ from miro_gen.cli.eventargs import (
     split_common,
     topic_arg,
 )
+from miro_gen.cli.log_ros2 import add_ros2_flag, record_ros2
 
 SHOWN_UNKNOWN = 10  # topics without a generated type named one by one at the end
 
@@ -42,9 +43,12 @@ def record_main(argv: Sequence[str]) -> int:
         metavar="TOPIC",
         help="DOMAIN/TYPE to record, * for any part (robot1/*, */Odometry); default all",
     )
+    add_ros2_flag(p)
     ns = p.parse_args(split_common(p, argv))
     if ns.output is not None and os.path.exists(ns.output) and not ns.force:
         p.error(f"{ns.output} exists (use --force to overwrite it)")
+    if ns.ros2:
+        return record_ros2(prog, ns.output or default_output("ros2"), ns.topics)
     from miro_gen.eventlog.progress import StatusLine
     from miro_gen.eventlog.recorder import Recorder
     from miro_gen.eventlog.writer import LogWriter

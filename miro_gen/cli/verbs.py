@@ -235,13 +235,18 @@ VERBS: tuple[Verb, ...] = (
     ),
     Verb(
         "bridge",
-        "relay events with a CORBA event channel (bridge corba)",
+        "relay events with a CORBA event channel or ROS 2 topics (bridge corba, ros2)",
         description="Relay events between miro-gen's event channels and another middleware's.",
         subs=(
             Verb(
                 "corba",
                 "with a CORBA event channel (CosEventComm push model, as omniEvents serves it)",
                 run="miro_gen.cli.bridge:corba_main",
+            ),
+            Verb(
+                "ros2",
+                "with ROS 2 topics (DDS, as ROS 2's RMWs; the ros2 extra)",
+                run="miro_gen.cli.bridge:ros2_main",
             ),
         ),
     ),

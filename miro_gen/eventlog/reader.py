@@ -57,9 +57,25 @@ class Topic:
     schema: bytes
     message_encoding: str
 
+    @property
+    def ros2(self) -> bool:
+        """Whether this is a ROS 2 topic of a rosbag2 file."""
+        return self.schema_encoding in ROS2_SCHEMA_ENCODINGS
+
+
+ROS2_SCHEMA_ENCODINGS = ("ros2msg", "ros2idl")  # rosbag2's (miro_gen/ros2/bag.py)
+
 
 def _topic(channel: Channel, schema: Schema | None) -> Topic:
+    """A channel as a topic: miro's `domain/type`; or, in a rosbag2 file, the ROS topic as its
+    domain, the ROS type (`pkg/msg/Name`) and its RIHS01 hash."""
     meta = channel.metadata
+    if schema is not None and schema.encoding in ROS2_SCHEMA_ENCODINGS:
+        return Topic(
+            channel.id, channel.topic, channel.topic, schema.name,
+            meta.get("topic_type_hash", ""), schema.name, schema.encoding, schema.data,
+            channel.message_encoding,
+        )  # fmt: skip
     domain, _, type_name = channel.topic.rpartition("/")
     type_hash = meta.get("type_hash", "")
     if not type_hash and schema is not None and schema.encoding == "omgidl":

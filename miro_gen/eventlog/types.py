@@ -28,7 +28,10 @@ def topic_name(domain: str, type_name: str) -> str:
 
 def parse_topic(text: str) -> tuple[str, str]:
     """(domain, type) of `domain/type`; the domain may be a path (`lab/robot1/Odometry`), either
-    part may be `*`. A bare `TYPE` means `*/TYPE`."""
+    part may be `*`. A bare `TYPE` means `*/TYPE`. A ROS 2 topic (`/chatter`, of a rosbag2
+    file, whose domain it is) means `/chatter` of any type."""
+    if text.startswith("/") and len(text) > 1:
+        return text, ANY
     domain, sep, type_name = text.rpartition("/")
     if not sep:
         return ANY, text

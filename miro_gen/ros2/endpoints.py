@@ -79,6 +79,10 @@ class RawWriter:
         if ret < 0:
             raise OSError(f"DDS write failed ({ret})")
 
+    def wait_for_acks(self, timeout: float) -> bool:
+        """Whether every matched reliable reader acknowledged all written within `timeout` s."""
+        return bool(self._writer.wait_for_acks(int(timeout * 1e9)))
+
     def matched(self) -> int:
         """How many readers this writer has matched."""
         return len(self._writer.get_matched_subscriptions())
@@ -160,6 +164,20 @@ class Dispatcher:
         self._wake.set(True)
         if threading.current_thread() is not self._thread:
             self._thread.join(timeout=5)
+
+    def drain(self) -> None:
+        """Stop the thread, then hand over what the readers hold still (a recorder's last
+        messages), on the calling thread."""
+        self.stop()
+        with self._lock:
+            readers = list(self._readers.values())
+        for reader in readers:
+            while samples := reader.take():
+                for data, info in samples:
+                    try:
+                        reader.handler(data, info)
+                    except Exception:
+                        log.exception("a ROS 2 handler failed")
 
     def _run(self) -> None:
         while not self._stopping:

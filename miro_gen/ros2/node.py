@@ -167,6 +167,10 @@ class Publisher(Generic[M]):
         """Publish a message already in CDR (with its encapsulation header)."""
         self._writer.write(data)
 
+    def wait_for_acks(self, timeout: float = 10.0) -> bool:
+        """Whether every reliable subscription matched took all published, within `timeout` s."""
+        return self._writer.wait_for_acks(timeout)
+
     def subscribers(self) -> int:
         """How many subscriptions this publisher has matched."""
         return self._writer.matched()

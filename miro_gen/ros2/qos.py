@@ -9,8 +9,10 @@ XCDR1 (the data representation the RMWs announce).
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
-from cyclonedds.qos import Policy, Qos
+if TYPE_CHECKING:
+    from cyclonedds.qos import Qos
 
 # What a reliable writer may block for when its history is full (rmw's default: 100 ms in
 # rmw_cyclonedds; Fast DDS's own default), in nanoseconds.
@@ -71,7 +73,10 @@ def parse_user_data(data: bytes) -> dict[str, str]:
 
 
 def dds_qos(profile: QosProfile, user_data: bytes = b"") -> Qos:
-    """The cyclonedds QoS of an endpoint with `profile`."""
+    """The cyclonedds QoS of an endpoint with `profile` (the profiles themselves need no DDS:
+    rosbag2 files carry them too)."""
+    from cyclonedds.qos import Policy, Qos
+
     policies = [
         Policy.Reliability.Reliable(MAX_BLOCKING_NS)
         if profile.reliable

@@ -108,7 +108,7 @@ def discover() -> bool:
                 continue
             if first.startswith(GENERATED_MARK.encode()):
                 try:
-                    importlib.import_module(name)
+                    _import_subpackages(importlib.import_module(name))
                     new = True
                 except Exception as e:  # a broken package must not stop the search
                     import logging
@@ -118,6 +118,17 @@ def discover() -> bool:
                     )
         _discovered = True
         return new
+
+
+def _import_subpackages(package: object, depth: int = 4) -> None:
+    """Import the subpackages a generated package lists (`_SUBMODULES`, those not `*_idl`), so
+    that the types of nested IDL modules (ROS 2's `pkg::msg`) are listed too; their `__init__`
+    alone, never their types' modules."""
+    if depth <= 0:
+        return
+    for sub in sorted(getattr(package, "_SUBMODULES", ())):
+        if not sub.endswith("_idl"):
+            _import_subpackages(importlib.import_module(f"{package.__name__}.{sub}"), depth - 1)  # type: ignore[attr-defined]
 
 
 def discover_in_background(done: Callable[[], object]) -> None:
