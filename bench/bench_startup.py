@@ -35,8 +35,8 @@ sys.path[:0] = [str(ROOT / "generated"), str(ROOT)]
 import MiroNaming  # noqa: E402
 import zmq  # noqa: E402
 
-from miro_gen.transport.invoker import ZmqInvoker  # noqa: E402
 from miro_gen.transport.naming import NamingClient  # noqa: E402
+from miro_gen.transport.rpc.invoker import ZmqInvoker  # noqa: E402
 
 TARGET = 2.0
 PYRO = "Pyro5 daemon + name server"

@@ -19,7 +19,6 @@ from miro_gen.exceptions import SystemException
 from miro_gen.transport import sockets
 from miro_gen.transport.addresses import server_addresses
 from miro_gen.transport.channels import CHANNEL_REPO_ID, ChannelHost
-from miro_gen.transport.invoker import ZmqInvoker
 from miro_gen.transport.local import naming_socket
 from miro_gen.transport.naming import (
     DEFAULT_HOLD,
@@ -32,6 +31,7 @@ from miro_gen.transport.naming_log import LogError, default_path
 from miro_gen.transport.naming_service import NamingService
 from miro_gen.transport.options import DEFAULT_NAMING, UsageError, byte_size, naming_endpoint
 from miro_gen.transport.reactor import Reactor
+from miro_gen.transport.rpc.invoker import ZmqInvoker
 
 # What a stranger may do with a naming service served --insecure beyond loopback
 NAMING_SERVES = "list, resolve and bind names, and publish and subscribe on its event channels"

@@ -20,11 +20,11 @@ import zmq
 
 from miro_gen.log import logger
 from miro_gen.transport import sockets
-from miro_gen.transport.adapter import ObjectAdapter
 from miro_gen.transport.addresses import Addresses
 from miro_gen.transport.local import bind_twin, nearest
 from miro_gen.transport.options import CommonOptions
 from miro_gen.transport.reactor import Reactor
+from miro_gen.transport.rpc.adapter import ObjectAdapter
 
 _log = logger("MIRO")
 

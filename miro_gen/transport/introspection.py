@@ -214,7 +214,7 @@ def bind_service(server: Server, impl: ServiceImpl, background: bool = False) ->
         return
 
     def bind() -> None:
-        from miro_gen.transport.invoker import ZmqInvoker
+        from miro_gen.transport.rpc.invoker import ZmqInvoker
 
         invoker = ZmqInvoker(server.context)
         try:

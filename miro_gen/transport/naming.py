@@ -5,7 +5,7 @@ The service is a remote object, `MiroNaming::Registry` 2.0 (idl/MiroNaming.idl),
 the key `NameService` at a well-known endpoint (`tcp://127.0.0.1:2809` by default); its side is
 `transport.naming_service`. Entries are held under leases that their servers renew. An entry
 belongs to an owner that the service checks itself: the caller's principal (its user, or its
-host and key, `transport.caller`) and the service the caller says it is. A process on the
+host and key, `transport.rpc.caller`) and the service the caller says it is. A process on the
 naming service's machine makes its owner's calls over the service's Unix socket
 (`transport.local.local_naming_socket`), where the kernel tells the service who calls.
 Everything the service holds is bounded: quotas per principal, a table size, entry sizes
@@ -21,9 +21,9 @@ import MiroNaming
 
 from miro_gen.exceptions import BAD_OPERATION, COMM_FAILURE, TIMEOUT, TRANSIENT
 from miro_gen.runtime.cdr import ObjectRef
-from miro_gen.transport.invoker import REFUSED_MINOR, ZmqInvoker
 from miro_gen.transport.local import local_naming_socket
 from miro_gen.transport.naming_table import MAX_LEASE_MS, MAX_NAME_BYTES, check_name
+from miro_gen.transport.rpc.invoker import REFUSED_MINOR, ZmqInvoker
 
 NAMING_KEY = b"NameService"
 DEFAULT_LEASE = 3.0  # seconds an entry lives without renewal

@@ -3,7 +3,7 @@ the limits that keep it bounded. No I/O and no clock of its own (callers pass th
 servant (`transport.naming`) asks it and writes what changed to its log
 (`transport.naming_log`).
 
-An owner (`Holder`) is a *principal*, checked by the naming service (`transport.caller`), and a
+An owner (`Holder`) is a *principal*, checked by the naming service (`transport.rpc.caller`), and a
 *service* and a *run*, which the caller states. The rules, for a name held by a binding:
 
 | the name is held      | same principal, service | same principal, other | other principal |

@@ -34,15 +34,15 @@ from miro_gen.exceptions import TRANSIENT
 from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.runtime.rpc import Servant, Stub
 from miro_gen.transport import channel_link, sockets
-from miro_gen.transport.adapter import ObjectAdapter
 from miro_gen.transport.addresses import server_addresses
 from miro_gen.transport.channels import EventChannel, resolve_channel
 from miro_gen.transport.introspection import SERVICE_KEY, ServiceImpl, bind_service, service_name
-from miro_gen.transport.invoker import ZmqInvoker
 from miro_gen.transport.leases import Leases
 from miro_gen.transport.naming import DEFAULT_LEASE, NamingClient
 from miro_gen.transport.options import CommonOptions, parse_common_options
 from miro_gen.transport.reactor import Reactor
+from miro_gen.transport.rpc.adapter import ObjectAdapter
+from miro_gen.transport.rpc.invoker import ZmqInvoker
 
 StubT = TypeVar("StubT", bound=Stub)
 WAIT_STEP = 0.5  # at most this many seconds between two looks for a name being waited for

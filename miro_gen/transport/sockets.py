@@ -398,7 +398,7 @@ class Admission(threading.Thread):
             self.refused_key += 1
         else:
             self.admitted += 1
-            if mechanism == b"CURVE" and credentials:  # who it is, for transport.caller
+            if mechanism == b"CURVE" and credentials:  # who it is, for transport.rpc.caller
                 user = z85.encode(credentials[0])
         zap.send_multipart([b"1.0", request_id, status, text, user, b""])
         if status != b"200":

@@ -40,7 +40,7 @@ import zmq
 from zmq.backend import Socket as _Socket
 
 from miro_gen.log import logger
-from miro_gen.transport.frames import ZERO_COPY_MIN
+from miro_gen.transport.rpc.frames import ZERO_COPY_MIN
 
 _log = logger("MIRO")
 
@@ -78,7 +78,7 @@ class Task(Protocol):
 
 
 # What ZeroMQ knows of the connection a message came on: its peer address and the user id the
-# admission thread gave it (transport.caller); asked for only by dispatchers that identify.
+# admission thread gave it (transport.rpc.caller); asked for only by dispatchers that identify.
 Peer = tuple[str, str]
 
 # What the owner of the socket makes of a message (and its peer, when asked for): a task to
