@@ -45,7 +45,7 @@ LEASE = "3"
 WAIT_MOVED = """
 import sys, time, zmq
 from miro_gen.transport.rpc.invoker import ZmqInvoker
-from miro_gen.transport.naming import NamingClient
+from miro_gen.transport.naming.client import NamingClient
 naming = NamingClient(ZmqInvoker(zmq.Context()), sys.argv[1], "bench")
 print("READY", flush=True)
 old = sys.stdin.readline().strip()

@@ -35,7 +35,7 @@ sys.path[:0] = [str(ROOT / "generated"), str(ROOT)]
 import MiroNaming  # noqa: E402
 import zmq  # noqa: E402
 
-from miro_gen.transport.naming import NamingClient  # noqa: E402
+from miro_gen.transport.naming.client import NamingClient  # noqa: E402
 from miro_gen.transport.rpc.invoker import ZmqInvoker  # noqa: E402
 
 TARGET = 2.0

@@ -20,7 +20,7 @@ from types import TracebackType
 
 import zmq
 
-from miro_gen.transport.naming_service import NamingService
+from miro_gen.transport.naming.service import NamingService
 from miro_gen.transport.reactor import Reactor
 from miro_gen.transport.rpc.invoker import ZmqInvoker
 

@@ -20,15 +20,15 @@ from miro_gen.transport import sockets
 from miro_gen.transport.addresses import server_addresses
 from miro_gen.transport.channels import CHANNEL_REPO_ID, ChannelHost
 from miro_gen.transport.local import naming_socket
-from miro_gen.transport.naming import (
+from miro_gen.transport.naming.client import (
     DEFAULT_HOLD,
     DEFAULT_MAX_NAMES,
     DEFAULT_QUOTA,
     check_name,
     naming_errors,
 )
-from miro_gen.transport.naming_log import LogError, default_path
-from miro_gen.transport.naming_service import NamingService
+from miro_gen.transport.naming.owners_log import LogError, default_path
+from miro_gen.transport.naming.service import NamingService
 from miro_gen.transport.options import DEFAULT_NAMING, UsageError, byte_size, naming_endpoint
 from miro_gen.transport.reactor import Reactor
 from miro_gen.transport.rpc.invoker import ZmqInvoker
@@ -240,7 +240,7 @@ def naming_main(argv: Sequence[str]) -> int:
         )
     announcer = None
     if announce and not re.search(r"://(127\.|localhost)", bound):
-        from miro_gen.transport.discovery import Announcer
+        from miro_gen.transport.naming.discovery import Announcer
 
         announcer = Announcer(bound)
     reactor.run()

@@ -16,7 +16,7 @@ from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.runtime.rpc import Stub
 from miro_gen.transport.events import CHANNEL_REPO_ID
 from miro_gen.transport.introspection import SERVICE_KEY, SERVICES
-from miro_gen.transport.naming import list_entries
+from miro_gen.transport.naming.client import list_entries
 from miro_gen.transport.server import Client
 
 SERVICE_REPO_ID = MiroService.Service._repo_id

@@ -110,7 +110,7 @@ class ChannelHost:
 
 
 class ChannelNaming(Protocol):
-    """The naming a channel is found in: transport.naming.NamingClient, or a CORBA naming
+    """The naming a channel is found in: transport.naming.client.NamingClient, or a CORBA naming
     service's client (transport.iiop)."""
 
     def full_name(self, name: str) -> str: ...

@@ -12,7 +12,7 @@ A Server owns the process's reactor and one ROUTER socket for all its objects, b
 advertised as `miro_gen.transport.addresses` decides (reachable from the naming service's host,
 or `--host`); its names live
 under its naming context (`-MNC`, default the host name) with leases that a background thread
-renews (`transport.leases`): taken over at start from an earlier run of the same service, and
+renews (`transport.naming.leases`): taken over at start from an earlier run of the same service, and
 never given up when another owner holds them. A Client only calls out.
 """
 
@@ -37,8 +37,8 @@ from miro_gen.transport import channel_link, sockets
 from miro_gen.transport.addresses import server_addresses
 from miro_gen.transport.channels import EventChannel, resolve_channel
 from miro_gen.transport.introspection import SERVICE_KEY, ServiceImpl, bind_service, service_name
-from miro_gen.transport.leases import Leases
-from miro_gen.transport.naming import DEFAULT_LEASE, NamingClient
+from miro_gen.transport.naming.client import DEFAULT_LEASE, NamingClient
+from miro_gen.transport.naming.leases import Leases
 from miro_gen.transport.options import CommonOptions, parse_common_options
 from miro_gen.transport.reactor import Reactor
 from miro_gen.transport.rpc.adapter import ObjectAdapter
@@ -80,7 +80,7 @@ class Client:
     def __init__(self, argv: Sequence[str] | None = None, *, context: Any = None) -> None:
         self.options, self.argv = _take_options(argv)
         if not self.options.naming_given and os.environ.get("MIRO_DISCOVERY", "1") != "0":
-            from miro_gen.transport.discovery import naming_for  # the manual's -m 1
+            from miro_gen.transport.naming.discovery import naming_for  # the manual's -m 1
 
             self.options.naming = naming_for(self.options.naming)
         self.context = context if context is not None else zmq.Context.instance()
@@ -262,7 +262,7 @@ class Server(Client):
     def bind_entry(self, entry: MiroNaming.Entry) -> None:
         """Bind a naming entry under this server's lease (objects, event channels), taking it
         over from an earlier run of this service. A name that another owner holds is not
-        given up on: said loudly, and bound when it is free (`transport.leases`). A naming
+        given up on: said loudly, and bound when it is free (`transport.naming.leases`). A naming
         service that does not answer yet is waited for (`--wait-naming`)."""
         if self.corba is not None and self.corba.naming is not None:
             self.corba.bind(entry)  # CosNaming: no lease; unbound when the server stops

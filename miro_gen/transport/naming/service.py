@@ -8,8 +8,8 @@ kernel, over the Unix socket; the host and key of one beyond it) together with t
 it says it is. A process on this machine that asks over TCP cannot be told from any other
 user's, so where the Unix socket exists, its calls that need an owner are refused
 (NO_PERMISSION) and it is told to come through the socket; reading (`resolve`, `list_page`)
-is open to everyone. The table's rules are in `transport.naming_table`, the log that keeps
-owners across restarts in `transport.naming_log`; docs/SECURITY.md says why.
+is open to everyone. The table's rules are in `transport.naming.table`, the log that keeps
+owners across restarts in `transport.naming.owners_log`; docs/SECURITY.md says why.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from miro_gen.log import PeerWarnings, logger
 from miro_gen.runtime.rpc import nonblocking
 from miro_gen.transport import sockets
 from miro_gen.transport.local import naming_socket
-from miro_gen.transport.naming import (
+from miro_gen.transport.naming.client import (
     DEFAULT_HOLD,
     DEFAULT_LEASE,
     DEFAULT_MAX_NAMES,
@@ -34,8 +34,8 @@ from miro_gen.transport.naming import (
     MAX_PAGE,
     NAMING_KEY,
 )
-from miro_gen.transport.naming_log import OwnersLog, Restored
-from miro_gen.transport.naming_table import Holder, Table, check_entry, check_name
+from miro_gen.transport.naming.owners_log import OwnersLog, Restored
+from miro_gen.transport.naming.table import Holder, Table, check_entry, check_name
 from miro_gen.transport.reactor import Reactor
 from miro_gen.transport.rpc import caller
 from miro_gen.transport.rpc.adapter import ObjectAdapter

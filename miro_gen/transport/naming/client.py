@@ -3,7 +3,7 @@ object references, looked up, listed page by page, and bound by owners.
 
 The service is a remote object, `MiroNaming::Registry` 2.0 (idl/MiroNaming.idl), served under
 the key `NameService` at a well-known endpoint (`tcp://127.0.0.1:2809` by default); its side is
-`transport.naming_service`. Entries are held under leases that their servers renew. An entry
+`transport.naming.service`. Entries are held under leases that their servers renew. An entry
 belongs to an owner that the service checks itself: the caller's principal (its user, or its
 host and key, `transport.rpc.caller`) and the service the caller says it is. A process on the
 naming service's machine makes its owner's calls over the service's Unix socket
@@ -22,7 +22,7 @@ import MiroNaming
 from miro_gen.exceptions import BAD_OPERATION, COMM_FAILURE, TIMEOUT, TRANSIENT
 from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.transport.local import local_naming_socket
-from miro_gen.transport.naming_table import MAX_LEASE_MS, MAX_NAME_BYTES, check_name
+from miro_gen.transport.naming.table import MAX_LEASE_MS, MAX_NAME_BYTES, check_name
 from miro_gen.transport.rpc.invoker import REFUSED_MINOR, ZmqInvoker
 
 NAMING_KEY = b"NameService"
@@ -59,7 +59,7 @@ class NamingClient:
         self.owner_endpoint = local_naming_socket(endpoint) or endpoint
         self.registry = self.registry_stub(invoker, 5.0)
         # Called before a look-up until one has been made: a server waits there for a naming
-        # service that does not answer yet (transport.leases).
+        # service that does not answer yet (transport.naming.leases).
         self.before_first_call: Callable[[], None] | None = None
 
     def registry_stub(

@@ -30,7 +30,7 @@ import MiroNaming
 from miro_gen import lifecycle
 from miro_gen.exceptions import TRANSIENT, SystemException
 from miro_gen.log import logger
-from miro_gen.transport.naming import NamingClient, naming_errors
+from miro_gen.transport.naming.client import NamingClient, naming_errors
 from miro_gen.transport.rpc.invoker import REFUSED_MINOR, ZmqInvoker
 
 _log = logger("MIRO")
