@@ -24,7 +24,7 @@ from loopback import NamingProcess, eventually, run_miro
 
 from miro_gen.clock import LogClock
 from miro_gen.eventlog.writer import LogWriter
-from miro_gen.transport.event_frames import RawEvent
+from miro_gen.transport.events.frames import RawEvent
 from miro_gen.transport.reactor import Reactor
 
 T0 = 1_577_836_800_000_000_000  # 2020-01-01 00:00:00 UTC: log time is not wall time

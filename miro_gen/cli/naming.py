@@ -18,7 +18,7 @@ from miro_gen import log
 from miro_gen.exceptions import SystemException
 from miro_gen.transport import sockets
 from miro_gen.transport.addresses import server_addresses
-from miro_gen.transport.channels import CHANNEL_REPO_ID, ChannelHost
+from miro_gen.transport.events.channels import CHANNEL_REPO_ID, ChannelHost
 from miro_gen.transport.local import naming_socket
 from miro_gen.transport.naming.client import (
     DEFAULT_HOLD,

@@ -16,8 +16,8 @@ from miro_gen.eventlog.progress import StatusLine, human_bytes
 from miro_gen.eventlog.tap import RawEventTap
 from miro_gen.eventlog.writer import LogWriter
 from miro_gen.runtime import registry
-from miro_gen.transport.channels import EventChannel
-from miro_gen.transport.event_frames import RawEvent
+from miro_gen.transport.events.channels import EventChannel
+from miro_gen.transport.events.frames import RawEvent
 from miro_gen.transport.log_clock import CLOCK_TYPE  # a player's clock: never recorded
 from miro_gen.transport.server import Server
 

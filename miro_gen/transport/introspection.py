@@ -25,7 +25,7 @@ import MiroService__POA
 
 from miro_gen import log
 from miro_gen.runtime.rpc import Servant
-from miro_gen.transport import offers
+from miro_gen.transport.events import offers
 
 if TYPE_CHECKING:  # loaded when first used: a service that never reads parameters, never
     from lxml import etree  # pays for lxml

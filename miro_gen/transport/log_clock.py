@@ -17,8 +17,9 @@ import MiroNaming
 from miro_gen.clock import LogClock
 from miro_gen.exceptions import SystemException
 from miro_gen.log import logger
-from miro_gen.transport.channels import EventChannel
-from miro_gen.transport.event_consumer import StructuredEvent, StructuredPushConsumer
+from miro_gen.transport.events.channels import EventChannel
+from miro_gen.transport.events.consumer import StructuredPushConsumer
+from miro_gen.transport.events.event import StructuredEvent
 
 if TYPE_CHECKING:
     from miro_gen.transport.server import Server

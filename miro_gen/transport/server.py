@@ -33,9 +33,10 @@ from miro_gen import lifecycle, log
 from miro_gen.exceptions import TRANSIENT
 from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.runtime.rpc import Servant, Stub
-from miro_gen.transport import channel_link, sockets
+from miro_gen.transport import sockets
 from miro_gen.transport.addresses import server_addresses
-from miro_gen.transport.channels import EventChannel, resolve_channel
+from miro_gen.transport.events import channel_link
+from miro_gen.transport.events.channels import EventChannel, resolve_channel
 from miro_gen.transport.introspection import SERVICE_KEY, ServiceImpl, bind_service, service_name
 from miro_gen.transport.naming.client import DEFAULT_LEASE, NamingClient
 from miro_gen.transport.naming.leases import Leases

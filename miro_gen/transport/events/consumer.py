@@ -1,27 +1,27 @@
 """Consumers of an event channel (Miro's StructuredPushConsumer): subscriptions by (domain,
 type), frames parsed on the reactor thread, payloads decoded with the generated class their
 type hash names (runtime.registry) when the handler is ready for them, as the consumer's
-quality of service keeps them (transport.event_queue), gaps counted per supplier and type.
-The overview is transport.events; the bytes are transport.event_frames.
+quality of service keeps them (transport.events.queue), gaps counted per supplier and type.
+The overview is transport.events; the bytes are transport.events.frames.
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Iterable
-from dataclasses import dataclass
 from struct import error as StructError
-from typing import Any
 
 import zmq
 
 from miro_gen.log import PeerWarnings, logger
 from miro_gen.runtime import registry
 from miro_gen.runtime.datatypes import IdlType
-from miro_gen.transport import offers, sockets
-from miro_gen.transport.channel_link import ChannelLink
-from miro_gen.transport.channels import EventChannel
-from miro_gen.transport.event_frames import (
+from miro_gen.transport import sockets
+from miro_gen.transport.events import offers
+from miro_gen.transport.events.channel_link import ChannelLink
+from miro_gen.transport.events.channels import EventChannel
+from miro_gen.transport.events.event import StructuredEvent
+from miro_gen.transport.events.frames import (
     BATCH_HEADER,
     EVENT,
     EVENT_HEADER,
@@ -29,9 +29,9 @@ from miro_gen.transport.event_frames import (
     split_topic,
     topic,
 )
-from miro_gen.transport.event_queue import DEFAULT_DEPTH, EventQueue, Waiting
-from miro_gen.transport.event_supplier import HWM, LARGE_EVENT
-from miro_gen.transport.gaps import GapCounter, gap
+from miro_gen.transport.events.gaps import GapCounter, gap
+from miro_gen.transport.events.queue import DEFAULT_DEPTH, EventQueue, Waiting
+from miro_gen.transport.events.supplier import HWM, LARGE_EVENT
 
 _log = logger("MIRO")
 _peer_warnings = PeerWarnings(_log)  # what peers send: rate-limited, with counts
@@ -43,20 +43,6 @@ TURN_FRAMES = 256  # frames a consumer reads per reactor turn
 HOLD_FRAMES = 1000
 HOLD_BYTES = 64 << 20
 ANY = "*"
-
-
-@dataclass(slots=True)
-class StructuredEvent:
-    """One event as a consumer receives it."""
-
-    domain_name: str
-    type_name: str
-    payload: Any  # the decoded generated type
-    seq: int
-    stamp: float  # source time, seconds since the epoch
-    publish_time: float  # when the supplier sent it, seconds since the epoch
-    supplier: int = 0  # the supplier's random id
-    type_hash: str = ""
 
 
 def subscription_prefix(domain: str, type_name: str) -> bytes:
@@ -73,7 +59,7 @@ class StructuredPushConsumer:
     """Receives the events it subscribes to. Subclass it and override
     `push_structured_event(event)`; it runs on the reactor thread, so it must not block.
 
-    Events wait for the handler in a queue kept as `depth` says (transport.event_queue): the
+    Events wait for the handler in a queue kept as `depth` says (transport.events.queue): the
     newest 10 per topic by default, as ROS 2 keeps them; `latest_only` keeps the newest one;
     `depth=KEEP_ALL` keeps everything up to the queue's byte limit. `missed` counts events lost
     on the way (sequence gaps), `dropped` those this consumer skipped because its handler fell

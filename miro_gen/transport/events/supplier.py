@@ -1,7 +1,7 @@
 """Suppliers of an event channel (Miro's StructuredPushSupplier): `push()` from any thread,
 events batched per reactor turn into one frame per topic, large ones alone and copied once,
 nothing encoded while nobody subscribes, every queue bounded and what overflows counted.
-The overview is transport.events; the bytes are transport.event_frames.
+The overview is transport.events; the bytes are transport.events.frames.
 """
 
 from __future__ import annotations
@@ -16,10 +16,11 @@ import zmq
 from miro_gen import clock
 from miro_gen.log import logger
 from miro_gen.runtime.cdr import encode_after
-from miro_gen.transport import offers, sockets
-from miro_gen.transport.channel_link import ChannelLink
-from miro_gen.transport.channels import EventChannel
-from miro_gen.transport.event_frames import (
+from miro_gen.transport import sockets
+from miro_gen.transport.events import offers
+from miro_gen.transport.events.channel_link import ChannelLink
+from miro_gen.transport.events.channels import EventChannel
+from miro_gen.transport.events.frames import (
     BATCH_HEADER,
     EVENT,
     EVENT_HEADER,
