@@ -119,7 +119,7 @@ def supply(naming: str, rate: float, seconds: float) -> tuple[int, float]:
 
 
 def consumer_endpoint(naming: str) -> str:
-    from miro_gen.transport.server import Client
+    from miro_gen.service.server import Client
 
     client = Client(["bench", "--naming", naming])
     try:

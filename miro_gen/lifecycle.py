@@ -196,7 +196,7 @@ def describe(exc: BaseException) -> tuple[str, int] | None:
 
     if isinstance(exc, SystemException):
         return exc.message or str(exc), 1
-    options = sys.modules.get("miro_gen.transport.options")
+    options = sys.modules.get("miro_gen.service.options")
     if options is not None and isinstance(exc, options.UsageError):
         return str(exc), 2
     naming = sys.modules.get("MiroNaming")

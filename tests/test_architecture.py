@@ -44,3 +44,36 @@ def test_one_owner_per_fact(fact: str, owner: str) -> None:
         if fact in p.read_text(encoding="utf-8")
     )
     assert spelled == [owner]
+
+
+def test_no_module_is_much_over_600_lines() -> None:
+    """A module keeps to one job: one that grows past about 600 lines is split along its jobs
+    (docs/ARCHITECTURE.md)."""
+    long = sorted(
+        f"{p.relative_to(ROOT)}: {n} lines"
+        for p in (ROOT / "miro_gen").rglob("*.py")
+        if (n := len(p.read_text(encoding="utf-8").splitlines())) > 650
+    )
+    assert long == []
+
+
+def test_the_events_face_names_each_name_once() -> None:
+    """`miro_gen.transport.events` hands on the names services import, each loaded from its
+    module on first use: the names the type checker sees are those it loads, from the same
+    modules."""
+    import ast
+    import importlib
+
+    from miro_gen.transport import events
+
+    tree = ast.parse((ROOT / "miro_gen/transport/events/__init__.py").read_text(encoding="utf-8"))
+    typed = {
+        alias.name: node.module.rsplit(".", 1)[1]
+        for node in ast.walk(tree)
+        if isinstance(node, ast.ImportFrom) and node.module and ".events." in node.module
+        for alias in node.names
+    }
+    assert typed == events._HOMES
+    for name, home in typed.items():
+        module = importlib.import_module(f"miro_gen.transport.events.{home}")
+        assert getattr(events, name) is getattr(module, name)

@@ -16,6 +16,7 @@ import zmq
 
 from miro_gen import log
 from miro_gen.exceptions import SystemException
+from miro_gen.service.options import DEFAULT_NAMING, UsageError, byte_size, naming_endpoint
 from miro_gen.transport import sockets
 from miro_gen.transport.addresses import server_addresses
 from miro_gen.transport.events.channels import CHANNEL_REPO_ID, ChannelHost
@@ -29,7 +30,6 @@ from miro_gen.transport.naming.client import (
 )
 from miro_gen.transport.naming.owners_log import LogError, default_path
 from miro_gen.transport.naming.service import NamingService
-from miro_gen.transport.options import DEFAULT_NAMING, UsageError, byte_size, naming_endpoint
 from miro_gen.transport.reactor import Reactor
 from miro_gen.transport.rpc.invoker import ZmqInvoker
 
@@ -276,7 +276,7 @@ def _host_channel(service: NamingService, name: str) -> ChannelHost:
 
 
 def nslist_main(argv: Sequence[str]) -> int:
-    from miro_gen.transport.server import Client
+    from miro_gen.service.server import Client
 
     p = argparse.ArgumentParser(
         prog="miro nslist",
@@ -314,7 +314,7 @@ def nslist_main(argv: Sequence[str]) -> int:
 def nsunbind_main(argv: Sequence[str]) -> int:
     import uuid
 
-    from miro_gen.transport.server import Client
+    from miro_gen.service.server import Client
 
     p = argparse.ArgumentParser(
         prog="miro nsunbind",

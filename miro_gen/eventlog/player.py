@@ -24,8 +24,8 @@ from mcap.records import Message
 from miro_gen.eventlog.reader import LogReader, Topic
 from miro_gen.eventlog.replay import ReplaySupplier
 from miro_gen.eventlog.types import matches
+from miro_gen.service.log_clock import CLOCK_TYPE
 from miro_gen.transport.events import StructuredPushSupplier
-from miro_gen.transport.log_clock import CLOCK_TYPE
 
 CLOCK_CHANNEL = "LogClock"
 CLOCK_PERIOD = 0.5  # seconds between clock events while nothing changes

@@ -205,9 +205,9 @@ class NameWatcher:
 
         from miro_gen.exceptions import SystemException
         from miro_gen.runtime.cdr import ObjectRef
+        from miro_gen.service.options import UsageError, parse_common_options
         from miro_gen.transport import sockets
         from miro_gen.transport.naming.client import NAMING_KEY, list_entries
-        from miro_gen.transport.options import UsageError, parse_common_options
         from miro_gen.transport.rpc.invoker import ZmqInvoker
 
         context: zmq.Context[Any] = zmq.Context()

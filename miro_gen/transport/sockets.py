@@ -37,7 +37,7 @@ from zmq.utils.monitor import parse_monitor_message
 from miro_gen.log import PeerWarnings, logger
 from miro_gen.transport.keyfiles import DEFAULT_KEY as DEFAULT_KEY  # (its users look here)
 from miro_gen.transport.keyfiles import read_key_pair
-from miro_gen.transport.options import UsageError
+from miro_gen.transport.usage import UsageError
 
 _log = logger("MIRO")
 _peer_warnings = PeerWarnings(_log)  # what peers send: rate-limited, with counts
@@ -183,7 +183,7 @@ def _stays_here(host: str, binding: bool) -> bool:
 
 def stays_here(host: str, binding: bool) -> bool:
     """Whether binding on (`binding`), or connecting to, `host` stays on this machine: the
-    line CURVE is drawn at, which IIOP follows too (`transport/iiop.py`)."""
+    line CURVE is drawn at, which IIOP follows too (`service/iiop.py`)."""
     return _stays_here(host, binding)
 
 

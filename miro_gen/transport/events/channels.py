@@ -22,9 +22,7 @@ from miro_gen.log import logger
 from miro_gen.transport import sockets
 from miro_gen.transport.addresses import Addresses
 from miro_gen.transport.local import bind_twin, nearest
-from miro_gen.transport.options import CommonOptions
 from miro_gen.transport.reactor import Reactor
-from miro_gen.transport.rpc.adapter import ObjectAdapter
 
 _log = logger("MIRO")
 
@@ -110,8 +108,11 @@ class ChannelHost:
 
 
 class ChannelNaming(Protocol):
-    """The naming a channel is found in: transport.naming.client.NamingClient, or a CORBA naming
-    service's client (transport.iiop)."""
+    """The naming a channel is found in, in the process's naming context (`context`): the miro
+    naming service's client or a CORBA naming service's (service.backbone.Naming)."""
+
+    @property
+    def context(self) -> str: ...
 
     def full_name(self, name: str) -> str: ...
 
@@ -119,21 +120,15 @@ class ChannelNaming(Protocol):
 
 
 class ChannelServer(Protocol):
-    """What event channels need of their process's server (transport.server.Server): its
-    sockets' context and reactor, its options (the naming context), where it binds and what it
-    advertises, its naming, binding an entry under its lease, and its clean-up."""
+    """What event channels need of their process's server (service.server.Server): its
+    sockets' context and reactor, where it binds and what it advertises, its naming, binding an
+    entry under its lease, and its clean-up."""
 
     @property
     def context(self) -> zmq.Context[Any]: ...
 
     @property
-    def options(self) -> CommonOptions: ...
-
-    @property
     def addresses(self) -> Addresses: ...
-
-    @property
-    def adapter(self) -> ObjectAdapter: ...
 
     @property
     def naming(self) -> ChannelNaming: ...
@@ -162,14 +157,14 @@ class EventChannelFactory:
         if full in self._channels:
             return self._channels[full]
         # Bound and advertised like the server's objects (miro_gen.transport.addresses).
-        advertise = self.server.adapter.endpoint.split("://", 1)[1].rsplit(":", 1)[0]
-        ch_host = ChannelHost(self.server.context, self.server.addresses.bind, advertise)
+        addresses = self.server.addresses
+        ch_host = ChannelHost(self.server.context, addresses.bind, addresses.advertise)
         channel = EventChannel(
             full,
             ch_host.supplier_endpoint,
             ch_host.consumer_endpoint,
             self.server.reactor(),
-            self.server.options.naming_context,
+            self.server.naming.context,
             ch_host,
         )
         entry = MiroNaming.Entry(
@@ -202,6 +197,6 @@ def resolve_channel(server: ChannelServer, name: str = DEFAULT_CHANNEL) -> Event
         entry.endpoint,
         bytes(entry.key).decode(),
         server.reactor(),
-        server.options.naming_context,
+        server.naming.context,
         resolve=lambda: resolve_channel(server, entry.name),
     )

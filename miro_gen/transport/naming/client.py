@@ -21,9 +21,10 @@ import MiroNaming
 
 from miro_gen.exceptions import BAD_OPERATION, COMM_FAILURE, TIMEOUT, TRANSIENT
 from miro_gen.runtime.cdr import ObjectRef
+from miro_gen.runtime.rpc import Invoker
 from miro_gen.transport.local import local_naming_socket
 from miro_gen.transport.naming.table import MAX_LEASE_MS, MAX_NAME_BYTES, check_name
-from miro_gen.transport.rpc.invoker import REFUSED_MINOR, ZmqInvoker
+from miro_gen.transport.rpc.invoker import REFUSED_MINOR
 
 NAMING_KEY = b"NameService"
 DEFAULT_LEASE = 3.0  # seconds an entry lives without renewal
@@ -48,9 +49,10 @@ __all__ = [
 
 
 class NamingClient:
-    """Binds and resolves names for a process whose naming context is `context`."""
+    """Binds and resolves names for a process whose naming context is `context` (a `Naming`,
+    service.backbone)."""
 
-    def __init__(self, invoker: ZmqInvoker, endpoint: str, context: str) -> None:
+    def __init__(self, invoker: Invoker, endpoint: str, context: str) -> None:
         self.context = context
         self.endpoint = endpoint
         self.ref = ObjectRef(MiroNaming.Registry._repo_id, endpoint, NAMING_KEY)
@@ -63,7 +65,7 @@ class NamingClient:
         self.before_first_call: Callable[[], None] | None = None
 
     def registry_stub(
-        self, invoker: ZmqInvoker, timeout: float, *, owner: bool = False
+        self, invoker: Invoker, timeout: float, *, owner: bool = False
     ) -> MiroNaming.Registry:
         """A stub of the naming service with its own call timeout (a lease renewer's); `owner`:
         for the calls that bind, renew and unbind."""

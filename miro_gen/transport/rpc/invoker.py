@@ -32,7 +32,7 @@ import itertools
 import struct
 import threading
 import time
-from typing import Any
+from typing import Any, Protocol
 
 import zmq
 from zmq.backend import Socket as _Socket
@@ -136,11 +136,19 @@ class _Connection:
         self.socket.close(0)
 
 
+class LocalServants(Protocol):
+    """Where a process serves the servants it passes as arguments: its object adapter."""
+
+    def reference_for(self, servant: Servant) -> ObjectRef: ...
+
+
 class ZmqInvoker:
     """Delivers requests to remote objects over ZeroMQ; safe to use from any thread. Local
     servants passed as arguments are activated on `adapter` (the process's server side)."""
 
-    def __init__(self, context: zmq.Context[Any] | None = None, adapter: Any = None) -> None:
+    def __init__(
+        self, context: zmq.Context[Any] | None = None, adapter: LocalServants | None = None
+    ) -> None:
         self.context = context if context is not None else zmq.Context.instance()
         self.adapter = adapter
         self._local = threading.local()
@@ -219,8 +227,7 @@ class ZmqInvoker:
     def reference_for(self, servant: Servant) -> ObjectRef:
         if self.adapter is None:
             raise TRANSIENT("a local object can only be passed by a process that serves objects")
-        ref: ObjectRef = self.adapter.reference_for(servant)
-        return ref
+        return self.adapter.reference_for(servant)
 
     # ---- internals ------------------------------------------------------------------------------
 

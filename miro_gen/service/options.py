@@ -44,6 +44,8 @@ import socket
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
+from miro_gen.transport.usage import UsageError as UsageError  # (its users look here)
+
 DEFAULT_NAMING = "tcp://127.0.0.1:2809"
 DEFAULT_LOG_LEVEL = 4
 
@@ -55,10 +57,6 @@ _CORBALOC = re.compile(
 )
 _TCP = re.compile(r"^tcp://(?P<host>\[[^\]]+\]|[^:/\[\]]+):(?P<port>\d+)$")
 _IIOP_DEFAULT_PORT = 2809  # the port corbaloc implies when none is given
-
-
-class UsageError(ValueError):
-    """A common option is missing its value or has one that makes no sense."""
 
 
 @dataclass
