@@ -11,9 +11,10 @@ which `service.iiop` plugs in at the same seams. A second backbone (Zenoh) provi
   `CallServer`, the object adapter that serves a process's servants under object keys;
 * naming: `Naming`, names looked up and listed, and `NameKeeper`, the names one server keeps
   bound while it runs (owners, leases, names taken over from the server's earlier run);
-* events: what channels need of their process is `transport.events.channels.ChannelServer`
-  (which `Server` satisfies); a channel's suppliers and consumers reach it through its links
-  (`transport.events.links`).
+* events: `PublishingLink` and `SubscribingLink` (transport.events.links), what a supplier
+  and a consumer need of their link to a channel, which the channel makes for them
+  (`EventChannel.publishing`, `.subscribing`); what channels need of their process is
+  `ChannelServer` (transport.events.channels), which `Server` satisfies.
 
 The implementations do not import these Protocols: they satisfy them, and mypy checks each where
 `Server` and `Client` hold them.

@@ -1,6 +1,7 @@
 """Event channels: where suppliers and consumers of a channel connect, the process that hosts
 one (an XSUB/XPUB proxy run by libzmq in a thread), and finding one in the naming service
-(docs/PROTOCOL.md, "Event channels"). Suppliers and consumers are in transport.events.
+(docs/PROTOCOL.md, "Event channels"). Suppliers and consumers are in transport.events; a
+channel makes their links to it (transport.events.links).
 
 A host's sockets are listening sockets of transport.sockets (limits, CURVE, admission); its
 queues hold at most PROXY_HWM frames per peer, fewer when the largest message allowed is large
@@ -21,6 +22,7 @@ import zmq
 from miro_gen.log import logger
 from miro_gen.transport import sockets
 from miro_gen.transport.addresses import Addresses
+from miro_gen.transport.events.links import ZmqPublishing, ZmqSubscribing
 from miro_gen.transport.local import bind_twin, nearest
 from miro_gen.transport.reactor import Reactor
 
@@ -56,6 +58,39 @@ class EventChannel:
         if host is not None and host.context is context:
             return host.local_endpoints
         return nearest(self.supplier_endpoint), nearest(self.consumer_endpoint)
+
+    def publishing(
+        self,
+        on_connection: Callable[[bool], object],
+        on_subscriptions: Callable[[list[tuple[bool, bytes]]], object],
+        hwm: int,
+        burst: int,
+    ) -> ZmqPublishing:
+        """A supplier's link to this channel (transport.events.links), found again when the
+        channel moves (when it has a name to be looked up by)."""
+        context = self.reactor.context
+        resolve = self.resolve
+        return ZmqPublishing(
+            self.reactor,
+            self.endpoints(context)[0],
+            None if resolve is None else lambda: resolve().endpoints(context)[0],
+            on_connection,
+            on_subscriptions,
+            hwm,
+            burst,
+        )
+
+    def subscribing(self, on_readable: Callable[[], object], hwm: int) -> ZmqSubscribing:
+        """A consumer's link to this channel (transport.events.links)."""
+        context = self.reactor.context
+        resolve = self.resolve
+        return ZmqSubscribing(
+            self.reactor,
+            self.endpoints(context)[1],
+            None if resolve is None else lambda: resolve().endpoints(context)[1],
+            on_readable,
+            hwm,
+        )
 
 
 class ChannelHost:
