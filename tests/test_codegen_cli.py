@@ -127,6 +127,62 @@ def test_an_error_leaves_the_output_folder_as_it_was(tmp_path: Path) -> None:
     assert tree(tmp_path / "gen") == before
 
 
+def test_a_failed_write_leaves_the_output_folder_as_it_was(tmp_path: Path) -> None:
+    """Many folders are written by several threads; when one cannot be made, none of the
+    files is replaced and no temporary file is left behind."""
+    idl = tmp_path / "Many.idl"
+    idl.write_text("".join(f"module M{i} {{ struct S {{ long x; }}; }};\n" for i in range(40)))
+    assert run_miro_idl("-o", "gen", str(idl), cwd=tmp_path).returncode == 0
+    idl.write_text("".join(f"module M{i} {{ struct S {{ short y; }}; }};\n" for i in range(40)))
+    blocker = tmp_path / "gen" / "M17"
+    for f in blocker.iterdir():
+        f.unlink()
+    blocker.rmdir()
+    blocker.write_text("a file where the package's folder goes\n")
+    before = tree(tmp_path / "gen")
+    out = run_miro_idl("-o", "gen", str(idl), cwd=tmp_path)
+    assert out.returncode == 1
+    assert "miro-idl: error: cannot write" in out.stderr and "M17" in out.stderr
+    assert "Traceback" not in out.stderr
+    assert tree(tmp_path / "gen") == before
+
+
+def test_a_failed_first_write_leaves_no_new_folder_behind(tmp_path: Path) -> None:
+    """In folders that did not exist, files are written under their own names at once; when
+    the run fails, they and the folders made for them go again."""
+    idl = tmp_path / "Many.idl"
+    idl.write_text("".join(f"module M{i} {{ struct S {{ long x; }}; }};\n" for i in range(40)))
+    (tmp_path / "gen").mkdir()
+    (tmp_path / "gen" / "M17").write_text("a file where the package's folder goes\n")
+    out = run_miro_idl("-o", "gen", str(idl), cwd=tmp_path)
+    assert out.returncode == 1
+    assert "miro-idl: error: cannot write" in out.stderr and "M17" in out.stderr
+    assert [p.name for p in (tmp_path / "gen").iterdir()] == ["M17"]
+
+
+def test_a_large_output_is_checked_and_rewritten_file_by_file(tmp_path: Path) -> None:
+    """Many files are rendered and compared by several processes: --check lists exactly the
+    stale ones, and a run rewrites exactly those."""
+    idl = tmp_path / "Many.idl"
+    modules = [f"module M{i} {{ struct S {{ long x; }}; }};\n" for i in range(40)]
+    idl.write_text("".join(modules))
+    assert run_miro_idl("-o", "gen", str(idl), cwd=tmp_path).returncode == 0
+    fresh = run_miro_idl("-o", "gen", "--check", str(idl), cwd=tmp_path)
+    assert fresh.returncode == 0, fresh.stderr
+    modules[7] = "module M7 { struct S { short x; }; };\n"
+    modules[31] = "module M31 { struct S { long y; }; };\n"
+    idl.write_text("".join(modules))
+    before = tree(tmp_path / "gen")
+    stale = run_miro_idl("-o", "gen", "--check", str(idl), cwd=tmp_path)
+    assert stale.returncode == 1
+    changed = [f"gen/M{i}/{name}" for i in (31, 7) for name in ("Many_idl.py", "__init__.py")]
+    assert stale.stderr.splitlines() == [f"miro-idl: {rel} is out of date" for rel in changed]
+    assert tree(tmp_path / "gen") == before
+    out = run_miro_idl("-o", "gen", str(idl), cwd=tmp_path)
+    assert out.stdout.splitlines() == [f"wrote {rel}" for rel in changed]
+    assert not [p for p in (tmp_path / "gen").rglob(".*")]  # no temporary file left
+
+
 def test_other_tools_files_are_left_alone(tmp_path: Path) -> None:
     gen = tmp_path / "gen"
     assert run_miro_idl("-o", "gen", str(EXAMPLE), cwd=tmp_path).returncode == 0

@@ -509,3 +509,68 @@ def test_document_structure_errors(tmp_path: Path) -> None:
     twice = document('<parameter name="A"/>\n<parameter name="A"/>\n')
     with pytest.raises(ParamsError, match=r"run\.xml:4: error: parameter 'A' given twice"):
         twice.find("A")
+
+
+def test_parameters_made_of_nothing_are_the_validated_defaults() -> None:
+    """`Cls()` (`instance()`, default factories) skips pydantic's validator, which is built
+    only when something is validated: the object is the same as validating no data gives,
+    constructor blocks included (Miro's laser and GPS parameters have them)."""
+    import Miro.CameraParameters
+    import Miro.GpsParameters
+    import Miro.LaserParameters
+    import Miro.SvcParameters
+    import Test.Parameters
+
+    from miro_gen.params.runtime import Config
+
+    modules = [Miro.SvcParameters, Miro.LaserParameters, Miro.GpsParameters]
+    modules += [Miro.CameraParameters, Test.Parameters]
+    classes = [
+        c
+        for m in modules
+        for c in vars(m).values()
+        if isinstance(c, type) and issubclass(c, Config) and c.__module__ == m.__name__
+    ]
+    assert len(classes) > 20
+    for cls in classes:
+        made = cls()
+        validated = cls.model_validate({})
+        assert type(made) is cls
+        assert made.model_dump() == validated.model_dump(), cls
+        assert made.model_fields_set == validated.model_fields_set == set(), cls
+        assert str(made) == str(validated), cls
+
+
+def test_a_service_reads_its_parameters_without_lxml_or_a_validator(tmp_path: Path) -> None:
+    """Without a parameter document, a service's start-up read imports neither lxml nor
+    asyncio and builds no pydantic validator; the first assignment builds one and checks."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\n"
+        "from Miro.SvcParameters import TtyParameters\n"
+        "from miro_gen.params import read_parameters\n"
+        "from miro_gen.params.runtime import instance_of\n"
+        "params = instance_of(TtyParameters)\n"
+        "assert not read_parameters(params, 'Tty')\n"
+        "print(params)\n"
+        "loaded = [m for m in ('lxml', 'asyncio') if m in sys.modules]\n"
+        "assert not loaded, loaded\n"
+        "built = [c.__name__ for c in type(params).__mro__\n"
+        "         if getattr(c, '__pydantic_complete__', False)]\n"
+        "assert not built, built\n"
+        "params.device = '/dev/ttyS1'\n"
+        "assert type(params).__pydantic_complete__\n"
+        "try:\n"
+        "    params.ttyParams = 'fast'\n"
+        "except Exception as e:\n"
+        "    print(type(e).__name__)\n"
+    )
+    env = {"PYTHONPATH": f"{REPO}:{REPO / 'generated'}", "PATH": "/usr/bin:/bin"}
+    result = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, cwd=tmp_path
+    )
+    assert result.returncode == 0, result.stderr
+    assert "Device: /dev/ttyS0\nTtyParams:\n  Baudrate: 9600" in result.stdout
+    assert result.stdout.strip().endswith("ValidationError")

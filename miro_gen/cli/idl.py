@@ -185,9 +185,11 @@ def _generate(args: argparse.Namespace, specs: list[Any], defines: dict[str, str
         print(f"miro-idl: error: {message}", file=sys.stderr)
     if too_long:
         return 1
-    files = generate.generated_files(modules, outdir)
+    planned = generate.planned_files(modules, outdir)
     missing = [
-        m for m in generate.missing_imports(modules, files, outdir) if not checks.installed(m)
+        m
+        for m in generate.missing_imports(modules, {rel for rel, _ in planned}, outdir)
+        if not checks.installed(m)
     ]
     if missing:
 
@@ -217,21 +219,20 @@ def _generate(args: argparse.Namespace, specs: list[Any], defines: dict[str, str
             f"the standard library's {package} module from programs with {outdir} on sys.path",
             file=sys.stderr,
         )
-    changed = generate.changed_files(files, outdir)
-    if args.check:
-        for rel in changed:
-            print(f"miro-idl: {outdir / rel} is out of date", file=sys.stderr)
-        return 1 if changed else 0
-    try:
-        generate.write_files(files, changed, outdir)
+    try:  # rendered only now, and written only if every file can be
+        changed = generate.write_planned(planned, outdir, check=args.check)
     except OSError as e:
         where = checks.shorten(str(e.filename or outdir))
         print(f"miro-idl: error: cannot write '{where}': {e.strerror or e}", file=sys.stderr)
         return 1
+    if args.check:
+        for rel in changed:
+            print(f"miro-idl: {outdir / rel} is out of date", file=sys.stderr)
+        return 1 if changed else 0
     for rel in changed:
         print(f"wrote {outdir / rel}")
     if not changed:
-        print(f"miro-idl: {len(files)} files in {outdir} are up to date")
+        print(f"miro-idl: {len(planned)} files in {outdir} are up to date")
     return 0
 
 

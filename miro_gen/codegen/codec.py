@@ -54,6 +54,9 @@ from miro_gen.codegen.steps import (
 )
 from miro_gen.idl import ast
 
+# A temporary of an enclosing loop in a packed value: its check is exempt from ruff's B023.
+_LOOP_VARIABLE = re.compile(r"\b_x\d+\b").search
+
 # A value to encode: its shape, the expression giving it, and what error messages call it.
 Encoded = tuple[Shape, str, str]
 # A value to decode: its shape and what error messages call it.
@@ -146,7 +149,7 @@ class CodecPlanner:
                     entries[i][2],
                     entries[i][0].packed_format,
                     value,
-                    re.search(r"\b_x\d+\b", value) is not None,
+                    _LOOP_VARIABLE(value) is not None,
                 )
                 for i, value in zip(group, values, strict=True)
             ]

@@ -333,8 +333,9 @@ class ModuleContext:
         """The expression for class `cls` of generated module `module`, imported if need be."""
         if module == self.name:
             return cls
-        alias = names.module_alias(module)
-        self.imports[module] = alias
+        alias = self.imports.get(module)
+        if alias is None:
+            alias = self.imports[module] = names.module_alias(module)
         return f"{alias}.{cls}"
 
     def struct_codec(self, fmt: str) -> str:
@@ -364,7 +365,7 @@ class ModuleContext:
         self.exports.append(item.name)
 
     # ---- what the templates and the package read ----------------------------------------
-    @property
+    @cached_property
     def name(self) -> str:
         return f"{self.package}.{self.stem}"
 
@@ -476,7 +477,10 @@ def _module_key(item: tuple[str, str]) -> list[int | str]:
 
 
 def _natural(text: str) -> list[int | str]:
-    return [int(p) if p.isdigit() else p for p in re.split(r"(\d+)", text)]
+    return [int(p) if p.isdigit() else p for p in _DIGITS(text)]
+
+
+_DIGITS = re.compile(r"(\d+)").split
 
 
 def isort_key(name: str) -> tuple[int, list[int | str]]:

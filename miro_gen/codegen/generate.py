@@ -1,24 +1,24 @@
 """Generation of Python from resolved IDL: the files `miro-idl` writes, and how it writes them.
 
 The pipeline: each IDL file's resolved specification is lowered into module contexts
-(`lower.py`), the package `__init__`s are built from those (`packages.py`), and everything is
-rendered in memory (`render.py`); only then are files written, each through a temporary file
-renamed into place, so that an error leaves the output folder as it was.
+(`lower.py`), the package `__init__`s are built from those (`packages.py`): together the
+planned files (`planned_files`), each rendered by `render` (`render.py`) and written through
+`output.py`, which leaves the output folder as it was when anything fails.
 """
 
 from __future__ import annotations
 
-import os
 import sys
-from collections.abc import Iterable
+from collections.abc import Collection, Iterable
 from pathlib import Path
 
 from miro_gen.codegen import python_limits
-from miro_gen.codegen.contexts import ModuleContext
+from miro_gen.codegen.contexts import InterfaceContext, ModuleContext, PackageContext
 from miro_gen.codegen.lower import lower_file
+from miro_gen.codegen.output import changed_files, update, write_files
 from miro_gen.codegen.packages import GENERATED_MARK, package_contexts
-from miro_gen.codegen.render import render_module, render_package_init
-from miro_gen.codegen.shapes import Unsupported
+from miro_gen.codegen.render import preload, render_module, render_package_init
+from miro_gen.codegen.shapes import Unsupported, member_shape
 from miro_gen.diagnostics import Diagnostics
 from miro_gen.idl import ast
 
@@ -29,8 +29,12 @@ __all__ = [
     "display_source",
     "generated_files",
     "missing_imports",
+    "planned_files",
+    "render",
     "shadowed_modules",
+    "update",
     "write_files",
+    "write_planned",
 ]
 
 
@@ -49,6 +53,15 @@ def build_modules(
     specs: Iterable[tuple[ast.Specification, str]], diag: Diagnostics
 ) -> list[ModuleContext]:
     """The Python modules of each (specification, main IDL file); refusals become errors."""
+    try:
+        return _build_modules(specs, diag)
+    finally:
+        member_shape.cache_clear()  # the shapes of this compilation's members
+
+
+def _build_modules(
+    specs: Iterable[tuple[ast.Specification, str]], diag: Diagnostics
+) -> list[ModuleContext]:
     modules: list[ModuleContext] = []
     declarations: dict[str, ast.Decl] = {}
     for spec, path in specs:
@@ -67,20 +80,61 @@ def build_modules(
     return modules
 
 
+Planned = tuple[str, ModuleContext | PackageContext | None]  # (relative path, its context)
+
+
+def planned_files(modules: list[ModuleContext], outdir: Path) -> list[Planned]:
+    """Every file to write, package `__init__`s included, by relative path (sorted), with
+    the context it is rendered from (None: an empty file)."""
+    files: dict[str, ModuleContext | PackageContext | None] = {}
+    for m in modules:
+        files.setdefault(m.path, m)  # the same IDL file compiled twice: the first one
+    for package in package_contexts(modules, outdir):
+        files[package.path] = package
+        if "." not in package.package:  # PEP 561: mypy checks against it where installed
+            files[package.package + "/py.typed"] = None
+    return sorted(files.items())
+
+
+def render(context: ModuleContext | PackageContext | None) -> str:
+    """The content of a planned file."""
+    if context is None:
+        return ""
+    if isinstance(context, ModuleContext):
+        return render_module(context)
+    return render_package_init(context)
+
+
+# What making a file costs (on a busy disk), in declarations rendered: for sharing out the work.
+FILE_WEIGHT = 10
+
+
+def write_planned(planned: list[Planned], outdir: Path, *, check: bool) -> list[str]:
+    """Render the planned files and bring `outdir` up to date with them, or with `check` only
+    compare (`output.update`); the paths that differ. The templates are loaded first, once,
+    rather than by each process that renders."""
+    preload()
+    return update(planned, render, outdir, check=check, weight=_weight)
+
+
+def _weight(context: ModuleContext | PackageContext | None) -> int:
+    """About what a planned file costs: making it (as much as rendering ten declarations, on
+    a busy disk), and rendering its declarations, most for the operations of stubs and
+    skeletons."""
+    if isinstance(context, ModuleContext):
+        interfaces = [i for i in context.items if isinstance(i, InterfaceContext)]
+        return FILE_WEIGHT + len(context.items) + 3 * sum(len(i.operations) for i in interfaces)
+    return FILE_WEIGHT + (0 if context is None else 1)
+
+
 def generated_files(modules: list[ModuleContext], outdir: Path) -> dict[str, str]:
     """Relative path -> content of every file to write, package `__init__`s included."""
-    files: dict[str, str] = {}
-    for m in modules:
-        if m.path not in files:  # the same IDL file compiled twice: the first one
-            files[m.path] = render_module(m)
-    for package in package_contexts(modules, outdir):
-        files[package.path] = render_package_init(package)
-        if "." not in package.package:  # PEP 561: mypy checks against it where installed
-            files[package.package + "/py.typed"] = ""
-    return files
+    return {rel: render(context) for rel, context in planned_files(modules, outdir)}
 
 
-def missing_imports(modules: list[ModuleContext], files: dict[str, str], outdir: Path) -> list[str]:
+def missing_imports(
+    modules: list[ModuleContext], files: Collection[str], outdir: Path
+) -> list[str]:
     """Generated modules imported by these ones that neither this run nor an earlier one wrote
     (an included IDL file that was not compiled)."""
     out = []
@@ -97,35 +151,3 @@ def shadowed_modules(modules: list[ModuleContext]) -> list[str]:
     (IDL `module queue`): wherever the output folder comes first on sys.path, every program
     imports the generated package in its place (miro_gen's `import queue` too)."""
     return sorted({m.package.split(".")[0] for m in modules} & sys.stdlib_module_names)
-
-
-def changed_files(files: dict[str, str], outdir: Path) -> list[str]:
-    """The relative paths whose content on disk differs (or that do not exist)."""
-    out = []
-    for rel, content in sorted(files.items()):
-        path = outdir / rel
-        try:
-            if path.read_text(encoding="utf-8") == content:
-                continue
-        except (OSError, UnicodeDecodeError):
-            pass
-        out.append(rel)
-    return out
-
-
-def write_files(files: dict[str, str], rels: list[str], outdir: Path) -> None:
-    """Write `rels` of `files` under `outdir`: all to temporary files first, then renamed."""
-    staged: list[tuple[Path, Path]] = []
-    try:
-        for rel in rels:
-            path = outdir / rel
-            path.parent.mkdir(parents=True, exist_ok=True)
-            tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-            tmp.write_text(files[rel], encoding="utf-8")
-            staged.append((tmp, path))
-        for tmp, path in staged:
-            os.replace(tmp, path)
-    finally:
-        for tmp, _ in staged:
-            if tmp.exists():
-                tmp.unlink()

@@ -46,14 +46,38 @@ def _declare(decl: Any, text: str) -> str:
     return _wrap(tuple(decl.scope_path[:-1]), "\n".join([text, *_typeid(decl)]))
 
 
-class _Writer:
-    def __init__(self, declarations: list[Any]) -> None:
-        self.by_path = {d.scope_path: d for d in declarations if not isinstance(d, ast.Forward)}
-        self.children: dict[tuple[str, ...], list[Any]] = {}
+class InterfaceSchemas:
+    """The interface schemas of one specification. Its declarations are indexed once (by
+    scoped path, and by the path of what they are declared in), however many interfaces it has:
+    a compilation's work stays linear in its declarations."""
+
+    def __init__(self, declarations: list[ast.Decl]) -> None:
+        self.by_path: dict[tuple[str, ...], ast.Decl] = {}
+        self.children: dict[tuple[str, ...], list[ast.Decl]] = {}
         for d in declarations:
-            if isinstance(d, ast.Forward | ast.Module):
+            if isinstance(d, ast.Forward):
                 continue
-            self.children.setdefault(tuple(d.scope_path[:-1]), []).append(d)
+            self.by_path[d.scope_path] = d
+            if not isinstance(d, ast.Module):
+                self.children.setdefault(tuple(d.scope_path[:-1]), []).append(d)
+        # The text of each declaration as schemas state it (in its modules): the same in every
+        # schema that holds it, so written once.
+        self.texts: dict[int, str] = {}
+
+    def of(self, decl: ast.Interface) -> str:
+        """The interface schema of `decl`; NoInterfaceSchema when it cannot be written."""
+        w = _Writer(self)
+        w.interface(decl)
+        while w.pending:
+            w.interface(w.pending.pop(0))
+        return "\n".join(w.parts) + "\n"
+
+
+class _Writer:
+    def __init__(self, index: InterfaceSchemas) -> None:
+        self.by_path = index.by_path
+        self.children = index.children
+        self.texts = index.texts
         self.parts: list[str] = []
         self.done: set[int] = set()
         self.active: list[Any] = []
@@ -123,7 +147,10 @@ class _Writer:
 
     def write(self, decl: Any) -> None:
         self.done.add(id(decl))
-        self.parts.append(_declare(decl, _body(decl, _no_data_scope, refs=True)))
+        text = self.texts.get(id(decl))
+        if text is None:
+            text = self.texts[id(decl)] = _declare(decl, _body(decl, _no_data_scope, refs=True))
+        self.parts.append(text)
 
     def data_deps(self, decl: Any) -> None:
         if isinstance(decl, ast.Typedef):
@@ -168,7 +195,10 @@ class _Writer:
         self.done.add(id(iface))
         for d in nested:
             self.done.add(id(d))
-        self.parts.append(_declare(iface, self.interface_text(iface, nested)))
+        text = self.texts.get(id(iface))
+        if text is None:
+            text = self.texts[id(iface)] = _declare(iface, self.interface_text(iface, nested))
+        self.parts.append(text)
 
     def interface_text(self, iface: Any, nested: list[Any]) -> str:
         word = "abstract interface" if iface.abstract else "interface"
@@ -218,12 +248,8 @@ class _Writer:
         return text + ";"
 
 
-def interface_schema(decl: Any, declarations: list[Any]) -> str:
-    """The interface schema of `decl` (an `ast.Interface`); `declarations` are those of the
-    resolved specification (for what is nested in interfaces). NoInterfaceSchema when it cannot be
-    written."""
-    w = _Writer(declarations)
-    w.interface(decl)
-    while w.pending:
-        w.interface(w.pending.pop(0))
-    return "\n".join(w.parts) + "\n"
+def interface_schema(decl: ast.Interface, declarations: list[ast.Decl]) -> str:
+    """The interface schema of `decl`; `declarations` are those of the resolved specification
+    (for what is nested in interfaces). NoInterfaceSchema when it cannot be written. For many
+    interfaces of one specification, `InterfaceSchemas` indexes the declarations once."""
+    return InterfaceSchemas(declarations).of(decl)

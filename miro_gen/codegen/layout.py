@@ -14,17 +14,17 @@ returned without its first line's indentation: templates indent the rest with `|
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from typing import NamedTuple
 
 INDENT = "    "
 
 
-@dataclass(frozen=True)
-class Bracket:
+class Bracket(NamedTuple):
     """`head` + items separated by commas + `tail`, e.g. `f(` a, b `)`.
 
     `flat_head` and `flat_tail` replace head and tail on one line: a tuple that needs its
-    parentheses only when exploded (`return (...)` is `return a, b` on one line).
+    parentheses only when exploded (`return (...)` is `return a, b` on one line). (A named
+    tuple: templates make one per call, signature and tuple they lay out.)
     """
 
     head: str

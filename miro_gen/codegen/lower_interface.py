@@ -14,10 +14,10 @@ from miro_gen.codegen.contexts import (
     StubContext,
 )
 from miro_gen.codegen.hints import TypeHints
-from miro_gen.codegen.interface_schema import NoInterfaceSchema, interface_schema
+from miro_gen.codegen.interface_schema import InterfaceSchemas, NoInterfaceSchema
 from miro_gen.codegen.python_limits import python_bases
 from miro_gen.codegen.scope import Scope
-from miro_gen.codegen.shapes import shape_of
+from miro_gen.codegen.shapes import Shape, shape_of
 from miro_gen.codegen.steps import Assign, DecodeStep
 from miro_gen.diagnostics import SourcePos
 from miro_gen.idl import ast
@@ -44,15 +44,22 @@ class InterfaceLowering:
     def __init__(self, scope: Scope, hints: TypeHints, declarations: list[ast.Decl]) -> None:
         self.scope = scope
         self.hints = hints
-        self.declarations = declarations  # for the interface schemas
+        self.schemas = InterfaceSchemas(declarations)
         self._schemas: dict[int, str] = {}
+        self._shapes: dict[int, Shape] = {}  # by IDL type: the stub and the skeleton both ask
+
+    def _shape(self, t: ast.TypeSpec, pos: SourcePos) -> Shape:
+        shape = self._shapes.get(id(t))
+        if shape is None:
+            shape = self._shapes[id(t)] = shape_of(t, pos)
+        return shape
 
     def schema(self, d: ast.Interface) -> str:
         """The interface schema of `d` ('' when it cannot have one), made once for both."""
         text = self._schemas.get(id(d))
         if text is None:
             try:
-                text = interface_schema(d, self.declarations)
+                text = self.schemas.of(d)
             except NoInterfaceSchema:  # its service object cannot describe it to callers
                 text = ""
             self._schemas[id(d)] = text
@@ -106,13 +113,13 @@ class InterfaceLowering:
         result_annotations: list[str] = []
         results: list[str] = []
         if sig.returns is not None:
-            shape = shape_of(sig.returns, sig.pos)
+            shape = self._shape(sig.returns, sig.pos)
             outs.append((shape, "_r", f"{sig.what} result"))
             results.append("_r")
             hint = self.hints.annotation(shape, m, in_op=True, sending=not in_stub)
             result_annotations.append(hint)
         for p in sig.params:
-            shape = shape_of(p.type, p.pos)
+            shape = self._shape(p.type, p.pos)
             py = m.ambiguous(names.py_name(p.name, names.PARAMETER_NAMES), "E741")
             hint = self.hints.annotation(shape, m, in_op=True, sending=in_stub)
             params.append(ParamContext(py, hint, p.mode))

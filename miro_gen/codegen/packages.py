@@ -36,6 +36,11 @@ def package_contexts(modules: list[ModuleContext], outdir: Path) -> list[Package
     for m in modules:
         parts = m.package.split(".")
         packages.update(".".join(parts[:i]) for i in range(1, len(parts) + 1))
+    subpackages: dict[str, set[str]] = {}  # package -> the names of its subpackages
+    for package in packages:
+        parent, _, name = package.rpartition(".")
+        if parent:
+            subpackages.setdefault(parent, set()).add(name)
     out = []
     for package in sorted(packages):
         folder = outdir / package.replace(".", "/")
@@ -47,12 +52,7 @@ def package_contexts(modules: list[ModuleContext], outdir: Path) -> list[Package
         for stem in sorted(stems, key=str.lower):  # later modules win, as star imports did
             exports.update(dict.fromkeys(stems[stem].exports, f"{package}.{stem}"))
             hashes.update(stems[stem].type_hashes)
-        children = {
-            p.rsplit(".", 1)[1]
-            for p in packages
-            if p.startswith(package + ".") and p.count(".") == package.count(".") + 1
-        }
-        children |= _packages_on_disk(folder)
+        children = subpackages.get(package, set()) | _packages_on_disk(folder)
         out.append(
             PackageContext(
                 package=package,

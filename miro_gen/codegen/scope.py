@@ -34,19 +34,23 @@ class Scope:
         self.source = source
         module_paths = {d.scope_path for d in spec.declarations if isinstance(d, ast.Module)}
         self._places: dict[int, Place] = {}
+        stems: dict[str, str] = {}  # IDL file -> module stem
+        modules: dict[tuple[tuple[str, ...], str], tuple[str, str]] = {}  # (IDL module, stem)
         for d in spec.declarations:
             outer = d.scope_path[:-1]
             while outer and outer not in module_paths:
                 outer = outer[:-1]
-            stem = names.module_stem(d.pos.path)
+            stem = stems.get(d.pos.path)
+            if stem is None:
+                stem = stems[d.pos.path] = names.module_stem(d.pos.path)
+            module = modules.get((outer, stem))
+            if module is None:
+                module = modules[outer, stem] = (
+                    f"{names.package_name(outer)}.{stem}",
+                    f"{names.poa_package_name(outer)}.{stem}",
+                )
             nesting = len(d.scope_path) - 1 - len(outer)
-            self._places[id(d)] = Place(
-                outer,
-                nesting,
-                f"{names.package_name(outer)}.{stem}",
-                f"{names.poa_package_name(outer)}.{stem}",
-                names.class_name(d, nesting),
-            )
+            self._places[id(d)] = Place(outer, nesting, *module, names.class_name(d, nesting))
         self._by_path = {
             d.scope_path: d for d in spec.declarations if not isinstance(d, ast.Forward)
         }

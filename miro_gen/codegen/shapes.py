@@ -9,7 +9,7 @@ Constructs the back end cannot generate are refused here, with their source posi
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cache
 
 from miro_gen.diagnostics import SourcePos
 from miro_gen.idl import ast
@@ -177,10 +177,10 @@ class Shape:
         return 1
 
 
-@lru_cache(maxsize=8192)  # asked for fields, codecs, bulk paths and size bounds alike
+@cache  # asked for fields, codecs, bulk paths and size bounds alike; emptied after each build
 def member_shape(m: ast.Member | ast.CaseBranch) -> Shape:
     """The shape of a struct member or union branch, with its declarator's dimensions (shared:
-    never change it)."""
+    never change it). `generate.build_modules` empties the cache when it is done."""
     return shape_of(m.type, m.pos, m.dims)
 
 

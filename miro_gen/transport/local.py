@@ -26,7 +26,6 @@ import os
 import socket
 import stat
 import sys
-import tempfile
 import time
 from typing import Any
 
@@ -42,6 +41,8 @@ def _folder() -> str | None:
     """This user's folder for the sockets (made once, mode 0700), or None where there is none."""
     if not sys.platform.startswith("linux"):
         return None
+    import tempfile  # here: servers without event channels never need it (1 MB at start)
+
     base = os.environ.get("XDG_RUNTIME_DIR") or tempfile.gettempdir()
     folder = os.path.join(base, f"miro-{os.getuid()}")
     try:

@@ -12,12 +12,14 @@ import datetime
 import math
 import re
 from collections.abc import Callable, Iterable, Sequence
-from typing import Any, Final
-
-from lxml import etree
+from typing import TYPE_CHECKING, Any, Final
 
 from miro_gen.diagnostics import Diagnostic, SourcePos
 from miro_gen.params.runtime import values
+
+if TYPE_CHECKING:
+    from lxml import etree  # imported where XML is made or parsed: a service without a
+    # parameter document starts without lxml
 
 
 class _Fail:
@@ -69,6 +71,8 @@ class Codec:
 
 
 def new_parameter(parent: etree._Element, name: str | None) -> etree._Element:
+    from lxml import etree
+
     elem = etree.SubElement(parent, PARAMETER)
     if name is not None:
         elem.set("name", name)

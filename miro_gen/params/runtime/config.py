@@ -13,10 +13,9 @@ import datetime
 import os
 import threading
 from collections.abc import Callable, Iterable
-from typing import Any, ClassVar, NamedTuple, Self, TypeVar
+from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple, Self, TypeVar
 
 import pydantic
-from lxml import etree
 
 from miro_gen.diagnostics import Diagnostic
 from miro_gen.params.runtime import codecs, values
@@ -32,6 +31,10 @@ from miro_gen.params.runtime.codecs import (
     Problems,
     Vector,
 )
+
+if TYPE_CHECKING:
+    from lxml import etree  # imported where XML is made or parsed: a service without a
+    # parameter document starts without lxml
 
 T = TypeVar("T")
 
@@ -222,9 +225,26 @@ class Config(pydantic.BaseModel):
     so a misspelt parameter is never silently ignored.
     """
 
+    # defer_build: a class's validator is built when it first validates something (a keyword
+    # argument, an assignment), not when its module is imported: a service that reads its
+    # parameters and never assigns one builds none (pydantic's schema machinery: 3.6 MB and
+    # tens of milliseconds at start).
     model_config = pydantic.ConfigDict(
-        extra="forbid", validate_assignment=True, validate_default=False
+        extra="forbid", validate_assignment=True, validate_default=False, defer_build=True
     )
+
+    def __init__(self, /, **data: Any) -> None:
+        """Validate `data`; without any (`instance()`, a default factory), every field gets
+        its default, unvalidated as `validate_default=False` has it, and the `<constructor>`
+        block runs: what validating nothing does, made by `model_construct` instead, so that
+        the validator need not be built."""
+        cls = type(self)
+        if data or not _defaults_only(cls):
+            super().__init__(**data)
+            return
+        made = cls.model_construct()
+        for slot in _STATE:
+            object.__setattr__(self, slot, getattr(made, slot))
 
     # (XML name, attribute, codec, measure) of the parameters this class adds
     _xml_fields: ClassVar[tuple[XmlField, ...]] = ()
@@ -264,6 +284,8 @@ class Config(pydantic.BaseModel):
     def to_xml(self, name: str | None = "Parameters", compact: bool = False) -> etree._Element:
         """This object as a run-time `<parameter name=...>` element; `compact` writes vectors
         of numbers as one `value="1 2 3"` (matrices with rows separated by `;`)."""
+        from lxml import etree
+
         root = etree.Element(codecs.PARAMETER)
         if name is not None:
             root.set("name", name)
@@ -283,6 +305,22 @@ class Config(pydantic.BaseModel):
 
     def __str__(self) -> str:
         return "\n".join(show_lines(layout_of(type(self)), self))
+
+
+# What makes up a pydantic model's instance (the slots `model_construct` and `model_copy` set).
+_STATE = ("__dict__", "__pydantic_fields_set__", "__pydantic_extra__", "__pydantic_private__")
+_PLAIN: dict[type[Any], bool] = {}
+
+
+def _defaults_only(cls: type[Config]) -> bool:
+    """Whether an instance made of nothing is its defaults, unvalidated: no field is required
+    and none validates its default."""
+    plain = _PLAIN.get(cls)
+    if plain is None:
+        plain = _PLAIN[cls] = not cls.model_config.get("validate_default") and not any(
+            f.is_required() or f.validate_default for f in cls.model_fields.values()
+        )
+    return plain
 
 
 _INSTANCES: dict[type[Any], Any] = {}

@@ -18,15 +18,16 @@ import os
 import socket
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, NamedTuple
-
-from lxml import etree
+from typing import TYPE_CHECKING, NamedTuple
 
 from miro_gen.diagnostics import Diagnostic, SourcePos
 from miro_gen.log import logger
 from miro_gen.params.runtime import live
 from miro_gen.params.runtime.config import Config, ParamsError
-from miro_gen.params.runtime.xmlsafe import XmlError, parse_xml, read_xml
+
+if TYPE_CHECKING:
+    from lxml import etree  # imported where XML is made or parsed: a service without a
+    # parameter document starts without lxml
 
 ROOT_TAG = "config"
 _log = logger("ConfigDocument")
@@ -92,23 +93,35 @@ class ConfigDocument:
     ) -> None:
         self.section: str | None = None
         self.path: str | None = None
+        self._root: etree._Element | None = None  # None: no document, defaults everywhere
         if text is not None:
             self.path = str(path) if path is not None else "<string>"
-            self.root = self._load(lambda: parse_xml(text, self.path or "<string>"))
+            self._root = self._load(text)
             return
         if path is None:
             found = find_document(list(argv or []))
             if found is None:
-                self.root = etree.Element(ROOT_TAG)  # no document: defaults everywhere
                 return
             path = found
         self.path = str(path)
-        file = self.path
-        self.root = self._load(lambda: read_xml(file))
+        self._root = self._load(None)
 
-    def _load(self, read: Any) -> etree._Element:
+    @property
+    def root(self) -> etree._Element:
+        """The document's `<config>` element (an empty one when there is no document)."""
+        if self._root is None:
+            from lxml import etree
+
+            self._root = etree.Element(ROOT_TAG)
+        return self._root
+
+    def _load(self, text: str | bytes | None) -> etree._Element:
+        """The document's root: `text`, else the file at `self.path` (checked: xmlsafe.py)."""
+        from miro_gen.params.runtime.xmlsafe import XmlError, parse_xml, read_xml
+
+        path = self.path or "<string>"
         try:
-            tree: etree._ElementTree = read()
+            tree = read_xml(path) if text is None else parse_xml(text, path)
         except XmlError as e:
             raise ParamsError(e.diagnostics) from None
         root = tree.getroot()
@@ -136,7 +149,10 @@ class ConfigDocument:
         )
 
     def sections(self) -> list[str]:
-        return [s.get("name", "") for s in self.root if s.tag == "section"]
+        return [s.get("name", "") for s in self._elements() if s.tag == "section"]
+
+    def _elements(self) -> list[etree._Element]:
+        return [] if self._root is None else list(self._root)
 
     def set_section(self, name: str) -> None:
         """Choose the section that `get_parameters` and `get_instances` read (Miro's
@@ -146,7 +162,7 @@ class ConfigDocument:
     def _section_elements(self) -> list[etree._Element]:
         if self.section is None:
             raise ValueError("call set_section(name) before reading parameters")
-        return [s for s in self.root if s.tag == "section" and s.get("name") == self.section]
+        return [s for s in self._elements() if s.tag == "section" and s.get("name") == self.section]
 
     def find(self, category: str) -> etree._Element | None:
         """The `<parameter name="category">` of the current section; a second one is an error."""

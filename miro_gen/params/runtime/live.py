@@ -12,9 +12,11 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from lxml import etree
+if TYPE_CHECKING:
+    from lxml import etree  # imported where XML is made or parsed: a service without a
+    # parameter document starts without lxml
 
 SOURCE = "<set>"  # the name problems of a change are reported under
 
@@ -95,6 +97,8 @@ def on_change(fn: Callable[[Exposed], object]) -> None:
 
 def document() -> etree._Element:
     """Every exposed object as one run-time document (`<config>`), which `-MCF` reads back."""
+    from lxml import etree
+
     root = etree.Element("config")
     sections: dict[str, etree._Element] = {}
     for e in exposed():

@@ -14,10 +14,12 @@ import html.entities
 import os
 import re
 from pathlib import Path
-
-from lxml import etree
+from typing import TYPE_CHECKING
 
 from miro_gen.diagnostics import Diagnostic, SourcePos
+
+if TYPE_CHECKING:
+    from lxml import etree
 
 # The named entities Miro's files use come from HTML 4's table (ISO Latin-1, symbols, Greek).
 ENTITIES: dict[str, str] = {
@@ -107,6 +109,8 @@ def parse_xml(data: bytes | str, path: str) -> etree._ElementTree:
     text = _replace_entities(text, path, problems)
     if problems:
         raise XmlError(problems)
+    from lxml import etree  # here: importing this module costs no lxml
+
     parser = etree.XMLParser(
         resolve_entities=False,
         no_network=True,

@@ -18,7 +18,6 @@ from collections.abc import Callable
 from typing import Any
 
 import zmq
-from zmq.utils.monitor import parse_monitor_message
 
 from miro_gen.log import logger
 from miro_gen.transport import sockets
@@ -62,12 +61,12 @@ class ChannelLink:
     def read_events(self) -> None:
         while True:
             try:
-                event = parse_monitor_message(self._monitor.recv_multipart(zmq.NOBLOCK))
+                event, _ = sockets.monitor_event(self._monitor.recv_multipart(zmq.NOBLOCK))
             except zmq.Again:
                 return
             except zmq.ZMQError:  # the monitor was closed
                 return
-            up = event["event"] == zmq.EVENT_HANDSHAKE_SUCCEEDED
+            up = event == zmq.EVENT_HANDSHAKE_SUCCEEDED
             if up == self.connected:
                 continue
             self.connected = up
