@@ -77,3 +77,21 @@ def test_the_events_face_names_each_name_once() -> None:
     for name, home in typed.items():
         module = importlib.import_module(f"miro_gen.transport.events.{home}")
         assert getattr(events, name) is getattr(module, name)
+
+
+def test_the_event_frames_load_without_the_rest_of_events() -> None:
+    """The log tools read and write event frames without ZeroMQ, channels or consumers: the
+    events part's face loads nothing until a name is asked of it."""
+    code = (
+        "import sys, miro_gen.transport.events.frames\n"
+        "print(sorted(m for m in sys.modules if m == 'zmq' or m.startswith('miro_gen.transport')))"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=60
+    )
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == [
+        "['miro_gen.transport',",
+        "'miro_gen.transport.events',",
+        "'miro_gen.transport.events.frames']",
+    ]
