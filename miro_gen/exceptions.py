@@ -1,14 +1,56 @@
-"""Exceptions of remote calls, named and shaped as CORBA's, which Miro users know.
+"""Exceptions of remote calls, named and shaped as CORBA's, which Miro users know; and the
+base of the failures a user can act on.
 
 `UserException` is the base of every exception declared in IDL (`exception ETimeOut {...};`).
 `SystemException` and its subclasses report what went wrong in the middleware itself, each with
 `completed`: whether the operation ran (`YES`), did not run (`NO`), or may have run (`MAYBE`).
+
+`ActionableError` is the base of the failures that are the user's to fix, not defects: a bad
+command-line option, a name nobody bound, a document that does not fit. `miro_gen.lifecycle`
+prints them as one line (`user_message`). Each floor derives its own errors from it; a class it
+cannot derive (generated from IDL, such as `MiroNaming.NotFound`, or a library's, such as
+pyzmq's `ZMQError`) is made actionable by the floor that raises it, with `actionable`.
 """
 
 from __future__ import annotations
 
 import enum
-from typing import ClassVar
+from collections.abc import Callable
+from typing import ClassVar, TypeVar
+
+E = TypeVar("E", bound=BaseException)
+
+
+class ActionableError(Exception):
+    """A failure the user can act on: `one_line()` says what failed and what to do, and a
+    command exits with `exit_status` (2 for a bad command line), without a traceback."""
+
+    exit_status: ClassVar[int] = 1
+
+    def one_line(self) -> str:
+        return str(self)
+
+
+# Classes a floor cannot derive from ActionableError -> (their message, exit status)
+_ACTIONABLE: dict[type[BaseException], tuple[Callable[[BaseException], str], int]] = {}
+
+
+def actionable(cls: type[E], message: Callable[[E], str], exit_status: int = 1) -> None:
+    """Have `cls` and its subclasses (an IDL exception, a library's error) told as one line,
+    `message(exc)`, as an ActionableError is: called by the floor that raises them, when it is
+    imported."""
+    _ACTIONABLE[cls] = (message, exit_status)  # type: ignore[assignment]
+
+
+def user_message(exc: BaseException) -> tuple[str, int] | None:
+    """The one line and exit status of a failure the user can act on; None for a defect."""
+    if isinstance(exc, ActionableError):
+        return exc.one_line(), exc.exit_status
+    for cls in type(exc).__mro__:
+        found = _ACTIONABLE.get(cls)
+        if found is not None:
+            return found[0](exc), found[1]
+    return None
 
 
 class CompletionStatus(enum.IntEnum):
@@ -25,8 +67,9 @@ class UserException(Exception):
     _repo_id: ClassVar[str] = "IDL:omg.org/CORBA/UserException:1.0"
 
 
-class SystemException(Exception):
-    """A failure of the middleware, not of the servant's code."""
+class SystemException(ActionableError):
+    """A failure of the middleware, not of the servant's code (a user acts on it: a server not
+    running, a call that timed out)."""
 
     _repo_id: ClassVar[str] = "IDL:omg.org/CORBA/SystemException:1.0"
 
@@ -46,6 +89,9 @@ class SystemException(Exception):
         done = {0: "yes", 1: "no", 2: "maybe"}[int(self.completed)]
         text = f": {self.message}" if self.message else ""
         return f"{name}{text} (completed: {done})"
+
+    def one_line(self) -> str:
+        return self.message or str(self)
 
     def __repr__(self) -> str:
         return (
@@ -150,7 +196,10 @@ __all__ = [
     "TIMEOUT",
     "TRANSIENT",
     "UNKNOWN",
+    "ActionableError",
     "CompletionStatus",
     "SystemException",
     "UserException",
+    "actionable",
+    "user_message",
 ]

@@ -23,7 +23,9 @@
   unbound, and `main` goes on; during that clean-up further signals are ignored.
 * `run_main` prints the failures a user can act on as one line, `prog: what failed ...`, and
   exits 1 (2 for a bad command line): the naming service or a server that cannot be reached, a
-  name not bound, a run-time parameter document that does not fit.
+  name not bound, a run-time parameter document that does not fit. Which failures those are is
+  for their own floors to say (`miro_gen.exceptions.ActionableError` and `actionable`): this
+  module looks at no other.
 
 Signal handlers can only be set on the main thread; elsewhere these are no-ops. The module
 imports nothing heavy: a service imports it before anything else.
@@ -37,7 +39,7 @@ import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from types import FrameType
-from typing import Any, NoReturn
+from typing import NoReturn
 
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
@@ -191,29 +193,8 @@ def _clean_up() -> None:
 
 
 def describe(exc: BaseException) -> tuple[str, int] | None:
-    """A one-line message and exit status for a failure a user can act on; None for others."""
-    from miro_gen.exceptions import SystemException
+    """A one-line message and exit status for a failure a user can act on (an ActionableError,
+    or a class its floor made actionable: miro_gen.exceptions); None for others."""
+    from miro_gen.exceptions import user_message
 
-    if isinstance(exc, SystemException):
-        return exc.message or str(exc), 1
-    options = sys.modules.get("miro_gen.service.options")
-    if options is not None and isinstance(exc, options.UsageError):
-        return str(exc), 2
-    naming = sys.modules.get("MiroNaming")
-    if naming is not None:
-        if isinstance(exc, naming.NotFound):
-            return (
-                f"{exc.name} is not bound in the naming service: is its server running? "
-                "(`miro nslist` lists what is)",
-                1,
-            )
-        if isinstance(exc, naming.InvalidName | naming.AlreadyBound):
-            return f"{type(exc).__name__}: {exc.name}", 1
-    params = sys.modules.get("miro_gen.params")
-    params_error: Any = getattr(params, "ParamsError", None)
-    if params_error is not None and isinstance(exc, params_error):
-        return str(exc), 1
-    zmq = sys.modules.get("zmq")
-    if zmq is not None and isinstance(exc, zmq.ZMQError):
-        return f"ZeroMQ: {exc}", 1
-    return None
+    return user_message(exc)

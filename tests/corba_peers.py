@@ -25,6 +25,7 @@ from miro_cli import REPO
 
 CORBA = REPO / "tests" / "corba"
 COS_IDL = Path("/usr/share/idl/omniORB")
+COS_HEADERS = Path("/usr/include/COS")
 NEEDED = ("omniNames", "omniidl", "g++")
 
 
@@ -70,6 +71,50 @@ def build_peer() -> Path:
     os.replace(work / "peer", binary)
     shutil.rmtree(work, ignore_errors=True)
     return binary
+
+
+MIRO_IDL = ("Time", "Exception", "Gps", "RangeEvent")  # what notify_peer.cc uses of idl/
+
+
+def build_notify_peer() -> Path:
+    """The C++ CosNotification peer (tests/corba/notify_peer.cc) built against omniORB's
+    CosNotify stubs (libCOS4) and omniidl's stubs of the project's Miro IDL and of
+    NotifyBench.idl (once per source version, cached under the hash of its inputs)."""
+    sources = [CORBA / "notify_peer.cc", CORBA / "NotifyBench.idl"]
+    sources += [REPO / "idl" / f"{name}.idl" for name in MIRO_IDL]
+    digest = hashlib.sha256(b"".join(p.read_bytes() for p in sources)).hexdigest()[:16]
+    out = Path(tempfile.gettempdir()) / f"miro-notify-peer-{digest}"
+    binary = out / "notify_peer"
+    if binary.is_file():
+        return binary
+    work = Path(tempfile.mkdtemp(prefix="miro-notify-build-"))
+    for idl in sources[1:]:
+        subprocess.run(
+            ["omniidl", "-bcxx", "-Wba", f"-I{REPO / 'idl'}", str(idl)],
+            cwd=work, check=True, capture_output=True, timeout=120,
+        )  # fmt: skip
+    stubs = sorted(str(p) for p in work.glob("*SK.cc"))
+    proc = subprocess.run(
+        ["g++", "-O1", "-I.", f"-I{COS_HEADERS}", "-o", "notify_peer", str(sources[0]), *stubs,
+         "-lCOS4", "-lomniDynamic4", "-lomniORB4", "-lomnithread", "-lpthread"],
+        cwd=work, capture_output=True, text=True, timeout=600,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-4000:]
+    out.mkdir(exist_ok=True)
+    os.replace(work / "notify_peer", binary)
+    shutil.rmtree(work, ignore_errors=True)
+    return binary
+
+
+def notify_tools_missing() -> list[str]:
+    """What the CosNotification tests need beyond the CORBA tests' tools: omniORB's CosNotify
+    stubs and headers (libcos4-dev) and nameclt."""
+    missing = missing_tools()
+    if not (COS_HEADERS / "CosNotifyChannelAdmin.hh").is_file():
+        missing.append("libcos4-dev")
+    if shutil.which("nameclt") is None:
+        missing.append("omniorb (nameclt)")
+    return missing
 
 
 def generate_python(out: Path) -> None:

@@ -72,3 +72,41 @@ def supply(naming: str, count: int, *gaps_ms: int, context: str = "robot1") -> N
 
 def read_events(stdout: str) -> list[dict[str, Any]]:
     return [json.loads(line) for line in stdout.splitlines() if line.startswith("{")]
+
+
+T0 = 1_700_000_000_000_000_000  # ns: the log time of the first event of the logs written here
+
+
+def write_log(
+    path: Path,
+    events: list[tuple[str, int, int]],
+    *,
+    type_name: str = "ExampleEvent",
+    chunk_every: int = 0,
+    finish: bool = True,
+) -> Path:
+    """A log of ExampleEvents `(domain, counter, log time offset in ms)`, each ExampleEventIDL(
+    counter, (counter, -counter)) with sequence number `counter`, stamped 1 ms before its log
+    time; a chunk closed after every `chunk_every` events; without `finish` the file has no
+    summary (as a recorder killed outright leaves it)."""
+    import Miro
+
+    from miro_gen.eventlog.writer import LogWriter
+    from miro_gen.transport.events.frames import RawEvent
+
+    h = Miro.ExampleEventIDL._type_hash
+    writer = LogWriter(str(path))
+    for n, (domain, counter, ms) in enumerate(events, 1):
+        t = T0 + ms * 1_000_000
+        payload = Miro.ExampleEventIDL(counter, Miro.ExampleStructIDL(float(counter), -counter))
+        writer.write(
+            [RawEvent(domain, type_name, h, 1, counter, t - 1_000_000, t, payload.serialize())], t
+        )
+        if chunk_every and n % chunk_every == 0:
+            writer.flush()
+    if finish:
+        writer.finish()
+    else:
+        writer.flush()
+        writer._file.close()
+    return path

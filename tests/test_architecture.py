@@ -95,3 +95,20 @@ def test_the_event_frames_load_without_the_rest_of_events() -> None:
         "'miro_gen.transport.events',",
         "'miro_gen.transport.events.frames']",
     ]
+
+
+def test_one_owner_of_compiling_into_a_package() -> None:
+    """Only miro_gen/compile/ drives the compilers' stages into files (the CLI, `miro new`,
+    `miro build`, the live tools and the log reader all call it), and nothing runs a compiler
+    through its command line (`main()`, `python -m miro_gen.cli.idl`)."""
+    stages = ("generated_files(", "write_files(", "import compile_idl", "params.compiler.build")
+    command_lines = ('"miro_gen.cli.idl"', '"miro_gen.cli.params"', "idl.main(", "params.main(")
+    own = ("compile", "codegen", "idl", "params/compiler")
+    found = []
+    for p in sorted((ROOT / "miro_gen").rglob("*.py")):
+        rel = p.relative_to(ROOT / "miro_gen").as_posix()
+        text = p.read_text(encoding="utf-8")
+        if not any(rel.startswith(f"{o}/") for o in own):
+            found += [f"{rel}: {s}" for s in stages if s in text]
+        found += [f"{rel}: {s}" for s in command_lines if s in text]
+    assert found == []

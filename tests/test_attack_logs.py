@@ -19,6 +19,7 @@ from loopback import run_miro, service_env
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
+from miro_gen.compile import foreign
 from miro_gen.eventlog import types
 from miro_gen.eventlog.reader import LogError, LogReader
 from miro_gen.eventlog.writer import MAX_CHANNELS, LogWriter
@@ -190,18 +191,21 @@ def test_a_hostile_schema_is_not_preprocessed(tmp_path: Path, include: str) -> N
 def test_compiling_a_schema_is_stopped_past_its_limits(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr(types, "COMPILE_SECONDS", 0.01)
+    monkeypatch.setattr(foreign, "COMPILE_SECONDS", 0.01)
     why = types.types_from_schemas(["module Slow { struct S { long x; }; };"])
     assert why is not None and "took longer than" in why
-    monkeypatch.setattr(types, "COMPILE_SECONDS", 60.0)
-    monkeypatch.setattr(types, "COMPILE_MEMORY", 16 << 20)  # not even Python starts in that
+    monkeypatch.setattr(foreign, "COMPILE_SECONDS", 60.0)
+    monkeypatch.setattr(foreign, "COMPILE_MEMORY", 16 << 20)  # not even the compiler loads
     why = types.types_from_schemas(["module Small { struct S { long x; }; };"])
-    assert why is not None and "do not compile" in why
-    monkeypatch.setattr(types, "MAX_SCHEMA_BYTES", 100)
+    assert why is not None and "ran out of its time or memory" in why
+    monkeypatch.setattr(foreign, "COMPILE_MEMORY", 2 << 30)
+    monkeypatch.setattr(foreign, "MAX_SCHEMA_BYTES", 100)
     why = types.types_from_schemas(
         [f"module Big{n} {{ struct S {{ long x; }}; }};" for n in range(9)]
     )
     assert why is not None and "larger than 100 bytes" in why
+    why = types.types_from_schemas(["module Bad { struct S { long x } };"])
+    assert why is not None and why.startswith("the schema does not compile here: schema.idl:1:")
 
 
 def test_topics_past_the_channel_limit_are_refused_and_the_rest_recorded(

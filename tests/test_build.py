@@ -145,3 +145,33 @@ def test_a_changed_generator_makes_the_project_stale(tmp_path: Path) -> None:
     done = miro("build")
     assert "wrote generated/Arm/ArmParameters.py" in done.stdout, done.stderr
     assert (root / "generated/Arm/ArmParameters.py").read_text().endswith("# one more line\n")
+
+
+def test_building_leaves_the_process_as_it_was(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """`miro run` and `miro launch` check freshness in their own process: compiling there
+    changes neither its working folder, nor its garbage collector or recursion limit, and
+    prints nothing (the compilers are a library, not their command lines). What it writes is
+    what the commands write in the project's folder."""
+    import gc
+
+    root = make_project(tmp_path)
+    project = proj.find_project(root)
+    assert project is not None
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    limit = sys.getrecursionlimit()
+    assert gc.isenabled()
+    wrote = proj.ensure_fresh(project)
+    assert "wrote generated/Miro/Example_idl.py" in wrote
+    assert proj.check(project).fresh
+    assert os.getcwd() == str(elsewhere) and gc.isenabled()
+    assert sys.getrecursionlimit() == limit
+    captured = capsys.readouterr()
+    assert captured.out == "" and captured.err == ""
+    for command in project.commands():
+        module = {"miro-idl": "miro_gen.cli.idl", "miro-params": "miro_gen.cli.params"}
+        done = run_module(module[command[0]], "--check", *command[1:], cwd=root)
+        assert done.returncode == 0, done.stderr

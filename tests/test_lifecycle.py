@@ -272,3 +272,80 @@ def test_a_server_interrupted_between_binding_and_running_unbinds(naming: str) -
         assert client.naming.entries("between/") == []
     finally:
         client.close()
+
+
+def run_script(script: str, *args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-c", script, *args],
+        capture_output=True,
+        text=True,
+        env=service_env(),
+        timeout=60,
+    )
+
+
+@pytest.mark.parametrize(("status", "expected"), [(None, 1), (3, 3)])
+def test_a_services_own_actionable_error_is_one_line(status: int | None, expected: int) -> None:
+    """A service's own error derived from ActionableError is told as its failures are: one
+    line, its status; lifecycle knows nothing of the class."""
+    script = (
+        "from miro_gen import ActionableError\n"
+        "from miro_gen.lifecycle import run_main\n"
+        "class NoArm(ActionableError):\n"
+        f"    exit_status = {status or 1}\n"
+        "def main():\n"
+        "    raise NoArm('no arm on /dev/arm0: is it plugged in?')\n"
+        "run_main(main, 'arm')\n"
+    )
+    done = run_script(script)
+    assert done.returncode == expected
+    assert one_line(done.stderr) == "arm: no arm on /dev/arm0: is it plugged in?"
+
+
+def test_a_defect_keeps_its_traceback() -> None:
+    script = (
+        "from miro_gen.lifecycle import run_main\n"
+        "def main():\n"
+        "    return {}['missing']\n"
+        "run_main(main, 'buggy')\n"
+    )
+    done = run_script(script)
+    assert done.returncode == 1
+    assert "Traceback" in done.stderr and "KeyError: 'missing'" in done.stderr
+
+
+def test_what_zeromq_refuses_is_one_line() -> None:
+    """A port another socket holds: ZeroMQ's refusal, made actionable by the transport."""
+    port = free_port()
+    script = (
+        "import zmq\n"
+        "from miro_gen import Client\n"
+        "from miro_gen.lifecycle import run_main\n"
+        "def main():\n"
+        "    ctx = zmq.Context()\n"
+        "    first, second = ctx.socket(zmq.REP), ctx.socket(zmq.REP)\n"
+        f"    first.bind('tcp://127.0.0.1:{port}')\n"
+        f"    second.bind('tcp://127.0.0.1:{port}')\n"
+        "run_main(main, 'twice')\n"
+    )
+    done = run_script(script)
+    assert done.returncode == 1
+    line = one_line(done.stderr)
+    assert line.startswith("twice: ZeroMQ: Address already in use") and str(port) in line
+
+
+def test_a_parameter_document_that_does_not_fit_is_told_not_traced(tmp_path: Path) -> None:
+    doc = tmp_path / "bad.xml"
+    doc.write_text('<config><section name="Robot"><parameter name="Nope"/></section></config>')
+    script = (
+        "import sys\n"
+        "from miro_gen.params import ParamsError\n"
+        "from miro_gen.diagnostics import Diagnostic, SourcePos\n"
+        "from miro_gen.lifecycle import run_main\n"
+        "def main():\n"
+        "    raise ParamsError([Diagnostic('error', SourcePos(sys.argv[1], 1, 0), 'no Nope')])\n"
+        "run_main(main, 'reader')\n"
+    )
+    done = run_script(script, str(doc))
+    assert done.returncode == 1
+    assert one_line(done.stderr) == f"reader: {doc}:1: error: no Nope"

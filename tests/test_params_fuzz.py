@@ -159,7 +159,7 @@ def compile_time_files(draw: st.DrawFn) -> bytes:
 
 def test_random_compile_time_files_compile_or_report_errors(tmp_path: Path) -> None:
     """...and what compiles renders as Python that compiles (the generator's own output)."""
-    from miro_gen.cli.params import compile_files
+    from miro_gen.compile.params import params_modules
     from miro_gen.params.compiler.generate import render_module
     from miro_gen.params.compiler.pymodel import PyParamsModule
 
@@ -171,7 +171,7 @@ def test_random_compile_time_files_compile_or_report_errors(tmp_path: Path) -> N
         diag = Diagnostics()
         modules: list[object] = []
         with contextlib.suppress(CompileError):
-            modules = compile_files([str(src)], [], None, diag)
+            modules = params_modules([str(src)], [], None, diag)
         for d in diag.items:
             assert d.severity != "error" or d.pos is None or d.pos.path.endswith("F.xml"), d
         if not diag.has_errors:

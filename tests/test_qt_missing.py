@@ -35,3 +35,10 @@ def test_the_qt_services_say_it_in_one_line() -> None:
         out = run(f"sys.argv = [{str(path)!r}, 'X']; import runpy; runpy.run_path(sys.argv[0])")
         assert out.returncode == 1
         assert "pip install miro-gen[qt]" in out.stderr and "Traceback" not in out.stderr
+
+
+def test_the_log_player_window_says_it_in_one_line() -> None:
+    out = run("from miro_gen.cli.main import main; raise SystemExit(main(['log', 'player']))")
+    assert out.returncode == 1
+    assert out.stderr.startswith("miro log player: ") and out.stderr.count("\n") == 1
+    assert "pip install miro-gen[qt]" in out.stderr and "Traceback" not in out.stderr

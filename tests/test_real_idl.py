@@ -44,15 +44,29 @@ TREES: dict[str, tuple[Path, list[Path]]] = {
 }
 
 
+# Files written in IDL 4 (the integer types of rosidl: uint8, int64...), which omniidl, an IDL 3
+# compiler, does not know (it reports 'uint8' not found, then its C++ back end crashes).
+IDL4_ONLY = {REPO / "idl" / "rmw_dds_common.idl"}
+
+
 def _files(tree: str) -> list[Any]:
     root, _ = TREES[tree]
-    return [pytest.param(p, id=f"{tree}/{p.relative_to(root)}") for p in idl_files(root)]
+    return [
+        pytest.param(
+            p,
+            id=f"{tree}/{p.relative_to(root)}",
+            marks=[pytest.mark.skip(reason="IDL 4 types, which omniidl does not know")]
+            if p in IDL4_ONLY
+            else [],
+        )
+        for p in idl_files(root)
+    ]
 
 
 @cache
 def _omniidl(tree: str) -> dict[str, dict[str, Any]]:
     root, includes = TREES[tree]
-    files = [str(p) for p in idl_files(root)]
+    files = [str(p) for p in idl_files(root) if p not in IDL4_ONLY]
     return omniidl_results(files, [str(d) for d in includes])
 
 

@@ -25,34 +25,9 @@ def _route(text: str) -> tuple[str, str]:
     return name, event
 
 
-def _kinds() -> argparse.ArgumentParser:
-    """`miro bridge`'s own parser: the kinds of bridge, each with its own options."""
-    p = argparse.ArgumentParser(
-        prog="miro bridge",
-        description="Relay events between miro-gen's event channels and another middleware's.",
-        epilog="`miro bridge KIND --help` lists the options of each.",
-    )
-    kinds = p.add_subparsers(dest="kind", metavar="KIND")
-    kinds.add_parser(
-        "corba",
-        help="with a CORBA event channel (CosEventComm push model, as omniEvents serves it)",
-        add_help=False,
-    )
-    return p
-
-
-def bridge_main(argv: Sequence[str]) -> int:
+def corba_main(argv: Sequence[str]) -> int:
+    """`miro bridge corba`."""
     prog = "miro bridge"
-    if not argv or argv[0] != "corba":
-        kinds = _kinds()
-        if argv and argv[0] in ("-h", "--help"):
-            kinds.print_help()
-            return 0
-        kinds.print_usage(sys.stderr)
-        given = f"no bridge {argv[0]!r}" if argv else "which bridge?"
-        print(f"{prog}: error: {given} (choose from corba)", file=sys.stderr)
-        return 2
-    argv = argv[1:]
     p = argparse.ArgumentParser(
         prog=f"{prog} corba",
         description="Relay events between a CORBA event channel (CosEventComm push model, "

@@ -8,9 +8,12 @@ import re
 import sys
 import traceback
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from miro_gen.diagnostics import Diagnostics
+
+if TYPE_CHECKING:
+    from miro_gen.compile.outcome import Outcome
 
 _MACRO_NAME = re.compile(r"[A-Za-z_]\w*$")
 
@@ -26,6 +29,27 @@ def parse_defines(items: list[tuple[str, str]], diag: Diagnostics) -> dict[str, 
             continue
         out[name] = None if option == "U" else value if sep else "1"
     return out
+
+
+def show(done: Outcome, prog: str, check: bool) -> int:
+    """Print what a compile did as the compilers' command lines do; their exit status."""
+    for d in done.diagnostics:
+        print(d, file=sys.stderr)
+    for text in done.warnings:
+        print(f"{prog}: warning: {text}", file=sys.stderr)
+    for text in done.errors:
+        print(f"{prog}: error: {text}", file=sys.stderr)
+    if not done.ok:
+        return 1
+    if check:
+        for path in done.paths():
+            print(f"{prog}: {path} is out of date", file=sys.stderr)
+        return 1 if done.changed else 0
+    for path in done.paths():
+        print(f"wrote {path}")
+    if done.written and not done.changed:
+        print(f"{prog}: {done.files} files in {done.outdir} are up to date")
+    return 0
 
 
 def internal_error(prog: str, exc: BaseException) -> int:

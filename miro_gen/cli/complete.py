@@ -1,6 +1,7 @@
-"""Shell completion for `miro`: sub-commands and options, and what is running: object names and
-their operations (`miro call`), services and their parameters (`miro param`), event topics and
-payload types (`miro pub`, `miro echo`, `miro hz`).
+"""Shell completion for `miro`: its verbs, sub-verbs and options (from the table of
+cli/verbs.py), and what is running: object names and their operations (`miro call`), services
+and their parameters (`miro param`), event topics and payload types (`miro pub`, `miro echo`,
+`miro hz`), by the completers the table names.
 
     eval "$(miro completion bash)"      # in ~/.bashrc (zsh: the same, after bashcompinit)
 
@@ -14,7 +15,9 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, cast
+
+from miro_gen.cli.verbs import VERBS, Verb, find, target
 
 TIMEOUT = 1.0  # seconds a Tab may wait for the naming service or a service
 
@@ -29,11 +32,6 @@ _miro_complete() {
 }
 complete -o filenames -F _miro_complete miro
 """
-
-COMMANDS = [
-    *("build", "call", "completion", "demo", "echo", "hz", "idl", "launch", "list", "log"),
-    *("naming", "new", "nslist", "nsunbind", "param", "params", "pub", "run", "sim"),
-]
 
 
 def completion_main(argv: Sequence[str]) -> int:
@@ -66,30 +64,31 @@ def complete_main(argv: Sequence[str]) -> int:
 
 
 def candidates(words: list[str]) -> list[str]:
-    """What may come at the last of `words` (words[0] is `miro`)."""
+    """What may come at the last of `words` (words[0] is `miro`): the verbs, sub-verbs and
+    options of cli/verbs.py's table, and what its completers say is running."""
     current = words[-1]
     if len(words) == 2:
-        return [c for c in COMMANDS if c.startswith(current)]
-    command = words[1]
+        return _filter([v.name for v in VERBS if not v.hidden], current)
+    verb = find(words[1])
+    if verb is None:
+        return []
     if current.startswith("-"):
-        return [o for o in _options(command, words) if o.startswith(current)]
+        return [o for o in _options(verb) if o.startswith(current)]
     previous = words[-2]
     if previous in ("--payload",):
         return _filter(_payload_types(words), current)
     if previous in ("--naming", "--host", "-MNC", "-MLL", "--channel", "-o", "--output"):
         return []
     args = _positionals(words[2:-1])
-    table: dict[str, Callable[[list[str], list[str]], list[str]]] = {
-        "call": _call,
-        "param": _param,
-        "pub": lambda w, a: _topics(w) if not a else [],
-        "echo": lambda w, a: _topics(w),
-        "hz": lambda w, a: _topics(w),
-        "list": lambda w, a: _service_names(w) if not a else [],
-        "new": lambda w, a: [],
-    }
-    found = table.get(command)
-    return _filter(found(words, args), current) if found else []
+    if verb.subs and not args:
+        return _filter([s.name for s in verb.subs], current)
+    sub = verb.sub(args[0]) if verb.subs else None
+    if sub is not None and sub.run:
+        return []  # a sub-verb's own arguments: files (the shell's default)
+    if not verb.complete:
+        return []
+    complete = cast("Callable[[list[str], list[str]], list[str]]", target(verb.complete))
+    return _filter(complete(words, args), current)
 
 
 def _filter(items: list[str], prefix: str) -> list[str]:
@@ -124,22 +123,13 @@ def _positionals(words: list[str]) -> list[str]:
     return out
 
 
-def _options(command: str, words: list[str]) -> list[str]:
-    import importlib
-
-    modules = {
-        "launch": "miro_gen.cli.launch",
-        "call": "miro_gen.cli.call",
-        "pub": "miro_gen.cli.pub",
-        "list": "miro_gen.cli.listing",
-        "param": "miro_gen.cli.param",
-    }
-    common = ["--naming", "-MNC", "-MLL", "--host"]
-    if command not in modules:
-        return ["--help"]
-    parser: argparse.ArgumentParser = importlib.import_module(modules[command]).parser()
-    options = [o for a in parser._actions for o in a.option_strings]
-    return options + (common if command != "launch" else [])
+def _options(verb: Verb) -> list[str]:
+    """The options of `verb`, from its parser, and the common options if it takes them."""
+    common = ["--naming", "-MNC", "-MLL", "--host"] if verb.common else []
+    if not verb.parser:
+        return ["--help", *common]
+    parser = cast("Callable[[], argparse.ArgumentParser]", target(verb.parser))()
+    return [o for a in parser._actions for o in a.option_strings] + common
 
 
 # ---- what is running ---------------------------------------------------------------------------
@@ -179,7 +169,8 @@ def _object_names(words: list[str]) -> list[str]:
     )
 
 
-def _call(words: list[str], args: list[str]) -> list[str]:
+def call_args(words: list[str], args: list[str]) -> list[str]:
+    """`miro call NAME OPERATION`: the objects bound, then the object's operations."""
     if not args:
         return _object_names(words)
     if len(args) > 1:
@@ -200,9 +191,9 @@ def _service_names(words: list[str]) -> list[str]:
     )
 
 
-def _param(words: list[str], args: list[str]) -> list[str]:
-    if not args:
-        return ["get", "set", "dump"]
+def param_args(words: list[str], args: list[str]) -> list[str]:
+    """`miro param get|set|dump SERVICE NAME` (the sub-verb given): services, then the
+    service's parameters."""
     if len(args) == 1:
         return _service_names(words)
     if len(args) > 2 or args[0] == "dump":
@@ -237,6 +228,21 @@ def _offers(words: list[str]) -> list[Any]:
     return _with_robot(
         words, lambda r: [o for s in r.services() if s.description for o in s.description.offers]
     )
+
+
+def pub_args(words: list[str], args: list[str]) -> list[str]:
+    """`miro pub TOPIC`: the topics published now."""
+    return _topics(words) if not args else []
+
+
+def topic_args(words: list[str], args: list[str]) -> list[str]:
+    """`miro echo|hz TOPIC...`: the topics published now."""
+    return _topics(words)
+
+
+def list_args(words: list[str], args: list[str]) -> list[str]:
+    """`miro list PATTERN`: the services running."""
+    return _service_names(words) if not args else []
 
 
 def _topics(words: list[str]) -> list[str]:

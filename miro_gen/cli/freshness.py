@@ -9,25 +9,28 @@ repository is:
     miro-params -I idl params/*.xml services/*/*Parameters.xml
 
 `check()` answers quickly when nothing changed: it keeps the digests of the inputs (and of the
-compilers that made the output) in `.miro/fresh.json`, and only when they differ runs the two
-compilers' own `--check`. `ensure_fresh()` regenerates what is stale, or, when `generated/`
-cannot be written, raises `StaleError` naming the commands to run.
+compilers that made the output) in `.miro/fresh.json`, and only when they differ compiles them
+(miro_gen.compile, as those commands do, in this process) and compares. `ensure_fresh()`
+regenerates what is stale, or, when `generated/` cannot be written, raises `StaleError` naming
+the commands to run.
 """
 
 from __future__ import annotations
 
 import contextlib
-import gc
 import hashlib
-import io
 import json
 import os
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from miro_gen import resources
+
+if TYPE_CHECKING:
+    from miro_gen.compile.outcome import Outcome
 
 STAMP = Path(".miro") / "fresh.json"
 _TOOL_SOURCES = ("codegen", "idl", "params/compiler")  # in miro_gen: what decides generated code
@@ -71,7 +74,11 @@ class Project:
         return " && ".join(out)
 
     def _rel(self, paths: list[Path]) -> list[str]:
-        return [p.relative_to(self.root).as_posix() for p in paths]
+        return [self.relative(p) for p in paths]
+
+    def relative(self, path: Path) -> str:
+        """`path` as the commands name it, from the project's folder."""
+        return path.relative_to(self.root).as_posix()
 
 
 def find_project(start: Path) -> Project | None:
@@ -146,43 +153,47 @@ def _write_stamp(project: Project, inputs: dict[str, object]) -> None:
         os.replace(tmp, path)
 
 
-def _run(main: Callable[[list[str]], int], argv: list[str]) -> tuple[int, str]:
-    """A compiler's main() in this process: its status and what it printed."""
-    out = io.StringIO()
-    enabled = gc.isenabled()
-    limit = sys.getrecursionlimit()
+def _compile(project: Project, check: bool) -> list[Outcome]:
+    """Compile the project's IDL, then its parameter files, into `generated/` (or with `check`
+    only compare): as the commands of `project.commands()` run in its folder would."""
+    from miro_gen.compile.idl import idl_package
+    from miro_gen.compile.params import params_package
+
+    root = project.root
+    include = [_shown(root / "idl")]
+    outcomes = []
+    if project.idl_files:
+        files = [_shown(p) for p in project.idl_files]
+        outcomes.append(
+            idl_package(files, project.generated, include_dirs=include, check=check, base=root)
+        )
+    if project.param_files:
+        files = [_shown(p) for p in project.param_files]
+        outcomes.append(
+            params_package(files, project.generated, include_dirs=include, check=check, base=root)
+        )
+    return outcomes
+
+
+def _shown(path: Path) -> str:
+    """An input as its problems name it: from the working folder when inside it."""
     try:
-        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(out):
-            status = main(argv)
-    finally:  # what the compilers change for their own short runs, as it was
-        if enabled:
-            gc.enable()
-        sys.setrecursionlimit(limit)
-    return status, out.getvalue()
+        return str(path.relative_to(Path.cwd()))
+    except ValueError:
+        return str(path)
 
 
-def _compile(project: Project, check: bool) -> list[tuple[list[str], int, str]]:
-    """Run each compiler (with --check, or writing) from the project's folder."""
-    from miro_gen.cli import idl, params
-
-    mains = {"miro-idl": idl.main, "miro-params": params.main}
-    results = []
-    here = Path.cwd()
-    os.chdir(project.root)
-    try:
-        for command in project.commands():
-            argv = [*command[1:3], "-o", "generated", *(["--check"] if check else []), *command[3:]]
-            status, text = _run(mains[command[0]], argv)
-            results.append((command, status, text))
-    finally:
-        os.chdir(here)
-    return results
+def _problems(done: Outcome) -> list[str]:
+    """A compile's errors, as lines."""
+    return [str(d) for d in done.diagnostics if d.severity != "warning"] + [
+        f"error: {e}" for e in done.errors
+    ]
 
 
 @dataclass
 class Freshness:
     fresh: bool
-    stale: list[str] = field(default_factory=list)  # what the --check runs said
+    stale: list[str] = field(default_factory=list)  # `PATH is out of date`, a line a file
     errors: list[str] = field(default_factory=list)  # compile errors (the inputs are broken)
 
 
@@ -192,22 +203,19 @@ def check(project: Project) -> Freshness:
     if _stamp_matches(project, inputs):
         return Freshness(True)
     stale, errors = [], []
-    for _command, status, text in _compile(project, check=True):
-        lines = [line for line in text.splitlines() if line.strip()]
-        if status != 0:
-            if any("is out of date" in line for line in lines):
-                stale += [line for line in lines if "is out of date" in line]
-            else:
-                errors += lines or ["the compiler failed"]
+    for done in _compile(project, check=True):
+        if not done.ok:
+            errors += _problems(done) or ["the compiler failed"]
+        stale += [f"{project.relative(p)} is out of date" for p in done.paths()]
     if not stale and not errors:
         _write_stamp(project, inputs)
     return Freshness(not stale and not errors, stale, errors)
 
 
 def ensure_fresh(project: Project) -> list[str]:
-    """Regenerate `generated/` if it is stale; the lines the compilers printed about what they
-    wrote (empty when it was fresh). StaleError when it cannot be written, or the inputs do
-    not compile (then the message holds the compilers' errors)."""
+    """Regenerate `generated/` if it is stale; what was written, a line a file (`wrote
+    generated/...`; empty when it was fresh). StaleError when it cannot be written, or the
+    inputs do not compile (then the message holds the compilers' errors)."""
     state = check(project)
     if state.fresh:
         return []
@@ -220,11 +228,10 @@ def ensure_fresh(project: Project) -> list[str]:
         )
     inputs = _inputs(project)
     wrote: list[str] = []
-    for _command, status, text in _compile(project, check=False):
-        lines = [line for line in text.splitlines() if line.strip()]
-        if status != 0:
-            raise StaleError("\n".join(lines) or "the compiler failed")
-        wrote += [line for line in lines if line.startswith("wrote ")]
+    for done in _compile(project, check=False):
+        if not done.ok:
+            raise StaleError("\n".join(_problems(done)) or "the compiler failed")
+        wrote += [f"wrote {project.relative(p)}" for p in done.paths()]
     _write_stamp(project, inputs)
     return wrote
 

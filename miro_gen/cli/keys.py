@@ -7,21 +7,15 @@ import os
 import sys
 from collections.abc import Sequence
 
+from miro_gen.cli.verbs import verb
 from miro_gen.transport.keyfiles import DEFAULT_KEY, KEY_SUFFIX, write_key_pair
 
 
-def keys_main(argv: Sequence[str]) -> int:
-    p = argparse.ArgumentParser(
-        prog="miro keys",
-        description="Make the key that the processes of a robot (or of a fleet) share: with it "
-        "(--keys FILE, or MIRO_KEYS), every connection is encrypted and only processes that "
-        "hold it can call, publish or subscribe (ZeroMQ CURVE).",
-    )
-    sub = p.add_subparsers(dest="command", metavar="COMMAND")
-    new = sub.add_parser(
-        "new",
-        help="write a new key pair: NAME.key_secret (secret: copy it to each machine that must "
-        "take part, readable by its user only) and NAME.key (public)",
+def new_main(argv: Sequence[str]) -> int:
+    """`miro keys new`."""
+    what = verb("keys new").help
+    new = argparse.ArgumentParser(
+        prog="miro keys new", description=f"{what[0].upper()}{what[1:]}. {verb('keys').description}"
     )
     new.add_argument(
         "name",
@@ -32,16 +26,13 @@ def keys_main(argv: Sequence[str]) -> int:
         " the key services use without --keys)",
     )
     new.add_argument("-f", "--force", action="store_true", help="replace an existing key")
-    ns = p.parse_args(argv)
-    if ns.command is None:
-        p.print_help()
-        return 0
+    ns = new.parse_args(argv)
     base = os.path.expanduser(ns.name).removesuffix(KEY_SUFFIX)
     secret = base + KEY_SUFFIX
     try:
         public_file, secret_file = write_key_pair(base, replace=ns.force)
     except FileExistsError:
-        p.error(
+        new.error(
             f"{secret} exists (use --force to replace it: processes holding the old key "
             "can then no longer connect)"
         )

@@ -1,5 +1,6 @@
-"""`miro log record|play|info|echo`: Miro's LogNotify and LogPlayer on MCAP files; this module
-dispatches them and holds the two that only read a file, info and echo."""
+"""`miro log info` and `miro log echo`, the two `miro log` sub-verbs that only read a file (the
+sub-verbs are listed in cli/verbs.py; record, play, the player window, cut and merge are in
+log_record.py, log_play.py, log_player.py and log_edit.py)."""
 
 from __future__ import annotations
 
@@ -16,30 +17,6 @@ from miro_gen.cli.eventargs import (
     read_status,
     topic_arg,
 )
-
-
-def main(argv: Sequence[str]) -> int:
-    p = argparse.ArgumentParser(
-        prog="miro log",
-        description="Record event channels into MCAP files, replay them, and look into them.",
-    )
-    sub = p.add_subparsers(dest="command", metavar="COMMAND")
-    for name, text in (
-        ("record", "record events of a channel into an MCAP file (Miro's LogNotify)"),
-        ("play", "replay a log into a channel with its original timing (Miro's LogPlayer)"),
-        ("info", "summarise a log: topics, types, counts, time span, rates"),
-        ("echo", "print the events of a log, decoded"),
-    ):
-        sub.add_parser(name, help=text, add_help=False)
-    args = list(argv)
-    if args and args[0] in ("record", "play", "info", "echo"):
-        run = {"record": _record, "play": _play, "info": info_main, "echo": echo_main}
-        return int(run[args[0]](args[1:]))  # a closed pipe: quiet (miro_gen.cli.main)
-    ns = p.parse_args(args)
-    if ns.command is None:
-        p.print_help()
-        return 0
-    return 0  # pragma: no cover
 
 
 def info_main(argv: Sequence[str]) -> int:
@@ -222,15 +199,3 @@ def _matching_topics(path: str, log: Any, wanted: list[tuple[str, str]]) -> bool
         file=sys.stderr,
     )
     return False
-
-
-def _record(argv: Sequence[str]) -> int:
-    from miro_gen.cli.log_record import record_main
-
-    return record_main(argv)
-
-
-def _play(argv: Sequence[str]) -> int:
-    from miro_gen.cli.log_play import play_main
-
-    return play_main(argv)

@@ -1,4 +1,6 @@
-"""`miro log play`: Miro's LogPlayer, replaying an MCAP file into a channel."""
+"""`miro log play`: Miro's LogPlayer on the terminal, replaying MCAP files (merged in log-time
+order) into each robot's channel; and what it shares with the player window (`miro log
+player`): opening the files, the cut and topic options, the channel options."""
 
 from __future__ import annotations
 
@@ -9,27 +11,49 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
-from miro_gen.cli.eventargs import (
-    COMMON,
-    make_server,
-    open_log,
-    read_status,
-    split_common,
-    topic_arg,
+from miro_gen.cli.eventargs import COMMON, make_server, split_common, topic_arg
+
+SWITCH_INTERVAL = 0.0001  # seconds a thread holds the interpreter before another may take it
+KEYS = (
+    "On a terminal: space pauses and resumes, s (or right) sends the next event, p (or left) "
+    "the one before, shift+left/right (or [ and ]) seek a 20th of the log, + and - change the "
+    "speed, 0 goes back to the start, q quits."
 )
 
 
-def play_main(argv: Sequence[str]) -> int:
-    prog = "miro log play"
-    p = argparse.ArgumentParser(
-        prog=prog,
-        description="Replay a log into a channel: every event at its log time (scaled by "
-        "--rate), with its recorded domain, type, sequence number and source stamp. On a "
-        "terminal: space pauses and resumes, s steps one event, q quits. Hosts the channel "
-        "if nobody has it bound. " + COMMON,
+def add_selection_options(p: argparse.ArgumentParser) -> None:
+    """--start/--end (the cut) and --topics/--exclude, as play, player and cut take them."""
+    p.add_argument("--start", type=float, default=0.0, metavar="S", help="from S s into the log")
+    p.add_argument("--end", type=float, metavar="E", help="up to E s into the log")
+    p.add_argument(
+        "--topics", nargs="+", type=topic_arg, metavar="TOPIC", help="DOMAIN/TYPE (default all)"
     )
-    p.add_argument("file", help="an MCAP file written by miro log record")
-    p.add_argument("--channel", default="EventChannel", metavar="NAME", help="default EventChannel")
+    p.add_argument(
+        "--exclude", nargs="+", type=topic_arg, default=[], metavar="TOPIC", help="leave out"
+    )
+
+
+def add_channel_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--channel",
+        default="EventChannel",
+        metavar="NAME",
+        help="the channels' name: each robot's events go into the channel its services find "
+        "(ROBOT/NAME, else NAME at the root), hosted and bound as ROBOT/NAME where there is "
+        "none; a path (lab/EventChannel) sends everything into that one (default EventChannel)",
+    )
+    modes = p.add_mutually_exclusive_group()
+    modes.add_argument(
+        "--shared-channels",
+        action="store_true",
+        help="only the channels that exist: a robot without one is not played (Miro's -shared_ec)",
+    )
+    modes.add_argument(
+        "--unified-channel",
+        action="store_true",
+        help="one channel for all the robots, hosted here and bound as ROBOT/NAME for each "
+        "(Miro's -unified_ec)",
+    )
     p.add_argument(
         "--clock-channel",
         default="LogClock",
@@ -37,13 +61,81 @@ def play_main(argv: Sequence[str]) -> int:
         help="the channel, hosted here, where the log clock is published for processes on "
         "--clock log (default LogClock)",
     )
+
+
+def check_selection(p: argparse.ArgumentParser, ns: Any) -> None:
+    if ns.start < 0 or (ns.end is not None and ns.end < ns.start):
+        p.error("--start must be 0 or more, and --end not before it")
+
+
+def open_files(paths: Sequence[str], files: Any, strict: bool) -> bool:
+    """Open each log into the file set, a progress line while one is scanned; False (and
+    said) when one cannot be read, or, `strict`, has a fault."""
+    from miro_gen.eventlog.progress import StatusLine, bar
+    from miro_gen.eventlog.reader import LogError
+
+    for path in paths:
+        status = StatusLine()
+
+        def progress(fraction: float, path: str = path, status: StatusLine = status) -> bool:
+            status.update(f"{path}: no index, reading it through {bar(fraction)}")
+            return True
+
+        try:
+            log = files.add(path, progress)
+        except LogError as e:
+            status.done(f"{path}: error: {e}")
+            return False
+        if log.fault is not None:
+            status.done(f"{path}: {'error' if strict else 'warning'}: {log.fault}")
+            if strict:
+                return False
+        elif not log.indexed:
+            status.done(f"{path}: read through ({log.count} events)")
+        for warning in log.warnings:
+            print(f"{path}: warning: {warning}", file=sys.stderr)
+    return True
+
+
+def apply_selection(files: Any, ns: Any) -> list[str]:
+    """The cut (--start/--end, seconds from the first event) and the topics left out
+    (--topics, --exclude); warnings for patterns that match no topic."""
+    from miro_gen.eventlog.types import matches
+
+    first, _ = files.span()
+    if ns.start:
+        files.cut_front(first + int(ns.start * 1e9))
+    if ns.end is not None:
+        files.cut_back(first + int(ns.end * 1e9))
+    names = [t.name for t in files.topics()]
+    said = []
+    for pattern in [*(ns.topics or []), *ns.exclude]:
+        if not any(matches(pattern, *name) for name in names):
+            said.append(f"warning: no topic matches {pattern[0]}/{pattern[1]}")
+    for name in names:
+        wanted = ns.topics is None or any(matches(p, *name) for p in ns.topics)
+        if not wanted or any(matches(p, *name) for p in ns.exclude):
+            files.exclude(name)
+    return said
+
+
+def channel_mode(ns: Any) -> str:
+    return "shared" if ns.shared_channels else "unified" if ns.unified_channel else "own"
+
+
+def play_main(argv: Sequence[str]) -> int:
+    prog = "miro log play"
+    p = argparse.ArgumentParser(
+        prog=prog,
+        description="Replay logs (several are merged in log-time order) into each robot's "
+        "channel: every event at its log time (scaled by --rate), with its recorded domain, "
+        "type, sequence number and source stamp. " + KEYS + " " + COMMON,
+    )
+    p.add_argument("files", nargs="+", metavar="FILE", help="MCAP files written by miro log record")
+    add_channel_options(p)
     p.add_argument("--rate", type=float, default=1.0, help="speed factor (default 1)")
     p.add_argument("--loop", action="store_true", help="start again at the end")
-    p.add_argument("--start", type=float, default=0.0, metavar="S", help="from S s into the log")
-    p.add_argument("--end", type=float, metavar="E", help="up to E s into the log")
-    p.add_argument(
-        "--topics", nargs="+", type=topic_arg, metavar="TOPIC", help="DOMAIN/TYPE (default all)"
-    )
+    add_selection_options(p)
     p.add_argument(
         "--wait",
         type=float,
@@ -51,104 +143,130 @@ def play_main(argv: Sequence[str]) -> int:
         metavar="S",
         help="seconds to let consumers connect before the first event (default 0.5)",
     )
+    p.add_argument(
+        "--wait-subscribed",
+        action="store_true",
+        help="then wait until every topic played has a consumer on its channel (Miro's -a)",
+    )
     ns = p.parse_args(split_common(p, argv))
     if not ns.rate > 0:
         p.error("--rate must be more than 0")
-    if ns.start < 0 or (ns.end is not None and ns.end < ns.start):
-        p.error("--start must be 0 or more, and --end not before it")
-    from miro_gen.eventlog.reader import LogError
+    check_selection(p, ns)
+    from miro_gen.eventlog.fileset import FileSet
 
-    log = open_log(ns.file)
-    if log is None:
-        return 1
-    with log:
-        try:
-            log.span()  # reads an unfinished file through: faults show before anything plays
-        except LogError as e:
-            print(f"{ns.file}: error: {e}", file=sys.stderr)
+    files = FileSet()
+    try:
+        if not open_files(ns.files, files, strict=True):
             return 1
-        return _run(p, prog, argv, ns, log)
+        for line in apply_selection(files, ns):
+            print(f"{prog}: {line}", file=sys.stderr)
+        return _run(p, prog, argv, ns, files)
+    finally:
+        files.close()
 
 
-def _run(p: argparse.ArgumentParser, prog: str, argv: Sequence[str], ns: Any, log: Any) -> int:
+def _run(p: argparse.ArgumentParser, prog: str, argv: Sequence[str], ns: Any, files: Any) -> int:
     import threading
 
-    import MiroNaming
-
     from miro_gen.eventlog.keys import key_presses
-    from miro_gen.eventlog.player import Player, PlayOptions
+    from miro_gen.eventlog.player import Player
     from miro_gen.eventlog.progress import StatusLine, bar
-    from miro_gen.eventlog.reader import LogError
-    from miro_gen.eventlog.replay import ReplaySupplier
+    from miro_gen.eventlog.routes import ClockPublisher, Routes
     from miro_gen.exceptions import SystemException
-    from miro_gen.transport.events import EventChannelFactory, StructuredPushSupplier
 
-    # Hand the interpreter between the player's thread and the reactor's within 0.5 ms, not
-    # Python's default 5 ms: a replayed event must leave on time.
-    sys.setswitchinterval(0.0005)
+    # Hand the interpreter between the player's thread, the reactor's and the one reading
+    # ahead within 0.1 ms, not Python's default 5 ms: a replayed event must leave on time.
+    sys.setswitchinterval(SWITCH_INTERVAL)
     server = make_server(p, prog, argv)
+    routes = Routes(server, ns.channel, channel_mode(ns))
     try:
-        try:
-            channel = server.resolve_channel(ns.channel)
-        except MiroNaming.NotFound:
-            channel = EventChannelFactory(server).create_channel(ns.channel)
+        problems = routes.connect(files.domains())
+        clock = ClockPublisher(server, ns.clock_channel)
     except SystemException as e:
         print(f"{prog}: {server.options.naming}: {e}", file=sys.stderr)
         server.close()
         return 1
-    supplier = ReplaySupplier(channel)
-    clock_channel = EventChannelFactory(server).create_channel(ns.clock_channel)
-    options = PlayOptions(ns.rate, ns.loop, ns.start, ns.end, ns.topics)
+    for line in problems:
+        print(f"{prog}: warning: {line}", file=sys.stderr)
+    if not routes.routes and files.domains():
+        print(f"{prog}: error: no channel to play into", file=sys.stderr)
+        server.close()
+        return 1
     reactor_thread = threading.Thread(target=server.run, name="miro-reactor", daemon=True)
     reactor_thread.start()
+    player = Player(files, routes.send, clock, rate=ns.rate, loop=ns.loop)
     status = StatusLine()
-    try:
-        player = Player(log, supplier, options, StructuredPushSupplier(clock_channel))
-    except LogError as e:
-        server.shutdown()
-        reactor_thread.join(5)
-        print(f"{ns.file}: error: {e}", file=sys.stderr)
-        return 1
-    span = max(1, (player.end_ns or player.last_ns) - player.begin_ns)
     shown = [0.0]
 
-    def progress(pl: Player, force: bool = False) -> None:
+    def progress(force: bool = False) -> None:
         now = time.monotonic()
         if now - shown[0] < 0.1 and not force:
             return
         shown[0] = now
-        at = pl.log_now() - pl.begin_ns
-        state = " paused (space: resume, s: step)" if pl.paused else ""
+        start, end = files.cut
+        span = max(1, end - start)
+        at = player.log_now() - start
+        state = " paused (space: resume, s: step)" if player.paused else ""
         status.update(
-            f"{bar(at / span)} {at / 1e9:8.2f}/{span / 1e9:.2f} s  {pl.sent} events  "
-            f"x{pl.rate:g}{state}"
+            f"{bar(at / span)} {at / 1e9:8.2f}/{span / 1e9:.2f} s  {player.sent} events  "
+            f"x{player.rate:g}{state}"
         )
 
-    player.on_progress = progress
+    quit_now = threading.Event()
+    actions = {
+        " ": player.toggle,
+        "s": player.next,
+        ".": player.next,
+        "right": player.next,
+        "p": player.prev,
+        ",": player.prev,
+        "left": player.prev,
+        "shift-right": lambda: player.skip(1),
+        "]": lambda: player.skip(1),
+        "shift-left": lambda: player.skip(-1),
+        "[": lambda: player.skip(-1),
+        "+": lambda: player.faster(1),
+        "=": lambda: player.faster(1),
+        "-": lambda: player.faster(-1),
+        "0": player.stop,
+        "home": player.stop,
+        "q": quit_now.set,
+    }
 
-    def on_key(ch: str) -> None:
-        if ch == " ":
-            player.toggle()
-        elif ch in "sS.":
-            player.step()
-        elif ch in "qQ":
-            player.stop()
-        progress(player, force=True)
+    def on_key(key: str) -> None:
+        action = actions.get(key if len(key) > 1 else key.lower())
+        if action is not None:
+            action()
+        progress(force=True)
 
-    signal.signal(signal.SIGTERM, lambda *_: player.stop())
-    print(f"playing {ns.file} into {channel.name} at x{ns.rate:g}", file=sys.stderr)
-    error = None
-    time.sleep(max(0.0, ns.wait))
+    signal.signal(signal.SIGTERM, lambda *_: quit_now.set())
+    into = ", ".join(sorted({r.channel for r in routes.routes.values()}))
+    print(f"playing {' '.join(ns.files)} into {into} at x{ns.rate:g}", file=sys.stderr)
+    topics = [t.name for t in files.topics() if t.name not in files.excluded]
+    topics = [t for t in topics if routes.channel_of(t[0]) is not None]
     try:
+        time.sleep(max(0.0, ns.wait))
+        if ns.wait_subscribed and not all(routes.subscribed(*t) for t in topics):
+            print(f"{prog}: waiting for a consumer of every topic", file=sys.stderr)
+            while not quit_now.is_set() and not all(routes.subscribed(*t) for t in topics):
+                quit_now.wait(0.02)
+        player.start()
+        player.play()
         with key_presses(on_key):
-            player.play()
-    except LogError as e:
-        error = str(e)
+            while not quit_now.is_set() and not (player.ended.is_set() and not player.loop):
+                quit_now.wait(0.05)
+                progress()
     except KeyboardInterrupt:
-        player.stop()
+        pass
     finally:
+        player.close()
         time.sleep(0.2)  # let the last frames leave
         server.shutdown()
         reactor_thread.join(5)
-    status.done(f"{ns.file}: replayed {player.sent} events into {channel.name}")
-    return read_status(ns.file, log, error)
+    names = " ".join(ns.files)
+    status.done(f"{names}: replayed {player.sent} events into {into}")
+    if player.error is not None:
+        where = getattr(player.error, "path", prog)
+        print(f"{where}: error: {player.error}", file=sys.stderr)
+        return 1
+    return 0

@@ -8,8 +8,10 @@ import dataclasses
 import os
 import re
 import signal
+import socket
 import sys
 from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
 
 import MiroNaming
 import zmq
@@ -32,6 +34,12 @@ from miro_gen.transport.naming.owners_log import LogError, default_path
 from miro_gen.transport.naming.service import NamingService
 from miro_gen.transport.reactor import Reactor
 from miro_gen.transport.rpc.invoker import ZmqInvoker
+
+if TYPE_CHECKING:  # (the CORBA doors load only with --iiop-endpoint)
+    from miro_gen.corba.notify import NotifyChannel
+    from miro_gen.corba.server import IIOPServer
+    from miro_gen.transport.events.notify_door import NotifyDoor
+    from miro_gen.transport.naming.cosnaming_door import RegistryTable
 
 # What a stranger may do with a naming service served --insecure beyond loopback
 NAMING_SERVES = "list, resolve and bind names, and publish and subscribe on its event channels"
@@ -123,6 +131,14 @@ def naming_main(argv: Sequence[str]) -> int:
         metavar="N",
         help=f"connections per socket (default {sockets.DEFAULT_MAX_CONNECTIONS})",
     )
+    p.add_argument(
+        "--iiop-endpoint",
+        metavar="HOST:PORT",
+        help="also answer CORBA clients at HOST:PORT (IIOP, loopback unless --insecure): "
+        "CosNaming over the same names, for C++ services started with -ORBInitRef "
+        "NameService=corbaloc::HOST:PORT/NameService, and each --channel as a "
+        "CosNotifyChannelAdmin::EventChannel (docs/CORBA.md)",
+    )
     p.add_argument("-MLL", "--log-level", type=int, default=5, help="Miro log level (default 5)")
     p.add_argument(
         "--no-announce",
@@ -213,7 +229,18 @@ def naming_main(argv: Sequence[str]) -> int:
     except LogError as e:
         print(f"miro naming: {e}", file=sys.stderr)
         return 1
-    channels = [_host_channel(service, name) for name in ns.channel]
+    corba = None
+    if ns.iiop_endpoint:
+        try:
+            corba = _serve_corba(ns.iiop_endpoint, ns.insecure, reactor, invoker, service)
+        except UsageError as e:
+            service.close()
+            p.error(str(e))
+        except SystemException as e:  # cannot listen there (in use, not an address)
+            service.close()
+            print(f"miro naming: {e.message}", file=sys.stderr)
+            return 1
+    channels = [_host_channel(service, name, corba) for name in ns.channel]
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: reactor.stop())
     bound = service.adapter.bound
@@ -225,7 +252,10 @@ def naming_main(argv: Sequence[str]) -> int:
         note += "; --insecure: in the clear, open to anyone who can reach it"
     if service.log is None:
         note += "; no log of owners: after a restart, names go to whoever binds first"
-    lines = [f"naming service at {bound}{note}", *(f"event channel {n}" for n in ns.channel)]
+    lines = [f"naming service at {bound}{note}"]
+    if corba is not None:
+        lines.append(f"CosNaming at corbaloc::{corba.address}/NameService")
+    lines += [f"event channel {n}" for n in ns.channel]
     # Said once the reactor runs: a signal from whoever waited for these lines then stops it.
     reactor.call_soon(lambda: print("\n".join(lines), flush=True))
     restored = service.restored
@@ -248,6 +278,8 @@ def naming_main(argv: Sequence[str]) -> int:
         announcer.close()
     for channel in channels:
         channel.close()
+    if corba is not None:
+        corba.close()
     service.close()
     reactor.close()
     return 0
@@ -261,18 +293,97 @@ def _iiop_endpoint(p: argparse.ArgumentParser, text: str) -> str:
     return f"tcp://{m.group(1)}:{m.group(2)}"
 
 
-def _host_channel(service: NamingService, name: str) -> ChannelHost:
-    """Host the event channel `name` in this process and bind it, lease-free, in `service`."""
+def _host_channel(service: NamingService, name: str, corba: CorbaDoors | None) -> ChannelHost:
+    """Host the event channel `name` in this process and bind it, lease-free, in `service`
+    (with its Notification door when CORBA clients are served)."""
+    host = _channel_host(service)
+    entry = MiroNaming.Entry(
+        name, CHANNEL_REPO_ID, host.supplier_endpoint, host.consumer_endpoint.encode(), ""
+    )
+    if corba is not None:
+        entry = corba.open_door(name, host).entry()
+    service.registry.keep(entry)
+    return host
+
+
+def _channel_host(service: NamingService) -> ChannelHost:
+    """A channel hosted in this process, bound and advertised as the naming service is."""
     bound = service.adapter.bound
     bind_host = bound.split("://", 1)[1].rsplit(":", 1)[0]
     advertise = service.endpoint.split("://", 1)[1].rsplit(":", 1)[0]
-    host = ChannelHost(service.adapter.reactor.context, bind_host, advertise)
-    service.registry.keep(
-        MiroNaming.Entry(
-            name, CHANNEL_REPO_ID, host.supplier_endpoint, host.consumer_endpoint.encode(), ""
+    return ChannelHost(service.adapter.reactor.context, bind_host, advertise)
+
+
+class CorbaDoors:
+    """What `miro naming --iiop-endpoint` serves to CORBA clients: CosNaming over its names,
+    and the Notification doors of the channels it hosts (transport.naming.cosnaming_door,
+    transport.events.notify_door)."""
+
+    def __init__(
+        self, server: IIOPServer, reactor: Reactor, service: NamingService, names: RegistryTable
+    ) -> None:
+        from miro_gen.corba.notify.wire import EVENT_CHANNEL_FACTORY
+        from miro_gen.transport.events.notify_door import FACTORY_KEY, serve_factory
+        from miro_gen.transport.naming.cosnaming_door import RENEW_EVERY
+
+        self.server = server
+        self.reactor = reactor
+        self.service = service
+        self.address = f"{server.host}:{server.port}"
+        self.doors: list[NotifyDoor] = []
+        self._made = 0
+        self._timer = reactor.schedule_timer(RENEW_EVERY, RENEW_EVERY, names.renew)
+        self.factory = serve_factory(server, self._make)
+        ior = self.factory.reference()
+        service.registry.keep(
+            MiroNaming.Entry(FACTORY_KEY, EVENT_CHANNEL_FACTORY, ior.to_string(), b"", "")
         )
-    )
-    return host
+
+    def open_door(self, name: str, host: ChannelHost) -> NotifyDoor:
+        from miro_gen.transport.events.channels import EventChannel
+        from miro_gen.transport.events.notify_door import NotifyDoor
+
+        channel = EventChannel(
+            name, host.supplier_endpoint, host.consumer_endpoint, self.reactor, "", host
+        )
+        door = NotifyDoor(channel, self.server, self.server.invoker, name, self.factory)
+        self.doors.append(door)
+        return door
+
+    def _make(self, qos: dict[str, Any], admin: dict[str, Any]) -> NotifyChannel:
+        """A channel a CORBA client asks the factory for: both doors, bound nowhere."""
+        self._made += 1
+        host = _channel_host(self.service)
+        door = self.open_door(f"NotifyChannel/{self._made}", host)
+        door.notify.destroyable = True
+        door.notify.core.qos, door.notify.core.admin = qos, admin
+        door.notify.on_close += [door.zmq.close, host.close]  # destroyed, or at the end
+        return door.notify
+
+    def close(self) -> None:
+        self.reactor.cancel_timer(self._timer)
+        for door in self.doors:
+            door.close()
+        self.server.close()
+
+
+def _serve_corba(
+    endpoint: str, insecure: bool, reactor: Reactor, invoker: ZmqInvoker, service: NamingService
+) -> CorbaDoors:
+    """Serve CORBA clients at `endpoint` (HOST:PORT): UsageError when it cannot be."""
+    from miro_gen.corba.client import IIOPInvoker
+    from miro_gen.service.iiop import serve_iiop
+    from miro_gen.service.options import CommonOptions, iiop_endpoint
+    from miro_gen.transport.naming.cosnaming_door import serve_cosnaming
+
+    host, _, port = iiop_endpoint(endpoint, "--iiop-endpoint").rpartition(":")
+    host = host.strip("[]") or "0.0.0.0"
+    iiop = IIOPInvoker(invoker)
+    options = CommonOptions(insecure=insecure)
+    advertise = socket.gethostname() if host in ("0.0.0.0", "::") else host
+    server = serve_iiop(iiop, options, host, advertise, int(port))
+    iiop.server = server
+    return CorbaDoors(server, reactor, service, serve_cosnaming(service.registry, server))
 
 
 def nslist_main(argv: Sequence[str]) -> int:

@@ -18,6 +18,7 @@ from typing import Any
 from lxml import etree
 
 from miro_gen.cli.liveargs import connect
+from miro_gen.cli.verbs import verb
 from miro_gen.live.remote import LiveError, Running
 
 
@@ -29,11 +30,12 @@ def parser() -> argparse.ArgumentParser:
         "options (--naming tcp://HOST:PORT).",
     )
     sub = p.add_subparsers(dest="action", metavar="ACTION", required=True)
-    get = sub.add_parser("get", help="print parameters: every set, a set, or one value")
+    actions = {v.name: sub.add_parser(v.name, help=v.help) for v in verb("param").subs}
+    get = actions["get"]
     get.add_argument("service", metavar="SERVICE", help="gps, robot1/gps, or an object's name")
     get.add_argument("name", metavar="NAME", nargs="?", help="Category[.Parameter[.Field]]")
     get.add_argument("--xml", action="store_true", help="as run-time document elements")
-    put = sub.add_parser("set", help="change one value, checked as a run-time document is")
+    put = actions["set"]
     put.add_argument("service", metavar="SERVICE")
     put.add_argument("name", metavar="NAME", help="Category.Parameter[.Field]")
     put.add_argument(
@@ -42,7 +44,7 @@ def parser() -> argparse.ArgumentParser:
         help="its new value, as a document writes it ('1 2 3' for a "
         "vector); a YAML list or mapping for a vector or a structure",
     )
-    out = sub.add_parser("dump", help="every set, as a run-time document (-MCF reads it back)")
+    out = actions["dump"]
     out.add_argument("service", metavar="SERVICE")
     out.add_argument("-o", "--output", metavar="FILE", help="write it to FILE (default: stdout)")
     return p

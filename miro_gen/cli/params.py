@@ -5,9 +5,9 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Sequence
-from pathlib import Path
 
-from miro_gen.cli.common import VersionAction, internal_error
+from miro_gen.cli.common import VersionAction, internal_error, show
+from miro_gen.compile.params import params_package
 from miro_gen.diagnostics import CompileError, Diagnostics
 
 DESCRIPTION = """\
@@ -102,17 +102,6 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     diag = Diagnostics()
-    for f in args.files:
-        path = Path(f)
-        if path.is_dir():
-            diag.error(None, f"'{f}' is a folder, not a compile-time file (give its .xml files)")
-        elif not path.exists():
-            diag.error(None, f"cannot read '{f}': no such file")
-    if args.name is not None and len(args.files) != 1:
-        diag.error(None, "-n NAME names the module of one FILE; give one")
-    outdir = Path(args.outdir)
-    if not args.xsd and outdir.exists() and not outdir.is_dir():
-        diag.error(None, f"the output folder '{args.outdir}' is a file (-o OUTDIR)")
     python_classes: dict[str, str] = {}
     for given in args.python_classes:
         cxx, eq, module = given.partition("=")
@@ -120,103 +109,39 @@ def main(argv: Sequence[str] | None = None) -> int:
             diag.error(None, f"--python-class {given!r}: give TYPE=MODULE")
         python_classes[cxx.strip().lstrip(":")] = module.strip()
     args.python_classes = python_classes
-    if diag.has_errors:
-        diag.print()
-        return 1
     try:
-        return _run(args, diag)
-    except CompileError:
-        diag.print()
-        return 1
+        if args.xsd:
+            return _xsd(args, diag)
+        done = params_package(
+            args.files,
+            args.outdir,
+            include_dirs=args.include_dirs,
+            name=args.name,
+            python_classes=python_classes,
+            skip_untranslatable=args.skip_untranslatable,
+            check=args.check,
+            diagnostics=diag,
+        )
     except KeyboardInterrupt:
         return 130
-    except RecursionError:  # classes deriving from each other thousands deep, ...
+    except CompileError:
         diag.print()
-        print("miro-params: error: the input is nested too deeply to compile", file=sys.stderr)
         return 1
     except Exception as e:  # a bug in miro-params, not in the input
         diag.print()
         return internal_error("miro-params", e)
-
-
-def compile_files(
-    paths: list[str],
-    include_dirs: list[str],
-    name: str | None,
-    diag: Diagnostics,
-    python_classes: dict[str, str] | None = None,
-    skip_untranslatable: bool = False,
-) -> list[object]:
-    """The template contexts of `paths` (errors in `diag`)."""
-    from miro_gen.params.compiler.build import build_modules
-    from miro_gen.params.compiler.loader import Loader
-
-    loader = Loader(include_dirs, diag)
-    targets = []
-    for path in paths:
-        f = loader.load(Path(path))
-        if f is not None:
-            targets.append(f)
-    names = {Path(paths[0]).resolve(): name} if name else {}
-    files = list(loader.files.values())
-    return list(
-        build_modules(
-            files, targets, names, diag, python_classes, skip_untranslatable=skip_untranslatable
-        )
-    )
-
-
-def _run(args: argparse.Namespace, diag: Diagnostics) -> int:
-    if args.xsd:
-        return _xsd(args, diag)
-    from miro_gen.codegen.generate import changed_files, write_files
-    from miro_gen.params.compiler import generate
-    from miro_gen.params.compiler.pymodel import PyParamsModule
-
-    modules = [
-        m
-        for m in compile_files(
-            args.files,
-            args.include_dirs,
-            args.name,
-            diag,
-            args.python_classes,
-            args.skip_untranslatable,
-        )
-        if isinstance(m, PyParamsModule)
-    ]
-    diag.print()
-    if diag.has_errors:
-        return 1
-    outdir = Path(args.outdir)
-    files = generate.generated_files(modules, outdir)
-    changed = changed_files(files, outdir)
-    if args.check:
-        for rel in changed:
-            print(f"miro-params: {outdir / rel} is out of date", file=sys.stderr)
-        return 1 if changed else 0
-    try:
-        write_files(files, changed, outdir)
-    except OSError as e:
-        where = e.filename or outdir
-        why = (
-            "a file is in the way of a folder"
-            if isinstance(e, (FileExistsError, NotADirectoryError))
-            else e.strerror or str(e)
-        )
-        print(f"miro-params: cannot write '{where}': {why}", file=sys.stderr)
-        return 1
-    for rel in changed:
-        print(f"wrote {outdir / rel}")
-    if not changed:
-        print(f"miro-params: {len(files)} files in {outdir} are up to date")
-    return 0
+    return show(done, "miro-params", args.check)
 
 
 def _xsd(args: argparse.Namespace, diag: Diagnostics) -> int:
+    from miro_gen.compile.checks import unreadable_params
     from miro_gen.params.compiler import dynamic
     from miro_gen.params.compiler.xsd import render_xsd
 
+    unreadable_params(args.files, diag)
+    if diag.has_errors:
+        diag.print()
+        return 1
     classes = dynamic.load(args.files, args.include_dirs, diag, args.python_classes)
     diag.print()
     sys.stdout.write(render_xsd(c.cls for c in classes if c.target))

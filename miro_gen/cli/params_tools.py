@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from miro_gen.cli.common import internal_error
+from miro_gen.cli.verbs import verb
 from miro_gen.diagnostics import CompileError, Diagnostic, Diagnostics, SourcePos
 
 if TYPE_CHECKING:
@@ -31,10 +32,7 @@ validate exits 1 when there is any.
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="miro params", description=DESCRIPTION)
     sub = p.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    for name, help_text in (
-        ("show", "print the effective values: defaults merged with the document"),
-        ("validate", "check documents; exit 1 listing every problem (for CI)"),
-    ):
+    for name, help_text in ((v.name, v.help) for v in verb("params").subs):
         s = sub.add_parser(name, help=help_text, description=help_text)
         s.add_argument(
             "documents",
@@ -66,6 +64,16 @@ def build_parser() -> argparse.ArgumentParser:
                 help='also list abstract classes (final="false") among the known ones',
             )
     return p
+
+
+def show_main(argv: Sequence[str]) -> int:
+    """`miro params show`."""
+    return main(["show", *argv])
+
+
+def validate_main(argv: Sequence[str]) -> int:
+    """`miro params validate`."""
+    return main(["validate", *argv])
 
 
 def main(argv: Sequence[str] | None = None) -> int:

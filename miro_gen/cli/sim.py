@@ -40,37 +40,6 @@ def _recorded(args: argparse.Namespace) -> Iterator[tuple[float, list[bytes]]]:
             return
 
 
-KINDS = {
-    "nmea": "a GPS receiver (NMEA 0183) on a pseudo-terminal",
-    "scip": "a Hokuyo laser scanner (SCIP 2.0) on a pseudo-terminal or a TCP port",
-    "camera": "a camera: a video file, or an MJPEG stream over HTTP",
-    "laser": "a laser scanner's scans as events on a channel (1,081 beams at 40 Hz)",
-}
-
-
-def sim_main(argv: Sequence[str]) -> int:
-    kind = argv[0] if argv else ""
-    if kind == "nmea":
-        return nmea_main(argv[1:])
-    if kind == "scip":
-        return scip_main(argv[1:])
-    if kind == "camera":
-        return camera_main(argv[1:])
-    if kind == "laser":
-        from miro_gen.cli.sim_laser import laser_main
-
-        return laser_main(argv[1:])
-    usage = "usage: miro sim KIND [OPTIONS]   (miro sim KIND --help for its options)\n\n"
-    usage += "\n".join(f"  {k:8s}{what}" for k, what in KINDS.items())
-    if kind in ("-h", "--help"):
-        print(usage)
-        return 0
-    print(usage, file=sys.stderr)
-    if kind:
-        print(f"\nmiro sim: no simulator {kind!r}", file=sys.stderr)
-    return 2
-
-
 def _stop_on_signals() -> threading.Event:
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):

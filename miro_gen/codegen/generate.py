@@ -38,29 +38,30 @@ __all__ = [
 ]
 
 
-def display_source(path: str) -> str:
-    """How generated files name their IDL source: relative to the working folder when inside
-    it, otherwise the file name (no absolute paths in output)."""
+def display_source(path: str, base: Path | None = None) -> str:
+    """How generated files name their IDL source: relative to `base` (default: the working
+    folder) when inside it, otherwise the file name (no absolute paths in output)."""
     p = Path(path)
     try:
-        rel = p.resolve().relative_to(Path.cwd().resolve())
+        rel = p.resolve().relative_to((base or Path.cwd()).resolve())
         return rel.as_posix()
     except ValueError:
         return p.name
 
 
 def build_modules(
-    specs: Iterable[tuple[ast.Specification, str]], diag: Diagnostics
+    specs: Iterable[tuple[ast.Specification, str]], diag: Diagnostics, base: Path | None = None
 ) -> list[ModuleContext]:
-    """The Python modules of each (specification, main IDL file); refusals become errors."""
+    """The Python modules of each (specification, main IDL file); refusals become errors.
+    Sources are named relative to `base` (`display_source`)."""
     try:
-        return _build_modules(specs, diag)
+        return _build_modules(specs, diag, base)
     finally:
         member_shape.cache_clear()  # the shapes of this compilation's members
 
 
 def _build_modules(
-    specs: Iterable[tuple[ast.Specification, str]], diag: Diagnostics
+    specs: Iterable[tuple[ast.Specification, str]], diag: Diagnostics, base: Path | None
 ) -> list[ModuleContext]:
     modules: list[ModuleContext] = []
     declarations: dict[str, ast.Decl] = {}
@@ -69,7 +70,7 @@ def _build_modules(
             mine = [d for d in spec.declarations if d.pos.path == path]
             python_limits.check_inheritance(mine)
             python_limits.check_nested_names(mine, spec.declarations)
-            modules += lower_file(spec, path, display_source(path))
+            modules += lower_file(spec, path, display_source(path, base))
         except Unsupported as e:
             diag.error(e.pos, e.message)
         for d in spec.declarations:

@@ -248,7 +248,7 @@ class CorbaNaming:
     def rebind(self, entry: MiroNaming.Entry) -> ObjectRef:
         """Bind the entry's reference (a CorbaEntry's, else one made of its endpoint and key)
         at its path, making the contexts on the way when missing; the reference bound."""
-        ref = getattr(entry, "ref", None) or _ref_of(entry)
+        ref = getattr(entry, "ref", None) or entry_reference(entry)
         name = miro_name(entry.name)
         context = self.root
         for i in range(len(name) - 1):
@@ -301,7 +301,9 @@ def _entry(path: str, ior: IOR) -> CorbaEntry:
     return CorbaEntry(path, ref.repo_id, ref.endpoint, ref.key, _miro_type_hash(ior), ref)
 
 
-def _ref_of(entry: MiroNaming.Entry) -> ObjectRef:
+def entry_reference(entry: MiroNaming.Entry) -> ObjectRef:
+    """The reference a naming entry of miro-gen's stands for (an object served over ZeroMQ
+    with its type hash in its profile)."""
     from miro_gen.corba.ior import CorbaRef
 
     ref = ObjectRef(entry.repo_id, entry.endpoint, entry.key)

@@ -32,6 +32,7 @@ import itertools
 import os
 import socket
 import threading
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
@@ -76,6 +77,17 @@ class BeyondLoopback(ValueError):
         super().__init__(f"IIOP on {address}:{port} would be served beyond this machine")
         self.address = address
         self.port = port
+
+
+Locator = Callable[[bytes], "rpc.Servant | None"]
+_current = threading.local()
+
+
+def current_connection() -> ServerConnection | None:
+    """The connection of the request this thread serves (None outside a request): what a
+    servant that must know who calls (CosNaming: who owns a name) asks of its caller."""
+    conn: ServerConnection | None = getattr(_current, "conn", None)
+    return conn
 
 
 def _listen(bind: str, port: int, beyond_loopback: bool) -> socket.socket:
@@ -143,6 +155,7 @@ class IIOPServer:
         self.max_message = max_message
         self._servants: dict[bytes, rpc.Servant] = {}
         self._keys: dict[int, bytes] = {}  # id(servant) -> key
+        self._locators: list[tuple[bytes, Locator]] = []
         self._counter = itertools.count(1)
         self._prefix = f"miro.{os.getpid()}.".encode()
         self._lock = threading.Lock()
@@ -203,8 +216,21 @@ class IIOPServer:
             return self.reference(key, servant._repo_id)
         return self.activate(servant)
 
+    def add_locator(self, prefix: bytes, locator: Locator) -> None:
+        """Serve every key that starts with `prefix` and names no activated servant by the
+        servant `locator(key)` returns (None: no such object), as a POA's servant locator does:
+        objects too many or too short-lived to activate one by one (naming contexts,
+        iterators)."""
+        with self._lock:
+            self._locators.append((prefix, locator))
+
     def _servant(self, key: bytes) -> rpc.Servant | None:
-        return self._servants.get(key)
+        servant = self._servants.get(key)
+        if servant is None and self._locators:
+            for prefix, locator in self._locators:
+                if key.startswith(prefix):
+                    return locator(key)
+        return servant
 
     # ---- messages (on the connection loop's thread) ---------------------------------------------
 
@@ -338,11 +364,14 @@ class IIOPServer:
         if req.request_id in conn.cancelled:
             conn.cancelled.discard(req.request_id)
             return
+        _current.conn = conn
         try:
             reply = servant._invoke(req.operation, body, self.invoker)
         except BaseException as e:  # _invoke turns every exception into a reply; a last guard
             _log.exception("IIOP: %s failed", req.operation)
             reply = rpc.system_exception_reply(BAD_OPERATION(f"{req.operation}: {e!r}"))
+        finally:
+            _current.conn = None
         if expected and not conn.closed:
             self._send_reply(conn, req, reply)
 

@@ -68,6 +68,20 @@ class ServerConnection:
         self.closed = False
         self.broken = False  # a worker found it gone: the loop closes it
         self.mask = 0  # the events the loop waits for on it
+        # Who is at the other end, as a servant that checks its callers worked it out (the
+        # naming service's principal of the caller), kept for the connection's next requests.
+        self.identity: object | None = None
+
+    def addresses(self) -> tuple[tuple[str, int], tuple[str, int]] | None:
+        """(the peer's address, ours) as (host, port) pairs; None when they cannot be had
+        (the socket closed, or not TCP)."""
+        try:
+            peer, here = self.sock.getpeername(), self.sock.getsockname()
+        except OSError:
+            return None
+        if not isinstance(peer, tuple) or not isinstance(here, tuple):
+            return None
+        return (str(peer[0]), int(peer[1])), (str(here[0]), int(here[1]))
 
     @property
     def evictable(self) -> bool:

@@ -1,221 +1,515 @@
-"""Miro's LogPlayer: re-publish a log's events with their original spacing.
+"""Miro's LogPlayer: play a file set's events with their original spacing (the model behind
+`miro log play` and the player window, with no channel and no Qt in it).
 
 The player keeps a *log clock*: log time advances from an anchor at `rate` log seconds per
-second, or stands still while paused. Each event is sent when the log clock reaches its log
-time, through a `ReplaySupplier`, with its recorded domain, type, type hash, sequence number and
-source stamp, so that consumers cannot tell replay from live. The clock itself is published, on
-a channel of its own (`LogClock`: consumers of the robot's channel never see it), as
-`MiroLogClock` events (`MiroLog::Clock`) whenever it changes and twice a second, so that
-processes started with `--clock log` run on the replayed time (miro_gen.clock).
+second, or stands still while paused. Its *position* is a key of the file set
+(eventlog.fileset): the events at or after it are ahead. A thread of its own reads the set
+from the position on and hands each event to `send` when the clock reaches the event's log
+time, skipping the topics excluded at that moment. Everything else only changes the state
+and wakes that thread, from any thread (the window's, the terminal's key reader):
 
-`pause()`, `resume()`, `step()` and `stop()` may be called from any thread (the key reader).
+- `play`, `pause`, `toggle`; `stop` pauses and goes back to the start of the cut;
+- `seek(log_ns)` at any moment, playing or paused; `set_rate` while playing;
+- `next()` pauses and sends the next event; `prev()` pauses and sends the event before the
+  one last sent (Miro's Prev: a step back, which consumers see as that event again);
+- a change of the file set (a file opened or closed, a cut) moves the position into what is
+  left and plays on from there.
+
+The clock is handed to `publish_clock` whenever it changes (and every CLOCK_PERIOD s), with an
+`epoch` that counts its jumps (seeks, steps back, loops), so that processes started with
+`--clock log` follow the replayed time (miro_gen.clock). The last `history` events sent are
+kept for the event list (`EventHistory`), and the last of each topic in `latest`.
 """
 
 from __future__ import annotations
 
-import random
+import contextlib
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import NamedTuple
 
-from mcap.records import Message
+from miro_gen.eventlog.fileset import Event, FileSet, Key, TopicName, after, at_time
+from miro_gen.eventlog.reader import LogError, Topic
 
-from miro_gen.eventlog.reader import LogReader, Topic
-from miro_gen.eventlog.replay import ReplaySupplier
-from miro_gen.eventlog.types import matches
-from miro_gen.service.log_clock import CLOCK_TYPE
-from miro_gen.transport.events import StructuredPushSupplier
+CLOCK_PERIOD = 0.5  # seconds between clock messages while nothing changes
+MAX_WAIT = 0.1  # seconds the play thread sleeps at most (its clock ticks, a close is seen)
+DEFAULT_HISTORY = 100
+RATES = (1 / 16, 1 / 8, 1 / 4, 1 / 2, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0)  # the speed dial's steps
+SKIP = 1 / 20  # of the cut's length: how far a skip (shift+arrow) seeks
+MAX_HISTORY = 100_000
+_SEND, _SKIP, _RESTART, _CLOSED = range(4)
 
-CLOCK_CHANNEL = "LogClock"
-CLOCK_PERIOD = 0.5  # seconds between clock events while nothing changes
+
+class Row(NamedTuple):
+    """An event as the event list keeps it: where it is and what it is, not its payload (a
+    history of camera images would hold gigabytes)."""
+
+    key: Key
+    topic: Topic
+    sequence: int
+    size: int  # bytes of its payload
+
+    @property
+    def log_time(self) -> int:
+        return self.key[0]
+
+    @property
+    def name(self) -> TopicName:
+        return (self.topic.domain, self.topic.type_name)
 
 
-@dataclass
-class PlayOptions:
-    rate: float = 1.0
-    loop: bool = False
-    start: float = 0.0  # seconds from the log's first event
-    end: float | None = None  # seconds from the log's first event; None: to the last
-    topics: list[tuple[str, str]] | None = None  # (domain, type) patterns; None: all
+def row_of(event: Event) -> Row:
+    return Row(event.key, event.topic, event.message.sequence, len(event.message.data))
+
+
+@dataclass(frozen=True)
+class ClockState:
+    """Where the log clock stands: `log_ns` now, advancing at `rate` unless `paused`."""
+
+    log_ns: int
+    rate: float
+    paused: bool
+    epoch: int
+
+
+class EventHistory:
+    """The last `length` events sent, oldest first, as rows for the event list. After a seek
+    it holds the events before the new position, read (when asked for) from the file set."""
+
+    def __init__(self, files: FileSet, length: int = DEFAULT_HISTORY) -> None:
+        self.files = files
+        self._lock = threading.Lock()
+        self._rows: deque[Row] = deque(maxlen=_check_length(length))
+        self._fill_before: Key | None = None  # read the events before this key when asked
+        self.version = 0  # changes whenever the rows do
+
+    @property
+    def length(self) -> int:
+        return self._rows.maxlen or 0
+
+    def set_length(self, length: int) -> None:
+        """Keep `length` events: fewer drops the oldest, more reads older ones when asked."""
+        with self._lock:
+            rows = list(self._rows)
+            self._rows = deque(rows[-_check_length(length) :], maxlen=length)
+            if len(self._rows) < length and self._fill_before is None:
+                self._fill_before = rows[0].key if rows else None
+            self.version += 1
+
+    def append(self, event: Event) -> None:
+        row = row_of(event)
+        with self._lock:
+            self._rows.append(row)
+            self.version += 1
+
+    def restart(self, pos: Key) -> None:
+        """The position jumped to `pos`: the rows become the events before it."""
+        with self._lock:
+            self._rows.clear()
+            self._fill_before = pos
+            self.version += 1
+
+    def rows(self) -> list[Row]:
+        """The events, oldest first, excluded topics left out (reads the file set after a
+        seek or a longer history: call it from the thread that shows them)."""
+        with self._lock:
+            fill, self._fill_before = self._fill_before, None
+            missing = self.length - len(self._rows)
+        if fill is not None and missing > 0:
+            older: list[Row] = []
+            start = self.files.cut[0]
+            try:
+                for ev in self.files.backward(fill, start):
+                    older.append(row_of(ev))
+                    if len(older) >= missing:
+                        break
+            except LogError:
+                pass  # the player reports the damaged segment when it comes to it
+            with self._lock:
+                kept = [e for e in self._rows if not older or e.key > older[0].key]
+                self._rows = deque([*reversed(older), *kept], maxlen=self.length)
+                self.version += 1
+        with self._lock:
+            rows = list(self._rows)
+        excluded = self.files.excluded
+        return [e for e in rows if e.name not in excluded] if excluded else rows
+
+
+def _check_length(length: int) -> int:
+    if not 1 <= length <= MAX_HISTORY:
+        raise ValueError(f"a history holds 1 to {MAX_HISTORY} events")
+    return length
 
 
 class Player:
-    """Plays `log` into `supplier`'s channel according to `options`."""
+    """Plays `files` into `send(event)`; see the module's doc. Starts paused at the start of
+    the cut: call `start()` (the thread), then `play()`."""
 
     def __init__(
         self,
-        log: LogReader,
-        supplier: ReplaySupplier,
-        options: PlayOptions,
-        clock_supplier: StructuredPushSupplier | None = None,
+        files: FileSet,
+        send: Callable[[Event], object],
+        publish_clock: Callable[[ClockState], object] | None = None,
+        *,
+        rate: float = 1.0,
+        loop: bool = False,
+        history: int = DEFAULT_HISTORY,
     ) -> None:
-        if not options.rate > 0:
+        if not rate > 0:
             raise ValueError("the rate must be more than 0")
-        self.log = log
-        self.supplier = supplier
-        self.clock_supplier = clock_supplier
-        self.options = options
-        self.rate = options.rate
+        self.files = files
+        self.send = send
+        self.publish_clock = publish_clock
+        self.loop = loop
+        self.history = EventHistory(files, history)
+        self.latest: dict[TopicName, Event] = {}  # the last event sent of each topic
         self.sent = 0
-        self.first_ns, self.last_ns = log.span()
-        self.begin_ns = self.first_ns + int(options.start * 1e9)
-        self.end_ns = None if options.end is None else self.first_ns + int(options.end * 1e9)
+        self.error: LogError | None = None  # why playing stopped (a damaged chunk)
+        self.ended = threading.Event()  # set at the end of the cut (not looping)
         self._cond = threading.Condition()
-        self._paused = False
-        self._steps = 0
-        self._stopped = False
+        self._rate = rate
+        self._playing = False
+        self._steps: deque[int] = deque()  # next() (+1) and prev() (-1) waiting for the thread
+        self._closed = False
+        self._gen = 0  # bumped to make the thread read again from the position
         self._epoch = 0
-        self._wall_anchor = time.monotonic()
-        self._log_anchor = self.begin_ns
-        self._replay_ids: dict[int, int] = {}  # channel id -> the replayed supplier id
-        self.on_progress: Callable[[Player], object] | None = None
+        self._at_end = False
+        self._fresh = True  # the first event played after a start or a jump sets the pace
+        start = files.cut[0]
+        self._pos: Key = at_time(start)
+        self._shown: Key | None = None  # the event just behind the position, if it was sent
+        self._anchor_log = start
+        self._anchor_wall = time.monotonic()
         self._clock_sent = 0.0
+        self._thread: threading.Thread | None = None
+        files.listeners.append(self._files_changed)
 
-    # ---- the clock ------------------------------------------------------------------------------
+    # ---- state ----------------------------------------------------------------------------------
+
+    @property
+    def playing(self) -> bool:
+        return self._playing
+
+    @property
+    def paused(self) -> bool:
+        return not self._playing
+
+    @property
+    def rate(self) -> float:
+        return self._rate
+
+    @property
+    def at_end(self) -> bool:
+        return self._at_end
+
+    @property
+    def position(self) -> Key:
+        return self._pos
 
     def log_now(self) -> int:
         """The log clock now, ns."""
         with self._cond:
-            return self._log_now_locked()
+            return self._now()
 
-    def _log_now_locked(self) -> int:
-        if self._paused:
-            return self._log_anchor
-        return self._log_anchor + int((time.monotonic() - self._wall_anchor) * self.rate * 1e9)
+    def _now(self) -> int:
+        if not self._playing:
+            return self._anchor_log
+        return self._anchor_log + int((time.monotonic() - self._anchor_wall) * self._rate * 1e9)
+
+    def clock(self) -> ClockState:
+        with self._cond:
+            return ClockState(self._now(), self._rate, not self._playing, self._epoch)
 
     def _rebase(self, log_ns: int) -> None:
-        self._log_anchor = log_ns
-        self._wall_anchor = time.monotonic()
+        self._anchor_log = log_ns
+        self._anchor_wall = time.monotonic()
 
-    @property
-    def paused(self) -> bool:
-        return self._paused
+    def _jump(self, log_ns: int, pos: Key) -> None:
+        """Move clock and position (under the lock): the thread reads again from `pos`."""
+        self._rebase(log_ns)
+        self._pos = pos
+        self._shown = None
+        self._at_end = False
+        self._fresh = True
+        self.error = None
+        self.ended.clear()
+        self._epoch += 1
+        self._gen += 1
+        self.history.restart(pos)
+        self._cond.notify_all()
+
+    # ---- commands (any thread) ------------------------------------------------------------------
+
+    def play(self) -> None:
+        with self._cond:
+            if self._at_end:  # again from the start of the cut
+                start = self.files.cut[0]
+                self._jump(start, at_time(start))
+            if not self._playing:
+                self._rebase(self._anchor_log)
+                self._playing = True
+                self._fresh = True
+                self._steps.clear()
+                self._cond.notify_all()
+        self._publish()
 
     def pause(self) -> None:
         with self._cond:
-            if not self._paused:
-                self._rebase(self._log_now_locked())
-                self._paused = True
+            if self._playing:
+                self._rebase(self._now())
+                self._playing = False
                 self._cond.notify_all()
-        self.publish_clock()
-
-    def resume(self) -> None:
-        with self._cond:
-            if self._paused:
-                self._paused = False
-                self._steps = 0
-                self._rebase(self._log_anchor)
-                self._cond.notify_all()
-        self.publish_clock()
+        self._publish()
 
     def toggle(self) -> None:
-        if self._paused:
-            self.resume()
-        else:
+        if self._playing:
             self.pause()
-
-    def step(self) -> None:
-        """Pause if playing; then send the next event and move the log clock to it."""
-        self.pause()
-        with self._cond:
-            self._steps += 1
-            self._cond.notify_all()
+        else:
+            self.play()
 
     def stop(self) -> None:
+        """Pause and go back to the start of the cut (Miro's Stop)."""
         with self._cond:
-            self._stopped = True
+            self._playing = False
+            self._steps.clear()
+            start = self.files.cut[0]
+            self._jump(start, at_time(start))
+        self._publish()
+
+    def seek(self, log_ns: int) -> None:
+        """Move to log time `log_ns` (kept inside the cut), playing on if playing."""
+        start, end = self.files.cut
+        log_ns = min(max(log_ns, start), end)
+        with self._cond:
+            self._steps.clear()
+            self._jump(log_ns, at_time(log_ns))
+        self._publish()
+
+    def seek_to(self, event: Event | Row) -> None:
+        """Move to just before `event` (an event list's row): it is the next one played."""
+        with self._cond:
+            self._steps.clear()
+            self._jump(event.log_time, event.key)
+        self._publish()
+
+    def set_rate(self, rate: float) -> None:
+        if not rate > 0:
+            raise ValueError("the rate must be more than 0")
+        with self._cond:
+            self._rebase(self._now())
+            self._rate = rate
+            self._cond.notify_all()
+        self._publish()
+
+    def faster(self, steps: int = 1) -> float:
+        """Move the speed `steps` notches up (down when negative) on RATES; the new rate."""
+        rate = self._rate
+        if steps > 0:
+            rate = next((r for r in RATES if r > rate * 1.0001), RATES[-1])
+        elif steps < 0:
+            rate = next((r for r in reversed(RATES) if r < rate / 1.0001), RATES[0])
+        self.set_rate(rate)
+        return rate
+
+    def skip(self, direction: int) -> None:
+        """Seek a 20th of the cut forward (`direction` > 0) or back."""
+        start, end = self.files.cut
+        step = max(int((end - start) * SKIP), 1_000_000)
+        self.seek(self.log_now() + (step if direction > 0 else -step))
+
+    def next(self) -> None:
+        """Pause, then send the next event (Miro's Next)."""
+        self.pause()
+        with self._cond:
+            self._steps.append(1)
             self._cond.notify_all()
 
-    def publish_clock(self) -> None:
-        if self.clock_supplier is None:
+    def prev(self) -> None:
+        """Pause, then send the event before the one last sent (Miro's Prev)."""
+        self.pause()
+        with self._cond:
+            self._steps.append(-1)
+            self._cond.notify_all()
+
+    def _files_changed(self, what: str) -> None:
+        if what == "excluded":
+            with self._cond:
+                self._cond.notify_all()
+                self.history.version += 1
             return
-        import MiroLog
-
+        start, end = self.files.cut
         with self._cond:
-            clock = MiroLog.Clock(self._log_now_locked(), self.rate, self._paused, self._epoch)
-        self.clock_supplier.push(CLOCK_TYPE, clock, stamp=clock.log_time_ns / 1e9)
-        self._clock_sent = time.monotonic()
+            now = self._now()
+            if not start <= now <= end or (what == "files" and self.sent == 0):
+                self._jump(start, at_time(start))
+            else:  # the same place, read again (the files changed under it)
+                self._rebase(now)
+                self._gen += 1
+                self._cond.notify_all()
+        self._publish()
 
-    # ---- playing --------------------------------------------------------------------------------
+    def _publish(self) -> None:
+        if self.publish_clock is not None:
+            self.publish_clock(self.clock())
+            self._clock_sent = time.monotonic()
 
-    def _messages(self) -> Iterator[tuple[Topic, Message]]:
-        patterns = self.options.topics
-        for topic, message in self.log.messages(start_ns=self.begin_ns, end_ns=self.end_ns):
-            if patterns is None or any(matches(p, topic.domain, topic.type_name) for p in patterns):
-                yield topic, message
+    # ---- the thread -----------------------------------------------------------------------------
 
-    def _wait_until(self, log_ns: int) -> bool:
-        """Wait until the log clock reaches `log_ns` (or a step allows the next event); False
-        when stopped."""
+    def start(self) -> None:
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._run, name="miro-player", daemon=True)
+            self._thread.start()
+            self._publish()
+
+    def close(self, timeout: float = 5.0) -> None:
+        """Stop the thread (and wait for it)."""
         with self._cond:
-            while not self._stopped:
-                if self._paused:
-                    if self._steps:
-                        self._steps -= 1
-                        self._rebase(max(log_ns, self._log_anchor))
-                        return True
-                    self._cond.release()
-                    try:
-                        self._tick()
-                    finally:
-                        self._cond.acquire()
-                    self._cond.wait(0.1)
-                    continue
-                ahead = (log_ns - self._log_now_locked()) / 1e9 / self.rate
-                if ahead <= 0:
-                    return True
-                self._cond.release()
-                try:
-                    self._tick()
-                finally:
-                    self._cond.acquire()
-                self._cond.wait(min(ahead, 0.1))
-            return False
+            self._closed = True
+            self._cond.notify_all()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout)
+        with contextlib.suppress(ValueError):
+            self.files.listeners.remove(self._files_changed)
 
-    def _tick(self) -> None:
-        if time.monotonic() - self._clock_sent >= CLOCK_PERIOD:
-            self.publish_clock()
-        if self.on_progress is not None:
-            self.on_progress(self)
-
-    def play(self) -> bool:
-        """Play to the end (again and again with `loop`); False when stopped first."""
+    def _run(self) -> None:
         while True:
             with self._cond:
-                self._rebase(self.begin_ns)
-            self.publish_clock()
-            for topic, message in self._messages():
-                if not self._wait_until(message.log_time):
-                    return False
-                self.supplier.push_encoded(
-                    topic.domain,
-                    topic.type_name,
-                    topic.type_hash,
-                    self._replay_id(topic),
-                    message.sequence,
-                    message.publish_time,
-                    message.log_time,
-                    message.data,
-                )
-                self.sent += 1
-                if self._paused:  # a step: followers move to this event's time
-                    self.publish_clock()
-                if self.on_progress is not None and self.sent % 64 == 0:
-                    self.on_progress(self)
-            if not self.options.loop:
-                break
-            with self._cond:
-                self._epoch += 1
+                if self._closed:
+                    return
+            try:
+                while self._step_back():
+                    pass
+                with self._cond:
+                    gen, pos = self._gen, self._pos
+                end = self.files.cut[1]
+                outcome = _RESTART
+                for event in self.files.forward(pos, end):
+                    outcome = self._wait_for(event, gen)
+                    if outcome == _SEND:
+                        self._deliver(event)
+                    elif outcome != _SKIP:
+                        break
+                else:
+                    outcome = self._end(gen)
+                if outcome == _CLOSED:
+                    return
+            except LogError as e:
+                self._failed(e)
+
+    def _wait_for(self, event: Event, gen: int) -> int:
+        """Under the lock: wait until `event` is due (or a step allows it); what to do."""
         with self._cond:
-            self._rebase(self._log_now_locked())
-            self._paused = True
-        self.publish_clock()  # followers stop at the end of the log
+            if self._at_end:  # the files changed: there is more to play after all
+                self._at_end = False
+                self.ended.clear()
+            while True:
+                if self._closed:
+                    return _CLOSED
+                if self._gen != gen:
+                    return _RESTART
+                if self.files.is_excluded(event.topic):
+                    self._pos = after(event.key)
+                    return _SKIP
+                if self._playing:
+                    if self._fresh and self._now() > event.log_time:
+                        # Reading the first events after a start or a seek took time: play
+                        # from them on time, not in a rush to catch up.
+                        self._rebase(event.log_time)
+                    self._fresh = False
+                    ahead = event.log_time - self._now()
+                    if ahead <= 0:
+                        self._pos = after(event.key)
+                        self._shown = event.key
+                        return _SEND
+                    wait = min(ahead / 1e9 / self._rate, MAX_WAIT)
+                elif self._steps and self._steps[0] < 0:
+                    return _RESTART  # a step back: the thread reads from the new position
+                elif self._steps:
+                    self._steps.popleft()
+                    self._rebase(max(event.log_time, self._anchor_log))
+                    self._pos = after(event.key)
+                    self._shown = event.key
+                    self._clock_sent = 0.0  # followers move to this event's time
+                    return _SEND
+                else:
+                    wait = MAX_WAIT
+                if time.monotonic() - self._clock_sent >= CLOCK_PERIOD:
+                    self._cond.release()
+                    try:
+                        self._publish()
+                    finally:
+                        self._cond.acquire()
+                    continue
+                self._cond.wait(wait)
+
+    def _deliver(self, event: Event) -> None:
+        self.send(event)
+        self.sent += 1
+        self.latest[event.name] = event
+        self.history.append(event)
+        if self._clock_sent == 0.0:
+            self._publish()
+
+    def _step_back(self) -> bool:
+        """If a step back is the next command: send the event before the one last sent, the
+        position moving to just after it; whether there was one."""
+        with self._cond:
+            if not self._steps or self._steps[0] > 0:
+                return False
+            self._steps.popleft()
+            pos, shown = self._pos, self._shown
+        start = self.files.cut[0]
+        earlier = (
+            e for e in self.files.backward(pos, start) if not self.files.is_excluded(e.topic)
+        )
+        target = next(earlier, None)
+        if target is not None and target.key == shown:
+            target = next(earlier, None)
+        with self._cond:
+            if target is None:  # at the start of the cut
+                self._jump(start, at_time(start))
+                return True
+            self._jump(target.log_time, after(target.key))
+            self._shown = target.key
+        self._deliver(target)
+        self._publish()
         return True
 
-    def _replay_id(self, topic: Topic) -> int:
-        """One supplier id per replayed channel, so consumers count its gaps as recorded."""
-        sid = self._replay_ids.get(topic.id)
-        if sid is None:
-            sid = self._replay_ids[topic.id] = random.getrandbits(63)
-        return sid
+    def _end(self, gen: int) -> int:
+        """At the end of the cut: loop, or pause there until something moves the position."""
+        with self._cond:
+            if self._gen != gen or self._closed:
+                return _CLOSED if self._closed else _RESTART
+            if self.loop and self._playing and self.sent:
+                start = self.files.cut[0]
+                self._jump(start, at_time(start))
+                return _RESTART
+            self._rebase(min(self._now(), self.files.cut[1]))
+            self._playing = False
+            self._at_end = True
+            self.ended.set()
+        self._publish()
+        with self._cond:
+            while not self._closed and self._gen == gen:
+                if self._steps and self._steps[0] < 0:
+                    break
+                if self._steps:  # a step forward at the end: nothing to send
+                    self._steps.popleft()
+                    continue
+                self._cond.wait(MAX_WAIT * 5)
+            return _CLOSED if self._closed else _RESTART
+
+    def _failed(self, why: LogError) -> None:
+        """A damaged segment: stop there (paused), say why, until the position moves."""
+        with self._cond:
+            self.error = why
+            self._playing = False
+            gen = self._gen
+            self.ended.set()
+        self._publish()
+        with self._cond:
+            while not self._closed and self._gen == gen:
+                self._cond.wait(MAX_WAIT * 5)

@@ -65,6 +65,12 @@ class ReplaySupplier(StructuredPushSupplier):
         if schedule:
             self.reactor.call_soon(self._send_encoded)
 
+    def has_subscribers_for(self, domain: str, type_name: str) -> bool:
+        """Whether a consumer of the channel subscribes to events of `type_name` from
+        `domain` (this supplier replays many domains; `has_subscribers` knows its own)."""
+        frame = topic(domain, type_name)
+        return any(frame.startswith(p) for p in list(self._subscriptions))
+
     def _send_encoded(self) -> None:
         with self._pending_lock:
             pending, self._pending = self._pending, []

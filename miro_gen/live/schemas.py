@@ -1,10 +1,12 @@
 """Code for a schema a running service gave: compiled once, kept, loaded when needed.
 
 `miro call` and `miro pub` need the stub of an interface, or the class of a payload, that may
-not be compiled on the caller's machine. The service's interface or data schema is compiled
-with miro-idl into a folder named after the text's hash (in `$MIRO_CACHE`, else in `schemas/`
-of the per-user cache, `~/.cache/miro-gen/`), with its AST JSON beside it; a later call with
-the same schema loads that. The hash names the exact text, so what is cached never goes stale.
+not be compiled on the caller's machine. The service's interface or data schema is compiled as
+text from elsewhere (miro_gen.compile.foreign: no preprocessor directives, a size cap, in a
+process of its own with a time and a memory cap) into a folder named after the text's hash (in
+`$MIRO_CACHE`, else in `schemas/` of the per-user cache, `~/.cache/miro-gen/`), with its AST
+JSON beside it; a later call with the same schema loads that. The hash names the exact text, so
+what is cached never goes stale.
 
 One process loads one version of a package: a schema whose package (`Miro`) is loaded already
 from elsewhere is refused with a message, unless the loaded package has the very classes
@@ -23,6 +25,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+from miro_gen.compile.foreign import AST, PACKAGES, ForeignSchemaError, compile_foreign, refusal
 from miro_gen.runtime.rpc import Stub
 
 
@@ -42,38 +45,16 @@ def cache_root() -> Path | None:
     return Path(folder) / "schemas" if folder else None
 
 
-def _compile(source: Path, out: Path) -> tuple[str, str]:
-    """miro-idl's work on `source`, in this process: its AST JSON, and its Python in `out`;
-    ('', the first error) when it does not compile."""
-    from miro_gen.codegen.generate import build_modules, generated_files, write_files
-    from miro_gen.diagnostics import CompileError, Diagnostics
-    from miro_gen.idl.ast_json import dumps, specifications_json
-    from miro_gen.idl.frontend import compile_idl
-
-    diag = Diagnostics()
-    try:
-        spec = compile_idl(str(source), [], None, diag)
-        modules = build_modules([(spec, str(source))], diag)
-    except CompileError:
-        pass
-    errors = [str(d) for d in diag.items if d.severity == "error"]
-    if errors:
-        return "", errors[0]
-    files = generated_files(modules, out)
-    write_files(files, list(files), out)
-    return dumps(specifications_json([str(source)], [spec])), ""
-
-
 class Compiled:
     """A schema compiled into `folder`: `py/` (the packages) and `ast.json`."""
 
     def __init__(self, folder: Path) -> None:
         self.folder = folder
-        self.ast: dict[str, Any] = json.loads((folder / "ast.json").read_text(encoding="utf-8"))
+        self.ast: dict[str, Any] = json.loads((folder / AST).read_text(encoding="utf-8"))
 
     @property
     def packages(self) -> list[str]:
-        py = self.folder / "py"
+        py = self.folder / PACKAGES
         return sorted(p.name for p in py.iterdir() if (p / "__init__.py").is_file())
 
     def declaration(self, name: str) -> dict[str, Any] | None:
@@ -85,7 +66,7 @@ class Compiled:
 
     def load(self) -> None:
         """Make the packages importable, and import them."""
-        py = str(self.folder / "py")
+        py = str(self.folder / PACKAGES)
         for name in self.packages:
             loaded = sys.modules.get(name)
             if loaded is not None and not str(getattr(loaded, "__file__", "")).startswith(py):
@@ -100,10 +81,15 @@ class Compiled:
 
 
 def compile_schema(text: str) -> Compiled:
-    """The schema `text` compiled (from the cache when it was compiled before)."""
+    """The schema `text` a service gave, compiled (from the cache when it was compiled before):
+    as schema text from elsewhere (miro_gen.compile.foreign: no directives, capped, in a
+    process of its own). SchemaError (one line) when it is refused or does not compile."""
+    why = refusal(text)  # before anything is made for it, or a cached one is looked for
+    if why is not None:
+        raise SchemaError(why)
     digest = hashlib.sha256(text.encode("utf-8")).hexdigest()
     root = cache_root()
-    if root is not None and (root / digest / "ast.json").is_file():
+    if root is not None and (root / digest / AST).is_file():
         return Compiled(root / digest)
     try:
         assert root is not None
@@ -113,13 +99,11 @@ def compile_schema(text: str) -> Compiled:
     except (AssertionError, OSError):  # no cache here: a folder for this process only
         work = Path(tempfile.mkdtemp(prefix="miro-schema-"))
         folder = work
-    source = work / "schema.idl"
-    source.write_text(text, encoding="utf-8")
-    ast_json, error = _compile(source, work / "py")
-    if error:
+    try:
+        compile_foreign([text], work)
+    except ForeignSchemaError as e:
         shutil.rmtree(work, ignore_errors=True)
-        raise SchemaError(f"the service's schema does not compile here: {error}")
-    (work / "ast.json").write_text(ast_json, encoding="utf-8")
+        raise SchemaError(str(e)) from None
     if work != folder:
         try:
             os.replace(work, folder)

@@ -53,6 +53,12 @@ class FieldsView(QTreeWidget):
             self.takeTopLevelItem(self.indexOfTopLevelItem(item))
             self._numeric.discard(path)
 
+    def clear(self) -> None:
+        """No rows (until the next payload)."""
+        super().clear()
+        self._rows.clear()
+        self._numeric.clear()
+
     def value_text(self, path: str) -> str | None:
         """The text shown for `path` (None if no such row)."""
         item = self._rows.get(path)

@@ -8,14 +8,17 @@ import importlib.util
 import sys
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import jinja2
 
 from miro_gen import resources
-from miro_gen.diagnostics import CompileError, Diagnostics
 from miro_gen.scaffold.interface import WIDTH, Interface, InterfaceError, load_interface
 from miro_gen.scaffold.names import name_problem
 from miro_gen.scaffold.patterns import PATTERNS, Parameter
+
+if TYPE_CHECKING:
+    from miro_gen.compile.outcome import Outcome
 
 
 class ScaffoldError(ValueError):
@@ -93,23 +96,14 @@ def _environment() -> jinja2.Environment:
 
 
 def compile_idl(idl: Path, project: Path, include_dirs: list[str]) -> None:
-    """Compile `idl` into `project/generated` (as `miro-idl -o generated` would), so that the
-    interface can be imported; its problems are printed, and make a ScaffoldError."""
-    from miro_gen.codegen import generate
-    from miro_gen.idl.frontend import compile_idl as front_end
+    """Compile `idl` into `project/generated` (as `miro-idl -o generated` run in the project
+    would), so that the interface can be imported; its problems are printed, and make a
+    ScaffoldError."""
+    from miro_gen.compile.idl import idl_package
 
     out = project / "generated"
-    diag = Diagnostics()
-    try:
-        spec = front_end(str(idl), include_dirs, {}, diag)
-        modules = generate.build_modules([(spec, str(idl))], diag)
-        diag.check()
-    except CompileError:
-        diag.print()
-        raise ScaffoldError(f"{idl} does not compile (see above): nothing was written") from None
-    diag.print()  # warnings
-    files = generate.generated_files(modules, out)
-    _write(files, out)
+    done = idl_package([str(idl)], out, include_dirs=include_dirs, base=project)
+    _report(done, f"{idl} does not compile (see above): nothing was written")
     if str(out) not in sys.path:
         sys.path.insert(0, str(out))
     importlib.invalidate_caches()
@@ -117,34 +111,22 @@ def compile_idl(idl: Path, project: Path, include_dirs: list[str]) -> None:
 
 def compile_parameters(xml: Path, project: Path) -> list[Path]:
     """Compile a service's Parameters.xml into `project/generated` (as `miro-params -o
-    generated` would)."""
-    from miro_gen.params.compiler import generate
-    from miro_gen.params.compiler.build import build_modules
-    from miro_gen.params.compiler.loader import Loader
-    from miro_gen.params.compiler.pymodel import PyParamsModule
+    generated` run in the project would); the files written."""
+    from miro_gen.compile.params import params_package
 
-    diag = Diagnostics()
-    try:
-        loader = Loader([], diag)
-        target = loader.load(xml)
-        targets = [target] if target is not None else []
-        built = build_modules(list(loader.files.values()), targets, {}, diag)
-        modules = [m for m in built if isinstance(m, PyParamsModule)]
-        diag.check()
-    except CompileError:
-        diag.print()
-        raise ScaffoldError(f"{xml} does not compile (see above)") from None
-    out = project / "generated"
-    return _write(generate.generated_files(modules, out), out)
+    done = params_package([str(xml)], project / "generated", base=project)
+    _report(done, f"{xml} does not compile (see above)")
+    return done.paths()
 
 
-def _write(files: dict[str, str], out: Path) -> list[Path]:
-    """Write what changed of `files` under `out`; the paths written."""
-    from miro_gen.codegen.generate import changed_files, write_files
-
-    changed = changed_files(files, out)
-    write_files(files, changed, out)
-    return [out / rel for rel in changed]
+def _report(done: Outcome, failed: str) -> None:
+    """Print a compile's diagnostics and warnings; ScaffoldError(`failed`) when it failed."""
+    for d in done.diagnostics:
+        print(d, file=sys.stderr)
+    for text in [*done.warnings, *done.errors]:
+        print(f"miro new: {text}", file=sys.stderr)
+    if not done.ok:
+        raise ScaffoldError(failed)
 
 
 def scaffold(

@@ -20,12 +20,12 @@ from __future__ import annotations
 
 import socket
 import threading
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import MiroNaming
 
 from miro_gen.corba.client import IIOPInvoker
-from miro_gen.corba.ior import CorbaRef
+from miro_gen.corba.ior import IOR, CorbaRef, ref_from_ior
 from miro_gen.corba.naming import CorbaEntry, CorbaNaming, Peer, corba_naming, decide
 from miro_gen.corba.server import BeyondLoopback, IIOPServer
 from miro_gen.log import logger
@@ -34,6 +34,11 @@ from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.service.options import CommonOptions, UsageError
 from miro_gen.transport import sockets
 from miro_gen.transport.addresses import LOOPBACK, Addresses, server_addresses
+
+if TYPE_CHECKING:
+    from miro_gen.corba.notify import EventChannelFactory
+    from miro_gen.transport.events.channels import EventChannel
+    from miro_gen.transport.events.notify_door import NotifyDoor
 
 _log = logger("MIRO")
 
@@ -109,6 +114,7 @@ class CorbaSide:
             self.naming = corba_naming(self.iiop, naming_url, client.options.naming_context)
             self.names = CorbaNames(self.naming)
         self.server: IIOPServer | None = None
+        self._factory: EventChannelFactory | None = None  # the Notification doors' factory
 
     # ---- serving --------------------------------------------------------------------------------
 
@@ -139,8 +145,22 @@ class CorbaSide:
             self.names.bind(CorbaEntry(full, ref.repo_id, ref.endpoint, ref.key, "", ref))
         return ref
 
+    def open_door(self, channel: EventChannel) -> NotifyDoor:
+        """Serve `channel` (hosted here) as a CosNotifyChannelAdmin::EventChannel too, under
+        its full name as object key (transport.events.notify_door)."""
+        from miro_gen.transport.events.notify_door import NotifyDoor, serve_factory
+
+        server = self.server or self._lazy_server()
+        if self._factory is None:
+            self._factory = serve_factory(server)
+        return NotifyDoor(channel, server, self.iiop, channel.name, self._factory)
+
     def stub(self, entry: MiroNaming.Entry, cls: type[rpc.StubT]) -> rpc.StubT:
-        ref = getattr(entry, "ref", None) or ObjectRef(entry.repo_id, entry.endpoint, entry.key)
+        ref: ObjectRef | None = getattr(entry, "ref", None)
+        if ref is None and entry.endpoint.startswith("IOR:"):  # bound through CosNaming
+            ref = ref_from_ior(IOR.from_string(entry.endpoint))
+        if ref is None:
+            ref = ObjectRef(entry.repo_id, entry.endpoint, entry.key)
         return cls(ref, self.iiop)
 
     def close(self) -> None:

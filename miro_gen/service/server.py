@@ -70,6 +70,13 @@ def _corba_side(client: Client) -> CorbaSide | None:
     return corba_for(client)
 
 
+def _calls_to_corba(client: Client) -> CorbaSide:
+    """An IIOP side for a process that found a CORBA object in its ZeroMQ naming service."""
+    from miro_gen.service.iiop import CorbaSide
+
+    return CorbaSide(client, None)
+
+
 def _take_options(argv: Sequence[str] | None) -> tuple[CommonOptions, list[str]]:
     """Parse the common options of `argv` (sys.argv by default; [0] is the program) and, when
     it is a mutable list, remove them from it as Miro does."""
@@ -129,6 +136,8 @@ class Client:
                 entry.type_hash[:12],
                 stub._interface_hash[:12],
             )
+        if self.corba is None and entry.endpoint.startswith(("IOR:", "iiop://")):
+            self.corba = _calls_to_corba(self)  # a C++ object named in miro naming (CosNaming)
         if self.corba is not None:  # a CORBA object, or any reached through the IIOP invoker
             found: StubT = self.corba.stub(entry, stub)
         else:

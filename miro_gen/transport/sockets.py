@@ -34,6 +34,7 @@ from typing import Any
 import zmq
 from zmq.utils import z85
 
+from miro_gen.exceptions import actionable
 from miro_gen.log import PeerWarnings, logger
 from miro_gen.transport.keyfiles import DEFAULT_KEY as DEFAULT_KEY  # (its users look here)
 from miro_gen.transport.keyfiles import read_key_pair
@@ -41,6 +42,8 @@ from miro_gen.transport.usage import UsageError
 
 _log = logger("MIRO")
 _peer_warnings = PeerWarnings(_log)  # what peers send: rate-limited, with counts
+# What ZeroMQ refuses (an address in use, one it cannot bind) is the user's to fix: one line.
+actionable(zmq.ZMQError, lambda e: f"ZeroMQ: {e}")
 
 DEFAULT_MAX_MESSAGE_SIZE = 8 << 20  # bytes: a 1080p RGB image fits; omniORB's default is 2 MB
 QUEUE_BYTES_PER_PEER = 128 << 20  # what a socket may hold for one peer, at most

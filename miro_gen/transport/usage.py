@@ -4,6 +4,11 @@ sockets (`--keys`, `--max-message-size`) and the addresses (`--host`, `--bind`);
 options (service.options) raise it for what they parse, and a program stops with its one line.
 """
 
+from miro_gen.exceptions import ActionableError
 
-class UsageError(ValueError):
-    """A common option is missing its value or has one that makes no sense."""
+
+class UsageError(ActionableError, ValueError):
+    """A common option is missing its value or has one that makes no sense (a bad command
+    line: status 2)."""
+
+    exit_status = 2

@@ -20,6 +20,7 @@ import Miro  # noqa: E402, F401 - the event types
 import MiroNaming  # noqa: E402
 
 from miro_gen import Server, StructuredEvent, StructuredPushConsumer  # noqa: E402
+from miro_gen.transport.events import KEEP_ALL  # noqa: E402
 
 
 class Printer(StructuredPushConsumer):
@@ -44,7 +45,7 @@ def main() -> None:
             break
         except MiroNaming.NotFound:
             time.sleep(0.05)
-    consumer = Printer(channel)
+    consumer = Printer(channel, depth=KEEP_ALL)  # every event, however fast they come
     subs = [tuple(t.rsplit("/", 1)) for t in topics] or [("*", "*")]
     consumer.set_subscriptions(subs)  # type: ignore[arg-type]
     server.reactor().call_soon(lambda: print("READY", flush=True))

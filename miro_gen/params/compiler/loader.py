@@ -41,11 +41,11 @@ _SCOPED = re.compile(r"(::)?[A-Za-z_]\w*(::[A-Za-z_]\w*)*$")
 _NAMESPACE = re.compile(r"[A-Za-z_]\w*(::[A-Za-z_]\w*)*$")
 
 
-def display_path(path: Path) -> str:
-    """Relative to the working folder when inside it, else the file name (no absolute paths
-    in generated output)."""
+def display_path(path: Path, base: Path | None = None) -> str:
+    """Relative to `base` (default: the working folder) when inside it, else the file name (no
+    absolute paths in generated output)."""
     try:
-        return path.resolve().relative_to(Path.cwd().resolve()).as_posix()
+        return path.resolve().relative_to((base or Path.cwd()).resolve()).as_posix()
     except ValueError:
         return path.name
 
@@ -82,10 +82,14 @@ def _doc(elem: etree._Element) -> str | None:
 
 
 class Loader:
-    """Reads compile-time files (each once) with the files they include."""
+    """Reads compile-time files (each once) with the files they include; generated files name
+    them relative to `base` (default: the working folder)."""
 
-    def __init__(self, include_dirs: list[str], diag: Diagnostics) -> None:
+    def __init__(
+        self, include_dirs: list[str], diag: Diagnostics, base: Path | None = None
+    ) -> None:
         self.include_dirs = [Path(d) for d in include_dirs]
+        self.base = base
         self.builtin = resources.params_dir()  # Miro's SvcParameters.xml, shipped
         self.diag = diag
         self.files: dict[Path, ParamsFile] = {}
@@ -108,7 +112,7 @@ class Loader:
             return None
         finally:
             self._loading.discard(key)
-        f = ParamsFile(path=path, display=display_path(path))
+        f = ParamsFile(path=path, display=display_path(path, self.base))
         self._loading.add(key)
         try:
             self._read(f, tree.getroot())

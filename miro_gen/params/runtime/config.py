@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple, Self, TypeVar
 import pydantic
 
 from miro_gen.diagnostics import Diagnostic
+from miro_gen.exceptions import ActionableError
 from miro_gen.params.runtime import codecs, values
 from miro_gen.params.runtime.codecs import (
     ANGLE,
@@ -39,7 +40,7 @@ if TYPE_CHECKING:
 T = TypeVar("T")
 
 
-class ParamsError(Exception):
+class ParamsError(ActionableError):
     """A run-time document that does not fit the parameter classes; lists every problem as
     `path:line: error: message`. The parameters it was read into are left as they were."""
 

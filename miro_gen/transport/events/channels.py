@@ -10,6 +10,7 @@ queues hold at most PROXY_HWM frames per peer, fewer when the largest message al
 
 from __future__ import annotations
 
+import contextlib
 import os
 import threading
 from collections.abc import Callable
@@ -154,10 +155,26 @@ class ChannelNaming(Protocol):
     def resolve(self, name: str) -> MiroNaming.Entry: ...
 
 
+class ChannelDoor(Protocol):
+    """Another door of a hosted channel (its Notification door: events.notify_door): the naming
+    entry that names the channel with both doors, and its end."""
+
+    def entry(self) -> MiroNaming.Entry: ...
+
+    def close(self) -> None: ...
+
+
+class ChannelDoors(Protocol):
+    """What opens a hosted channel's other doors: a process's IIOP side (service.iiop)."""
+
+    def open_door(self, channel: EventChannel) -> ChannelDoor: ...
+
+
 class ChannelServer(Protocol):
     """What event channels need of their process's server (service.server.Server): its
     sockets' context and reactor, where it binds and what it advertises, its naming, binding an
-    entry under its lease, and its clean-up."""
+    entry under its lease, its clean-up, and its IIOP side if it has one (`corba`), which opens
+    a hosted channel's Notification door."""
 
     @property
     def context(self) -> zmq.Context[Any]: ...
@@ -170,6 +187,9 @@ class ChannelServer(Protocol):
 
     @property
     def hosted_channels(self) -> dict[str, EventChannel]: ...
+
+    @property
+    def corba(self) -> ChannelDoors | None: ...
 
     def reactor(self) -> Reactor: ...
 
@@ -205,8 +225,13 @@ class EventChannelFactory:
         entry = MiroNaming.Entry(
             full, CHANNEL_REPO_ID, ch_host.supplier_endpoint, ch_host.consumer_endpoint.encode(), ""
         )
-        self.server.bind_entry(entry)
         self.server.on_shutdown(ch_host.close)
+        doors = self.server.corba
+        if doors is not None:  # an IIOP side: the Notification door too (events.notify_door)
+            door = doors.open_door(channel)
+            self.server.on_shutdown(door.close)
+            entry = door.entry()
+        self.server.bind_entry(entry)
         self._channels[full] = channel
         return channel
 
@@ -225,13 +250,29 @@ class EventChannelFactory:
 def resolve_channel(server: ChannelServer, name: str = DEFAULT_CHANNEL) -> EventChannel:
     """The channel bound as `name` (naming rules as for objects)."""
     entry = server.naming.resolve(name)
-    if entry.repo_id != CHANNEL_REPO_ID:
-        raise MiroNaming.NotFound(name=f"{entry.name} (bound, but not an event channel)")
+    supplier, consumer = channel_endpoints(entry)
     return EventChannel(
         entry.name,
-        entry.endpoint,
-        bytes(entry.key).decode(),
+        supplier,
+        consumer,
         server.reactor(),
         server.naming.context,
         resolve=lambda: resolve_channel(server, entry.name),
     )
+
+
+def channel_endpoints(entry: MiroNaming.Entry) -> tuple[str, str]:
+    """(supplier, consumer) endpoints of a channel's naming entry: a ZeroMQ channel's, or the
+    miro-gen profile of a channel bound with its Notification door (events.notify_door)."""
+    if entry.repo_id == CHANNEL_REPO_ID:
+        return entry.endpoint, bytes(entry.key).decode()
+    ior = getattr(getattr(entry, "ref", None), "ior", None)
+    if ior is None and entry.endpoint.startswith("IOR:"):
+        from miro_gen.corba.ior import IOR, UrlError
+
+        with contextlib.suppress(UrlError):
+            ior = IOR.from_string(entry.endpoint)
+    found = ior.zmq_profile() if ior is not None else None
+    if found is None:
+        raise MiroNaming.NotFound(name=f"{entry.name} (bound, but not an event channel)")
+    return found[0], bytes(found[1]).decode("utf-8", "replace")

@@ -19,7 +19,7 @@ from collections.abc import Callable, Iterator
 
 import MiroNaming
 
-from miro_gen.exceptions import BAD_OPERATION, COMM_FAILURE, TIMEOUT, TRANSIENT
+from miro_gen.exceptions import BAD_OPERATION, COMM_FAILURE, TIMEOUT, TRANSIENT, actionable
 from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.runtime.rpc import Invoker
 from miro_gen.transport.local import local_naming_socket
@@ -46,6 +46,17 @@ __all__ = [
     "list_entries",
     "naming_errors",
 ]
+
+# The naming errors a program lets through are the user's to fix: one line each (lifecycle).
+actionable(
+    MiroNaming.NotFound,
+    lambda e: (
+        f"{e.name} is not bound in the naming service: is its server running? "
+        "(`miro nslist` lists what is)"
+    ),
+)
+actionable(MiroNaming.InvalidName, lambda e: f"InvalidName: {e.name}")
+actionable(MiroNaming.AlreadyBound, lambda e: f"AlreadyBound: {e.name}")
 
 
 class NamingClient:

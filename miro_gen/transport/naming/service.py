@@ -206,6 +206,7 @@ class NamingService:
             host=host,
             also_bind=lambda bound: [s for s in [naming_socket(bound)] if s],
             identify_callers=True,
+            serve=False,  # callers wait until the registry is there
         )
         self.endpoint = self.adapter.endpoint
         self.local_socket = next(iter(self.adapter.also_bound), None)
@@ -226,6 +227,7 @@ class NamingService:
             page_bytes=min(MAX_PAGE_BYTES, size // 2),
         )
         self.adapter.activate(self.registry, NAMING_KEY)
+        self.adapter.serve()
         self._timer = reactor.schedule_timer(PURGE_INTERVAL, PURGE_INTERVAL, self._purge)
 
     def _purge(self, _: Any) -> None:

@@ -58,7 +58,9 @@ class ObjectAdapter:
     endpoints `also_bind` gives for the one bound, advertising `host` as the address other
     processes reach it at; at most `workers` servant calls run at once. `reactor` gives the
     ZeroMQ context. With `identify_callers`, servants learn who calls them
-    (`transport.rpc.caller.current()`)."""
+    (`transport.rpc.caller.current()`). With `serve=False` the socket is bound but nothing is
+    read from it until `serve()`: a process whose objects have well-known keys activates them
+    first, so an early caller waits instead of hearing OBJECT_NOT_EXIST."""
 
     def __init__(
         self,
@@ -70,6 +72,7 @@ class ObjectAdapter:
         *,
         also_bind: Callable[[str], Sequence[str]] | None = None,
         identify_callers: bool = False,
+        serve: bool = True,
     ) -> None:
         self.reactor = reactor
         self.invoker = invoker
@@ -90,15 +93,24 @@ class ObjectAdapter:
         self._prefix = f"{os.getpid()}.".encode()
         self._lock = threading.Lock()
         self._quick: dict[tuple[type, str], bool] = {}  # (servant class, operation): @nonblocking
-        # From here on the socket belongs to the dispatcher's threads.
-        self._dispatcher = Dispatcher(
-            self.socket,
-            self._receive,
-            workers,
-            MAX_PENDING,
-            MAX_PENDING_BYTES,
-            identify=identify_callers,
-        )
+        self._workers = workers
+        self._identify = identify_callers
+        self._dispatcher: Dispatcher | None = None
+        if serve:
+            self.serve()
+
+    def serve(self) -> None:
+        """Start reading requests (once); from here on the socket belongs to the dispatcher's
+        threads."""
+        if self._dispatcher is None:
+            self._dispatcher = Dispatcher(
+                self.socket,
+                self._receive,
+                self._workers,
+                MAX_PENDING,
+                MAX_PENDING_BYTES,
+                identify=self._identify,
+            )
 
     # ---- objects --------------------------------------------------------------------------------
 
@@ -161,11 +173,14 @@ class ObjectAdapter:
     def drain(self, timeout: float) -> bool:
         """Refuse new requests (TRANSIENT, completed NO) and wait up to `timeout` seconds for
         the calls being served to finish and be answered; whether they all were."""
-        return self._dispatcher.drain(timeout)
+        return self._dispatcher.drain(timeout) if self._dispatcher is not None else True
 
     def close(self) -> None:
         """Stop serving (from any thread; the socket closes when its owner is free)."""
-        self._dispatcher.close()
+        if self._dispatcher is None:
+            self.socket.close(linger=0)
+        else:
+            self._dispatcher.close()
 
 
 class _Call:

@@ -15,6 +15,11 @@ came on (`Peer-Address`, `User-Id`; the adapter's `identify_callers`) and makes 
 * `loopback` — a process on this machine connected over TCP: any user, any address of
   127/8 (a caller picks its source address), so nothing is known about it.
 
+IIOP callers (the CosNaming door of `miro naming --iiop-endpoint`) come over TCP without keys
+(`caller_of_tcp`): one on this machine is `uid:N` when the kernel's table of TCP sockets
+(`/proc/net/tcp`, `tcp6`) names the user whose socket is the other end of the connection, as
+identd does, else `loopback`; one beyond is `host:ADDRESS` (served only with --insecure).
+
 `verified` says whether the principal tells one party from another (all but `loopback`).
 """
 
@@ -23,6 +28,9 @@ from __future__ import annotations
 import functools
 import ipaddress
 import re
+import socket
+import struct
+import sys
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -90,3 +98,47 @@ def serving(caller: Caller | None) -> Iterator[None]:
         yield
     finally:
         _current.caller = None
+
+
+def caller_of_tcp(peer: tuple[str, int], here: tuple[str, int]) -> Caller:
+    """The caller at the far end of a TCP connection from `peer` to `here` (host, port): the
+    user whose socket it is, for one on this machine (the kernel's table of TCP sockets)."""
+    address = peer[0].partition("%")[0]
+    if not _is_ours(address):
+        return Caller(f"host:{address}", True)
+    uid = tcp_owner(peer, here)
+    if uid is None:
+        return Caller(LOOPBACK, False)
+    return Caller(f"uid:{uid}", True)
+
+
+def _proc_address(host: str, port: int) -> str | None:
+    """`host`:`port` as /proc/net/tcp{,6} spell it: the address's 32-bit words in this
+    machine's byte order, in hexadecimal, and the port."""
+    try:
+        packed = socket.inet_pton(socket.AF_INET6 if ":" in host else socket.AF_INET, host)
+    except OSError:
+        return None
+    words = struct.unpack(f"={len(packed) // 4}I", packed)
+    return "".join(f"{w:08X}" for w in words) + f":{port:04X}"
+
+
+def tcp_owner(peer: tuple[str, int], here: tuple[str, int]) -> int | None:
+    """The user id owning this machine's TCP socket at `peer` connected to `here` (None: not
+    found, or not Linux)."""
+    if not sys.platform.startswith("linux"):
+        return None
+    local, remote = _proc_address(*peer), _proc_address(*here)
+    if local is None or remote is None:
+        return None
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+        try:
+            with open(table) as f:
+                next(f, None)  # the heading
+                for line in f:
+                    fields = line.split()
+                    if len(fields) > 7 and fields[1] == local and fields[2] == remote:
+                        return int(fields[7])
+        except (OSError, ValueError):
+            continue
+    return None

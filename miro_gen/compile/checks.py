@@ -1,14 +1,19 @@
-"""What `miro-idl` checks before it writes anything: inputs it can read, an output folder it
-can write into, package paths the file system can hold, and that every module the generated
-code imports can be generated (so that no generated module fails when it is imported)."""
+"""What a compile into a package checks before it writes anything: inputs it can read, an
+output folder it can write into, package paths the file system can hold, and (IDL) that every
+module the generated code imports can be generated (so that no generated module fails when it
+is imported) and that no two files declare the same names."""
 
 from __future__ import annotations
 
 import os
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING
 
-from miro_gen.diagnostics import CompileError, Diagnostics
+from miro_gen.diagnostics import CompileError, Diagnostic, Diagnostics
+
+if TYPE_CHECKING:
+    from miro_gen.codegen.contexts import ModuleContext
+    from miro_gen.idl.ast import Decl, Specification
 
 
 def unreadable(path: str) -> str | None:
@@ -20,6 +25,15 @@ def unreadable(path: str) -> str | None:
     if not os.access(path, os.R_OK):
         return "permission denied"
     return None
+
+
+def unreadable_params(files: list[str], diag: Diagnostics) -> None:
+    """Compile-time parameter files that are folders or missing, as errors in `diag`."""
+    for f in files:
+        if os.path.isdir(f):
+            diag.error(None, f"'{f}' is a folder, not a compile-time file (give its .xml files)")
+        elif not os.path.exists(f):
+            diag.error(None, f"cannot read '{f}': no such file")
 
 
 def unusable_outdir(outdir: str, writing: bool = True) -> str | None:
@@ -39,7 +53,7 @@ def unusable_outdir(outdir: str, writing: bool = True) -> str | None:
     return None
 
 
-def too_long_paths(paths: list[str], outdir: Any) -> list[str]:
+def too_long_paths(paths: list[str], outdir: str | os.PathLike[str]) -> list[str]:
     """Generated paths the file system cannot hold (deeply nested or very long module names),
     each as a message naming the IDL module, so that nothing is written at all."""
     base = os.path.abspath(str(outdir))
@@ -89,10 +103,10 @@ def shorten(name: str, keep: int = 60) -> str:
 
 
 def refused_dependencies(
-    specs: list[Any],
-    modules: list[Any],
+    specs: list[Specification],
+    modules: list[ModuleContext],
     missing: list[str],
-    compile_file: Callable[[str, Diagnostics], Any],
+    compile_file: Callable[[str, Diagnostics], Specification],
     diag: Diagnostics,
 ) -> None:
     """Report, as errors in `diag`, the included IDL files whose generated modules the new code
@@ -103,16 +117,16 @@ def refused_dependencies(
 
     by_stem: dict[str, set[str]] = {}
 
-    def learn(spec: Any) -> None:
+    def learn(spec: Specification) -> None:
         for path in spec.includes:
             by_stem.setdefault(names.module_stem(path), set()).add(path)
 
     def sources(imported: str) -> list[str]:
         return sorted(by_stem.get(imported.rsplit(".", 1)[-1], ()))
 
-    refusals: dict[str, Any] = {}
+    refusals: dict[str, Diagnostic | None] = {}
 
-    def refusal(path: str) -> Any:
+    def refusal(path: str) -> Diagnostic | None:
         """The first refusal met generating `path` and what it imports, or None."""
         if path in refusals:
             return refusals[path]
@@ -148,7 +162,7 @@ def refused_dependencies(
                 )
 
 
-def clashing_declarations(specs: list[Any], diag: Diagnostics) -> None:
+def clashing_declarations(specs: list[Specification], diag: Diagnostics) -> None:
     """Two command-line files that declare the same scoped names (omniORB ships both Naming.idl
     and CosNaming.idl with module CosNaming), or one a module and the other something else of
     that name: their generated modules would land in one package, one hiding the other's names.
@@ -156,8 +170,8 @@ def clashing_declarations(specs: list[Any], diag: Diagnostics) -> None:
     from miro_gen.idl import ast
     from miro_gen.idl.rosidl.redeclarations import same_declaration
 
-    first: dict[str, Any] = {}
-    clashes: dict[tuple[str, str], list[tuple[Any, Any]]] = {}
+    first: dict[str, Decl] = {}
+    clashes: dict[tuple[str, str], list[tuple[Decl, Decl]]] = {}
     for spec in specs:
         for d in spec.declarations:
             if d.pos.path != spec.main_file or isinstance(d, ast.Forward):

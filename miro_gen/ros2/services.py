@@ -1,0 +1,148 @@
+"""ROS 2 services over DDS: a service answers requests on `rq<name>Request` on
+`rr<name>Reply`; a client sends requests and waits for their replies.
+
+Requests and replies carry the request header rmw_cyclonedds puts before each body (its
+`serdata.hpp`, `Serialization.cpp`): after the encapsulation header, the client's 64-bit id and
+the request's 64-bit sequence number, in the payload's byte order, then the body (whose
+alignment is unchanged, 16 being a multiple of 8). A reply repeats its request's header; a
+client takes the replies that carry its own id.
+
+Fast DDS (rmw_fastrtps) instead relates a reply to its request through the RTPS sample
+identity, sent as inline QoS (`related_sample_identity`), which Cyclone DDS can neither write
+nor read: services between a Cyclone DDS participant and a Fast DDS one do not interoperate
+(ros2/rmw_cyclonedds#184), and neither do this module's with rclpy on Fast DDS. They do with
+each other and with rmw_cyclonedds' nodes. Discovery sees them either way: rclpy on Fast DDS
+lists these services (`get_service_names_and_types`) and their nodes.
+"""
+
+from __future__ import annotations
+
+import logging
+import secrets
+import struct
+import threading
+from collections.abc import Callable
+from typing import Any, Generic, TypeVar
+
+from miro_gen.ros2 import names
+from miro_gen.ros2 import qos as ros_qos
+from miro_gen.ros2.node import Node
+from miro_gen.ros2.types import Message, service_parts
+
+log = logging.getLogger("miro.ros2")
+
+Req = TypeVar("Req", bound=Message)
+Res = TypeVar("Res", bound=Message)
+HEADER_SIZE = 16  # client id (8 bytes) and sequence number (8 bytes)
+
+
+class ServiceTimeout(TimeoutError):
+    """No reply came in time."""
+
+
+def with_header(cdr: bytes, client_id: int, seq: int) -> bytes:
+    """A body's CDR (with its encapsulation header) with the request header put before it."""
+    order = "<" if cdr[1] & 1 else ">"
+    return cdr[:4] + struct.pack(order + "Qq", client_id, seq) + cdr[4:]
+
+
+def split_header(data: bytes) -> tuple[int, int, bytes]:
+    """(client id, sequence number, the body's CDR with its encapsulation header)."""
+    if len(data) < 4 + HEADER_SIZE:
+        raise ValueError(f"a request or reply of {len(data)} bytes has no request header")
+    order = "<" if data[1] & 1 else ">"
+    client_id, seq = struct.unpack_from(order + "Qq", data, 4)
+    return client_id, seq, data[:4] + data[4 + HEADER_SIZE :]
+
+
+class Service(Generic[Req, Res]):
+    """Answers the requests of one ROS 2 service with `handler(request) -> response`; a
+    request that does not decode is logged and dropped (its client times out)."""
+
+    def __init__(
+        self, node: Node, srv_type: type[Message], name: str, handler: Callable[[Req], Res],
+        qos: ros_qos.QosProfile = ros_qos.SERVICES,
+    ) -> None:  # fmt: skip
+        self.name = node.resolve(name)
+        self._request, self._response = service_parts(srv_type)
+        self._handler = handler
+        request_topic, reply_topic = names.service_to_dds(self.name)
+        h = srv_type._ros2_type_hash
+        self._writer = node.writer(self._response, reply_topic, qos, h, True)
+        self._reader = node.reader(self._request, request_topic, qos, h, self._on_request, True)
+
+    def _on_request(self, data: bytes, info: Any) -> None:
+        try:
+            client_id, seq, body = split_header(data)
+            request = self._request.deserialize(body)
+        except Exception as e:
+            log.warning("service %s: a request that does not decode was dropped: %s", self.name, e)
+            return
+        response = self._handler(request)
+        self._writer.write(with_header(response.serialize(), client_id, seq))
+
+
+class Client(Generic[Req, Res]):
+    """Calls one ROS 2 service: `call(request, timeout)` → its response."""
+
+    def __init__(
+        self, node: Node, srv_type: type[Message], name: str,
+        qos: ros_qos.QosProfile = ros_qos.SERVICES,
+    ) -> None:  # fmt: skip
+        self.name = node.resolve(name)
+        self._request, self._response = service_parts(srv_type)
+        self._id = secrets.randbits(64)
+        self._seq = 0
+        self._lock = threading.Lock()
+        self._pending: dict[int, list[Any]] = {}
+        request_topic, reply_topic = names.service_to_dds(self.name)
+        h = srv_type._ros2_type_hash
+        self._reader = node.reader(self._response, reply_topic, qos, h, self._on_reply, True)
+        self._writer = node.writer(self._request, request_topic, qos, h, True)
+
+    def service_is_ready(self) -> bool:
+        """Whether a service's request reader and reply writer are both matched."""
+        return self._writer.matched() > 0 and self._reader.matched() > 0
+
+    def wait_for_service(self, timeout: float = 10.0) -> bool:
+        done = threading.Event()
+        deadline = timeout
+        while not self.service_is_ready():
+            if deadline <= 0:
+                return False
+            done.wait(0.02)
+            deadline -= 0.02
+        return True
+
+    def call(self, request: Req, timeout: float = 10.0) -> Res:
+        with self._lock:
+            self._seq += 1
+            seq = self._seq
+            slot: list[Any] = [threading.Event()]
+            self._pending[seq] = slot
+        try:
+            self._writer.write(with_header(request.serialize(), self._id, seq))
+            if not slot[0].wait(timeout):
+                raise ServiceTimeout(f"service {self.name}: no reply within {timeout} s")
+            return slot[1]  # type: ignore[no-any-return]
+        finally:
+            with self._lock:
+                self._pending.pop(seq, None)
+
+    def _on_reply(self, data: bytes, info: Any) -> None:
+        try:
+            client_id, seq, body = split_header(data)
+        except ValueError:
+            return
+        if client_id != self._id:
+            return  # another client's reply
+        with self._lock:
+            slot = self._pending.get(seq)
+        if slot is None:
+            return  # a reply to a call that gave up
+        try:
+            slot.append(self._response.deserialize(body))
+        except Exception as e:
+            log.warning("service %s: a reply that does not decode was dropped: %s", self.name, e)
+            return
+        slot[0].set()

@@ -1,0 +1,111 @@
+"""An rclpy node (ROS 2 Kilted, Fast DDS) the ROS 2 runtime tests talk to, in the ROS 2
+environment of tests/ros2_env.py. Prints one JSON document on stdout when done.
+
+  peer.py sub TYPE TOPIC COUNT TIMEOUT      take COUNT messages; print them and the graph
+  peer.py pub TYPE TOPIC SPEC TIMEOUT       publish SPEC (JSON) at 20 Hz until stdin closes
+  peer.py graph NODE TIMEOUT [SERVICE TYPE] wait for node NODE; print the graph (and whether a
+                                            client of SERVICE sees it ready)
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import select
+import sys
+import time
+from typing import Any
+
+import canon
+import rclpy
+from rclpy.node import Node
+
+
+def message_class(name: str) -> Any:
+    pkg, kind, cls = name.split("/")
+    return getattr(importlib.import_module(f"{pkg}.{kind}"), cls)
+
+
+def fill(msg: Any, spec: dict[str, Any]) -> Any:
+    for key, value in spec.items():
+        current = getattr(msg, key)
+        if isinstance(value, dict):
+            fill(current, value)
+        else:
+            setattr(msg, key, value)
+    return msg
+
+
+def graph(node: Node) -> dict[str, Any]:
+    nodes = [f"{ns.rstrip('/')}/{n}" for n, ns in node.get_node_names_and_namespaces()]
+    out: dict[str, Any] = {
+        "nodes": sorted(nodes),
+        "topics": {n: t for n, t in node.get_topic_names_and_types()},
+        "services": {n: t for n, t in node.get_service_names_and_types()},
+        "by_node": {},
+    }
+    for name, ns in node.get_node_names_and_namespaces():
+        try:
+            pubs = node.get_publisher_names_and_types_by_node(name, ns)
+            subs = node.get_subscriber_names_and_types_by_node(name, ns)
+            srvs = node.get_service_names_and_types_by_node(name, ns)
+        except Exception as e:  # a node that went meanwhile
+            out["by_node"][name] = str(e)
+            continue
+        out["by_node"][name] = {
+            "publishers": {n: t for n, t in pubs},
+            "subscribers": {n: t for n, t in subs},
+            "services": {n: t for n, t in srvs},
+        }
+    return out
+
+
+def main() -> None:
+    mode = sys.argv[1]
+    rclpy.init()
+    node = Node("rclpy_peer")
+    result: dict[str, Any] = {}
+    if mode == "sub":
+        cls, topic = sys.argv[2], sys.argv[3]
+        count, timeout = int(sys.argv[4]), float(sys.argv[5])
+        got: list[Any] = []
+        node.create_subscription(
+            message_class(cls), topic, lambda m: got.append(canon.canon(m)), 10
+        )
+        deadline = time.monotonic() + timeout
+        while len(got) < count and time.monotonic() < deadline:
+            rclpy.spin_once(node, timeout_sec=0.1)
+        result = {"received": got, "graph": graph(node)}
+    elif mode == "pub":
+        cls, topic, spec, timeout = sys.argv[2], sys.argv[3], sys.argv[4], float(sys.argv[5])
+        msg = fill(message_class(cls)(), canon.expand(json.loads(spec)))
+        pub = node.create_publisher(message_class(cls), topic, 10)
+        deadline = time.monotonic() + timeout
+        sent = 0
+        while time.monotonic() < deadline:
+            pub.publish(msg)
+            sent += 1
+            rclpy.spin_once(node, timeout_sec=0.05)
+            if select.select([sys.stdin], [], [], 0)[0] and not sys.stdin.readline():
+                break
+        result = {"sent": sent}
+    elif mode == "graph":
+        want, timeout = sys.argv[2], float(sys.argv[3])
+        deadline = time.monotonic() + timeout
+        client = None
+        if len(sys.argv) > 5:
+            client = node.create_client(message_class(sys.argv[5]), sys.argv[4])
+        while time.monotonic() < deadline:
+            rclpy.spin_once(node, timeout_sec=0.1)
+            if want in graph(node)["nodes"] and (client is None or client.service_is_ready()):
+                time.sleep(0.5)  # let the endpoints of the node arrive too
+                rclpy.spin_once(node, timeout_sec=0.1)
+                break
+        result = {"graph": graph(node), "service_ready": bool(client and client.service_is_ready())}
+    node.destroy_node()
+    rclpy.shutdown()
+    print(json.dumps(result))
+
+
+if __name__ == "__main__":
+    main()
