@@ -360,8 +360,13 @@ class Dispatcher:
                 me.link = link
         try:
             link.send_multipart([self._token, *frames], zmq.NOBLOCK)
-        except zmq.ZMQError as e:  # pragma: no cover - an inproc queue of 1000 replies is full
-            _log.warning("could not hand a reply to the leader: %s", e)
+        except zmq.ZMQError as e:
+            if not frames and self._closed:
+                # A wake-up to close: the leader, woken meanwhile by an earlier message (a
+                # drain's), saw `_closed` first and closed its socket; nobody is left to wake.
+                _log.debug("no leader to wake: %s", e)
+            else:  # pragma: no cover - an inproc queue of 1000 replies is full
+                _log.warning("could not hand a reply to the leader: %s", e)
         finally:
             if me is None:
                 link.close()  # with its linger: the wake-up is still delivered
