@@ -60,7 +60,7 @@ def miro_consumer(naming: str, expected: int) -> None:
     import Miro  # noqa: F401 - the payload's type, for decoding
 
     from miro_gen import StructuredEvent, StructuredPushConsumer
-    from miro_gen.transport.server import Server
+    from miro_gen.service.server import Server
 
     arrivals: list[float] = []
     numbers: list[int] = []

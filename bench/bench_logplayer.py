@@ -77,8 +77,8 @@ for r in got:
 
 RAW_TAP = """
 import json, signal, sys, time, zmq
-from miro_gen.transport.server import Client
-from miro_gen.transport.event_frames import parse_batch, split_topic
+from miro_gen.service.server import Client
+from miro_gen.transport.events.frames import parse_batch, split_topic
 while True:  # the player binds the channel
     try:
         client = Client(["bench-tap", "--naming", sys.argv[1]])
@@ -181,7 +181,7 @@ def write_big_log(path: Path, events: int) -> None:
     import Miro
 
     from miro_gen.eventlog.writer import LogWriter
-    from miro_gen.transport.event_frames import RawEvent
+    from miro_gen.transport.events.frames import RawEvent
 
     h = Miro.ExampleEventIDL  # noqa: F841 - the generated packages, imported
     cls = Miro.ImageEventIDL

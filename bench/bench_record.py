@@ -78,7 +78,7 @@ print("READY", flush=True)
 signal.signal(signal.SIGINT, lambda *_: (print(count, missed, flush=True), sys.exit(0)))
 count = missed = 0
 expected = None
-from miro_gen.transport.event_frames import BATCH as H, EVENT as E
+from miro_gen.transport.events.frames import BATCH as H, EVENT as E
 while True:
     topic, body = s.recv_multipart()
     n = H.unpack_from(body)[2]
@@ -119,7 +119,7 @@ def supply(naming: str, rate: float, seconds: float) -> tuple[int, float]:
 
 
 def consumer_endpoint(naming: str) -> str:
-    from miro_gen.transport.server import Client
+    from miro_gen.service.server import Client
 
     client = Client(["bench", "--naming", naming])
     try:
@@ -180,7 +180,7 @@ def replay_spacing(naming: str) -> tuple[float, float]:
     import Miro
 
     from miro_gen.eventlog.writer import LogWriter
-    from miro_gen.transport.event_frames import RawEvent
+    from miro_gen.transport.events.frames import RawEvent
 
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "spacing.mcap"

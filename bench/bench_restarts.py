@@ -44,8 +44,8 @@ LEASE = "3"
 # Polls `name` until it resolves to an endpoint other than `old` ("-": any); prints the time.
 WAIT_MOVED = """
 import sys, time, zmq
-from miro_gen.transport.invoker import ZmqInvoker
-from miro_gen.transport.naming import NamingClient
+from miro_gen.transport.rpc.invoker import ZmqInvoker
+from miro_gen.transport.naming.client import NamingClient
 naming = NamingClient(ZmqInvoker(zmq.Context()), sys.argv[1], "bench")
 print("READY", flush=True)
 old = sys.stdin.readline().strip()

@@ -34,7 +34,7 @@ import Miro  # noqa: E402
 import zmq  # noqa: E402
 
 from miro_gen.runtime.cdr import ObjectRef  # noqa: E402
-from miro_gen.transport.invoker import ZmqInvoker  # noqa: E402
+from miro_gen.transport.rpc.invoker import ZmqInvoker  # noqa: E402
 
 RAW = "raw pyzmq DEALER/ROUTER echo"
 POOL = "getData() (default)"

@@ -40,8 +40,8 @@ sys.path[:0] = [str(ROOT / "generated"), str(ROOT)]
 import MiroNaming  # noqa: E402
 import zmq  # noqa: E402
 
-from miro_gen.transport.invoker import ZmqInvoker  # noqa: E402
-from miro_gen.transport.naming import NamingClient  # noqa: E402
+from miro_gen.transport.naming.client import NamingClient  # noqa: E402
+from miro_gen.transport.rpc.invoker import ZmqInvoker  # noqa: E402
 
 TARGET = 1.5  # time to resolvable, and idle memory, against Pyro5's
 PYRO = "Pyro5 daemon + name server"

@@ -400,7 +400,7 @@ def sensor_log(path: Path, seconds: float) -> tuple[int, int]:
     """A log of 1280x720 RGB images at 30 Hz and 1,081-beam scans at 40 Hz: (images, scans)."""
     from miro_gen.eventlog.writer import LogWriter
     from miro_gen.sim.laser import LaserScans
-    from miro_gen.transport.event_frames import RawEvent
+    from miro_gen.transport.events.frames import RawEvent
 
     writer = LogWriter(str(path))
     t0 = 1_577_836_800_000_000_000

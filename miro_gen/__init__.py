@@ -29,6 +29,8 @@ from miro_gen.exceptions import (
 
 if TYPE_CHECKING:
     from miro_gen.runtime.rpc import nonblocking
+    from miro_gen.service.implementation import Implementation
+    from miro_gen.service.server import Client, Server
     from miro_gen.transport.events import (
         KEEP_ALL,
         EventChannelFactory,
@@ -36,22 +38,20 @@ if TYPE_CHECKING:
         StructuredPushConsumer,
         StructuredPushSupplier,
     )
-    from miro_gen.transport.implementation import Implementation
-    from miro_gen.transport.server import Client, Server
 
 __version__ = "0.1.0"
 
 _EVENTS = "miro_gen.transport.events"
 _LAZY = {
     "nonblocking": "miro_gen.runtime.rpc",
-    "Server": "miro_gen.transport.server",
-    "Client": "miro_gen.transport.server",
+    "Server": "miro_gen.service.server",
+    "Client": "miro_gen.service.server",
     "EventChannelFactory": _EVENTS,
     "StructuredPushSupplier": _EVENTS,
     "StructuredPushConsumer": _EVENTS,
     "StructuredEvent": _EVENTS,
     "KEEP_ALL": _EVENTS,  # a consumer's depth: every event kept for its handler
-    "Implementation": "miro_gen.transport.implementation",
+    "Implementation": "miro_gen.service.implementation",
 }
 
 __all__ = [

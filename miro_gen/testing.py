@@ -20,9 +20,9 @@ from types import TracebackType
 
 import zmq
 
-from miro_gen.transport.invoker import ZmqInvoker
-from miro_gen.transport.naming_service import NamingService
+from miro_gen.transport.naming.service import NamingService
 from miro_gen.transport.reactor import Reactor
+from miro_gen.transport.rpc.invoker import ZmqInvoker
 
 
 @contextmanager

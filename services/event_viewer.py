@@ -29,7 +29,7 @@ if __package__ in (None, ""):  # run as a script from a checkout: the generated 
 import Miro  # noqa: F401 - the project's event types, for decoding
 import MiroNaming
 from miro_gen import Server, StructuredEvent, SystemException
-from miro_gen.transport.options import service_parser
+from miro_gen.service.options import service_parser
 
 try:
     from miro_gen.qt import QtEventBridge, Subscription

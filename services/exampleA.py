@@ -23,7 +23,7 @@ if __package__ in (None, ""):  # run as a script from a checkout: the generated 
 import Miro
 import Miro__POA
 from miro_gen import Server, log, nonblocking
-from miro_gen.transport.options import service_parser
+from miro_gen.service.options import service_parser
 
 _log = log.logger("MIRO")
 

@@ -19,7 +19,7 @@ if __package__ in (None, ""):  # run as a script from a checkout: the generated 
 
 import Miro
 from miro_gen import EventChannelFactory, Server, StructuredPushSupplier
-from miro_gen.transport.options import service_parser
+from miro_gen.service.options import service_parser
 
 CHANNEL = "ExampleEventChannel"
 EVENT = "ExampleEvent"

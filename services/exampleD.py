@@ -21,7 +21,7 @@ if __package__ in (None, ""):  # run as a script from a checkout: the generated 
 import Miro  # noqa: F401 - the package that has the event type, for decoding
 import MiroNaming
 from miro_gen import Server, StructuredEvent, StructuredPushConsumer
-from miro_gen.transport.options import service_parser
+from miro_gen.service.options import service_parser
 
 CHANNEL = "ExampleEventChannel"
 EVENT = "ExampleEvent"

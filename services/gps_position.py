@@ -33,8 +33,8 @@ from miro_gen import (
     StructuredPushConsumer,
     StructuredPushSupplier,
 )
+from miro_gen.service.options import service_parser
 from miro_gen.transport.events import EventChannel
-from miro_gen.transport.options import service_parser
 
 EARTH_RADIUS = 6_371_000.0  # metres
 STALE = 2.0  # seconds after which a fix is too old to publish

@@ -92,7 +92,7 @@ def write_log(
     import Miro
 
     from miro_gen.eventlog.writer import LogWriter
-    from miro_gen.transport.event_frames import RawEvent
+    from miro_gen.transport.events.frames import RawEvent
 
     h = Miro.ExampleEventIDL._type_hash
     writer = LogWriter(str(path))

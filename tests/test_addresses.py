@@ -16,9 +16,9 @@ import pytest
 import zmq
 from loopback import NamingProcess, service_env
 
+from miro_gen.service.options import UsageError
 from miro_gen.transport import addresses
 from miro_gen.transport.addresses import Addresses, route_source, server_addresses
-from miro_gen.transport.options import UsageError
 
 SERVICES = Path(__file__).resolve().parents[1] / "services"
 NOT_OURS = "203.0.113.77"  # TEST-NET-3: documentation only, on no machine's interface

@@ -28,9 +28,9 @@ from loopback import (
 )
 
 from miro_gen import TRANSIENT, Client, EventChannelFactory, StructuredPushSupplier
-from miro_gen.transport.event_frames import pack_batch
 from miro_gen.transport.events import DEFAULT_DEPTH, topic
-from miro_gen.transport.gaps import MAX_SOURCES
+from miro_gen.transport.events.frames import pack_batch
+from miro_gen.transport.events.gaps import MAX_SOURCES
 
 HERE = Path(__file__).resolve().parent
 HOST = HERE / "procs" / "channel_host.py"

@@ -15,8 +15,8 @@ from loopback import NamingProcess, run_miro, service_env
 from miro_cli import REPO
 from zmq.auth.certs import load_certificate
 
+from miro_gen.service.options import UsageError
 from miro_gen.transport import sockets
-from miro_gen.transport.options import UsageError
 
 
 @pytest.fixture(autouse=True)

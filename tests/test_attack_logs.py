@@ -23,7 +23,7 @@ from miro_gen.compile import foreign
 from miro_gen.eventlog import types
 from miro_gen.eventlog.reader import LogError, LogReader
 from miro_gen.eventlog.writer import MAX_CHANNELS, LogWriter
-from miro_gen.transport.event_frames import RawEvent
+from miro_gen.transport.events.frames import RawEvent
 
 MAGIC = b"\x89MCAP0\r\n"
 

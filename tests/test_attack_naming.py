@@ -21,8 +21,8 @@ from loopback import NamingProcess, RunningServer, eventually, rss_mb, run_miro,
 
 from miro_gen import BAD_OPERATION, MARSHAL, TRANSIENT, Client
 from miro_gen.runtime.cdr import HEADER_LE
-from miro_gen.transport import frames
-from miro_gen.transport.naming import NAMING_KEY, list_entries
+from miro_gen.transport.naming.client import NAMING_KEY, list_entries
+from miro_gen.transport.rpc import frames
 
 HERE = Path(__file__).resolve().parent
 EXAMPLE = HERE / "procs" / "named_example.py"

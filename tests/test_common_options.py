@@ -10,7 +10,7 @@ from collections.abc import Iterator
 import pytest
 
 from miro_gen import log
-from miro_gen.transport.options import (
+from miro_gen.service.options import (
     DEFAULT_NAMING,
     UsageError,
     naming_endpoint,

@@ -28,10 +28,10 @@ from miro_gen.corba.server import IIOPServer
 from miro_gen.exceptions import NO_IMPLEMENT, NO_PERMISSION
 from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.runtime.cdrstream import CdrOutput
-from miro_gen.transport import caller
-from miro_gen.transport.naming_door import SERVICE, serve_cosnaming
-from miro_gen.transport.naming_service import Registry
-from miro_gen.transport.naming_table import Table
+from miro_gen.transport.naming.cosnaming_door import SERVICE, serve_cosnaming
+from miro_gen.transport.naming.service import Registry
+from miro_gen.transport.naming.table import Table
+from miro_gen.transport.rpc import caller
 
 
 class Door:

@@ -14,7 +14,7 @@ import pytest
 from loopback import free_port, run_miro, service_env
 from test_multihost import Hosts, ip, network
 
-from miro_gen.transport.discovery import answers
+from miro_gen.transport.naming.discovery import answers
 
 ADDRESSES = {"nsbox": "10.79.0.1", "robot": "10.79.0.2"}
 SERVICES = Path(__file__).resolve().parents[1] / "services"

@@ -27,7 +27,7 @@ from mcap.reader import NonSeekingReader, make_reader
 from miro_cli import REPO, run_miro_idl
 
 from miro_gen.eventlog.writer import LogWriter
-from miro_gen.transport.event_frames import RawEvent
+from miro_gen.transport.events.frames import RawEvent
 
 
 @pytest.fixture(scope="module")

@@ -270,7 +270,8 @@ def test_events_refused_at_the_high_water_mark_are_counted(
 ) -> None:
     """A channel that stops reading: the supplier's frames pile up to its high-water mark and
     the kernel's buffers, then push() goes on without blocking and counts what it dropped."""
-    from miro_gen.transport import event_supplier, events
+    from miro_gen.transport import events
+    from miro_gen.transport.events import supplier as event_supplier
 
     monkeypatch.setattr(event_supplier, "HWM", 10)
     host = servers("r")

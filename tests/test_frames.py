@@ -8,8 +8,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from miro_gen.transport import frames
-from miro_gen.transport.frames import FrameError, Reply, Request, Status
+from miro_gen.transport.rpc import frames
+from miro_gen.transport.rpc.frames import FrameError, Reply, Request, Status
 
 requests = st.builds(
     Request,

@@ -10,7 +10,7 @@ import pytest
 from loopback import run_miro
 
 from miro_gen.eventlog.writer import LogWriter
-from miro_gen.transport.event_frames import RawEvent
+from miro_gen.transport.events.frames import RawEvent
 
 T0 = 1_700_000_000_000_000_000  # ns
 

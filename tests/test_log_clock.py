@@ -24,7 +24,7 @@ from loopback import NamingProcess, eventually, run_miro
 
 from miro_gen.clock import LogClock
 from miro_gen.eventlog.writer import LogWriter
-from miro_gen.transport.event_frames import RawEvent
+from miro_gen.transport.events.frames import RawEvent
 from miro_gen.transport.reactor import Reactor
 
 T0 = 1_577_836_800_000_000_000  # 2020-01-01 00:00:00 UTC: log time is not wall time
@@ -139,7 +139,7 @@ def test_a_process_on_log_time_publishes_10_events_per_logged_second_at_4x(
 
 
 def test_the_clock_option_is_checked() -> None:
-    from miro_gen.transport.options import UsageError, parse_common_options
+    from miro_gen.service.options import UsageError, parse_common_options
 
     opts, rest = parse_common_options(["--clock", "log:robot1/LogClock", "x"])
     assert opts.clock == "log:robot1/LogClock" and rest == ["x"]

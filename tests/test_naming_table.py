@@ -1,5 +1,5 @@
-"""The naming table's rules (transport/naming_table.py) and its log of owners
-(transport/naming_log.py), without processes: who may bind a name, live or kept, quotas that
+"""The naming table's rules (transport/naming/table.py) and its log of owners
+(transport/naming/owners_log.py), without processes: who may bind a name, live or kept, quotas that
 give up kept names first, pages that fit a message, and a log that survives damage."""
 
 from __future__ import annotations
@@ -15,8 +15,8 @@ import pytest
 from loopback import free_port, service_env
 
 from miro_gen.exceptions import NO_RESOURCES
-from miro_gen.transport.naming_log import LogError, OwnersLog
-from miro_gen.transport.naming_table import ENTRY_OVERHEAD, Holder, Table, entry_size
+from miro_gen.transport.naming.owners_log import LogError, OwnersLog
+from miro_gen.transport.naming.table import ENTRY_OVERHEAD, Holder, Table, entry_size
 
 ME = Holder("uid:1000", "r/exampleA", "run1")
 RESTART = Holder("uid:1000", "r/exampleA", "run2")

@@ -18,9 +18,9 @@ from loopback import eventually, free_port
 
 from miro_gen.exceptions import COMM_FAILURE, OBJECT_NOT_EXIST, TIMEOUT, TRANSIENT, CompletionStatus
 from miro_gen.runtime.cdr import ObjectRef
-from miro_gen.transport.adapter import ObjectAdapter
-from miro_gen.transport.invoker import ZmqInvoker
 from miro_gen.transport.reactor import Reactor
+from miro_gen.transport.rpc.adapter import ObjectAdapter
+from miro_gen.transport.rpc.invoker import ZmqInvoker
 
 HERE = Path(__file__).resolve().parent
 SERVER = HERE / "procs" / "example_server.py"

@@ -9,9 +9,9 @@ from pathlib import Path
 import pytest
 from loopback import run_miro
 
+from miro_gen.service.options import UsageError, parse_common_options
 from miro_gen.transport import sockets
 from miro_gen.transport.addresses import server_addresses
-from miro_gen.transport.options import UsageError, parse_common_options
 
 
 @pytest.fixture

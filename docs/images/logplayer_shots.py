@@ -30,7 +30,7 @@ from miro_gen.eventlog.player import Player  # noqa: E402
 from miro_gen.eventlog.writer import LogWriter  # noqa: E402
 from miro_gen.qt.logplayer import LogPlayerWindow  # noqa: E402
 from miro_gen.sim.laser import LaserScans  # noqa: E402
-from miro_gen.transport.event_frames import RawEvent  # noqa: E402
+from miro_gen.transport.events.frames import RawEvent  # noqa: E402
 
 T0 = 1_764_000_000_000_000_000  # a morning in November 2025
 SECONDS = 30

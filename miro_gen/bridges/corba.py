@@ -18,12 +18,14 @@ from typing import Any
 
 from miro_gen.corba.events import CosEventConsumer, CosEventSupplier, EventChannel
 from miro_gen.log import PeerWarnings, logger
+from miro_gen.service.server import Server
 from miro_gen.transport.events import (
     KEEP_ALL,
     StructuredEvent,
     StructuredPushConsumer,
     StructuredPushSupplier,
 )
+from miro_gen.transport.events import EventChannel as MiroChannel  # (a miro-gen channel)
 
 _log = logger("MIRO")
 _peer_warnings = PeerWarnings(_log)  # what peers send: rate-limited, with counts
@@ -52,7 +54,7 @@ class _ToCorba(StructuredPushConsumer):
     """Takes events from the miro-gen channel (on the reactor thread) and hands them to a thread
     that pushes them into the CORBA channel, so that a slow channel never blocks the reactor."""
 
-    def __init__(self, channel: Any, supplier: CosEventSupplier) -> None:
+    def __init__(self, channel: MiroChannel, supplier: CosEventSupplier) -> None:
         super().__init__(channel, depth=KEEP_ALL)  # every event is relayed, none skipped
         self.supplier = supplier
         self.outbox: queue.SimpleQueue[Any] = queue.SimpleQueue()
@@ -121,7 +123,9 @@ class Bridge:
     """A running bridge between `corba` (a CORBA event channel) and `channel` (a miro-gen one)
     of `server`, along `routes`."""
 
-    def __init__(self, server: Any, corba: EventChannel, channel: Any, routes: Routes) -> None:
+    def __init__(
+        self, server: Server, corba: EventChannel, channel: MiroChannel, routes: Routes
+    ) -> None:
         self.to_corba: _ToCorba | None = None
         self.from_corba: _FromCorba | None = None
         self.supplier: CosEventSupplier | None = None

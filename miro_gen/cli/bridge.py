@@ -93,7 +93,7 @@ def _corba_channel(server: Any, url: str) -> Any:
     from miro_gen.corba.events import EventChannel
     from miro_gen.corba.ior import ior_from_ref
     from miro_gen.corba.naming import resolve_url
-    from miro_gen.transport.iiop import iiop_addresses, serve_iiop
+    from miro_gen.service.iiop import iiop_addresses, serve_iiop
 
     invoker = IIOPInvoker(server.invoker)
     ref = resolve_url(invoker, url)

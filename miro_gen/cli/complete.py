@@ -137,12 +137,12 @@ def _options(verb: Verb) -> list[str]:
 
 def _robot(words: list[str]) -> Any:
     from miro_gen.live.remote import Robot
-    from miro_gen.transport.options import parse_common_options
+    from miro_gen.service.options import parse_common_options
 
     opts, _ = parse_common_options(words[2:])
     argv = ["miro", "--naming", opts.naming, "-MNC", opts.naming_context]
     robot = Robot(argv, timeout=TIMEOUT)
-    naming = robot.client.naming  # miro's own (Robot refuses a CORBA naming service)
+    naming = robot.naming  # miro's own (Robot refuses a CORBA naming service)
     naming.registry = naming.registry_stub(robot.client.invoker, TIMEOUT)
     return robot
 
@@ -156,8 +156,8 @@ def _with_robot(words: list[str], fn: Callable[[Any], list[str]]) -> list[str]:
 
 
 def _object_names(words: list[str]) -> list[str]:
+    from miro_gen.service.introspection import SERVICES
     from miro_gen.transport.events import CHANNEL_REPO_ID
-    from miro_gen.transport.introspection import SERVICES
 
     return _with_robot(
         words,

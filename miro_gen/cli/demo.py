@@ -23,7 +23,7 @@ from typing import IO
 
 from miro_gen import resources
 from miro_gen.launch.console import Console
-from miro_gen.transport.options import DEFAULT_NAMING, UsageError, naming_endpoint
+from miro_gen.service.options import DEFAULT_NAMING, UsageError, naming_endpoint
 
 NAMING_READY = "naming service at"
 

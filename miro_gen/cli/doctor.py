@@ -18,8 +18,8 @@ def doctor_main(argv: Sequence[str]) -> int:
         "--timeout", type=float, default=3.0, metavar="S", help="seconds to listen (default 3)"
     )
     ns = p.parse_args(argv)
-    from miro_gen.transport.discovery import diagnose
-    from miro_gen.transport.options import UsageError, parse_common_options
+    from miro_gen.service.options import UsageError, parse_common_options
+    from miro_gen.transport.naming.discovery import diagnose
 
     try:
         opts, _ = parse_common_options(["--naming", ns.naming] if ns.naming else [])

@@ -10,7 +10,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from miro_gen.eventlog.types import parse_topic
-from miro_gen.transport.options import UsageError, parse_common_options
+from miro_gen.service.options import UsageError, parse_common_options
 
 COMMON = "Accepts the common options (--naming tcp://HOST:PORT, -MNC NAME, -MLL N, --host ADDR)."
 
@@ -58,7 +58,7 @@ def split_common(p: argparse.ArgumentParser, argv: Sequence[str]) -> list[str]:
 
 
 def make_server(p: argparse.ArgumentParser, prog: str, argv: Sequence[str]) -> Any:
-    from miro_gen.transport.server import Server
+    from miro_gen.service.server import Server
 
     try:
         return Server([prog, *argv])

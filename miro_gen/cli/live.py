@@ -155,8 +155,8 @@ def echo_main(argv: Sequence[str]) -> int:
     ns = p.parse_args(split_common(p, argv))
     limit = length_limit(p, ns)
     from miro_gen.eventlog.show import clock_text, payload_text
-    from miro_gen.transport.event_frames import RawEvent
-    from miro_gen.transport.gaps import GapCounter
+    from miro_gen.transport.events.frames import RawEvent
+    from miro_gen.transport.events.gaps import GapCounter
 
     suppliers = Suppliers(prog, argv, ns.topics)
     for _, offer in suppliers.offers:
@@ -209,8 +209,8 @@ def hz_main(argv: Sequence[str]) -> int:
     if ns.window < 1:
         p.error("--window must be 1 or more")
     from miro_gen.eventlog.rates import RateWindow, data_rate
-    from miro_gen.transport.event_frames import RawEvent
-    from miro_gen.transport.gaps import GapCounter
+    from miro_gen.transport.events.frames import RawEvent
+    from miro_gen.transport.events.gaps import GapCounter
 
     names: list[str] = []
     if ns.channel is None:

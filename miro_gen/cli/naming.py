@@ -11,29 +11,35 @@ import signal
 import socket
 import sys
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import MiroNaming
 import zmq
 
 from miro_gen import log
 from miro_gen.exceptions import SystemException
+from miro_gen.service.options import DEFAULT_NAMING, UsageError, byte_size, naming_endpoint
 from miro_gen.transport import sockets
 from miro_gen.transport.addresses import server_addresses
-from miro_gen.transport.channels import CHANNEL_REPO_ID, ChannelHost
-from miro_gen.transport.invoker import ZmqInvoker
+from miro_gen.transport.events.channels import CHANNEL_REPO_ID, ChannelHost
 from miro_gen.transport.local import naming_socket
-from miro_gen.transport.naming import (
+from miro_gen.transport.naming.client import (
     DEFAULT_HOLD,
     DEFAULT_MAX_NAMES,
     DEFAULT_QUOTA,
     check_name,
     naming_errors,
 )
-from miro_gen.transport.naming_log import LogError, default_path
-from miro_gen.transport.naming_service import NamingService
-from miro_gen.transport.options import DEFAULT_NAMING, UsageError, byte_size, naming_endpoint
+from miro_gen.transport.naming.owners_log import LogError, default_path
+from miro_gen.transport.naming.service import NamingService
 from miro_gen.transport.reactor import Reactor
+from miro_gen.transport.rpc.invoker import ZmqInvoker
+
+if TYPE_CHECKING:  # (the CORBA doors load only with --iiop-endpoint)
+    from miro_gen.corba.notify import NotifyChannel
+    from miro_gen.corba.server import IIOPServer
+    from miro_gen.transport.events.notify_door import NotifyDoor
+    from miro_gen.transport.naming.cosnaming_door import RegistryTable
 
 # What a stranger may do with a naming service served --insecure beyond loopback
 NAMING_SERVES = "list, resolve and bind names, and publish and subscribe on its event channels"
@@ -264,7 +270,7 @@ def naming_main(argv: Sequence[str]) -> int:
         )
     announcer = None
     if announce and not re.search(r"://(127\.|localhost)", bound):
-        from miro_gen.transport.discovery import Announcer
+        from miro_gen.transport.naming.discovery import Announcer
 
         announcer = Announcer(bound)
     reactor.run()
@@ -310,19 +316,21 @@ def _channel_host(service: NamingService) -> ChannelHost:
 
 class CorbaDoors:
     """What `miro naming --iiop-endpoint` serves to CORBA clients: CosNaming over its names,
-    and the Notification doors of the channels it hosts (transport.naming_door,
-    transport.notify_door)."""
+    and the Notification doors of the channels it hosts (transport.naming.cosnaming_door,
+    transport.events.notify_door)."""
 
-    def __init__(self, server: Any, reactor: Reactor, service: NamingService, names: Any) -> None:
+    def __init__(
+        self, server: IIOPServer, reactor: Reactor, service: NamingService, names: RegistryTable
+    ) -> None:
         from miro_gen.corba.notify.wire import EVENT_CHANNEL_FACTORY
-        from miro_gen.transport.naming_door import RENEW_EVERY
-        from miro_gen.transport.notify_door import FACTORY_KEY, serve_factory
+        from miro_gen.transport.events.notify_door import FACTORY_KEY, serve_factory
+        from miro_gen.transport.naming.cosnaming_door import RENEW_EVERY
 
         self.server = server
         self.reactor = reactor
         self.service = service
         self.address = f"{server.host}:{server.port}"
-        self.doors: list[Any] = []
+        self.doors: list[NotifyDoor] = []
         self._made = 0
         self._timer = reactor.schedule_timer(RENEW_EVERY, RENEW_EVERY, names.renew)
         self.factory = serve_factory(server, self._make)
@@ -331,9 +339,9 @@ class CorbaDoors:
             MiroNaming.Entry(FACTORY_KEY, EVENT_CHANNEL_FACTORY, ior.to_string(), b"", "")
         )
 
-    def open_door(self, name: str, host: ChannelHost) -> Any:
-        from miro_gen.transport.channels import EventChannel
-        from miro_gen.transport.notify_door import NotifyDoor
+    def open_door(self, name: str, host: ChannelHost) -> NotifyDoor:
+        from miro_gen.transport.events.channels import EventChannel
+        from miro_gen.transport.events.notify_door import NotifyDoor
 
         channel = EventChannel(
             name, host.supplier_endpoint, host.consumer_endpoint, self.reactor, "", host
@@ -342,7 +350,7 @@ class CorbaDoors:
         self.doors.append(door)
         return door
 
-    def _make(self, qos: dict[str, Any], admin: dict[str, Any]) -> Any:
+    def _make(self, qos: dict[str, Any], admin: dict[str, Any]) -> NotifyChannel:
         """A channel a CORBA client asks the factory for: both doors, bound nowhere."""
         self._made += 1
         host = _channel_host(self.service)
@@ -364,9 +372,9 @@ def _serve_corba(
 ) -> CorbaDoors:
     """Serve CORBA clients at `endpoint` (HOST:PORT): UsageError when it cannot be."""
     from miro_gen.corba.client import IIOPInvoker
-    from miro_gen.transport.iiop import serve_iiop
-    from miro_gen.transport.naming_door import serve_cosnaming
-    from miro_gen.transport.options import CommonOptions, iiop_endpoint
+    from miro_gen.service.iiop import serve_iiop
+    from miro_gen.service.options import CommonOptions, iiop_endpoint
+    from miro_gen.transport.naming.cosnaming_door import serve_cosnaming
 
     host, _, port = iiop_endpoint(endpoint, "--iiop-endpoint").rpartition(":")
     host = host.strip("[]") or "0.0.0.0"
@@ -379,7 +387,7 @@ def _serve_corba(
 
 
 def nslist_main(argv: Sequence[str]) -> int:
-    from miro_gen.transport.server import Client
+    from miro_gen.service.server import Client
 
     p = argparse.ArgumentParser(
         prog="miro nslist",
@@ -417,7 +425,7 @@ def nslist_main(argv: Sequence[str]) -> int:
 def nsunbind_main(argv: Sequence[str]) -> int:
     import uuid
 
-    from miro_gen.transport.server import Client
+    from miro_gen.service.server import Client
 
     p = argparse.ArgumentParser(
         prog="miro nsunbind",

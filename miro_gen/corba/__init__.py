@@ -3,7 +3,7 @@ a CosNaming client, and CosEventComm push suppliers and consumers (docs/CORBA.md
 
 Generated stubs and skeletons work over IIOP unchanged: `IIOPInvoker` is an `Invoker` for
 CORBA objects, `IIOPServer` serves servants to CORBA clients. `Server` and `Client` use them
-(miro_gen.transport.iiop) when the naming service is a CORBA one (`--naming
+(miro_gen.service.iiop) when the naming service is a CORBA one (`--naming
 corbaloc:iiop:HOST:PORT/NameService`, an IOR, ...) or `--iiop-endpoint` is given. This package
 sits below the transport: it imports the run time and the foundations only.
 """

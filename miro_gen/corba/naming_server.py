@@ -1,6 +1,7 @@
 """A CosNaming service (NamingContext, NamingContextExt, BindingIterator) over a naming table
 of paths, so that one naming service answers the CORBA world and miro-gen's alike
-(`miro naming --iiop-endpoint`; transport.naming_door gives it the naming service's table).
+(`miro naming --iiop-endpoint`; transport.naming.cosnaming_door gives it the naming service's
+table).
 
 Names are paths: the CosNaming name `[{id: robot1}, {id: Gps}]` is the path `robot1/Gps`, a
 component with a kind is `id.kind` (the stringified form of the Interoperable Naming Service,
@@ -51,7 +52,8 @@ Name = list[tuple[str, str]]
 
 
 class NameTable(Protocol):
-    """The names a CosNaming service answers for (transport.naming_door: miro naming's)."""
+    """The names a CosNaming service answers for (transport.naming.cosnaming_door: miro
+    naming's)."""
 
     def resolve(self, path: str) -> MiroNaming.Entry | None:
         """The entry bound at `path`, if any."""

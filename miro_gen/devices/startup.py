@@ -18,9 +18,9 @@ from typing import NoReturn
 
 from miro_gen.exceptions import SystemException
 from miro_gen.params import Config, ParamsError, read_parameters
+from miro_gen.service.options import UsageError, service_parser
+from miro_gen.service.server import Server
 from miro_gen.transport.events import EventChannelFactory, StructuredPushSupplier
-from miro_gen.transport.options import UsageError, service_parser
-from miro_gen.transport.server import Server
 
 
 def fail(name: str, message: object, status: int = 1) -> NoReturn:

@@ -16,10 +16,10 @@ from miro_gen.eventlog.progress import StatusLine, human_bytes
 from miro_gen.eventlog.tap import RawEventTap
 from miro_gen.eventlog.writer import LogWriter
 from miro_gen.runtime import registry
-from miro_gen.transport.channels import EventChannel
-from miro_gen.transport.event_frames import RawEvent
-from miro_gen.transport.log_clock import CLOCK_TYPE  # a player's clock: never recorded
-from miro_gen.transport.server import Server
+from miro_gen.service.log_clock import CLOCK_TYPE  # a player's clock: never recorded
+from miro_gen.service.server import Server
+from miro_gen.transport.events.channels import EventChannel
+from miro_gen.transport.events.frames import RawEvent
 
 TICK = 0.25  # seconds between chunk checks and progress updates
 

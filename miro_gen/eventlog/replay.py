@@ -13,14 +13,14 @@ from __future__ import annotations
 import threading
 from typing import NamedTuple
 
-from miro_gen.transport.event_frames import (
+from miro_gen.transport.events import MAX_BATCH_BYTES, EventChannel, StructuredPushSupplier
+from miro_gen.transport.events.frames import (
     BATCH_HEADER,
     EVENT_HEADER,
     MAX_EVENTS,
     pack_batch,
     topic,
 )
-from miro_gen.transport.events import MAX_BATCH_BYTES, EventChannel, StructuredPushSupplier
 
 
 class _Encoded(NamedTuple):

@@ -32,17 +32,17 @@ from miro_gen.eventlog.fileset import Event
 from miro_gen.eventlog.player import ClockState
 from miro_gen.eventlog.replay import ReplaySupplier
 from miro_gen.exceptions import SystemException
-from miro_gen.transport.channels import channel_endpoints
+from miro_gen.service.log_clock import CLOCK_TYPE
 from miro_gen.transport.events import (
     CHANNEL_REPO_ID,
     EventChannel,
     EventChannelFactory,
     StructuredPushSupplier,
 )
-from miro_gen.transport.log_clock import CLOCK_TYPE
+from miro_gen.transport.events.channels import channel_endpoints
 
 if TYPE_CHECKING:
-    from miro_gen.transport.server import Server
+    from miro_gen.service.server import Server
 
 DEFAULT_NAME = "EventChannel"
 CLOCK_CHANNEL = "LogClock"

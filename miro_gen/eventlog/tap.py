@@ -17,10 +17,10 @@ import zmq
 from miro_gen.eventlog.types import matches
 from miro_gen.log import PeerWarnings, logger
 from miro_gen.transport import sockets
-from miro_gen.transport.channel_link import ChannelLink
-from miro_gen.transport.event_frames import FrameError, RawEvent, parse_batch, split_topic
 from miro_gen.transport.events import EventChannel, subscription_prefix
-from miro_gen.transport.gaps import GapCounter
+from miro_gen.transport.events.channel_link import ChannelLink
+from miro_gen.transport.events.frames import FrameError, RawEvent, parse_batch, split_topic
+from miro_gen.transport.events.gaps import GapCounter
 
 _log = logger("MIRO")
 _peer_warnings = PeerWarnings(_log)  # what peers send: rate-limited, with counts

@@ -26,7 +26,7 @@ from mcap.writer import CompressionType, Writer
 from miro_gen import __version__
 from miro_gen.eventlog.types import topic_name
 from miro_gen.runtime import registry
-from miro_gen.transport.event_frames import RawEvent
+from miro_gen.transport.events.frames import RawEvent
 
 PROFILE = ""  # no well-known MCAP profile describes omgidl/cdr logs
 LIBRARY = f"miro-gen/{__version__}"

@@ -338,7 +338,7 @@ def _context(r: _Reader, table: dict[str, Any], *where: str) -> str | None:
 
 
 def _naming_url(r: _Reader, text: str, *where: str) -> str | None:
-    from miro_gen.transport.options import UsageError, naming_endpoint
+    from miro_gen.service.options import UsageError, naming_endpoint
 
     try:
         return naming_endpoint(text)
@@ -378,7 +378,7 @@ def _default_naming() -> str:
     """Where `miro naming` serves by default: $MIRO_NAMING, else tcp://127.0.0.1:2809."""
     import os
 
-    from miro_gen.transport.options import DEFAULT_NAMING, UsageError, naming_endpoint
+    from miro_gen.service.options import DEFAULT_NAMING, UsageError, naming_endpoint
 
     try:
         return naming_endpoint(os.environ.get("MIRO_NAMING") or DEFAULT_NAMING)

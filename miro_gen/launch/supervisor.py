@@ -205,10 +205,10 @@ class NameWatcher:
 
         from miro_gen.exceptions import SystemException
         from miro_gen.runtime.cdr import ObjectRef
+        from miro_gen.service.options import UsageError, parse_common_options
         from miro_gen.transport import sockets
-        from miro_gen.transport.invoker import ZmqInvoker
-        from miro_gen.transport.naming import NAMING_KEY, list_entries
-        from miro_gen.transport.options import UsageError, parse_common_options
+        from miro_gen.transport.naming.client import NAMING_KEY, list_entries
+        from miro_gen.transport.rpc.invoker import ZmqInvoker
 
         context: zmq.Context[Any] = zmq.Context()
         try:  # the key and limits its services get from the environment (or the default key)
@@ -307,7 +307,7 @@ class Supervisor:
 
     def _discover(self) -> None:
         """Look for the announced naming service until one is seen (or the launch stops)."""
-        from miro_gen.transport.discovery import FIND_TIMEOUT, DiscoveryOff, browse
+        from miro_gen.transport.naming.discovery import FIND_TIMEOUT, DiscoveryOff, browse
 
         while not self.stopping.is_set():
             try:

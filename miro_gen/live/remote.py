@@ -1,5 +1,5 @@
 """Finding running services and what they serve, through the naming service and their service
-objects (transport/introspection.py): the live tools' view of a robot."""
+objects (service/introspection.py): the live tools' view of a robot."""
 
 from __future__ import annotations
 
@@ -14,10 +14,10 @@ from miro_gen.exceptions import SystemException
 from miro_gen.live.schemas import Compiled, SchemaError, compile_schema, loaded_stub, stub_class
 from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.runtime.rpc import Stub
+from miro_gen.service.introspection import SERVICE_KEY, SERVICES
+from miro_gen.service.server import Client
 from miro_gen.transport.events import CHANNEL_REPO_ID
-from miro_gen.transport.introspection import SERVICE_KEY, SERVICES
-from miro_gen.transport.naming import list_entries
-from miro_gen.transport.server import Client
+from miro_gen.transport.naming.client import NamingClient, list_entries
 
 SERVICE_REPO_ID = MiroService.Service._repo_id
 DESCRIBE_TIMEOUT = 3.0  # seconds a service may take to describe itself
@@ -49,13 +49,15 @@ class Robot:
     def __init__(self, argv: list[str], timeout: float = 10.0) -> None:
         self.client = Client(argv)
         self.timeout = timeout
-        if self.client.corba is not None and self.client.corba.naming is not None:
+        naming = self.client.naming
+        if not isinstance(naming, NamingClient):  # a CORBA naming service's
             url = self.client.options.naming_url
             self.client.close()
             raise LiveError(
                 f"{url} is a CORBA naming service: the live tools need miro's (--naming "
                 "tcp://HOST:PORT); `miro nslist` lists a CORBA one"
             )
+        self.naming = naming  # miro's own
 
     @property
     def options(self) -> Any:
@@ -68,7 +70,7 @@ class Robot:
 
     def entries(self, prefix: str = "") -> list[MiroNaming.Entry]:
         try:
-            return list_entries(self.client.naming.registry, prefix)
+            return list_entries(self.naming.registry, prefix)
         except SystemException as e:
             raise LiveError(f"the naming service at {self.options.naming}: {e}") from None
 

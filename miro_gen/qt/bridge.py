@@ -23,6 +23,7 @@ from PySide6.QtCore import QCoreApplication, QEvent, QObject, Qt, QTimer, Signal
 from PySide6.QtWidgets import QWidget
 
 from miro_gen.log import logger
+from miro_gen.service.server import Server
 from miro_gen.transport.events import (
     KEEP_ALL,
     EventChannel,
@@ -30,7 +31,6 @@ from miro_gen.transport.events import (
     StructuredPushConsumer,
 )
 from miro_gen.transport.reactor import Reactor
-from miro_gen.transport.server import Server
 
 _log = logger("QT")
 STOP_TIMEOUT = 5.0  # seconds stop() waits for the reactor thread

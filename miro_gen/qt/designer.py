@@ -62,8 +62,8 @@ from miro_gen.qt.fields import (
 )
 from miro_gen.qt.widgets import FieldsView, PlotWidget
 from miro_gen.runtime.rpc import Stub
+from miro_gen.service.server import Client
 from miro_gen.transport.events import StructuredEvent
-from miro_gen.transport.server import Client
 
 _log = logger("QT")
 _COPY = re.compile(r"_\d+")

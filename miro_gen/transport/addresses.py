@@ -29,7 +29,7 @@ import ipaddress
 import socket
 from dataclasses import dataclass
 
-from miro_gen.transport.options import UsageError
+from miro_gen.transport.usage import UsageError
 
 LOOPBACK = "127.0.0.1"
 EVERY_INTERFACE = "0.0.0.0"

@@ -18,7 +18,7 @@ import datetime
 import os
 import secrets
 
-from miro_gen.transport.options import UsageError
+from miro_gen.transport.usage import UsageError
 
 KEY_SUFFIX = ".key_secret"
 PUBLIC_SUFFIX = ".key"

@@ -14,7 +14,7 @@ folder does not grow with every process ever killed.
 A naming service has a twin of another kind (`naming_socket`): a Linux abstract socket, named
 after its port, that every user of the machine can reach and nobody leaves behind as a file.
 Processes on its machine call it there for what needs an owner, because over a Unix socket the
-kernel tells it which user calls (`transport.caller`).
+kernel tells it which user calls (`transport.rpc.caller`).
 """
 
 from __future__ import annotations

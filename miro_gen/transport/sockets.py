@@ -38,7 +38,7 @@ from miro_gen.exceptions import actionable
 from miro_gen.log import PeerWarnings, logger
 from miro_gen.transport.keyfiles import DEFAULT_KEY as DEFAULT_KEY  # (its users look here)
 from miro_gen.transport.keyfiles import read_key_pair
-from miro_gen.transport.options import UsageError
+from miro_gen.transport.usage import UsageError
 
 _log = logger("MIRO")
 _peer_warnings = PeerWarnings(_log)  # what peers send: rate-limited, with counts
@@ -199,7 +199,7 @@ def _stays_here(host: str, binding: bool) -> bool:
 
 def stays_here(host: str, binding: bool) -> bool:
     """Whether binding on (`binding`), or connecting to, `host` stays on this machine: the
-    line CURVE is drawn at, which IIOP follows too (`transport/iiop.py`)."""
+    line CURVE is drawn at, which IIOP follows too (`service/iiop.py`)."""
     return _stays_here(host, binding)
 
 
@@ -413,7 +413,7 @@ class Admission(threading.Thread):
             self.refused_key += 1
         else:
             self.admitted += 1
-            if mechanism == b"CURVE" and credentials:  # who it is, for transport.caller
+            if mechanism == b"CURVE" and credentials:  # who it is, for transport.rpc.caller
                 user = z85.encode(credentials[0])
         zap.send_multipart([b"1.0", request_id, status, text, user, b""])
         if status != b"200":

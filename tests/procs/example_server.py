@@ -22,9 +22,9 @@ import Miro  # noqa: E402
 import Miro__POA  # noqa: E402
 
 from miro_gen import nonblocking  # noqa: E402
-from miro_gen.transport.adapter import ObjectAdapter  # noqa: E402
-from miro_gen.transport.invoker import ZmqInvoker  # noqa: E402
 from miro_gen.transport.reactor import Reactor  # noqa: E402
+from miro_gen.transport.rpc.adapter import ObjectAdapter  # noqa: E402
+from miro_gen.transport.rpc.invoker import ZmqInvoker  # noqa: E402
 
 
 class Example(Miro__POA.Example):

@@ -30,8 +30,8 @@ import MiroNaming  # noqa: E402
 import zmq  # noqa: E402
 
 from miro_gen.exceptions import SystemException  # noqa: E402
-from miro_gen.transport.invoker import ZmqInvoker  # noqa: E402
-from miro_gen.transport.naming import NamingClient  # noqa: E402
+from miro_gen.transport.naming.client import NamingClient  # noqa: E402
+from miro_gen.transport.rpc.invoker import ZmqInvoker  # noqa: E402
 
 POLL = 0.02
 

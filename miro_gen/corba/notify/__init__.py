@@ -1,6 +1,6 @@
 """A CosNotification channel served over IIOP (CosNotifyChannelAdmin::EventChannel), as TAO's
 Notify_Service serves Miro's C++ services: the other door of a miro-gen event channel
-(transport.notify_door joins the two; docs/CORBA.md, "Mixing C++ and Python services").
+(transport.events.notify_door joins the two; docs/CORBA.md, "Mixing C++ and Python services").
 
 `NotifyChannel` is one channel's objects (`admins`: the channel, its admins; `proxies`: what
 suppliers push into and what pushes to consumers; `filters`: the default filter factory and

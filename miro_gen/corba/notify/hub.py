@@ -66,7 +66,7 @@ _FIXED_SIZES: dict[int, int] = {K.tk_string: 8, K.tk_wstring: 8, K.tk_fixed: 8}
 
 
 class Backbone(Protocol):
-    """The channel's other door, as the hub sees it (transport.notify_door: ZeroMQ)."""
+    """The channel's other door, as the hub sees it (transport.events.notify_door: ZeroMQ)."""
 
     def wants(self, domain: str, type_name: str) -> bool:
         """Whether a consumer at the other door subscribes to events of this topic."""

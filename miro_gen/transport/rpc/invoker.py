@@ -32,7 +32,7 @@ import itertools
 import struct
 import threading
 import time
-from typing import Any
+from typing import Any, Protocol
 
 import zmq
 from zmq.backend import Socket as _Socket
@@ -41,7 +41,8 @@ from miro_gen.exceptions import COMM_FAILURE, MARSHAL, TIMEOUT, TRANSIENT, Compl
 from miro_gen.log import PeerWarnings, logger
 from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.runtime.rpc import Reply, ReplyStatus, Servant
-from miro_gen.transport import frames, sockets
+from miro_gen.transport import sockets
+from miro_gen.transport.rpc import frames
 
 _log = logger("MIRO")
 _peer_warnings = PeerWarnings(_log)  # what peers send: rate-limited, with counts
@@ -135,11 +136,19 @@ class _Connection:
         self.socket.close(0)
 
 
+class LocalServants(Protocol):
+    """Where a process serves the servants it passes as arguments: its object adapter."""
+
+    def reference_for(self, servant: Servant) -> ObjectRef: ...
+
+
 class ZmqInvoker:
     """Delivers requests to remote objects over ZeroMQ; safe to use from any thread. Local
     servants passed as arguments are activated on `adapter` (the process's server side)."""
 
-    def __init__(self, context: zmq.Context[Any] | None = None, adapter: Any = None) -> None:
+    def __init__(
+        self, context: zmq.Context[Any] | None = None, adapter: LocalServants | None = None
+    ) -> None:
         self.context = context if context is not None else zmq.Context.instance()
         self.adapter = adapter
         self._local = threading.local()
@@ -218,8 +227,7 @@ class ZmqInvoker:
     def reference_for(self, servant: Servant) -> ObjectRef:
         if self.adapter is None:
             raise TRANSIENT("a local object can only be passed by a process that serves objects")
-        ref: ObjectRef = self.adapter.reference_for(servant)
-        return ref
+        return self.adapter.reference_for(servant)
 
     # ---- internals ------------------------------------------------------------------------------
 

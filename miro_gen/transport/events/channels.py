@@ -1,6 +1,7 @@
 """Event channels: where suppliers and consumers of a channel connect, the process that hosts
 one (an XSUB/XPUB proxy run by libzmq in a thread), and finding one in the naming service
-(docs/PROTOCOL.md, "Event channels"). Suppliers and consumers are in transport.events.
+(docs/PROTOCOL.md, "Event channels"). Suppliers and consumers are in transport.events; a
+channel makes their links to it (transport.events.links).
 
 A host's sockets are listening sockets of transport.sockets (limits, CURVE, admission); its
 queues hold at most PROXY_HWM frames per peer, fewer when the largest message allowed is large
@@ -21,10 +22,9 @@ import zmq
 
 from miro_gen.log import logger
 from miro_gen.transport import sockets
-from miro_gen.transport.adapter import ObjectAdapter
 from miro_gen.transport.addresses import Addresses
+from miro_gen.transport.events.links import ZmqPublishing, ZmqSubscribing
 from miro_gen.transport.local import bind_twin, nearest
-from miro_gen.transport.options import CommonOptions
 from miro_gen.transport.reactor import Reactor
 
 _log = logger("MIRO")
@@ -59,6 +59,39 @@ class EventChannel:
         if host is not None and host.context is context:
             return host.local_endpoints
         return nearest(self.supplier_endpoint), nearest(self.consumer_endpoint)
+
+    def publishing(
+        self,
+        on_connection: Callable[[bool], object],
+        on_subscriptions: Callable[[list[tuple[bool, bytes]]], object],
+        hwm: int,
+        burst: int,
+    ) -> ZmqPublishing:
+        """A supplier's link to this channel (transport.events.links), found again when the
+        channel moves (when it has a name to be looked up by)."""
+        context = self.reactor.context
+        resolve = self.resolve
+        return ZmqPublishing(
+            self.reactor,
+            self.endpoints(context)[0],
+            None if resolve is None else lambda: resolve().endpoints(context)[0],
+            on_connection,
+            on_subscriptions,
+            hwm,
+            burst,
+        )
+
+    def subscribing(self, on_readable: Callable[[], object], hwm: int) -> ZmqSubscribing:
+        """A consumer's link to this channel (transport.events.links)."""
+        context = self.reactor.context
+        resolve = self.resolve
+        return ZmqSubscribing(
+            self.reactor,
+            self.endpoints(context)[1],
+            None if resolve is None else lambda: resolve().endpoints(context)[1],
+            on_readable,
+            hwm,
+        )
 
 
 class ChannelHost:
@@ -111,36 +144,52 @@ class ChannelHost:
 
 
 class ChannelNaming(Protocol):
-    """The naming a channel is found in: transport.naming.NamingClient, or a CORBA naming
-    service's client (transport.iiop)."""
+    """The naming a channel is found in, in the process's naming context (`context`): the miro
+    naming service's client or a CORBA naming service's (service.backbone.Naming)."""
+
+    @property
+    def context(self) -> str: ...
 
     def full_name(self, name: str) -> str: ...
 
     def resolve(self, name: str) -> MiroNaming.Entry: ...
 
 
+class ChannelDoor(Protocol):
+    """Another door of a hosted channel (its Notification door: events.notify_door): the naming
+    entry that names the channel with both doors, and its end."""
+
+    def entry(self) -> MiroNaming.Entry: ...
+
+    def close(self) -> None: ...
+
+
+class ChannelDoors(Protocol):
+    """What opens a hosted channel's other doors: a process's IIOP side (service.iiop)."""
+
+    def open_door(self, channel: EventChannel) -> ChannelDoor: ...
+
+
 class ChannelServer(Protocol):
-    """What event channels need of their process's server (transport.server.Server): its
-    sockets' context and reactor, its options (the naming context), where it binds and what it
-    advertises, its naming, binding an entry under its lease, and its clean-up."""
+    """What event channels need of their process's server (service.server.Server): its
+    sockets' context and reactor, where it binds and what it advertises, its naming, binding an
+    entry under its lease, its clean-up, and its IIOP side if it has one (`corba`), which opens
+    a hosted channel's Notification door."""
 
     @property
     def context(self) -> zmq.Context[Any]: ...
 
     @property
-    def options(self) -> CommonOptions: ...
-
-    @property
     def addresses(self) -> Addresses: ...
-
-    @property
-    def adapter(self) -> ObjectAdapter: ...
 
     @property
     def naming(self) -> ChannelNaming: ...
 
     @property
     def hosted_channels(self) -> dict[str, EventChannel]: ...
+
+    @property
+    def corba(self) -> ChannelDoors | None: ...
 
     def reactor(self) -> Reactor: ...
 
@@ -163,23 +212,23 @@ class EventChannelFactory:
         if full in self._channels:
             return self._channels[full]
         # Bound and advertised like the server's objects (miro_gen.transport.addresses).
-        advertise = self.server.adapter.endpoint.split("://", 1)[1].rsplit(":", 1)[0]
-        ch_host = ChannelHost(self.server.context, self.server.addresses.bind, advertise)
+        addresses = self.server.addresses
+        ch_host = ChannelHost(self.server.context, addresses.bind, addresses.advertise)
         channel = EventChannel(
             full,
             ch_host.supplier_endpoint,
             ch_host.consumer_endpoint,
             self.server.reactor(),
-            self.server.options.naming_context,
+            self.server.naming.context,
             ch_host,
         )
         entry = MiroNaming.Entry(
             full, CHANNEL_REPO_ID, ch_host.supplier_endpoint, ch_host.consumer_endpoint.encode(), ""
         )
         self.server.on_shutdown(ch_host.close)
-        corba = getattr(self.server, "corba", None)
-        if corba is not None:  # an IIOP side: the Notification door too (transport.notify_door)
-            door = corba.open_door(channel)
+        doors = self.server.corba
+        if doors is not None:  # an IIOP side: the Notification door too (events.notify_door)
+            door = doors.open_door(channel)
             self.server.on_shutdown(door.close)
             entry = door.entry()
         self.server.bind_entry(entry)
@@ -207,14 +256,14 @@ def resolve_channel(server: ChannelServer, name: str = DEFAULT_CHANNEL) -> Event
         supplier,
         consumer,
         server.reactor(),
-        server.options.naming_context,
+        server.naming.context,
         resolve=lambda: resolve_channel(server, entry.name),
     )
 
 
 def channel_endpoints(entry: MiroNaming.Entry) -> tuple[str, str]:
     """(supplier, consumer) endpoints of a channel's naming entry: a ZeroMQ channel's, or the
-    miro-gen profile of a channel bound with its Notification door (transport.notify_door)."""
+    miro-gen profile of a channel bound with its Notification door (events.notify_door)."""
     if entry.repo_id == CHANNEL_REPO_ID:
         return entry.endpoint, bytes(entry.key).decode()
     ior = getattr(getattr(entry, "ref", None), "ior", None)

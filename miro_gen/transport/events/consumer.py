@@ -1,27 +1,23 @@
 """Consumers of an event channel (Miro's StructuredPushConsumer): subscriptions by (domain,
 type), frames parsed on the reactor thread, payloads decoded with the generated class their
 type hash names (runtime.registry) when the handler is ready for them, as the consumer's
-quality of service keeps them (transport.event_queue), gaps counted per supplier and type.
-The overview is transport.events; the bytes are transport.event_frames.
+quality of service keeps them (transport.events.queue), gaps counted per supplier and type.
+The overview is transport.events; the bytes are transport.events.frames.
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Iterable
-from dataclasses import dataclass
 from struct import error as StructError
-from typing import Any
-
-import zmq
 
 from miro_gen.log import PeerWarnings, logger
 from miro_gen.runtime import registry
 from miro_gen.runtime.datatypes import IdlType
-from miro_gen.transport import offers, sockets
-from miro_gen.transport.channel_link import ChannelLink
-from miro_gen.transport.channels import EventChannel
-from miro_gen.transport.event_frames import (
+from miro_gen.transport.events import offers
+from miro_gen.transport.events.channels import EventChannel
+from miro_gen.transport.events.event import StructuredEvent
+from miro_gen.transport.events.frames import (
     BATCH_HEADER,
     EVENT,
     EVENT_HEADER,
@@ -29,9 +25,10 @@ from miro_gen.transport.event_frames import (
     split_topic,
     topic,
 )
-from miro_gen.transport.event_queue import DEFAULT_DEPTH, EventQueue, Waiting
-from miro_gen.transport.event_supplier import HWM, LARGE_EVENT
-from miro_gen.transport.gaps import GapCounter, gap
+from miro_gen.transport.events.gaps import GapCounter, gap
+from miro_gen.transport.events.links import SubscribingLink
+from miro_gen.transport.events.queue import DEFAULT_DEPTH, EventQueue, Waiting
+from miro_gen.transport.events.supplier import HWM, LARGE_EVENT
 
 _log = logger("MIRO")
 _peer_warnings = PeerWarnings(_log)  # what peers send: rate-limited, with counts
@@ -43,20 +40,6 @@ TURN_FRAMES = 256  # frames a consumer reads per reactor turn
 HOLD_FRAMES = 1000
 HOLD_BYTES = 64 << 20
 ANY = "*"
-
-
-@dataclass(slots=True)
-class StructuredEvent:
-    """One event as a consumer receives it."""
-
-    domain_name: str
-    type_name: str
-    payload: Any  # the decoded generated type
-    seq: int
-    stamp: float  # source time, seconds since the epoch
-    publish_time: float  # when the supplier sent it, seconds since the epoch
-    supplier: int = 0  # the supplier's random id
-    type_hash: str = ""
 
 
 def subscription_prefix(domain: str, type_name: str) -> bytes:
@@ -73,7 +56,7 @@ class StructuredPushConsumer:
     """Receives the events it subscribes to. Subclass it and override
     `push_structured_event(event)`; it runs on the reactor thread, so it must not block.
 
-    Events wait for the handler in a queue kept as `depth` says (transport.event_queue): the
+    Events wait for the handler in a queue kept as `depth` says (transport.events.queue): the
     newest 10 per topic by default, as ROS 2 keeps them; `latest_only` keeps the newest one;
     `depth=KEEP_ALL` keeps everything up to the queue's byte limit. `missed` counts events lost
     on the way (sequence gaps), `dropped` those this consumer skipped because its handler fell
@@ -85,24 +68,13 @@ class StructuredPushConsumer:
         self.channel = channel
         self.reactor = channel.reactor
         self.queue = EventQueue(depth, latest_only)
-        context = self.reactor.context
-        self.socket = sockets.connecting_socket(context, zmq.SUB)
-        self.socket.setsockopt(zmq.RCVHWM, min(HWM, sockets.queue_limit(context)))
-        resolve = channel.resolve
-        self.link = ChannelLink(
-            self.reactor,
-            self.socket,
-            channel.endpoints(context)[1],
-            None if resolve is None else lambda: resolve().endpoints(context)[1],
-            lambda up: None,
-        )
         self._filters: list[tuple[str, str]] = []
         self._prefixes: set[bytes] = set()
         self._gaps = GapCounter()  # per (supplier, type name), bounded
         self._topics: dict[bytes, tuple[str, str, bool]] = {}
         self._classes: dict[bytes, type[IdlType]] = {}
         self._unknown: set[tuple[str, str]] = set()
-        self._held: list[list[zmq.Frame]] = []  # frames waiting for the search for their types
+        self._held: list[tuple[bytes, memoryview]] = []  # frames waiting for their types
         self._held_hashes: set[bytes] = set()
         self._held_bytes = 0
         self._searching = False
@@ -110,7 +82,7 @@ class StructuredPushConsumer:
         self.received = 0
         self.undecodable = 0  # events whose type hash matches no imported generated type
         self.lag = 0.0  # seconds between the push and the delivery of the last event delivered
-        self.reactor.call_soon(self.reactor.register, self.socket, self._readable)
+        self.link: SubscribingLink = channel.subscribing(self._readable, HWM)
 
     @property
     def missed(self) -> int:
@@ -130,9 +102,9 @@ class StructuredPushConsumer:
 
         def apply() -> None:
             for p in self._prefixes - prefixes:
-                self.socket.setsockopt(zmq.UNSUBSCRIBE, p)
+                self.link.unsubscribe(p)
             for p in prefixes - self._prefixes:
-                self.socket.setsockopt(zmq.SUBSCRIBE, p)
+                self.link.subscribe(p)
             self._prefixes = prefixes
             self._filters = subs
             self._topics.clear()
@@ -148,14 +120,13 @@ class StructuredPushConsumer:
     def _readable(self) -> None:
         """Take every frame waiting (so that the queue, not ZeroMQ, decides what waits), then
         deliver a turn's worth of events."""
-        recv, queue = self.socket.recv_multipart, self.queue
+        receive, queue = self.link.receive, self.queue
         for _ in range(TURN_FRAMES):
             try:
-                parts = recv(zmq.NOBLOCK, copy=False)  # large payloads are decoded in place
-            except zmq.Again:
-                break
-            try:
-                self._parse(parts)
+                frame = receive()  # (the batch not copied: large payloads decode in place)
+                if frame is None:
+                    break
+                self._parse(*frame)
             except (ValueError, StructError, UnicodeDecodeError) as e:
                 _peer_warnings.warning("dropped an event frame on %s: %s", self.channel.name, e)
         else:
@@ -228,19 +199,16 @@ class StructuredPushConsumer:
                 )
         return cls
 
-    def _parse(self, parts: list[zmq.Frame]) -> None:
-        """Queue the events of one message; raises if the frame does not parse (then none of
-        its events count, and the sequence numbers stay as they were)."""
-        if len(parts) != 2:
-            raise ValueError(f"{len(parts)} frames, expected 2")
-        head, body = parts[0].bytes, parts[1].buffer  # the body is not copied
+    def _parse(self, head: bytes, body: memoryview) -> None:
+        """Queue the events of one message (its topic, its batch); raises if the batch does not
+        parse (then none of its events count, and the sequence numbers stay as they were)."""
         domain, type_name, wanted = self._topic(head)
         if not wanted:
             return
         count, supplier, raw_hash = read_batch_head(body)
         held = self._held and raw_hash in self._held_hashes  # after those already waiting
         cls = None if held else self._class(raw_hash, domain, type_name)
-        if cls is None and self._hold(parts, raw_hash, len(body)):
+        if cls is None and self._hold((head, body), raw_hash, len(body)):
             return
         if held:
             cls = self._class(raw_hash, domain, type_name)
@@ -286,7 +254,7 @@ class StructuredPushConsumer:
             self.queue.dropped += keep_from
             self.queue.add(topic_key, waiting)
 
-    def _hold(self, parts: list[zmq.Frame], raw_hash: bytes, size: int) -> bool:
+    def _hold(self, frame: tuple[bytes, memoryview], raw_hash: bytes, size: int) -> bool:
         """Keep a frame whose type is not known yet until the generated packages on the path
         are imported, off the reactor thread; False when that search is over (or too much
         waits already): then its type is unknown here."""
@@ -297,7 +265,7 @@ class StructuredPushConsumer:
             registry.discover_in_background(lambda: self.reactor.call_soon(self._release))
         if len(self._held) >= HOLD_FRAMES or self._held_bytes + size > HOLD_BYTES:
             return False
-        self._held.append(parts)
+        self._held.append(frame)
         self._held_hashes.add(raw_hash)
         self._held_bytes += size
         return True
@@ -306,9 +274,9 @@ class StructuredPushConsumer:
         """The search for generated packages is over: the frames that waited for it, in order."""
         self._searching = False
         held, self._held, self._held_hashes, self._held_bytes = self._held, [], set(), 0
-        for parts in held:
+        for frame in held:
             try:
-                self._parse(parts)
+                self._parse(*frame)
             except (ValueError, StructError, UnicodeDecodeError) as e:
                 _peer_warnings.warning("dropped an event frame on %s: %s", self.channel.name, e)
         if len(self.queue):
@@ -316,4 +284,4 @@ class StructuredPushConsumer:
 
     def close(self) -> None:
         offers.unsubscribed(self)
-        self.link.close_socket()
+        self.link.close()

@@ -18,20 +18,26 @@ import sys
 import threading
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
+import MiroNaming
 import MiroService
 import MiroService__POA
 
 from miro_gen import log
+from miro_gen.exceptions import SystemException
 from miro_gen.runtime.rpc import Servant
-from miro_gen.transport import offers
+from miro_gen.service.backbone import CallServer, NameKeeper
+from miro_gen.service.options import CommonOptions
+from miro_gen.transport.events import offers
+from miro_gen.transport.events.channels import EventChannel
+from miro_gen.transport.reactor import Reactor
 
 if TYPE_CHECKING:  # loaded when first used: a service that never reads parameters, never
     from lxml import etree  # pays for lxml
 
     from miro_gen.params.runtime.live import Exposed
-    from miro_gen.transport.server import Server
+    from miro_gen.transport.events.supplier import StructuredPushSupplier
 
 SERVICE_KEY = b"_service"
 SERVICES = "_services"  # the naming context, under a process's own, of the service objects
@@ -53,6 +59,27 @@ def service_name(argv0: str) -> str:
     return "-".join((name or "python").split()) or "python"
 
 
+class ServicePort(Protocol):
+    """What the service object needs of its process (service.server.Server gives it): its
+    options (the naming context), the objects it serves, the names it keeps, its reactor (on
+    which parameters change) and its event channels (where changes are announced)."""
+
+    @property
+    def options(self) -> CommonOptions: ...
+
+    @property
+    def adapter(self) -> CallServer: ...
+
+    @property
+    def names(self) -> NameKeeper: ...
+
+    def bound_entries(self) -> list[MiroNaming.Entry]: ...
+
+    def reactor(self) -> Reactor: ...
+
+    def resolve_channel(self, name: str = ...) -> EventChannel: ...
+
+
 def servant_class(servant: Servant, repo_id: str) -> type[Any] | None:
     """The generated class in `servant`'s ancestry whose interface is `repo_id`."""
     for cls in type(servant).__mro__:
@@ -64,12 +91,12 @@ def servant_class(servant: Servant, repo_id: str) -> type[Any] | None:
 class ServiceImpl(MiroService__POA.Service):
     """`MiroService::Service` for the process of `server`."""
 
-    def __init__(self, server: Server, name: str) -> None:
+    def __init__(self, server: ServicePort, name: str) -> None:
         self.server = server
         self.name = name
         self.bound = False  # bind_service has been called
         self.thread: threading.Thread | None = None  # binding it in the background
-        self._supplier: Any = None
+        self._supplier: StructuredPushSupplier | None = None
 
     def join(self) -> None:
         """Wait for a bind in the background to end (its naming calls are short)."""
@@ -200,42 +227,27 @@ def _text(elem: etree._Element) -> str:
     return str(etree.tostring(elem, encoding="unicode"))
 
 
-def bind_service(server: Server, impl: ServiceImpl, background: bool = False) -> None:
+def bind_service(server: ServicePort, impl: ServiceImpl, background: bool = False) -> None:
     """Bind the service object as `<context>/_services/<name>` (once). A name held by another
     live process gets this one's pid appended, unless $MIRO_SERVICE named it (a launch's
     restart: the name is taken over from the run before). A process whose naming service does
-    not answer is left unbound. `background`: from a thread of its own, with sockets of its
-    own, which the server's clean-up waits for (`ServiceImpl.join`)."""
-    if impl.bound or (server.corba is not None and server.corba.naming is not None):
+    not answer is left unbound. `background`: from a thread of its own, which the server's
+    clean-up waits for (`ServiceImpl.join`)."""
+    if impl.bound or not server.names.leased:
         return  # (names in a CORBA naming service are CORBA objects': no service object)
     impl.bound = True
     if not background:
-        _bind(server, impl, server.invoker)
+        _bind(server, impl)
         return
-
-    def bind() -> None:
-        from miro_gen.transport.invoker import ZmqInvoker
-
-        invoker = ZmqInvoker(server.context)
-        try:
-            _bind(server, impl, invoker)
-        finally:
-            invoker.close()
-
     with contextlib.suppress(RuntimeError):  # an interpreter on its way out
-        impl.thread = threading.Thread(target=bind, name="miro-service", daemon=True)
+        impl.thread = threading.Thread(
+            target=_bind, args=(server, impl), name="miro-service", daemon=True
+        )
         impl.thread.start()
 
 
-def _bind(server: Server, impl: ServiceImpl, invoker: Any) -> None:
-    import MiroNaming
-
-    from miro_gen.exceptions import SystemException
-
-    if server.leases is None:
-        return
-    registry = server.naming.registry_stub(invoker, BIND_TIMEOUT, owner=True)
-    lease = server.leases.lease_ms
+def _bind(server: ServicePort, impl: ServiceImpl) -> None:
+    names = server.names
     ref = server.adapter.reference_for(impl)
     full = f"{server.options.naming_context}/{SERVICES}/{impl.name}"
     entry = MiroNaming.Entry(full, ref.repo_id, ref.endpoint, ref.key, impl._interface_hash)
@@ -244,17 +256,15 @@ def _bind(server: Server, impl: ServiceImpl, invoker: Any) -> None:
     launched = bool(os.environ.get("MIRO_SERVICE"))
     try:
         try:
-            registry.bind_as(entry, server.owner, lease, launched)
+            kept = names.claim(entry, take_over=launched, timeout=BIND_TIMEOUT)
         except MiroNaming.AlreadyBound as e:
             if launched:  # another owner's: bound when it is free
-                server.leases.want(entry, e.holder)
+                names.want(entry, e.holder)
                 return
             entry.name = f"{full}-{os.getpid()}"
-            registry.bind_as(entry, server.owner, lease, False)
-        if not server.keep_entry(entry):  # the server stopped meanwhile: leave nothing behind
-            registry.unbind_as(entry.name, server.owner)
-            return
-        _log.notice("bound %s in the naming service", entry.name)
+            kept = names.claim(entry, take_over=False, timeout=BIND_TIMEOUT)
+        if kept:  # (else the server stopped meanwhile: nothing was left behind)
+            _log.notice("bound %s in the naming service", entry.name)
     except (SystemException, MiroNaming.InvalidName, MiroNaming.NotFound) as e:
         _log.debug("the service object is not bound: %s", e)
     except MiroNaming.AlreadyBound as e:

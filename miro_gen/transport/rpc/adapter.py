@@ -1,6 +1,6 @@
 """The server side of remote calls: one ROUTER socket serving all of a process's objects.
 
-The socket is served by a leader/followers group of threads (`miro_gen.transport.dispatch`):
+The socket is served by a leader/followers group of threads (`miro_gen.transport.rpc.dispatch`):
 the thread that receives a request runs its servant and sends the reply, and another thread
 takes over the socket when a servant blocks, so a servant may wait (for the next value) or call
 another service that calls back into this one (A -> B -> A) without stopping the process from
@@ -39,10 +39,11 @@ from miro_gen.runtime.rpc import (
     is_nonblocking,
     system_exception_reply,
 )
-from miro_gen.transport import frames, sockets
-from miro_gen.transport.caller import Caller, caller_of, serving
-from miro_gen.transport.dispatch import Dispatcher, Peer
+from miro_gen.transport import sockets
 from miro_gen.transport.reactor import Reactor
+from miro_gen.transport.rpc import frames
+from miro_gen.transport.rpc.caller import Caller, caller_of, serving
+from miro_gen.transport.rpc.dispatch import Dispatcher, Peer
 
 _log = logger("MIRO")
 _peer_warnings = PeerWarnings(_log)  # what peers send: rate-limited, with counts
@@ -57,9 +58,9 @@ class ObjectAdapter:
     endpoints `also_bind` gives for the one bound, advertising `host` as the address other
     processes reach it at; at most `workers` servant calls run at once. `reactor` gives the
     ZeroMQ context. With `identify_callers`, servants learn who calls them
-    (`transport.caller.current()`). With `serve=False` the socket is bound but nothing is read
-    from it until `serve()`: a process whose objects have well-known keys activates them first,
-    so an early caller waits instead of hearing OBJECT_NOT_EXIST."""
+    (`transport.rpc.caller.current()`). With `serve=False` the socket is bound but nothing is
+    read from it until `serve()`: a process whose objects have well-known keys activates them
+    first, so an early caller waits instead of hearing OBJECT_NOT_EXIST."""
 
     def __init__(
         self,
@@ -228,7 +229,7 @@ class _Call:
         req = self.request
         if self.caller is None:
             reply = self.servant._invoke(req.operation, self.body, self.adapter.invoker)
-        else:  # a servant that asks who calls (transport.caller.current)
+        else:  # a servant that asks who calls (transport.rpc.caller.current)
             with serving(self.caller):
                 reply = self.servant._invoke(req.operation, self.body, self.adapter.invoker)
         limit = self.adapter.max_message_size

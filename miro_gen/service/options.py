@@ -44,7 +44,7 @@ import socket
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
-from miro_gen.exceptions import ActionableError
+from miro_gen.transport.usage import UsageError as UsageError  # (its users look here)
 
 DEFAULT_NAMING = "tcp://127.0.0.1:2809"
 DEFAULT_LOG_LEVEL = 4
@@ -57,13 +57,6 @@ _CORBALOC = re.compile(
 )
 _TCP = re.compile(r"^tcp://(?P<host>\[[^\]]+\]|[^:/\[\]]+):(?P<port>\d+)$")
 _IIOP_DEFAULT_PORT = 2809  # the port corbaloc implies when none is given
-
-
-class UsageError(ActionableError, ValueError):
-    """A common option is missing its value or has one that makes no sense (a bad command
-    line: status 2)."""
-
-    exit_status = 2
 
 
 @dataclass

@@ -40,7 +40,7 @@ import zmq
 from zmq.backend import Socket as _Socket
 
 from miro_gen.log import logger
-from miro_gen.transport.frames import ZERO_COPY_MIN
+from miro_gen.transport.rpc.frames import ZERO_COPY_MIN
 
 _log = logger("MIRO")
 
@@ -78,7 +78,7 @@ class Task(Protocol):
 
 
 # What ZeroMQ knows of the connection a message came on: its peer address and the user id the
-# admission thread gave it (transport.caller); asked for only by dispatchers that identify.
+# admission thread gave it (transport.rpc.caller); asked for only by dispatchers that identify.
 Peer = tuple[str, str]
 
 # What the owner of the socket makes of a message (and its peer, when asked for): a task to
@@ -360,8 +360,13 @@ class Dispatcher:
                 me.link = link
         try:
             link.send_multipart([self._token, *frames], zmq.NOBLOCK)
-        except zmq.ZMQError as e:  # pragma: no cover - an inproc queue of 1000 replies is full
-            _log.warning("could not hand a reply to the leader: %s", e)
+        except zmq.ZMQError as e:
+            if not frames and self._closed:
+                # A wake-up to close: the leader, woken meanwhile by an earlier message (a
+                # drain's), saw `_closed` first and closed its socket; nobody is left to wake.
+                _log.debug("no leader to wake: %s", e)
+            else:  # pragma: no cover - an inproc queue of 1000 replies is full
+                _log.warning("could not hand a reply to the leader: %s", e)
         finally:
             if me is None:
                 link.close()  # with its linger: the wake-up is still delivered

@@ -1,9 +1,9 @@
 """The naming service's table: which name is bound to what, who owns it, how long it lives, and
 the limits that keep it bounded. No I/O and no clock of its own (callers pass the time): the
-servant (`transport.naming`) asks it and writes what changed to its log
-(`transport.naming_log`).
+servant (`transport.naming.service`) asks it and writes what changed to its log
+(`transport.naming.owners_log`).
 
-An owner (`Holder`) is a *principal*, checked by the naming service (`transport.caller`), and a
+An owner (`Holder`) is a *principal*, checked by the naming service (`transport.rpc.caller`), and a
 *service* and a *run*, which the caller states. The rules, for a name held by a binding:
 
 | the name is held      | same principal, service | same principal, other | other principal |

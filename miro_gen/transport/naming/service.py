@@ -3,13 +3,13 @@
 an abstract Unix socket beside it (`transport.local.naming_socket`).
 
 Who owns a name is checked here, not taken on the caller's word: the owner of an entry is the
-caller's principal (`transport.caller`: the user of a process on this machine, from the
+caller's principal (`transport.rpc.caller`: the user of a process on this machine, from the
 kernel, over the Unix socket; the host and key of one beyond it) together with the service
 it says it is. A process on this machine that asks over TCP cannot be told from any other
 user's, so where the Unix socket exists, its calls that need an owner are refused
 (NO_PERMISSION) and it is told to come through the socket; reading (`resolve`, `list_page`)
-is open to everyone. The table's rules are in `transport.naming_table`, the log that keeps
-owners across restarts in `transport.naming_log`; docs/SECURITY.md says why.
+is open to everyone. The table's rules are in `transport.naming.table`, the log that keeps
+owners across restarts in `transport.naming.owners_log`; docs/SECURITY.md says why.
 """
 
 from __future__ import annotations
@@ -24,11 +24,9 @@ import MiroNaming__POA
 from miro_gen.exceptions import NO_PERMISSION, NO_RESOURCES
 from miro_gen.log import PeerWarnings, logger
 from miro_gen.runtime.rpc import nonblocking
-from miro_gen.transport import caller, sockets
-from miro_gen.transport.adapter import ObjectAdapter
-from miro_gen.transport.invoker import ZmqInvoker
+from miro_gen.transport import sockets
 from miro_gen.transport.local import naming_socket
-from miro_gen.transport.naming import (
+from miro_gen.transport.naming.client import (
     DEFAULT_HOLD,
     DEFAULT_LEASE,
     DEFAULT_MAX_NAMES,
@@ -36,9 +34,12 @@ from miro_gen.transport.naming import (
     MAX_PAGE,
     NAMING_KEY,
 )
-from miro_gen.transport.naming_log import OwnersLog, Restored
-from miro_gen.transport.naming_table import Holder, Table, check_entry, check_name
+from miro_gen.transport.naming.owners_log import OwnersLog, Restored
+from miro_gen.transport.naming.table import Holder, Table, check_entry, check_name
 from miro_gen.transport.reactor import Reactor
+from miro_gen.transport.rpc import caller
+from miro_gen.transport.rpc.adapter import ObjectAdapter
+from miro_gen.transport.rpc.invoker import ZmqInvoker
 
 _log = logger("MIRO")
 _peer_warnings = PeerWarnings(_log)  # what peers send: rate-limited, with counts

@@ -10,10 +10,14 @@
 
 A Server owns the process's reactor and one ROUTER socket for all its objects, bound and
 advertised as `miro_gen.transport.addresses` decides (reachable from the naming service's host,
-or `--host`); its names live
-under its naming context (`-MNC`, default the host name) with leases that a background thread
-renews (`transport.leases`): taken over at start from an earlier run of the same service, and
-never given up when another owner holds them. A Client only calls out.
+or `--host`); its names live under its naming context (`-MNC`, default the host name) with
+leases that a background thread renews (`transport.naming.leases`): taken over at start from an
+earlier run of the same service, and never given up when another owner holds them. A Client
+only calls out.
+
+Both hold the backbone they run over by the Protocols of `service.backbone`: the calls
+(`invoker`, a server's `adapter`), the naming (`naming`) and a server's names (`names`); the
+ZeroMQ ones are made here, a CORBA naming service's come from the IIOP side (`service.iiop`).
 """
 
 from __future__ import annotations
@@ -24,7 +28,7 @@ import sys
 import time
 import uuid
 from collections.abc import Callable, MutableSequence, Sequence
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import MiroNaming
 import zmq
@@ -33,16 +37,21 @@ from miro_gen import lifecycle, log
 from miro_gen.exceptions import TRANSIENT
 from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.runtime.rpc import Servant, Stub
-from miro_gen.transport import channel_link, sockets
-from miro_gen.transport.adapter import ObjectAdapter
+from miro_gen.service.backbone import CallClient, CallServer, NameKeeper, Naming
+from miro_gen.service.introspection import SERVICE_KEY, ServiceImpl, bind_service, service_name
+from miro_gen.service.options import CommonOptions, parse_common_options
+from miro_gen.transport import sockets
 from miro_gen.transport.addresses import server_addresses
-from miro_gen.transport.channels import EventChannel, resolve_channel
-from miro_gen.transport.introspection import SERVICE_KEY, ServiceImpl, bind_service, service_name
-from miro_gen.transport.invoker import ZmqInvoker
-from miro_gen.transport.leases import Leases
-from miro_gen.transport.naming import DEFAULT_LEASE, NamingClient
-from miro_gen.transport.options import CommonOptions, parse_common_options
+from miro_gen.transport.events import channel_link
+from miro_gen.transport.events.channels import EventChannel, resolve_channel
+from miro_gen.transport.naming.client import DEFAULT_LEASE, NamingClient
+from miro_gen.transport.naming.leases import Leases
 from miro_gen.transport.reactor import Reactor
+from miro_gen.transport.rpc.adapter import ObjectAdapter
+from miro_gen.transport.rpc.invoker import ZmqInvoker
+
+if TYPE_CHECKING:  # loaded when the options call for it
+    from miro_gen.service.iiop import CorbaSide
 
 StubT = TypeVar("StubT", bound=Stub)
 WAIT_STEP = 0.5  # at most this many seconds between two looks for a name being waited for
@@ -50,20 +59,20 @@ DRAIN_TIMEOUT = 2.0  # seconds the calls being served may take to finish when a 
 _log = log.logger("MIRO")
 
 
-def _corba_side(client: Client) -> Any:
+def _corba_side(client: Client) -> CorbaSide | None:
     """The CORBA side of a process whose options name a CORBA naming service or an IIOP
-    endpoint (miro_gen.transport.iiop), else None; the CORBA code loads only then."""
+    endpoint (miro_gen.service.iiop), else None; the CORBA code loads only then."""
     o = client.options
     if o.naming_url is None and o.iiop_endpoint is None:
         return None
-    from miro_gen.transport.iiop import corba_for
+    from miro_gen.service.iiop import corba_for
 
     return corba_for(client)
 
 
-def _calls_to_corba(client: Client) -> Any:
+def _calls_to_corba(client: Client) -> CorbaSide:
     """An IIOP side for a process that found a CORBA object in its ZeroMQ naming service."""
-    from miro_gen.transport.iiop import CorbaSide
+    from miro_gen.service.iiop import CorbaSide
 
     return CorbaSide(client, None)
 
@@ -84,17 +93,20 @@ def _take_options(argv: Sequence[str] | None) -> tuple[CommonOptions, list[str]]
 class Client:
     """Calls remote objects found through the naming service."""
 
-    def __init__(self, argv: Sequence[str] | None = None, *, context: Any = None) -> None:
+    def __init__(
+        self, argv: Sequence[str] | None = None, *, context: zmq.Context[Any] | None = None
+    ) -> None:
         self.options, self.argv = _take_options(argv)
         if not self.options.naming_given and os.environ.get("MIRO_DISCOVERY", "1") != "0":
-            from miro_gen.transport.discovery import naming_for  # the manual's -m 1
+            from miro_gen.transport.naming.discovery import naming_for  # the manual's -m 1
 
             self.options.naming = naming_for(self.options.naming)
         self.context = context if context is not None else zmq.Context.instance()
         self._configure_sockets(None)
-        self.invoker = ZmqInvoker(self.context)
+        self._zmq_invoker = ZmqInvoker(self.context)  # (a Server's adapter serves its arguments)
+        self.invoker: CallClient = self._zmq_invoker
         self.corba = _corba_side(self)  # the CORBA world: a CORBA naming service, IIOP
-        self.naming: Any = (
+        self.naming: Naming = (
             self.corba.naming
             if self.corba is not None and self.corba.naming is not None
             else NamingClient(self.invoker, self.options.naming, self.options.naming_context)
@@ -140,8 +152,7 @@ class Client:
         said = False
         while True:
             try:
-                entry: MiroNaming.Entry = self.naming.resolve(name)
-                return entry
+                return self.naming.resolve(name)
             except (MiroNaming.NotFound, TRANSIENT) as e:
                 left = deadline - time.monotonic()
                 if left <= 0:
@@ -196,7 +207,7 @@ class Server(Client):
         self,
         argv: Sequence[str] | None = None,
         *,
-        context: Any = None,
+        context: zmq.Context[Any] | None = None,
         bind_host: str | None = None,
         lease: float = DEFAULT_LEASE,
     ) -> None:
@@ -213,13 +224,13 @@ class Server(Client):
             clock = LogClock()
             use(clock)
         self._reactor = Reactor(self.context, clock)
-        self.adapter = ObjectAdapter(
+        self.adapter: CallServer = ObjectAdapter(
             self._reactor,
             self.invoker,
             bind=f"tcp://{self.addresses.bind}:*",
             host=self.addresses.advertise,
         )
-        self.invoker.adapter = self.adapter
+        self._zmq_invoker.adapter = self.adapter
         if self.corba is not None:
             self.corba.serve(self.addresses.bind, self.addresses.advertise)
         self.lease = lease
@@ -227,9 +238,12 @@ class Server(Client):
         # or by hand) and this run of it; the naming service adds who it checks we are.
         service = f"{self.options.naming_context}/{service_name(self.argv[0])}"
         self.owner = MiroNaming.Owner(service, uuid.uuid4().hex)
-        self.leases: Leases | None = None
-        if isinstance(self.naming, NamingClient):
-            self.leases = Leases(
+        self.names: NameKeeper
+        if self.corba is not None and self.corba.names is not None:
+            self.names = self.corba.names  # bindings in a CORBA naming service: no leases
+        else:
+            assert isinstance(self.naming, NamingClient)
+            leases = Leases(
                 self.naming,
                 self.invoker,
                 self.owner,
@@ -237,17 +251,18 @@ class Server(Client):
                 self.options.wait_naming,
                 self._unreachable,
             )
-            self.naming.before_first_call = self.leases.wait_for_naming
+            self.naming.before_first_call = leases.wait_for_naming
+            self.names = leases
         self.drain_timeout = DRAIN_TIMEOUT
         self._armed = False
         self._cleaned = False
         self._on_shutdown: list[Callable[[], object]] = []
         self.hosted_channels: dict[str, EventChannel] = {}  # hosted here, by full name
-        # The service object (transport/introspection.py): bound when run() starts.
+        # The service object (service/introspection.py): bound when run() starts.
         self.service = ServiceImpl(self, service_name(self.argv[0]))
         self.adapter.activate(self.service, SERVICE_KEY)
         if clock is not None:
-            from miro_gen.transport.log_clock import follow_log_clock
+            from miro_gen.service.log_clock import follow_log_clock
 
             follow_log_clock(self, self.options.clock.partition(":")[2] or "LogClock", clock)
 
@@ -260,8 +275,8 @@ class Server(Client):
         full = self.naming.full_name(name)
         if self.corba is not None:  # served over IIOP (and bound in a CORBA naming service)
             corba_ref: ObjectRef = self.corba.add(servant, full)
-            if self.corba.naming is not None:
-                self._unbind_if_interrupted()
+            if self.corba.names is not None:
+                self._arm_cleanup()
                 return corba_ref
         ref = self.adapter.reference_for(servant)
         entry = MiroNaming.Entry(full, ref.repo_id, ref.endpoint, ref.key, servant._interface_hash)
@@ -271,52 +286,29 @@ class Server(Client):
     def bind_entry(self, entry: MiroNaming.Entry) -> None:
         """Bind a naming entry under this server's lease (objects, event channels), taking it
         over from an earlier run of this service. A name that another owner holds is not
-        given up on: said loudly, and bound when it is free (`transport.leases`). A naming
-        service that does not answer yet is waited for (`--wait-naming`)."""
-        if self.corba is not None and self.corba.naming is not None:
-            self.corba.bind(entry)  # CosNaming: no lease; unbound when the server stops
-            self._unbind_if_interrupted()
-            _log.notice("bound %s in the naming service", entry.name)
-            return
-        assert self.leases is not None
+        given up on: said loudly, and bound when it is free (`transport.naming.leases`). A
+        naming service that does not answer yet is waited for (`--wait-naming`). In a CORBA
+        naming service: no lease, unbound when the server stops."""
         self._arm_cleanup()
-        if self.leases.bind(entry):
+        if self.names.bind(entry):
             _log.notice("bound %s in the naming service", entry.name)
         bind_service(self, self.service)  # with its first name: nothing can come between
 
-    def keep_entry(self, entry: MiroNaming.Entry) -> bool:
-        """Keep `entry`, bound already, under this server's lease (renewed, bound again in a
-        restarted naming service, unbound at the end); False when the server is stopping."""
-        assert self.leases is not None
-        self._arm_cleanup()
-        return self.leases.keep(entry)
-
     def bound_entries(self) -> list[MiroNaming.Entry]:
         """The naming entries this server keeps bound."""
-        return [] if self.leases is None else self.leases.held()
+        return self.names.held()
 
     def remove_from_name_service(self, name: str) -> None:
         """Unbind `name`, bound by this server, and stop renewing it. Its object is still
         served until deactivated (`adapter.deactivate`); another server may bind the name now
         instead of waiting for this one's lease."""
-        full = self.naming.full_name(name)
-        if self.corba is not None and self.corba.naming is not None:
-            self.corba.unbind(full)
-            return
-        assert self.leases is not None
-        self.leases.remove(full)
+        self.names.remove(self.naming.full_name(name))
 
     def _arm_cleanup(self) -> None:
         """Unbind this server's names if it is interrupted before it runs."""
         if not self._armed:
             self._armed = True
             lifecycle.at_interrupt(self._cleanup)
-
-    def _unbind_if_interrupted(self) -> None:
-        """A server whose names live in a CORBA naming service (no leases there) unbinds them
-        when interrupted before it runs, as `_start_renewing` arranges for leased names."""
-        lifecycle.forget(self._cleanup)
-        lifecycle.at_interrupt(self._cleanup)
 
     def resolve_channel(self, name: str = "EventChannel") -> EventChannel:
         """The event channel bound as `name` (see EventChannelFactory.create_channel)."""
@@ -350,8 +342,7 @@ class Server(Client):
         self._cleaned = True
         lifecycle.forget(self._cleanup)
         self.service.join()  # a bind of the service object still under way
-        if self.leases is not None:
-            self.leases.stop()
+        self.names.stop()
         # Its names gone, the calls it is running finish and are answered (bounded); others
         # are refused, completed NO, so that their callers may go elsewhere.
         if not self.adapter.drain(self.drain_timeout):

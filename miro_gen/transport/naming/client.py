@@ -3,9 +3,9 @@ object references, looked up, listed page by page, and bound by owners.
 
 The service is a remote object, `MiroNaming::Registry` 2.0 (idl/MiroNaming.idl), served under
 the key `NameService` at a well-known endpoint (`tcp://127.0.0.1:2809` by default); its side is
-`transport.naming_service`. Entries are held under leases that their servers renew. An entry
+`transport.naming.service`. Entries are held under leases that their servers renew. An entry
 belongs to an owner that the service checks itself: the caller's principal (its user, or its
-host and key, `transport.caller`) and the service the caller says it is. A process on the
+host and key, `transport.rpc.caller`) and the service the caller says it is. A process on the
 naming service's machine makes its owner's calls over the service's Unix socket
 (`transport.local.local_naming_socket`), where the kernel tells the service who calls.
 Everything the service holds is bounded: quotas per principal, a table size, entry sizes
@@ -21,9 +21,10 @@ import MiroNaming
 
 from miro_gen.exceptions import BAD_OPERATION, COMM_FAILURE, TIMEOUT, TRANSIENT, actionable
 from miro_gen.runtime.cdr import ObjectRef
-from miro_gen.transport.invoker import REFUSED_MINOR, ZmqInvoker
+from miro_gen.runtime.rpc import Invoker
 from miro_gen.transport.local import local_naming_socket
-from miro_gen.transport.naming_table import MAX_LEASE_MS, MAX_NAME_BYTES, check_name
+from miro_gen.transport.naming.table import MAX_LEASE_MS, MAX_NAME_BYTES, check_name
+from miro_gen.transport.rpc.invoker import REFUSED_MINOR
 
 NAMING_KEY = b"NameService"
 DEFAULT_LEASE = 3.0  # seconds an entry lives without renewal
@@ -59,9 +60,10 @@ actionable(MiroNaming.AlreadyBound, lambda e: f"AlreadyBound: {e.name}")
 
 
 class NamingClient:
-    """Binds and resolves names for a process whose naming context is `context`."""
+    """Binds and resolves names for a process whose naming context is `context` (a `Naming`,
+    service.backbone)."""
 
-    def __init__(self, invoker: ZmqInvoker, endpoint: str, context: str) -> None:
+    def __init__(self, invoker: Invoker, endpoint: str, context: str) -> None:
         self.context = context
         self.endpoint = endpoint
         self.ref = ObjectRef(MiroNaming.Registry._repo_id, endpoint, NAMING_KEY)
@@ -70,11 +72,11 @@ class NamingClient:
         self.owner_endpoint = local_naming_socket(endpoint) or endpoint
         self.registry = self.registry_stub(invoker, 5.0)
         # Called before a look-up until one has been made: a server waits there for a naming
-        # service that does not answer yet (transport.leases).
+        # service that does not answer yet (transport.naming.leases).
         self.before_first_call: Callable[[], None] | None = None
 
     def registry_stub(
-        self, invoker: ZmqInvoker, timeout: float, *, owner: bool = False
+        self, invoker: Invoker, timeout: float, *, owner: bool = False
     ) -> MiroNaming.Registry:
         """A stub of the naming service with its own call timeout (a lease renewer's); `owner`:
         for the calls that bind, renew and unbind."""

@@ -15,9 +15,10 @@ from __future__ import annotations
 from collections import deque
 from typing import TYPE_CHECKING
 
-if TYPE_CHECKING:  # the consumer (event_consumer.py) imports this module
+from miro_gen.transport.events.event import StructuredEvent
+
+if TYPE_CHECKING:
     from miro_gen.runtime.datatypes import IdlType
-    from miro_gen.transport.event_consumer import StructuredEvent
 
 KEEP_ALL = 0
 DEFAULT_DEPTH = 10  # ROS 2's default history depth

@@ -30,8 +30,9 @@ import MiroNaming
 from miro_gen import lifecycle
 from miro_gen.exceptions import TRANSIENT, SystemException
 from miro_gen.log import logger
-from miro_gen.transport.invoker import REFUSED_MINOR, ZmqInvoker
-from miro_gen.transport.naming import NamingClient, naming_errors
+from miro_gen.runtime.rpc import Invoker
+from miro_gen.transport.naming.client import NamingClient, naming_errors
+from miro_gen.transport.rpc.invoker import REFUSED_MINOR
 
 _log = logger("MIRO")
 
@@ -56,12 +57,14 @@ class Leases:
     """The names of one server: `owner` (its service and this run), leases of `lease`
     seconds, naming calls through `invoker`; `wait_naming` bounds the wait for an unreachable
     naming service (None: no bound); `unreachable` turns that failure into the message to
-    raise."""
+    raise. (A `NameKeeper`, service.backbone.)"""
+
+    leased = True  # a name outlives its server until its lease ends
 
     def __init__(
         self,
         naming: NamingClient,
-        invoker: ZmqInvoker,
+        invoker: Invoker,
         owner: MiroNaming.Owner,
         lease: float,
         wait_naming: float | None = None,
@@ -186,6 +189,18 @@ class Leases:
             if left <= 0:
                 return
             time.sleep(min(left, 0.05))
+
+    def claim(self, entry: MiroNaming.Entry, *, take_over: bool, timeout: float) -> bool:
+        """Bind `entry` once and keep it, from any thread (through that thread's own sockets),
+        with calls of `timeout` seconds and without waiting for the naming service; False when
+        the server stopped meanwhile (then it is unbound again). MiroNaming.AlreadyBound when
+        another owner holds it: not retried."""
+        registry = self.naming.registry_stub(self._invoker, timeout, owner=True)
+        registry.bind_as(entry, self.owner, self.lease_ms, take_over)
+        if not self.keep(entry):  # the server stopped meanwhile: leave nothing behind
+            registry.unbind_as(entry.name, self.owner)
+            return False
+        return True
 
     def keep(self, entry: MiroNaming.Entry) -> bool:
         """Keep `entry`, bound already, under this server's lease (renewed, bound again when

@@ -22,10 +22,10 @@ from miro_gen.corba.naming_server import NamingService as CosNamingService
 from miro_gen.corba.server import IIOPServer, current_connection
 from miro_gen.exceptions import NO_PERMISSION
 from miro_gen.log import logger
-from miro_gen.transport import caller
-from miro_gen.transport.caller import Caller
-from miro_gen.transport.naming_service import Registry
-from miro_gen.transport.naming_table import MAX_LEASE_MS, check_name
+from miro_gen.transport.naming.service import Registry
+from miro_gen.transport.naming.table import MAX_LEASE_MS, check_name
+from miro_gen.transport.rpc import caller
+from miro_gen.transport.rpc.caller import Caller
 
 _log = logger("MIRO")
 

@@ -1,7 +1,7 @@
 """Suppliers of an event channel (Miro's StructuredPushSupplier): `push()` from any thread,
 events batched per reactor turn into one frame per topic, large ones alone and copied once,
 nothing encoded while nobody subscribes, every queue bounded and what overflows counted.
-The overview is transport.events; the bytes are transport.event_frames.
+The overview is transport.events; the bytes are transport.events.frames.
 """
 
 from __future__ import annotations
@@ -11,15 +11,13 @@ import random
 import threading
 from typing import Any
 
-import zmq
-
 from miro_gen import clock
 from miro_gen.log import logger
 from miro_gen.runtime.cdr import encode_after
-from miro_gen.transport import offers, sockets
-from miro_gen.transport.channel_link import ChannelLink
-from miro_gen.transport.channels import EventChannel
-from miro_gen.transport.event_frames import (
+from miro_gen.transport import sockets
+from miro_gen.transport.events import offers
+from miro_gen.transport.events.channels import EventChannel
+from miro_gen.transport.events.frames import (
     BATCH_HEADER,
     EVENT,
     EVENT_HEADER,
@@ -28,6 +26,7 @@ from miro_gen.transport.event_frames import (
     batch_head,
     topic,
 )
+from miro_gen.transport.events.links import PublishingLink
 
 _log = logger("MIRO")
 
@@ -108,32 +107,16 @@ class StructuredPushSupplier:
         self.sent = 0
         self.dropped = 0  # events pushed while someone subscribed that were never sent
         self._too_large: set[str] = set()  # types with an event too large to send (said once)
-        context = self.reactor.context
-        self.max_frame = sockets.policy(context).max_message_size
-        self.socket = sockets.connecting_socket(context, zmq.XPUB)
-        # A turn's events leave in a burst of frames (100,000 small events: about 30), which the
-        # socket must hold until the channel reads them: room for a full queue of batches
-        # (QUEUE_BYTES), more only when the supplier's own events are larger than a batch.
-        burst = QUEUE_BYTES // MAX_BATCH_BYTES
-        self.socket.setsockopt(zmq.SNDHWM, min(HWM, max(burst, sockets.queue_limit(context))))
-        self.socket.setsockopt(zmq.XPUB_VERBOSER, 1)
-        # At the high-water mark an XPUB drops silently; with NODROP a non-blocking send fails
-        # instead, so that the supplier counts what it drops. It never blocks either way.
-        self.socket.setsockopt(zmq.XPUB_NODROP, 1)
-        # No queue for a connection that is down: the channel's subscriptions end with it, and
-        # what is pushed meanwhile is counted as dropped, not sent into the void.
-        self.socket.setsockopt(zmq.IMMEDIATE, 1)
+        self.max_frame = sockets.policy(self.reactor.context).max_message_size
         self._connected = False
         self._lost: set[bytes] = set()  # the subscriptions when the channel went away
-        resolve = channel.resolve
-        self.link = ChannelLink(
-            self.reactor,
-            self.socket,
-            channel.endpoints(context)[0],
-            None if resolve is None else lambda: resolve().endpoints(context)[0],
-            self._connection_changed,
+        # A turn's events leave in a burst of frames (100,000 small events: about 30), which the
+        # link must hold until the channel reads them: room for a full queue of batches
+        # (QUEUE_BYTES), more only when the supplier's own events are larger than a batch.
+        burst = QUEUE_BYTES // MAX_BATCH_BYTES
+        self.link: PublishingLink = channel.publishing(
+            self._connection_changed, self._subscriptions_changed, HWM, burst
         )
-        self.reactor.call_soon(self.reactor.register, self.socket, self._subscription_changed)
 
     def _topic(self, type_name: str) -> _Topic:
         t = self._topics.get(type_name)
@@ -282,11 +265,7 @@ class StructuredPushSupplier:
         high-water mark, or when the channel is gone (nobody to send to: the events are lost)."""
         if not self._connected:
             return False
-        try:
-            self.socket.send_multipart([frame, body], zmq.NOBLOCK, copy=len(body) < LARGE_EVENT)
-        except zmq.Again:
-            return False
-        return True
+        return self.link.send(frame, body, len(body) < LARGE_EVENT)
 
     def _refuse_large(self, type_name: str, size: int) -> None:
         with self._lock:
@@ -310,30 +289,20 @@ class StructuredPushSupplier:
             _log.notice("lost the event channel %s; looking for it", self.channel.name)
         self._connected = up
 
-    def _subscription_changed(self) -> None:
-        # A lost connection's subscriptions end with unsubscriptions that ZeroMQ queues after
-        # its monitor event: read that event first, so that `_lost` still holds them.
-        self.link.read_events()
-        changed = False
+    def _subscriptions_changed(self, changes: list[tuple[bool, bytes]]) -> None:
+        """Consumers (un)subscribed, as the link heard it (reactor thread): after a lost
+        connection's notice, so that `_lost` still holds what it ended."""
         subs = self._subscriptions
-        while True:
-            try:
-                msg = self.socket.recv(zmq.NOBLOCK)
-            except zmq.Again:
-                break
-            if not msg:
-                continue
-            prefix = msg[1 : MAX_PREFIX + 1]  # a longer prefix matches no fewer topics
+        for subscribed, whole in changes:
+            prefix = whole[:MAX_PREFIX]  # a longer prefix matches no fewer topics
             if prefix not in subs and len(subs) >= MAX_SUBSCRIPTIONS:
                 prefix = b""  # too many to track: send every topic (the channel filters)
-            n = subs.get(prefix, 0) + (1 if msg[0] == 1 else -1)
+            n = subs.get(prefix, 0) + (1 if subscribed else -1)
             if n > 0:
                 subs[prefix] = n
             else:
                 subs.pop(prefix, None)
-            changed = True
-        if changed:
-            self._generation += 1  # after the change, so a reader never keeps a stale answer
+        self._generation += 1  # after the change, so a reader never keeps a stale answer
 
     def close(self) -> None:
-        self.link.close_socket()
+        self.link.close()

@@ -20,7 +20,9 @@ from __future__ import annotations
 
 import socket
 import threading
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Protocol
+
+import MiroNaming
 
 from miro_gen.corba.client import IIOPInvoker
 from miro_gen.corba.ior import IOR, CorbaRef, ref_from_ior
@@ -29,30 +31,90 @@ from miro_gen.corba.server import BeyondLoopback, IIOPServer
 from miro_gen.log import logger
 from miro_gen.runtime import rpc
 from miro_gen.runtime.cdr import ObjectRef
+from miro_gen.service.options import CommonOptions, UsageError
 from miro_gen.transport import sockets
 from miro_gen.transport.addresses import LOOPBACK, Addresses, server_addresses
-from miro_gen.transport.options import CommonOptions, UsageError
 
 if TYPE_CHECKING:
-    from miro_gen.transport.channels import EventChannel
-    from miro_gen.transport.notify_door import NotifyDoor
+    from miro_gen.corba.notify import EventChannelFactory
+    from miro_gen.transport.events.channels import EventChannel
+    from miro_gen.transport.events.notify_door import NotifyDoor
 
 _log = logger("MIRO")
 
 
-class CorbaSide:
-    """The IIOP invoker, server and naming of one `Server` or `Client`."""
+class CorbaClient(Protocol):
+    """What the IIOP side needs of its `Client` or `Server` (service.server): its common
+    options and its ZeroMQ invoker, which the IIOP invoker hands references that are not
+    CORBA ones."""
 
-    def __init__(self, client: Any, naming_url: str | None) -> None:
+    @property
+    def options(self) -> CommonOptions: ...
+
+    @property
+    def invoker(self) -> rpc.Invoker: ...
+
+
+class CorbaNames:
+    """The names a server binds in a CORBA naming service (a `NameKeeper`, service.backbone):
+    CosNaming has neither leases nor owners, so a bind replaces what was bound, and the names
+    live until the server unbinds them when it stops."""
+
+    leased = False
+
+    def __init__(self, naming: CorbaNaming) -> None:
+        self.naming = naming
+        self._held: dict[str, MiroNaming.Entry] = {}
+        self._lock = threading.Lock()
+
+    def bind(self, entry: MiroNaming.Entry) -> bool:
+        self.naming.rebind(entry)
+        with self._lock:
+            self._held[entry.name] = entry
+        return True
+
+    def claim(self, entry: MiroNaming.Entry, *, take_over: bool, timeout: float) -> bool:
+        return self.bind(entry)  # (no owners to take a name over from)
+
+    def want(self, entry: MiroNaming.Entry, holder: str) -> None:
+        self.bind(entry)
+
+    def remove(self, name: str) -> None:
+        """Unbind a name bound here from the CORBA naming service."""
+        with self._lock:
+            if self._held.pop(name, None) is None:
+                return
+        self.naming.unbind(name)
+
+    def held(self) -> list[MiroNaming.Entry]:
+        with self._lock:
+            return list(self._held.values())
+
+    def stop(self) -> None:
+        """Unbind the names bound here (a naming service that is gone is not waited for)."""
+        with self._lock:
+            names, self._held = list(self._held), {}
+        for name in reversed(names):
+            try:
+                self.naming.unbind(name)
+            except Exception as e:  # the naming service may be gone
+                _log.debug("cannot unbind %s: %s", name, e)
+
+
+class CorbaSide:
+    """The IIOP invoker, server and naming of one `Server` or `Client`: `naming` and `names`
+    when its naming service is a CORBA one."""
+
+    def __init__(self, client: CorbaClient, naming_url: str | None) -> None:
         self.client = client
         self.iiop = IIOPInvoker(client.invoker, make_server=self._lazy_server)
         self.naming: CorbaNaming | None = None
+        self.names: CorbaNames | None = None
         if naming_url is not None:
             self.naming = corba_naming(self.iiop, naming_url, client.options.naming_context)
+            self.names = CorbaNames(self.naming)
         self.server: IIOPServer | None = None
-        self._factory: Any = None  # the Notification doors' factory, once a channel has one
-        self._names: list[str] = []
-        self._lock = threading.Lock()
+        self._factory: EventChannelFactory | None = None  # the Notification doors' factory
 
     # ---- serving --------------------------------------------------------------------------------
 
@@ -79,40 +141,22 @@ class CorbaSide:
         """Serve `servant` over IIOP under its full name; bind it if the naming is CORBA's."""
         server = self.server or self._lazy_server()
         ref = server.activate(servant, full)
-        if self.naming is not None:
-            self.naming.rebind(CorbaEntry(full, ref.repo_id, ref.endpoint, ref.key, "", ref))
-            with self._lock:
-                self._names.append(full)
+        if self.names is not None:
+            self.names.bind(CorbaEntry(full, ref.repo_id, ref.endpoint, ref.key, "", ref))
         return ref
-
-    def bind(self, entry: Any) -> None:
-        """Bind a naming entry of the process (an event channel) in the CORBA naming service."""
-        assert self.naming is not None
-        self.naming.rebind(entry)
-        with self._lock:
-            self._names.append(entry.name)
-
-    def unbind(self, full: str) -> None:
-        """Unbind a name bound here from the CORBA naming service."""
-        assert self.naming is not None
-        with self._lock:
-            if full not in self._names:
-                return
-            self._names.remove(full)
-        self.naming.unbind(full)
 
     def open_door(self, channel: EventChannel) -> NotifyDoor:
         """Serve `channel` (hosted here) as a CosNotifyChannelAdmin::EventChannel too, under
-        its full name as object key (transport.notify_door)."""
-        from miro_gen.transport.notify_door import NotifyDoor, serve_factory
+        its full name as object key (transport.events.notify_door)."""
+        from miro_gen.transport.events.notify_door import NotifyDoor, serve_factory
 
         server = self.server or self._lazy_server()
         if self._factory is None:
             self._factory = serve_factory(server)
         return NotifyDoor(channel, server, self.iiop, channel.name, self._factory)
 
-    def stub(self, entry: Any, cls: type[rpc.StubT]) -> rpc.StubT:
-        ref = getattr(entry, "ref", None)
+    def stub(self, entry: MiroNaming.Entry, cls: type[rpc.StubT]) -> rpc.StubT:
+        ref: ObjectRef | None = getattr(entry, "ref", None)
         if ref is None and entry.endpoint.startswith("IOR:"):  # bound through CosNaming
             ref = ref_from_ior(IOR.from_string(entry.endpoint))
         if ref is None:
@@ -120,15 +164,10 @@ class CorbaSide:
         return cls(ref, self.iiop)
 
     def close(self) -> None:
-        """Unbind the names bound here, stop serving (CloseConnection to clients)."""
-        with self._lock:
-            names, self._names = self._names, []
-        for name in reversed(names):
-            try:
-                assert self.naming is not None
-                self.naming.unbind(name)
-            except Exception as e:  # the naming service may be gone
-                _log.debug("cannot unbind %s: %s", name, e)
+        """Unbind the names bound here (those its server did not unbind when it stopped), stop
+        serving (CloseConnection to clients)."""
+        if self.names is not None:
+            self.names.stop()
         self.iiop.fallback = None
         self.iiop.close()
 
@@ -190,7 +229,7 @@ def _check_naming(opts: CommonOptions, url: str) -> None:
         )
 
 
-def corba_for(client: Any) -> CorbaSide | None:
+def corba_for(client: CorbaClient) -> CorbaSide | None:
     """The CORBA side of a client or server whose options call for one, else None."""
     opts = client.options
     url = opts.naming_url

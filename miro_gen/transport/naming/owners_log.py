@@ -33,7 +33,7 @@ import MiroNaming
 from miro_gen.exceptions import BAD_PARAM
 from miro_gen.log import logger
 from miro_gen.transport.local import network_namespace
-from miro_gen.transport.naming_table import MAX_LEASE_MS, Binding, Holder, Table, check_entry
+from miro_gen.transport.naming.table import MAX_LEASE_MS, Binding, Holder, Table, check_entry
 
 _log = logger("MIRO")
 

@@ -20,7 +20,7 @@ what the door asks for itself.
 
 The channel is bound as one naming entry for both doors: an IOR whose IIOP profile is the
 Notification door and whose miro-gen profile (`TAG_MIRO_ZMQ`) holds the ZeroMQ endpoints
-(`channel_entry`; `transport.channels.resolve_channel` reads either form).
+(`channel_entry`; `transport.events.channels.resolve_channel` reads either form).
 """
 
 from __future__ import annotations
@@ -42,9 +42,10 @@ from miro_gen.corba.server import IIOPServer
 from miro_gen.log import PeerWarnings, logger
 from miro_gen.runtime import registry
 from miro_gen.runtime.cdrstream import encapsulated
+from miro_gen.runtime.rpc import Invoker
 from miro_gen.transport import sockets
-from miro_gen.transport.channels import EventChannel
-from miro_gen.transport.event_frames import (
+from miro_gen.transport.events.channels import EventChannel
+from miro_gen.transport.events.frames import (
     BATCH_HEADER,
     EVENT,
     EVENT_HEADER,
@@ -53,7 +54,7 @@ from miro_gen.transport.event_frames import (
     split_topic,
     topic,
 )
-from miro_gen.transport.event_supplier import StructuredPushSupplier
+from miro_gen.transport.events.supplier import StructuredPushSupplier
 
 _log = logger("MIRO")
 _peer_warnings = PeerWarnings(_log)
@@ -372,7 +373,7 @@ class NotifyDoor:
         self,
         channel: EventChannel,
         server: IIOPServer,
-        invoker: Any,
+        invoker: Invoker,
         key: str,
         factory: EventChannelFactory | None = None,
     ) -> None:

@@ -3,13 +3,14 @@
 The player publishes `MiroLogClock` events (`MiroLog::Clock`) on its clock channel (`LogClock`
 in its naming context). A follower resolves that channel, waiting for the player to bind it,
 and hands every clock message to the process's `LogClock`, on the reactor thread. The server
-starts it (transport.server); the player (eventlog.player) publishes what it follows.
+starts it (service.server); the player (eventlog.player) publishes what it follows.
 """
 
 from __future__ import annotations
 
 import threading
-from typing import TYPE_CHECKING
+from collections.abc import Callable
+from typing import Protocol
 
 import MiroLog
 import MiroNaming
@@ -17,15 +18,22 @@ import MiroNaming
 from miro_gen.clock import LogClock
 from miro_gen.exceptions import SystemException
 from miro_gen.log import logger
-from miro_gen.transport.channels import EventChannel
-from miro_gen.transport.event_consumer import StructuredEvent, StructuredPushConsumer
-
-if TYPE_CHECKING:
-    from miro_gen.transport.server import Server
+from miro_gen.transport.events.channels import EventChannel
+from miro_gen.transport.events.consumer import StructuredPushConsumer
+from miro_gen.transport.events.event import StructuredEvent
 
 CLOCK_TYPE = "MiroLogClock"  # the type name of a player's clock events
 RETRY = 0.2  # seconds between attempts to resolve the clock channel
 _log = logger("MIRO")
+
+
+class ClockServer(Protocol):
+    """What a follower needs of its process's server (service.server.Server): its channels,
+    and its clean-up, which stops the follower's thread."""
+
+    def resolve_channel(self, name: str = ...) -> EventChannel: ...
+
+    def on_shutdown(self, fn: Callable[[], object]) -> None: ...
 
 
 class ClockFollower(StructuredPushConsumer):
@@ -42,7 +50,7 @@ class ClockFollower(StructuredPushConsumer):
             self.clock.update(c.log_time_ns, c.rate, c.paused, c.epoch)
 
 
-def follow_log_clock(server: Server, channel_name: str, clock: LogClock) -> threading.Thread:
+def follow_log_clock(server: ClockServer, channel_name: str, clock: LogClock) -> threading.Thread:
     """Follow the clock published on `channel_name`, from a thread that waits for the channel
     to be bound (the process may start before the player)."""
     stop = threading.Event()

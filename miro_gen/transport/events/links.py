@@ -1,0 +1,182 @@
+"""A supplier's and a consumer's link to their event channel: what carries their frames and
+subscriptions, the part of events a backbone provides (service.backbone).
+
+A supplier hands its link one frame per topic and batch (`send`), and hears from it, on the
+reactor thread, when the channel comes and goes and what consumers subscribe to; a consumer
+tells its link what it subscribes to and takes frames from it when told they wait. Everything
+else (batching, sequence numbers, a consumer's queue and gaps) is the same over any backbone,
+and the frames are transport.events.frames'. A channel makes its suppliers' and consumers'
+links (`EventChannel.publishing`, `EventChannel.subscribing`).
+
+Over ZeroMQ a link is a socket made by transport.sockets and kept connected to the channel's
+proxy wherever the channel moves (`ChannelLink`): the supplier's an XPUB socket (the proxy
+forwards subscriptions to it), the consumer's a SUB socket. Their queues hold at most `hwm`
+frames per peer, fewer when the largest message allowed is large (`sockets.queue_limit`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any, Protocol
+
+import zmq
+
+from miro_gen.transport import sockets
+from miro_gen.transport.events.channel_link import ChannelLink
+from miro_gen.transport.reactor import Reactor
+
+_NOBLOCK = int(zmq.NOBLOCK)
+
+
+class PublishingLink(Protocol):
+    """What a supplier needs of its link to its channel."""
+
+    @property
+    def connected(self) -> bool: ...
+
+    @property
+    def moves(self) -> int:
+        """Times the channel was found elsewhere (its host restarted)."""
+        ...
+
+    def send(self, topic: bytes, body: bytes, copy: bool) -> bool:
+        """Send a topic and a batch frame without blocking (`copy`: False for a large body,
+        which the link may then keep instead of copying); False when it cannot be sent now."""
+        ...
+
+    def close(self) -> None: ...
+
+
+class SubscribingLink(Protocol):
+    """What a consumer needs of its link to its channel (on the reactor thread)."""
+
+    @property
+    def connected(self) -> bool: ...
+
+    @property
+    def moves(self) -> int: ...
+
+    def subscribe(self, prefix: bytes) -> None:
+        """Receive the frames whose topic starts with `prefix`."""
+        ...
+
+    def unsubscribe(self, prefix: bytes) -> None: ...
+
+    def receive(self) -> tuple[bytes, memoryview] | None:
+        """The next frame waiting, as (topic, batch) with the batch not copied; None when none
+        waits. ValueError for a message that is not a topic and a batch (it is gone)."""
+        ...
+
+    def close(self) -> None: ...
+
+
+class ZmqPublishing:
+    """A supplier's XPUB socket connected to its channel's proxy at `endpoint` (found again with
+    `find`, None for fixed endpoints). `on_connection(up)` and `on_subscriptions(changes)`,
+    each change (subscribed, prefix), run on the reactor thread; a lost connection's
+    unsubscriptions come after its `on_connection(False)`. At most `hwm` frames wait for the
+    proxy, at least `burst` (a turn's events, however large the messages allowed)."""
+
+    def __init__(
+        self,
+        reactor: Reactor,
+        endpoint: str,
+        find: Callable[[], str] | None,
+        on_connection: Callable[[bool], object],
+        on_subscriptions: Callable[[list[tuple[bool, bytes]]], object],
+        hwm: int,
+        burst: int,
+    ) -> None:
+        context = reactor.context
+        self.socket = sockets.connecting_socket(context, zmq.XPUB)
+        self.socket.setsockopt(zmq.SNDHWM, min(hwm, max(burst, sockets.queue_limit(context))))
+        self.socket.setsockopt(zmq.XPUB_VERBOSER, 1)
+        # At the high-water mark an XPUB drops silently; with NODROP a non-blocking send fails
+        # instead, so that the supplier counts what it drops. It never blocks either way.
+        self.socket.setsockopt(zmq.XPUB_NODROP, 1)
+        # No queue for a connection that is down: the channel's subscriptions end with it, and
+        # what is pushed meanwhile is counted as dropped, not sent into the void.
+        self.socket.setsockopt(zmq.IMMEDIATE, 1)
+        self._on_subscriptions = on_subscriptions
+        self.link = ChannelLink(reactor, self.socket, endpoint, find, on_connection)
+        reactor.call_soon(reactor.register, self.socket, self._readable)
+
+    @property
+    def connected(self) -> bool:
+        return self.link.connected
+
+    @property
+    def moves(self) -> int:
+        return self.link.moves
+
+    def send(self, topic: bytes, body: bytes, copy: bool) -> bool:
+        try:
+            self.socket.send_multipart([topic, body], _NOBLOCK, copy=copy)
+        except zmq.Again:
+            return False
+        return True
+
+    def _readable(self) -> None:
+        # A lost connection's subscriptions end with unsubscriptions that ZeroMQ queues after
+        # its monitor event: read that event first, so that the supplier hears of it first.
+        self.link.read_events()
+        changes = []
+        while True:
+            try:
+                msg = self.socket.recv(_NOBLOCK)
+            except zmq.Again:
+                break
+            if msg:
+                changes.append((msg[0] == 1, msg[1:]))
+        if changes:
+            self._on_subscriptions(changes)
+
+    def close(self) -> None:
+        self.link.close_socket()
+
+
+class ZmqSubscribing:
+    """A consumer's SUB socket connected to its channel's proxy at `endpoint` (found again with
+    `find`, None for fixed endpoints); `on_readable()` runs on the reactor thread when frames
+    wait. At most `hwm` frames wait per peer."""
+
+    def __init__(
+        self,
+        reactor: Reactor,
+        endpoint: str,
+        find: Callable[[], str] | None,
+        on_readable: Callable[[], object],
+        hwm: int,
+    ) -> None:
+        context = reactor.context
+        self.socket: zmq.Socket[Any] = sockets.connecting_socket(context, zmq.SUB)
+        self.socket.setsockopt(zmq.RCVHWM, min(hwm, sockets.queue_limit(context)))
+        self.link = ChannelLink(reactor, self.socket, endpoint, find, lambda up: None)
+        self._recv = self.socket.recv_multipart
+        reactor.call_soon(reactor.register, self.socket, on_readable)
+
+    @property
+    def connected(self) -> bool:
+        return self.link.connected
+
+    @property
+    def moves(self) -> int:
+        return self.link.moves
+
+    def subscribe(self, prefix: bytes) -> None:
+        self.socket.setsockopt(zmq.SUBSCRIBE, prefix)
+
+    def unsubscribe(self, prefix: bytes) -> None:
+        self.socket.setsockopt(zmq.UNSUBSCRIBE, prefix)
+
+    def receive(self) -> tuple[bytes, memoryview] | None:
+        try:
+            parts = self._recv(_NOBLOCK, copy=False)  # large payloads are decoded in place
+        except zmq.Again:
+            return None
+        if len(parts) != 2:
+            raise ValueError(f"{len(parts)} frames, expected 2")
+        return parts[0].bytes, parts[1].buffer
+
+    def close(self) -> None:
+        self.link.close_socket()
