@@ -2,7 +2,7 @@
 
     python bench/bench_refusals.py [--repeat 5] [--cpp] [--baseline DIR] [--check]
 
-Each case is a file written to a temporary folder (the texts of tests/test_attack_compilers.py):
+Each case is a file written to a temporary folder (the texts of tests/idl/test_attack_compilers.py):
 macro expansion that doubles at each level (the issue's 20 lines of `#define`, and 2 KB using
 them), nesting thousands deep (modules, parentheses; makeParams includes, types, constructor
 blocks). Ours is the tool of this checkout (miro-idl generating, with -o), run as a process

@@ -7,7 +7,8 @@ tests/nmea_captures.py) is written, as fast as the driver reads it, into a pseud
 services/gps reads in a process of its own; the valid readings it publishes are compared with the
 fixes gpsd reported for the same log (its .chk file): missing, extra, and at another position.
 Not a speed benchmark: a measurement of correctness that takes minutes, so it is not a test
-(tests/test_gps_captures.py runs every log through the parser, and a few through the driver).
+(tests/devices/test_gps_captures.py runs every log through the parser, and a few through the
+driver).
 """
 
 from __future__ import annotations

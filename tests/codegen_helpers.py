@@ -1,4 +1,4 @@
-"""Shared machinery of the CDR codec tests (tests/test_cdr_*.py).
+"""Shared machinery of the CDR codec tests (tests/codegen/test_cdr_*.py).
 
 * where the test IDL (tests/codegen/*.idl) and its committed golden output live, and the command
   that regenerates the output;

@@ -1,8 +1,8 @@
 """The checkout's generated code comes first on the path, including what the wheel leaves out
 (the manual's example parameters, package Test). Multicast DNS is off for every test and every
 process a test starts (MIRO_DISCOVERY=0: no naming service announced, none looked for), so that
-nothing leaves loopback; the network namespaces of tests/test_multihost.py turn it on again for
-the processes inside them."""
+nothing leaves loopback; the network namespaces of tests/transport/test_multihost.py turn it on
+again for the processes inside them."""
 
 from __future__ import annotations
 

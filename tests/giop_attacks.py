@@ -1,5 +1,5 @@
 """What an attacker of an IIOP server does, over raw sockets, and what is measured of the server
-process meanwhile (shared by tests/test_attack_iiop.py and bench/bench_iiop_floods.py).
+process meanwhile (shared by tests/corba/test_attack_iiop.py and bench/bench_iiop_floods.py).
 
 The attacked process runs `VICTIM NOFILE SPARE`: an `IIOPServer` on 127.0.0.1 serving a
 `Miro::Example` under the key `robot/Example`, with its file-descriptor limit lowered to NOFILE

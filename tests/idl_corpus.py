@@ -47,9 +47,9 @@ CORPUS = TESTS / "corpus"
 INCLUDE_DIR = CORPUS / "include"
 
 # file (relative to tests/corpus) -> (reason, the tests it breaks)
-#   "api":  tests/test_corpus.py through compile_idl (compiles cleanly / expected diagnostics)
-#   "cli":  tests/test_corpus.py through `python -m miro_gen.cli.idl` (invalid files)
-#   "diff": tests/test_differential_omniidl.py
+#   "api":  tests/idl/test_corpus.py through compile_idl (compiles cleanly / expected diagnostics)
+#   "cli":  tests/idl/test_corpus.py through `python -m miro_gen.cli.idl` (invalid files)
+#   "diff": tests/idl/test_differential_omniidl.py
 KNOWN_BUGS: dict[str, tuple[str, frozenset[str]]] = {}
 
 

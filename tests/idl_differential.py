@@ -1,7 +1,7 @@
 """miro-idl against omniidl (Debian's CORBA IDL front end), file by file, on any IDL.
 
-Shared by tests/test_differential_omniidl.py (the corpus in tests/corpus/) and
-tests/test_real_idl.py (whole trees of real IDL: Debian's omniORB tree, the project's idl/), and
+Shared by tests/idl/test_differential_omniidl.py (the corpus in tests/corpus/) and
+tests/idl/test_real_idl.py (whole trees of real IDL: Debian's omniORB tree, the project's idl/), and
 runnable on its own over any tree, for checking real IDL that is not committed:
 
     python tests/idl_differential.py [-I DIR]... [--tree-includes] [-v] PATH...

@@ -14,7 +14,8 @@ and aborts on some inputs). The output is one JSON object mapping each FILE to i
      "FILE2": {"ok": false, "declarations": null, "errors": [{"file", "line", "message"}], ...}}
 
 `declarations` follows DESIGN.md's "AST JSON" contract (kind, name, repo_id, file, line and the
-per-kind fields) so that tests/test_differential_omniidl.py can compare it with miro-idl's output.
+per-kind fields) so that tests/idl/test_differential_omniidl.py can compare it with miro-idl's
+output.
 `file` is the basename of the file the declaration comes from; `doc` is always null and
 `annotations` always empty (omniidl has neither doc comments in miro's sense nor annotations).
 

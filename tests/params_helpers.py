@@ -1,5 +1,6 @@
-"""Shared machinery of the parameter tests (tests/test_params_*.py): compiling compile-time files
-with the real `miro-params` command into a temporary folder and importing what it wrote."""
+"""Shared machinery of the parameter tests (tests/params/test_params_*.py): compiling
+compile-time files with the real `miro-params` command into a temporary folder and importing what
+it wrote."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """miro-idl against ROS 2's own tools on ROS 2 interface files (the Kilted wheels from PyPI).
 
-Shared by tests/test_ros2_interfaces.py and runnable on its own (with the ROS 2 environment of
+Shared by tests/ros2/test_ros2_interfaces.py and runnable on its own (with the ROS 2 environment of
 tests/ros2_env.py, made if it is not there):
 
     python tests/rosidl_differential.py

@@ -18,7 +18,7 @@ and runs the table in one tight loop:
 
 `build_tables` reads Lark's LALR tables through Lark's private structure (the parser's
 `parse_table` and `callbacks`, each rule's `expansion` and `options`); Lark offers no public
-access to them. tests/test_idl_engine_lark.py pins every attribute read, and checks that the
+access to them. tests/idl/test_idl_engine_lark.py pins every attribute read, and checks that the
 engine builds the same parse tree as Lark's own parser on the project's IDL and the corpus, so a
 Lark release that changes them fails there. Why not Lark's parser: the engine parses about twice
 as fast and skips compiling the grammar (`python bench/bench_idl.py` measures it).

@@ -1,4 +1,4 @@
-"""Supplies FoxTest::Scan events (tests/foxglove/FoxTest.idl) for tests/test_foxglove.py.
+"""Supplies FoxTest::Scan events (tests/foxglove/FoxTest.idl) for tests/eventlog/test_foxglove.py.
 
     python tests/procs/fox_supplier.py [common options] CHANNEL
 

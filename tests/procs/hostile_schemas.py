@@ -1,5 +1,5 @@
 """A service whose objects describe their interfaces with hostile schemas, for the live tools'
-tests of schemas from elsewhere (tests/test_foreign_schemas.py).
+tests of schemas from elsewhere (tests/live/test_foreign_schemas.py).
 
     python tests/procs/hostile_schemas.py FILE [common options]
 

@@ -1,5 +1,5 @@
 """A service of types the tools' machine does not have: it publishes `Reading` events on a channel
-of its own and serves `Lab::Store`, for the live tools' tests (tests/test_live_types.py).
+of its own and serves `Lab::Store`, for the live tools' tests (tests/live/test_live_types.py).
 
     python tests/procs/lab_service.py GENERATED [common options]
 

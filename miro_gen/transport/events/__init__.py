@@ -56,7 +56,8 @@ if TYPE_CHECKING:
     from miro_gen.transport.events.supplier import QUEUE_EVENTS as QUEUE_EVENTS
     from miro_gen.transport.events.supplier import StructuredPushSupplier as StructuredPushSupplier
 
-# Each name's module, for __getattr__ (tests/test_architecture.py checks it against the above).
+# Each name's module, for __getattr__ (tests/project/test_architecture.py checks it against the
+# above).
 _HOMES = {
     "CHANNEL_REPO_ID": "channels",
     "DEFAULT_CHANNEL": "channels",
