@@ -1,0 +1,212 @@
+"""Suppliers' and consumers' links to an event channel over Zenoh (the `PublishingLink` and
+`SubscribingLink` of transport.events.links).
+
+A channel over Zenoh is a name, not a process: its events of one domain and type travel on one
+key (`keys.event_key`), the batch frame (transport.events.frames) as the payload, routed by
+Zenoh from every supplier to every consumer whose key expression matches. A consumer's
+subscriptions become key expressions (`keys.event_selector`: `*` a key wildcard); one that
+another of its subscriptions covers is not declared, so that no event comes twice.
+
+Zenoh's subscriber callbacks run on Zenoh's threads: they only append (key, payload) to a
+bounded queue and, when it was empty, ask the reactor to read it (`Reactor.call_soon`, which
+never blocks). A full queue drops the newest event, which the consumer's sequence numbers
+show as missed. Suppliers put from the reactor thread with congestion control DROP, so a slow
+consumer never blocks them; whether anyone listens is not known to the supplier (every
+topic counts as subscribed), so suppliers encode what they push.
+"""
+
+from __future__ import annotations
+
+import collections
+import contextlib
+import threading
+from collections.abc import Callable
+from typing import Any
+
+import zenoh
+
+from miro_gen.log import PeerWarnings, logger
+from miro_gen.transport.events.frames import FrameError
+from miro_gen.transport.reactor import Reactor
+from miro_gen.transport.zenoh import keys
+
+_log = logger("MIRO")
+_peer_warnings = PeerWarnings(_log)
+_DROP = zenoh.CongestionControl.DROP
+_BLOCK = zenoh.CongestionControl.BLOCK
+
+
+class ZenohChannels:
+    """The links of the channels of a process: its `session` and its `reactor`. `endpoint`
+    is what a channel's naming entry carries."""
+
+    def __init__(self, session: Any, reactor: Reactor) -> None:
+        self.session = session
+        self.reactor = reactor
+        self.endpoint = keys.endpoint(str(session.zid()))
+
+    def publishing(
+        self,
+        channel: str,
+        on_connection: Callable[[bool], object],
+        on_subscriptions: Callable[[list[tuple[bool, bytes]]], object],
+        hwm: int,
+        burst: int,
+    ) -> ZenohPublishing:
+        return ZenohPublishing(self.session, self.reactor, channel, on_connection, on_subscriptions)
+
+    def subscribing(
+        self, channel: str, on_readable: Callable[[], object], hwm: int
+    ) -> ZenohSubscribing:
+        return ZenohSubscribing(self.session, self.reactor, channel, on_readable, hwm)
+
+
+class ZenohPublishing:
+    """A supplier's link: a Zenoh publisher per topic, declared on first use."""
+
+    def __init__(
+        self,
+        session: Any,
+        reactor: Reactor,
+        channel: str,
+        on_connection: Callable[[bool], object],
+        on_subscriptions: Callable[[list[tuple[bool, bytes]]], object],
+        *,
+        blocking: bool = False,
+    ) -> None:
+        self.session = session
+        self.channel = channel
+        self._publishers: dict[bytes, Any] = {}
+        self._congestion = _BLOCK if blocking else _DROP
+        self._closed = False
+
+        def up() -> None:  # as a channel just reached: everything counts as subscribed
+            on_connection(True)
+            on_subscriptions([(True, b"")])
+
+        reactor.call_soon(up)
+
+    @property
+    def connected(self) -> bool:
+        return not self._closed
+
+    @property
+    def moves(self) -> int:
+        return 0
+
+    def send(self, topic: bytes, body: bytes, copy: bool) -> bool:
+        publisher = self._publishers.get(topic)
+        if publisher is None:
+            publisher = self._publishers[topic] = self.session.declare_publisher(
+                keys.event_key(self.channel, topic), congestion_control=self._congestion
+            )
+        try:
+            publisher.put(body if isinstance(body, bytes) else bytes(body))
+        except zenoh.ZError:
+            return False
+        return True
+
+    def close(self) -> None:
+        self._closed = True
+        publishers, self._publishers = list(self._publishers.values()), {}
+        for p in publishers:
+            with contextlib.suppress(zenoh.ZError):
+                p.undeclare()
+
+
+class ZenohSubscribing:
+    """A consumer's link: a Zenoh subscriber per subscription not covered by another; at most
+    `hwm` frames wait for the reactor."""
+
+    def __init__(
+        self,
+        session: Any,
+        reactor: Reactor,
+        channel: str,
+        on_readable: Callable[[], object],
+        hwm: int,
+    ) -> None:
+        self.session = session
+        self.reactor = reactor
+        self.channel = channel
+        self.hwm = hwm
+        self.dropped = 0  # frames the full queue refused
+        self._on_readable = on_readable
+        self._prefixes: set[bytes] = set()
+        self._subscribers: dict[bytes, Any] = {}
+        self._frames: collections.deque[tuple[str, bytes]] = collections.deque()
+        self._scheduled = False
+        self._lock = threading.Lock()
+        self._closed = False
+
+    @property
+    def connected(self) -> bool:
+        return not self._closed
+
+    @property
+    def moves(self) -> int:
+        return 0
+
+    # ---- Zenoh's threads: never block -----------------------------------------------------------
+
+    def _on_sample(self, sample: Any) -> None:
+        if len(self._frames) >= self.hwm:
+            self.dropped += 1
+            return
+        self._frames.append((str(sample.key_expr), sample.payload.to_bytes()))
+        if not self._scheduled:
+            self._scheduled = True
+            self.reactor.call_soon(self._ready)
+
+    # ---- the reactor thread ---------------------------------------------------------------------
+
+    def _ready(self) -> None:
+        self._scheduled = False
+        if self._frames:
+            self._on_readable()
+
+    def subscribe(self, prefix: bytes) -> None:
+        self._prefixes.add(prefix)
+        self._declare()
+
+    def unsubscribe(self, prefix: bytes) -> None:
+        self._prefixes.discard(prefix)
+        self._declare()
+
+    def _declare(self) -> None:
+        """Subscribers for the prefixes no other prefix covers (ZeroMQ's prefix rule)."""
+        wanted = {
+            p for p in self._prefixes if not any(q != p and p.startswith(q) for q in self._prefixes)
+        }
+        for p in [p for p in self._subscribers if p not in wanted]:
+            _undeclare(self._subscribers.pop(p))
+        for p in wanted - self._subscribers.keys():
+            try:
+                selector = keys.event_selector(self.channel, p)
+            except (FrameError, UnicodeDecodeError) as e:
+                _log.warning("cannot subscribe to %r: %s", p, e)
+                continue
+            self._subscribers[p] = self.session.declare_subscriber(selector, self._on_sample)
+
+    def receive(self) -> tuple[bytes, memoryview] | None:
+        try:
+            key, payload = self._frames.popleft()
+        except IndexError:
+            return None
+        try:
+            topic = keys.topic_of(key)
+        except (FrameError, UnicodeDecodeError) as e:
+            raise ValueError(str(e)) from None
+        return topic, memoryview(payload)
+
+    def close(self) -> None:
+        self._closed = True
+        subscribers, self._subscribers = list(self._subscribers.values()), {}
+        for s in subscribers:
+            _undeclare(s)
+        self._frames.clear()
+
+
+def _undeclare(entity: Any) -> None:
+    with contextlib.suppress(zenoh.ZError):
+        entity.undeclare()
