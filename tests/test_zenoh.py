@@ -1,0 +1,112 @@
+"""What only the Zenoh backbone has to show: its keys, the choice of backbone, and that a
+session other than a name's owner cannot answer for it (Zenoh lets any session declare a
+queryable on any key). The contract both backbones keep is tests/test_backbones.py."""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Iterator
+
+import Miro
+import Miro__POA
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from loopback import NamingProcess, RunningServer
+
+from miro_gen import Client
+from miro_gen.service.options import UsageError, parse_common_options
+from miro_gen.transport.events.frames import topic
+
+zenoh = pytest.importorskip("zenoh")
+
+from miro_gen.transport.rpc import frames  # noqa: E402
+from miro_gen.transport.zenoh import keys  # noqa: E402
+from miro_gen.transport.zenoh.session import config, locator  # noqa: E402
+
+
+@given(st.text())
+def test_a_chunk_escapes_into_one_key_chunk_and_back(text: str) -> None:
+    chunk = keys.escape(text)
+    assert chunk and not set(chunk) & set("/*$?#")
+    assert keys.unescape(chunk) == text
+
+
+@given(st.text(), st.text(), st.text())
+def test_an_event_key_gives_back_its_topic(channel: str, domain: str, type_name: str) -> None:
+    t = topic(domain, type_name)
+    if domain.count("\0") or type_name.count("\0"):
+        return  # not a topic frame (a name has no NUL)
+    key = keys.event_key(channel, t)
+    assert keys.topic_of(key) == t
+    assert key.startswith(keys.event_selector(channel, b"")[: -len("*/*")])
+
+
+def test_subscriptions_become_key_expressions() -> None:
+    assert keys.event_selector("r/Events", b"") == "miro/ev/r%2FEvents/*/*"
+    assert keys.event_selector("r/Events", b"robot1\0") == "miro/ev/r%2FEvents/robot1/*"
+    assert keys.event_selector("E", topic("a/b", "T")) == "miro/ev/E/a%2Fb/T"
+
+
+def test_the_backbone_is_chosen_by_option_or_environment() -> None:
+    assert parse_common_options([])[0].transport == "zmq"
+    assert parse_common_options(["--transport", "zenoh"])[0].transport == "zenoh"
+    assert parse_common_options(["--transport=zenoh"])[0].transport == "zenoh"
+    assert parse_common_options([], {"MIRO_TRANSPORT": "zenoh"})[0].transport == "zenoh"
+    with pytest.raises(UsageError, match="unknown transport"):
+        parse_common_options(["--transport", "dds"])
+
+
+def test_sessions_never_scout_beyond_loopback() -> None:
+    conf = config("client", connect=locator("tcp://127.0.0.1:1"))
+    assert conf.get_json("scouting/multicast/enabled") == "false"
+    assert conf.get_json("connect/endpoints") == '["tcp/127.0.0.1:1"]'
+
+
+class _Example(Miro__POA.Example):
+    def __init__(self) -> None:
+        self.data = Miro.ExampleStructIDL(7.0, 7.0)
+
+    def setData(self, a: float, b: float) -> None:
+        self.data = Miro.ExampleStructIDL(a, b)
+
+    def getData(self) -> Miro.ExampleStructIDL:
+        return self.data
+
+
+@pytest.fixture(scope="module")
+def naming() -> Iterator[NamingProcess]:
+    process = NamingProcess(options=("--zenoh",))
+    yield process
+    process.stop()
+
+
+def test_a_second_session_on_the_owners_key_answers_no_call(naming: NamingProcess) -> None:
+    owner = RunningServer(naming.endpoint, "robot1", "--transport", "zenoh")
+    owner.server.add_to_name_service(_Example(), "ExampleA")
+    rogue = zenoh.open(config("client", connect=locator(naming.endpoint)))
+    heard = threading.Event()
+
+    def answer(query: object) -> None:  # answers at once, as the owner would
+        header = frames.decode_request(query.attachment.to_bytes())  # type: ignore[attr-defined]
+        reply = Miro.ExampleStructIDL(-1.0, -1.0).serialize()
+        query.reply(  # type: ignore[attr-defined]
+            query.key_expr,  # type: ignore[attr-defined]
+            reply,
+            attachment=frames.reply_header(header.request_id, 0),
+        )
+        heard.set()
+
+    queryable = rogue.declare_queryable(keys.call_key(str(owner.server.zenoh.zid())), answer)
+    client = Client(["t", "--transport", "zenoh", "--naming", naming.endpoint])
+    try:
+        example = client.resolve_name("robot1/ExampleA", Miro.Example, wait=10)
+        answers = [example.getData() for _ in range(20)]
+        assert heard.is_set()  # the rogue heard the calls, and answered them
+        assert answers == [Miro.ExampleStructIDL(7.0, 7.0)] * 20
+        assert client.invoker.foreign_replies >= 1  # type: ignore[attr-defined]
+    finally:
+        client.close()
+        queryable.undeclare()
+        rogue.close()
+        owner.stop()
