@@ -195,8 +195,11 @@ def naming_main(argv: Sequence[str]) -> int:
     if ns.zenoh:
         from miro_gen.cli.naming_zenoh import zenoh_naming
 
-        if ns.keys:
-            p.error("--keys: the Zenoh backbone has no keys yet (TLS); use --insecure or ZeroMQ")
+        if not ns.insecure and not sockets.is_loopback(sockets.endpoint_host(endpoint)):
+            p.error(
+                "beyond loopback the Zenoh backbone runs only with --insecure: it has no keys "
+                "yet (TLS), so anyone who reaches it may bind names and call (docs/FLEET.md)"
+            )
         log_path = ns.log_file or default_path(endpoint)
         return zenoh_naming(ns, endpoint, None if log_path == "none" else log_path)
     if ns.channel and not ns.host and re.search(r"://(0\.0\.0\.0|\*):", endpoint):

@@ -33,6 +33,7 @@ from miro_gen.runtime.rpc import Invoker, Reply, Servant, system_exception_reply
 from miro_gen.transport.rpc import frames
 from miro_gen.transport.rpc.caller import Caller, serving
 from miro_gen.transport.zenoh import keys
+from miro_gen.transport.zenoh.session import direct, track, untrack
 
 _log = logger("MIRO")
 _peer_warnings = PeerWarnings(_log)
@@ -73,7 +74,9 @@ class ZenohAdapter:
         ]
         for t in self._threads:
             t.start()
-        self._queryable = session.declare_queryable(keys.call_key(self.zid), self._queries.put)
+        self._queryable = track(
+            session.declare_queryable(keys.call_key(self.zid), direct(self._queries.put))
+        )
         self._token = session.liveliness().declare_token(keys.alive_key(self.zid))
 
     # ---- objects --------------------------------------------------------------------------------
@@ -187,8 +190,8 @@ class ZenohAdapter:
             if self._closed:
                 return
             self._closed = True
-        for entity in (self._queryable, self._token):
-            with contextlib.suppress(zenoh.ZError):  # the session is closed already
-                entity.undeclare()
+        untrack(self._queryable)
+        with contextlib.suppress(zenoh.ZError):  # the session is closed already
+            self._token.undeclare()
         for _ in self._threads:
             self._queries.put(None)

@@ -19,7 +19,6 @@ a set; a server not yet seen is asked for once (`liveliness().get`), from the ca
 
 from __future__ import annotations
 
-import contextlib
 import itertools
 import threading
 import time
@@ -34,6 +33,7 @@ from miro_gen.runtime.rpc import Reply, ReplyStatus, Servant
 from miro_gen.transport.rpc import frames
 from miro_gen.transport.rpc.invoker import LocalServants
 from miro_gen.transport.zenoh import keys
+from miro_gen.transport.zenoh.session import direct, track, untrack
 
 _log = logger("MIRO")
 _peer_warnings = PeerWarnings(_log)
@@ -58,8 +58,10 @@ class ZenohInvoker:
         self._alive: set[str] = set()
         self._closed = False
         self._lock = threading.Lock()
-        self._watch = session.liveliness().declare_subscriber(
-            keys.ALIVE_ALL, self._on_alive, history=True
+        self._watch = track(
+            session.liveliness().declare_subscriber(
+                keys.ALIVE_ALL, direct(self._on_alive), history=True
+            )
         )
         self.foreign_replies = 0  # replies from sessions that do not own the object: dropped
 
@@ -178,8 +180,7 @@ class ZenohInvoker:
             if self._closed:
                 return
             self._closed = True
-        with contextlib.suppress(zenoh.ZError):  # the session is closed already
-            self._watch.undeclare()
+        untrack(self._watch)
 
 
 def _ignore(_reply: Any) -> None:

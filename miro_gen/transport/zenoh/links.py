@@ -29,6 +29,7 @@ from miro_gen.log import PeerWarnings, logger
 from miro_gen.transport.events.frames import FrameError
 from miro_gen.transport.reactor import Reactor
 from miro_gen.transport.zenoh import keys
+from miro_gen.transport.zenoh.session import direct, track, untrack
 
 _log = logger("MIRO")
 _peer_warnings = PeerWarnings(_log)
@@ -179,14 +180,16 @@ class ZenohSubscribing:
             p for p in self._prefixes if not any(q != p and p.startswith(q) for q in self._prefixes)
         }
         for p in [p for p in self._subscribers if p not in wanted]:
-            _undeclare(self._subscribers.pop(p))
+            untrack(self._subscribers.pop(p))
         for p in wanted - self._subscribers.keys():
             try:
                 selector = keys.event_selector(self.channel, p)
             except (FrameError, UnicodeDecodeError) as e:
                 _log.warning("cannot subscribe to %r: %s", p, e)
                 continue
-            self._subscribers[p] = self.session.declare_subscriber(selector, self._on_sample)
+            self._subscribers[p] = track(
+                self.session.declare_subscriber(selector, direct(self._on_sample))
+            )
 
     def receive(self) -> tuple[bytes, memoryview] | None:
         try:
@@ -203,7 +206,7 @@ class ZenohSubscribing:
         self._closed = True
         subscribers, self._subscribers = list(self._subscribers.values()), {}
         for s in subscribers:
-            _undeclare(s)
+            untrack(s)
         self._frames.clear()
 
 

@@ -15,7 +15,6 @@ its owner as any lapsed name is. The token's callback only hands the key to the 
 
 from __future__ import annotations
 
-import contextlib
 import time
 from typing import Any
 
@@ -38,7 +37,7 @@ from miro_gen.transport.reactor import Reactor
 from miro_gen.transport.zenoh import keys
 from miro_gen.transport.zenoh.adapter import ZenohAdapter
 from miro_gen.transport.zenoh.invoker import ZenohInvoker
-from miro_gen.transport.zenoh.session import config, locator, shared_memory
+from miro_gen.transport.zenoh.session import config, direct, locator, shared_memory, track, untrack
 
 _log = logger("MIRO")
 
@@ -76,8 +75,10 @@ class ZenohNaming:
         self.invoker.adapter = self.adapter
         self.adapter.activate(self.registry, NAMING_KEY)
         self.ended = 0  # names whose tokens went: their leases ended then
-        self._tokens: Any = self.session.liveliness().declare_subscriber(
-            keys.NAME_TOKENS, self._on_token, history=True
+        self._tokens: Any = track(
+            self.session.liveliness().declare_subscriber(
+                keys.NAME_TOKENS, direct(self._on_token), history=True
+            )
         )
         self._timer = reactor.schedule_timer(PURGE_INTERVAL, PURGE_INTERVAL, self._purge)
 
@@ -106,8 +107,7 @@ class ZenohNaming:
 
     def close(self) -> None:
         self.reactor.cancel_timer(self._timer)
-        with contextlib.suppress(zenoh.ZError):
-            self._tokens.undeclare()
+        untrack(self._tokens)
         self.adapter.close()
         self.invoker.close()
         if self.log is not None:

@@ -13,10 +13,14 @@ through shared memory. `MIRO_ZENOH_SHM=0` turns it off, `1` on; the default is Z
 
 from __future__ import annotations
 
+import atexit
+import contextlib
 import json
 import os
 import re
+import threading
 import time
+from collections.abc import Callable
 from typing import Any
 
 import zenoh
@@ -70,6 +74,49 @@ def config(mode: str, *, connect: str | None = None, listen: str | None = None) 
 def shared_memory(conf: Any) -> bool:
     """Whether a config sends large messages on one host through shared memory."""
     return bool(json.loads(conf.get_json("transport/shared_memory/enabled")))
+
+
+_callbacks: list[Any] = []  # subscribers and queryables whose callbacks are Python code
+_callbacks_lock = threading.Lock()
+
+
+def _undeclare_all() -> None:
+    """Undeclare what still calls Python code when the interpreter exits: a subscriber or a
+    queryable left declared keeps the process from ever ending (Zenoh's threads wait for the
+    interpreter), and so does closing its session then."""
+    with _callbacks_lock:
+        entities, _callbacks[:] = list(_callbacks), []
+    for entity in entities:
+        with contextlib.suppress(zenoh.ZError):
+            entity.undeclare()
+
+
+atexit.register(_undeclare_all)
+
+
+def direct(callback: Callable[[Any], object]) -> Any:
+    """`callback` run on Zenoh's own thread, as a handler: no Python thread per subscriber or
+    queryable (zenoh-python's default gives each one, which keeps a process from exiting
+    while it is declared, and costs a thread switch per sample). Only for callbacks that
+    never block and never call Zenoh: they append to a queue or hand over to the reactor."""
+    return zenoh.handlers.Callback(callback, indirect=False)
+
+
+def track(entity: Any) -> Any:
+    """`entity` (a subscriber or a queryable with a Python callback), undeclared when the
+    interpreter exits if it still is declared then."""
+    with _callbacks_lock:
+        _callbacks.append(entity)
+    return entity
+
+
+def untrack(entity: Any) -> None:
+    """Undeclare `entity` (made with `track`) now."""
+    with _callbacks_lock:
+        if entity in _callbacks:
+            _callbacks.remove(entity)
+    with contextlib.suppress(zenoh.ZError):
+        entity.undeclare()
 
 
 def open_client(naming: str, wait: float | None = 0.0) -> Any:
