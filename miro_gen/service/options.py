@@ -22,6 +22,7 @@ takes what it knows and leaves the service's own ones. The contract (DESIGN.md, 
   interface (`0.0.0.0`) when other hosts must reach it;
 * `--keys FILE` (env `MIRO_KEYS`): the robot's or fleet's CURVE key (`miro keys new`);
   `--insecure`: no CURVE even beyond loopback (docs/SECURITY.md);
+* `--transport zmq|zenoh` (env `MIRO_TRANSPORT`): the backbone (docs/FLEET.md);
 * `--max-message-size BYTES` (env `MIRO_MAX_MESSAGE_SIZE`; suffixes K, M, G): the largest
   message a socket accepts (default 8M, like omniORB's `giopMaxMsgSize`);
 * `--wait-naming SECONDS` (env `MIRO_WAIT_NAMING`): how long a server waits for a naming
