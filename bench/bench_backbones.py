@@ -59,7 +59,9 @@ conf.insert_json5("connect/endpoints", json.dumps([sys.argv[1]]))
 conf.insert_json5("scouting/multicast/enabled", "false")
 s = zenoh.open(conf)
 reply, head = bytes.fromhex(sys.argv[2]), bytes(16)
-q = s.declare_queryable("bench/echo", lambda query: query.reply(query.key_expr, reply, attachment=head))
+def answer(query):
+    query.reply(query.key_expr, reply, attachment=head)
+q = s.declare_queryable("bench/echo", answer)
 print("READY", flush=True)
 while True:
     time.sleep(3600)
