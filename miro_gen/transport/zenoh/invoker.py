@@ -91,9 +91,9 @@ class ZenohInvoker:
             routers = self.session.info.routers_zid()
             if not routers:
                 raise TRANSIENT("no Zenoh router (the naming service) is connected")
-            zid = str(routers[0])
-            self._alive.add(zid)  # connected to it: up
-            return zid
+            router = str(routers[0])
+            self._alive.add(router)  # connected to it: up
+            return router
         zid = keys.zid_of(endpoint)
         if zid is None:
             raise TRANSIENT(f"{endpoint!r} is not an endpoint of the Zenoh backbone")
