@@ -258,3 +258,18 @@ def test_events_are_selected_by_domain_and_type_with_wildcards(
     e = exact.events[-1]
     assert e.payload == _event(e.payload.counter)
     assert e.type_hash == Miro.ExampleEventIDL._type_hash
+
+
+def test_a_supplier_knows_whether_anyone_subscribes(servers: Callable[[str], Server]) -> None:
+    host = servers("robot5")
+    supplier = StructuredPushSupplier(EventChannelFactory(host).create_channel("Quiet"))
+    listener = servers("gui")
+    remote = listener.resolve_channel("robot5/Quiet")
+    assert not supplier.has_subscribers("ExampleEvent")
+    assert not supplier.push("ExampleEvent", _event(0))  # nothing encoded, nothing sent
+    consumer = Recorder(remote)
+    consumer.set_subscriptions([("robot5", "ExampleEvent")])
+    eventually(lambda: supplier.has_subscribers("ExampleEvent"))
+    assert not supplier.has_subscribers("Other")
+    consumer.set_subscriptions([])
+    eventually(lambda: not supplier.has_subscribers("ExampleEvent"))

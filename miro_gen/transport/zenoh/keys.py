@@ -5,6 +5,9 @@
     miro/name/<zid>/<name>       liveliness: a name it keeps bound (the registry drops the
                                  name when the token goes: its process died or was cut off)
     miro/ev/<channel>/<domain>/<type>   the events of one channel, domain and type
+    miro/sub/<channel>/<prefix>/<zid>/<n>   liveliness: a consumer's subscription (its prefix,
+                                 transport.events.consumer.subscription_prefix, in hex), which
+                                 suppliers count as ZeroMQ's XPUB counts subscriptions
 
 Names, channels, domains and types become single chunks: `%`, `/`, `*`, `$`, `?`, `#` are
 percent-escaped (Zenoh forbids the others in a chunk; rmw_zenoh escapes `/` too), and an empty
@@ -117,3 +120,24 @@ def topic_of(key: str) -> bytes:
     if len(parts) != 5 or parts[0] != PREFIX or parts[1] != "ev":
         raise FrameError(f"not an event key: {key[:200]!r}")
     return topic(unescape(parts[3]), unescape(parts[4]))
+
+
+def sub_token(channel: str, prefix: bytes, zid: str, n: int) -> str:
+    """The liveliness token of a consumer's subscription to `prefix` on `channel`."""
+    return f"{PREFIX}/sub/{escape(channel)}/{escape(prefix.hex())}/{zid}/{n}"
+
+
+def sub_tokens(channel: str) -> str:
+    """The key expression of every subscription token of `channel`."""
+    return f"{PREFIX}/sub/{escape(channel)}/*/*/*"
+
+
+def prefix_of_sub(key: str) -> bytes:
+    """The subscription prefix a token's key carries; FrameError for another key."""
+    parts = key.split("/")
+    if len(parts) != 6 or parts[0] != PREFIX or parts[1] != "sub":
+        raise FrameError(f"not a subscription token: {key[:200]!r}")
+    try:
+        return bytes.fromhex(unescape(parts[3]))
+    except ValueError:
+        raise FrameError(f"not a subscription token: {key[:200]!r}") from None

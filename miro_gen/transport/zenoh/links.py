@@ -11,14 +11,17 @@ Zenoh's subscriber callbacks run on Zenoh's threads: they only append (key, payl
 bounded queue and, when it was empty, ask the reactor to read it (`Reactor.call_soon`, which
 never blocks). A full queue drops the newest event, which the consumer's sequence numbers
 show as missed. Suppliers put from the reactor thread with congestion control DROP, so a slow
-consumer never blocks them; whether anyone listens is not known to the supplier (every
-topic counts as subscribed), so suppliers encode what they push.
+consumer never blocks them. Each subscription of a consumer is also a liveliness token
+(`keys.sub_token`), which the suppliers of the channel count as ZeroMQ's XPUB counts
+subscriptions: `has_subscribers()` is false while nobody listens (nothing is encoded then), and
+a consumer whose process dies stops counting when its session ends.
 """
 
 from __future__ import annotations
 
 import collections
 import contextlib
+import itertools
 import threading
 from collections.abc import Callable
 from typing import Any
@@ -35,6 +38,7 @@ _log = logger("MIRO")
 _peer_warnings = PeerWarnings(_log)
 _DROP = zenoh.CongestionControl.DROP
 _BLOCK = zenoh.CongestionControl.BLOCK
+_tokens = itertools.count(1)  # the subscription tokens of this process
 
 
 class ZenohChannels:
@@ -80,12 +84,22 @@ class ZenohPublishing:
         self._publishers: dict[bytes, Any] = {}
         self._congestion = _BLOCK if blocking else _DROP
         self._closed = False
+        self._reactor = reactor
+        self._on_subscriptions = on_subscriptions
+        reactor.call_soon(on_connection, True)  # a channel that no process hosts is always up
+        self._watch = track(
+            session.liveliness().declare_subscriber(
+                keys.sub_tokens(channel), direct(self._on_token), history=True
+            )
+        )
 
-        def up() -> None:  # as a channel just reached: everything counts as subscribed
-            on_connection(True)
-            on_subscriptions([(True, b"")])
-
-        reactor.call_soon(up)
+    def _on_token(self, sample: Any) -> None:  # Zenoh's thread: hand over, never block
+        try:
+            prefix = keys.prefix_of_sub(str(sample.key_expr))
+        except FrameError:
+            return
+        subscribed = sample.kind == zenoh.SampleKind.PUT
+        self._reactor.call_soon(self._on_subscriptions, [(subscribed, prefix)])
 
     @property
     def connected(self) -> bool:
@@ -109,6 +123,7 @@ class ZenohPublishing:
 
     def close(self) -> None:
         self._closed = True
+        untrack(self._watch)
         publishers, self._publishers = list(self._publishers.values()), {}
         for p in publishers:
             with contextlib.suppress(zenoh.ZError):
@@ -135,6 +150,8 @@ class ZenohSubscribing:
         self._on_readable = on_readable
         self._prefixes: set[bytes] = set()
         self._subscribers: dict[bytes, Any] = {}
+        self._tokens: dict[bytes, Any] = {}
+        self._zid = str(session.zid())
         self._frames: collections.deque[tuple[str, bytes]] = collections.deque()
         self._scheduled = False
         self._lock = threading.Lock()
@@ -169,10 +186,16 @@ class ZenohSubscribing:
     def subscribe(self, prefix: bytes) -> None:
         self._prefixes.add(prefix)
         self._declare()
+        if prefix not in self._tokens:  # what suppliers count
+            key = keys.sub_token(self.channel, prefix, self._zid, next(_tokens))
+            self._tokens[prefix] = self.session.liveliness().declare_token(key)
 
     def unsubscribe(self, prefix: bytes) -> None:
         self._prefixes.discard(prefix)
         self._declare()
+        token = self._tokens.pop(prefix, None)
+        if token is not None:
+            _undeclare(token)
 
     def _declare(self) -> None:
         """Subscribers for the prefixes no other prefix covers (ZeroMQ's prefix rule)."""
@@ -204,6 +227,9 @@ class ZenohSubscribing:
 
     def close(self) -> None:
         self._closed = True
+        tokens, self._tokens = list(self._tokens.values()), {}
+        for token in tokens:
+            _undeclare(token)
         subscribers, self._subscribers = list(self._subscribers.values()), {}
         for s in subscribers:
             untrack(s)
