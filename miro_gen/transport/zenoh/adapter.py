@@ -75,7 +75,7 @@ class ZenohAdapter:
         for t in self._threads:
             t.start()
         self._queryable = track(
-            session.declare_queryable(keys.call_key(self.zid), direct(self._queries.put))
+            session.declare_queryable(keys.call_key(self.zid), direct(self._arrived))
         )
         self._token = session.liveliness().declare_token(keys.alive_key(self.zid))
 
@@ -103,30 +103,34 @@ class ZenohAdapter:
                     return ObjectRef(servant._repo_id, self.endpoint, key)
         return self.activate(servant)
 
-    # ---- requests (the pool's threads) ----------------------------------------------------------
+    # ---- requests -------------------------------------------------------------------------------
+
+    def _arrived(self, query: Any) -> None:  # Zenoh's thread: hand over, never block
+        self._queries.put((time.monotonic(), query))
 
     def _work(self) -> None:
         while True:
-            query = self._queries.get()
-            if query is None:
+            item = self._queries.get()
+            if item is None:
                 return
+            received, query = item
             with self._lock:
                 self._running += 1
             try:
-                self._serve(query)
+                self._serve(query, received)
             except zenoh.ZError as e:  # the caller or the session went away
                 _log.debug("a reply was not sent: %s", e)
             except Exception:
                 _log.exception("serving a call failed")
             finally:
-                del query  # finalizes the query: its caller hears that no more replies come
+                del query, item  # finalizes the query: its caller hears that no more come
                 with self._lock:
                     self._running -= 1
                     if not self._running:
                         self._idle.notify_all()
 
-    def _serve(self, query: Any) -> None:
-        received = time.monotonic()
+    def _serve(self, query: Any, received: float) -> None:
+        """Answer `query`, which arrived at `received` (monotonic seconds)."""
         attachment = query.attachment
         if attachment is None or query.payload is None:
             _peer_warnings.warning("dropped a request without a header or a body")
