@@ -4,6 +4,7 @@ queryable on any key). The contract both backbones keep is tests/test_backbones.
 
 from __future__ import annotations
 
+import socket
 import threading
 from collections.abc import Iterator
 
@@ -110,3 +111,19 @@ def test_a_second_session_on_the_owners_key_answers_no_call(naming: NamingProces
         queryable.undeclare()
         rogue.close()
         owner.stop()
+
+
+def test_the_router_beyond_loopback_needs_insecure_and_a_busy_port_is_one_line() -> None:
+    from loopback import free_port, run_miro
+
+    refused = run_miro("naming", "--zenoh", "--endpoint", f"tcp://0.0.0.0:{free_port()}")
+    assert refused.returncode == 2 and "--insecure" in refused.stderr.splitlines()[-1]
+    assert "Traceback" not in refused.stderr
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        taken = run_miro("naming", "--zenoh", "--endpoint", f"tcp://127.0.0.1:{port}",
+                         "--log-file", "none")  # fmt: skip
+    assert taken.returncode == 1 and "cannot run a Zenoh router" in taken.stderr, taken.stderr
+    assert "Traceback" not in taken.stderr and len(taken.stderr.strip().splitlines()) == 1
