@@ -127,3 +127,32 @@ def test_the_router_beyond_loopback_needs_insecure_and_a_busy_port_is_one_line()
                          "--log-file", "none")  # fmt: skip
     assert taken.returncode == 1 and "cannot run a Zenoh router" in taken.stderr, taken.stderr
     assert "Traceback" not in taken.stderr and len(taken.stderr.strip().splitlines()) == 1
+
+
+def test_a_fleet_channel_hears_every_robots_channel_with_the_robot_as_domain(
+    naming: NamingProcess,
+) -> None:
+    from loopback import Recorder, eventually
+
+    from miro_gen import EventChannelFactory, StructuredPushSupplier
+
+    zenoh_options = ("--transport", "zenoh")
+    robots = [RunningServer(naming.endpoint, f"robot{i}", *zenoh_options) for i in (1, 2)]
+    base = RunningServer(naming.endpoint, "base", *zenoh_options)
+    try:
+        suppliers = [
+            StructuredPushSupplier(EventChannelFactory(r.server).create_channel("EventChannel"))
+            for r in robots
+        ]
+        fleet = Recorder(base.server.resolve_channel("*/EventChannel"))
+        fleet.set_subscriptions([("*", "ExampleEvent")])
+        eventually(lambda: all(s.has_subscribers("ExampleEvent") for s in suppliers))
+        for n, s in enumerate(suppliers):
+            s.push("ExampleEvent", Miro.ExampleEventIDL(n, Miro.ExampleStructIDL(n, n)))
+        eventually(lambda: len(fleet.events) == 2)
+        assert {e.domain_name for e in fleet.events} == {"robot1", "robot2"}
+        with pytest.raises(ValueError, match="consumers only"):
+            StructuredPushSupplier(base.server.resolve_channel("*/EventChannel"))
+    finally:
+        for r in (base, *robots):
+            r.stop()

@@ -271,10 +271,13 @@ class EventChannelFactory:
 
 def resolve_channel(server: ChannelServer, name: str = DEFAULT_CHANNEL) -> EventChannel:
     """The channel bound as `name` (naming rules as for objects)."""
+    links = server.channel_links
+    if links is not None and "*" in name:  # a fleet's channel pattern: no entry to look up
+        return EventChannel(name, links.endpoint, "", server.reactor(), server.naming.context,
+                            links=links)  # fmt: skip
     entry = server.naming.resolve(name)
     if entry.repo_id != CHANNEL_REPO_ID:
         raise MiroNaming.NotFound(name=f"{entry.name} (bound, but not an event channel)")
-    links = server.channel_links
     if links is not None:
         return EventChannel(
             entry.name, entry.endpoint, "", server.reactor(), server.naming.context, links=links

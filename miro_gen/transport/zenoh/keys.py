@@ -99,10 +99,30 @@ def event_key(channel: str, topic_frame: bytes) -> str:
     return f"{PREFIX}/ev/{escape(channel)}/{escape(domain)}/{escape(type_name)}"
 
 
+def channel_chunk(channel: str) -> str:
+    """The chunk of a channel's keys; for a fleet's channel pattern (`*/EventChannel`: that
+    channel of every robot) a chunk with `$*` where the pattern has `*`."""
+    if "*" not in channel:
+        return escape(channel)
+    return "$*".join(escape(part) if part else "" for part in channel.split("*")) or "$*"
+
+
+def is_pattern(channel: str) -> bool:
+    return "*" in channel
+
+
+def sub_channel(key: str) -> str | None:
+    """The channel (or channel pattern) of a subscription token's key."""
+    parts = key.split("/")
+    if len(parts) != 6 or parts[0] != PREFIX or parts[1] != "sub":
+        return None
+    return unescape(parts[2])
+
+
 def event_selector(channel: str, prefix: bytes) -> str:
     """The key expression a consumer's subscription prefix (`consumer.subscription_prefix`)
     becomes: the empty prefix any domain and type, `domain\\0` any type of the domain."""
-    head = f"{PREFIX}/ev/{escape(channel)}"
+    head = f"{PREFIX}/ev/{channel_chunk(channel)}"
     if not prefix:
         return f"{head}/*/*"
     fields = prefix.split(b"\0")
@@ -127,9 +147,7 @@ def sub_token(channel: str, prefix: bytes, zid: str, n: int) -> str:
     return f"{PREFIX}/sub/{escape(channel)}/{escape(prefix.hex())}/{zid}/{n}"
 
 
-def sub_tokens(channel: str) -> str:
-    """The key expression of every subscription token of `channel`."""
-    return f"{PREFIX}/sub/{escape(channel)}/*/*/*"
+SUB_TOKENS: Final = f"{PREFIX}/sub/*/*/*/*"  # every subscription token of every channel
 
 
 def prefix_of_sub(key: str) -> bytes:

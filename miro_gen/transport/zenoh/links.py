@@ -15,12 +15,18 @@ consumer never blocks them. Each subscription of a consumer is also a liveliness
 (`keys.sub_token`), which the suppliers of the channel count as ZeroMQ's XPUB counts
 subscriptions: `has_subscribers()` is false while nobody listens (nothing is encoded then), and
 a consumer whose process dies stops counting when its session ends.
+
+A fleet's channel: a consumer of the channel pattern `*/EventChannel` (resolve_channel with a
+`*` in the name) hears that channel of every robot, each robot's events under its own domain
+(Miro's NotifyMulticast, without a multicast group): its keys use Zenoh's `$*` wildcard, and
+suppliers count its subscriptions when their channel matches the pattern.
 """
 
 from __future__ import annotations
 
 import collections
 import contextlib
+import fnmatch
 import itertools
 import threading
 from collections.abc import Callable
@@ -58,6 +64,8 @@ class ZenohChannels:
         hwm: int,
         burst: int,
     ) -> ZenohPublishing:
+        if keys.is_pattern(channel):
+            raise ValueError(f"{channel}: a fleet's channel pattern is for consumers only")
         return ZenohPublishing(self.session, self.reactor, channel, on_connection, on_subscriptions)
 
     def subscribing(
@@ -89,13 +97,20 @@ class ZenohPublishing:
         reactor.call_soon(on_connection, True)  # a channel that no process hosts is always up
         self._watch = track(
             session.liveliness().declare_subscriber(
-                keys.sub_tokens(channel), direct(self._on_token), history=True
+                keys.SUB_TOKENS, direct(self._on_token), history=True
             )
         )
 
     def _on_token(self, sample: Any) -> None:  # Zenoh's thread: hand over, never block
+        key = str(sample.key_expr)
+        wanted = keys.sub_channel(key)
+        if wanted is None or not (
+            wanted == self.channel
+            or (keys.is_pattern(wanted) and fnmatch.fnmatchcase(self.channel, wanted))
+        ):
+            return  # another channel's consumer
         try:
-            prefix = keys.prefix_of_sub(str(sample.key_expr))
+            prefix = keys.prefix_of_sub(key)
         except FrameError:
             return
         subscribed = sample.kind == zenoh.SampleKind.PUT
