@@ -7,13 +7,14 @@ from __future__ import annotations
 import socket
 import threading
 from collections.abc import Iterator
+from pathlib import Path
 
 import Miro
 import Miro__POA
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
-from loopback import NamingProcess, RunningServer
+from loopback import NamingProcess, RunningServer, service_env
 
 from miro_gen import Client
 from miro_gen.service.options import UsageError, parse_common_options
@@ -40,7 +41,11 @@ def test_an_event_key_gives_back_its_topic(channel: str, domain: str, type_name:
         return  # not a topic frame (a name has no NUL)
     key = keys.event_key(channel, t)
     assert keys.topic_of(key) == t
-    assert key.startswith(keys.event_selector(channel, b"")[: -len("*/*")])
+    if "*" not in channel:  # (a pattern is for consumers: it has no keys of its own)
+        selector = zenoh.KeyExpr(keys.event_selector(channel, b""))
+        assert selector.intersects(zenoh.KeyExpr(key))
+        fleet = zenoh.KeyExpr(keys.event_selector("*" + channel[len(channel) // 2 :], b""))
+        assert fleet.intersects(zenoh.KeyExpr(key))
 
 
 def test_subscriptions_become_key_expressions() -> None:
@@ -156,3 +161,40 @@ def test_a_fleet_channel_hears_every_robots_channel_with_the_robot_as_domain(
     finally:
         for r in (base, *robots):
             r.stop()
+
+
+def test_the_base_records_every_robots_events_from_the_fleet_channel(
+    naming: NamingProcess, tmp_path: Path
+) -> None:
+    from eventlog_helpers import miro, proc, stop
+    from loopback import run_miro
+
+    env = service_env(MIRO_TRANSPORT="zenoh")
+    hosts = [proc("channel_host.py", "--transport", "zenoh", "--naming", naming.endpoint,
+                  "-MNC", robot, "EventChannel") for robot in ("robot1", "robot2")]  # fmt: skip
+    log = tmp_path / "fleet.mcap"
+    rec = None
+    try:
+        for h in hosts:
+            assert h.stdout is not None and h.stdout.readline().strip() == "READY"
+        rec = miro("log", "record", "--naming", naming.endpoint, "--channel", "*/EventChannel",
+                   "-o", str(log), env=env)  # fmt: skip
+        assert rec.stderr is not None and rec.stderr.readline().startswith("recording ")
+        for robot in ("robot1", "robot2"):
+            sup = proc("event_supplier.py", "--transport", "zenoh", "--naming", naming.endpoint,
+                       "-MNC", robot, "EventChannel", "20", "5")  # fmt: skip
+            out, err = sup.communicate(timeout=60)
+            assert sup.returncode == 0 and "DONE" in out, err
+        stop(rec)
+        rec = None
+        info = run_miro("log", "info", str(log))
+        assert info.returncode == 0, info.stderr
+        counts = {line.split()[0]: line.split()[2] for line in info.stdout.splitlines()
+                  if "events" in line and "/" in line.split()[0]}  # fmt: skip
+        assert counts == {"robot1/ExampleEvent": "20", "robot2/ExampleEvent": "20"}, info.stdout
+    finally:
+        if rec is not None:
+            rec.kill()
+        for h in hosts:
+            h.kill()
+            h.wait()

@@ -9,8 +9,9 @@
                                  transport.events.consumer.subscription_prefix, in hex), which
                                  suppliers count as ZeroMQ's XPUB counts subscriptions
 
-Names, channels, domains and types become single chunks: `%`, `/`, `*`, `$`, `?`, `#` are
-percent-escaped (Zenoh forbids the others in a chunk; rmw_zenoh escapes `/` too), and an empty
+Names, channels, domains and types become single chunks: `%`, `/`, `*`, `$`, `?`, `#`, `@` are
+percent-escaped (Zenoh forbids the others in a chunk, and one that starts with `@` matches no
+wildcard; rmw_zenoh escapes `/` too), and an empty
 text is `%` alone (a chunk may not be empty; a real `%` is always `%25`).
 """
 
@@ -24,7 +25,7 @@ from miro_gen.transport.events.frames import FrameError, topic
 PREFIX: Final = "miro"
 ENDPOINT_SCHEME: Final = "zenoh/"  # an object reference's endpoint: zenoh/<zid>
 NAMING_ENDPOINT: Final = "zenoh/naming"  # the naming registry: the router's session
-_ESCAPED: Final = {c: f"%{ord(c):02X}" for c in "%/*$?#"}
+_ESCAPED: Final = {c: f"%{ord(c):02X}" for c in "%/*$?#@"}  # (`@`: Zenoh's verbatim chunks)
 _SPECIAL: Final = frozenset(_ESCAPED)
 
 
@@ -104,7 +105,10 @@ def channel_chunk(channel: str) -> str:
     channel of every robot) a chunk with `$*` where the pattern has `*`."""
     if "*" not in channel:
         return escape(channel)
-    return "$*".join(escape(part) if part else "" for part in channel.split("*")) or "$*"
+    chunk = "$*".join(escape(part) if part else "" for part in channel.split("*"))
+    while "$*$*" in chunk:  # (`**` in a pattern)
+        chunk = chunk.replace("$*$*", "$*")
+    return "*" if chunk == "$*" else chunk
 
 
 def is_pattern(channel: str) -> bool:
