@@ -273,3 +273,28 @@ def test_a_supplier_knows_whether_anyone_subscribes(servers: Callable[[str], Ser
     assert not supplier.has_subscribers("Other")
     consumer.set_subscriptions([])
     eventually(lambda: not supplier.has_subscribers("ExampleEvent"))
+
+
+def test_names_and_calls_come_back_after_the_naming_service_restarts(backbone: Backbone) -> None:
+    own = Backbone(backbone.name, NamingProcess(options=backbone.naming.options))
+    try:
+        proc = own.spawn("robot6", "Survivor")
+        own.naming.restart()  # killed, and started again on the same port and log of owners
+        client = own.client()
+        try:
+
+            def answers() -> bool:
+                try:
+                    example = client.resolve_name("robot6/Survivor", Miro.Example)
+                    example.setData(3.0, 4.0)
+                    return bool(example.getData() == Miro.ExampleStructIDL(4.0, 5.0))
+                except (MiroNaming.NotFound, TRANSIENT, TIMEOUT):
+                    return False
+
+            eventually(answers, 30)
+        finally:
+            client.close()
+            proc.kill()
+            proc.wait(10)
+    finally:
+        own.naming.stop()
