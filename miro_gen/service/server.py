@@ -39,7 +39,7 @@ from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.runtime.rpc import Servant, Stub
 from miro_gen.service.backbone import CallClient, CallServer, NameKeeper, Naming
 from miro_gen.service.introspection import SERVICE_KEY, ServiceImpl, bind_service, service_name
-from miro_gen.service.options import CommonOptions, parse_common_options
+from miro_gen.service.options import CommonOptions, UsageError, parse_common_options
 from miro_gen.transport import sockets
 from miro_gen.transport.addresses import server_addresses
 from miro_gen.transport.events import channel_link
@@ -108,8 +108,13 @@ class Client:
         self._zmq_invoker: ZmqInvoker | ZenohInvoker
         naming_endpoint = self.options.naming
         if zenoh:  # calls over queryables, names in the registry beside the router
-            from miro_gen.transport.zenoh import keys, session
-            from miro_gen.transport.zenoh.invoker import ZenohInvoker
+            try:
+                from miro_gen.transport.zenoh import keys, session
+                from miro_gen.transport.zenoh.invoker import ZenohInvoker
+            except ImportError as e:
+                raise UsageError(
+                    f"--transport zenoh needs the Zenoh wheel ({e}): pip install 'miro-gen[zenoh]'"
+                ) from None
 
             self.zenoh = session.open_client(self.options.naming, self._router_wait())
             self._zmq_invoker = ZenohInvoker(self.zenoh)
