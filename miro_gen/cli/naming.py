@@ -161,6 +161,13 @@ def naming_main(argv: Sequence[str]) -> int:
         help="the manual's spelling of --endpoint",
     )
     p.add_argument(
+        "--zenoh",
+        action="store_true",
+        help="the Zenoh backbone's naming service: a Zenoh router listening at --endpoint "
+        "with the name registry beside it, for services run with --transport zenoh "
+        "(docs/FLEET.md)",
+    )
+    p.add_argument(
         "--list-announced",
         action="store_true",
         help="list the naming services announced on this network, whether each answers and "
@@ -201,6 +208,16 @@ def naming_main(argv: Sequence[str]) -> int:
     except UsageError as e:
         p.error(str(e))
     policy = dataclasses.replace(policy, max_connections=ns.max_connections)
+    if ns.zenoh:
+        from miro_gen.cli.naming_zenoh import zenoh_naming
+
+        if not ns.insecure and not sockets.is_loopback(sockets.endpoint_host(endpoint)):
+            p.error(
+                "beyond loopback the Zenoh backbone runs only with --insecure: it has no keys "
+                "yet (TLS), so anyone who reaches it may bind names and call (docs/FLEET.md)"
+            )
+        log_path = ns.log_file or default_path(endpoint)
+        return zenoh_naming(ns, endpoint, None if log_path == "none" else log_path)
     if ns.channel and not ns.host and re.search(r"://(0\.0\.0\.0|\*):", endpoint):
         p.error(
             "--channel with an --endpoint on every interface needs --host ADDRESS: the "

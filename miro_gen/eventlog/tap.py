@@ -21,12 +21,14 @@ from miro_gen.transport.events import EventChannel, subscription_prefix
 from miro_gen.transport.events.channel_link import ChannelLink
 from miro_gen.transport.events.frames import FrameError, RawEvent, parse_batch, split_topic
 from miro_gen.transport.events.gaps import GapCounter
+from miro_gen.transport.events.links import SubscribingLink
 
 _log = logger("MIRO")
 _peer_warnings = PeerWarnings(_log)  # what peers send: rate-limited, with counts
 # A recorder would rather queue than drop while it writes a chunk: up to this many bytes of
 # frames of the largest size (batched frames of small events count as frames too).
 QUEUE_BYTES = 1 << 30
+LINK_FRAMES = 100_000  # frames a backbone's link (Zenoh's) keeps waiting for the reactor
 
 Handler = Callable[[list[RawEvent], int], object]  # events of one frame, receive time ns
 
@@ -51,6 +53,12 @@ class RawEventTap:
         self.gaps = GapCounter()
         self.bad_frames = 0
         self._wanted: dict[bytes, bool] = {}
+        self.sub: SubscribingLink | None = None
+        if channel.links is not None:  # a backbone without channel hosts (Zenoh)
+            self.sub = channel.subscribing(self._read_link, LINK_FRAMES)
+            for prefix in {subscription_prefix(d, t) for d, t in self.filters}:
+                self.sub.subscribe(prefix)
+            return
         context = self.reactor.context
         self.socket: zmq.Socket[Any] = sockets.connecting_socket(context, zmq.SUB)
         self.socket.setsockopt(zmq.RCVHWM, sockets.queue_limit(context, QUEUE_BYTES))
@@ -83,6 +91,31 @@ class RawEventTap:
                 self.received += len(events)
                 self.handler(events, received_ns)
 
+    def _read_link(self) -> None:
+        assert self.sub is not None
+        for _ in range(1000):
+            try:
+                frame = self.sub.receive()
+            except ValueError as e:
+                self.bad_frames += 1
+                _peer_warnings.warning("dropped an event frame on %s: %s", self.channel.name, e)
+                continue
+            if frame is None:
+                return
+            self._deliver([frame[0], bytes(frame[1])], time.time_ns())
+        self.reactor.call_soon(self._read_link)  # more may wait: next turn
+
+    def _deliver(self, parts: list[bytes], received_ns: int) -> None:
+        try:
+            events = self._parse(parts)
+        except FrameError as e:
+            self.bad_frames += 1
+            _peer_warnings.warning("dropped an event frame on %s: %s", self.channel.name, e)
+            return
+        if events:
+            self.received += len(events)
+            self.handler(events, received_ns)
+
     def _parse(self, parts: list[bytes]) -> list[RawEvent]:
         if len(parts) != 2:
             raise FrameError(f"{len(parts)} frames, expected 2")
@@ -109,4 +142,7 @@ class RawEventTap:
         return self.gaps.missed
 
     def close(self) -> None:
+        if self.sub is not None:
+            self.sub.close()
+            return
         self.link.close_socket()

@@ -5,7 +5,8 @@ A backbone carries a process's calls, names and events. The ZeroMQ one is `miro_
 its calls are `transport.rpc` (`ZmqInvoker`, `ObjectAdapter`), its names `transport.naming`
 (`NamingClient`, `Leases`), its events `transport.events`. The CORBA world provides calls and
 names of its own (`miro_gen.corba`: `IIOPInvoker`, `CorbaNaming`; `service.iiop.CorbaNames`),
-which `service.iiop` plugs in at the same seams. A second backbone (Zenoh) provides the same:
+which `service.iiop` plugs in at the same seams. The second backbone, Zenoh
+(`transport.zenoh`, `--transport zenoh`), provides the same:
 
 * calls: `CallClient`, the invoker generated stubs call through (`runtime.rpc.Invoker`), and
   `CallServer`, the object adapter that serves a process's servants under object keys;

@@ -22,6 +22,7 @@ takes what it knows and leaves the service's own ones. The contract (DESIGN.md, 
   interface (`0.0.0.0`) when other hosts must reach it;
 * `--keys FILE` (env `MIRO_KEYS`): the robot's or fleet's CURVE key (`miro keys new`);
   `--insecure`: no CURVE even beyond loopback (docs/SECURITY.md);
+* `--transport zmq|zenoh` (env `MIRO_TRANSPORT`): the backbone (docs/FLEET.md);
 * `--max-message-size BYTES` (env `MIRO_MAX_MESSAGE_SIZE`; suffixes K, M, G): the largest
   message a socket accepts (default 8M, like omniORB's `giopMaxMsgSize`);
 * `--wait-naming SECONDS` (env `MIRO_WAIT_NAMING`): how long a server waits for a naming
@@ -79,6 +80,7 @@ class CommonOptions:
     iiop_endpoint: str | None = None  # HOST:PORT to serve IIOP on (--iiop-endpoint)
     wait_naming: float | None = None  # --wait-naming: seconds a server waits (None: no limit)
     ignored: list[str] = field(default_factory=list)  # -ORB options given, for the notice
+    transport: str = "zmq"  # --transport / MIRO_TRANSPORT: the backbone, zmq or zenoh
 
 
 def naming_endpoint(text: str) -> str:
@@ -158,6 +160,8 @@ def parse_common_options(
         opts.max_message_size = byte_size(env["MIRO_MAX_MESSAGE_SIZE"], "MIRO_MAX_MESSAGE_SIZE")
     if env.get("MIRO_WAIT_NAMING"):
         opts.wait_naming = seconds(env["MIRO_WAIT_NAMING"], "MIRO_WAIT_NAMING")
+    if env.get("MIRO_TRANSPORT"):
+        opts.transport = transport(env["MIRO_TRANSPORT"], "MIRO_TRANSPORT")
     rest: list[str] = []
     args = list(argv)
     i = 0
@@ -177,6 +181,8 @@ def parse_common_options(
             break
         if name == "--clock":
             opts.clock = _clock(inline if eq else value(name))
+        elif name == "--transport":
+            opts.transport = transport(inline if eq else value(name), name)
         elif name in ("--bind", "--keys", "--max-message-size", "--wait-naming"):
             text = inline if eq else value(name)
             if name == "--wait-naming":
@@ -230,6 +236,17 @@ def parse_common_options(
             rest.append(arg)
         i += 1
     return opts, rest
+
+
+TRANSPORTS = ("zmq", "zenoh")
+
+
+def transport(text: str, option: str) -> str:
+    """The backbone an option names: zmq (the default) or zenoh (docs/FLEET.md)."""
+    t = text.strip().lower()
+    if t not in TRANSPORTS:
+        raise UsageError(f"{option}: unknown transport {text!r} (expected zmq or zenoh)")
+    return t
 
 
 def byte_size(text: str, option: str) -> int:
@@ -293,6 +310,8 @@ COMMON_HELP = (
     ("--wait-naming SECONDS", "how long a server waits for its naming service to answer "
      "(env MIRO_WAIT_NAMING; default: until it does)"),
     ("--clock wall|log|log:CHANNEL", "run on wall time (default) or a log player's time"),
+    ("--transport zmq|zenoh", "the backbone: ZeroMQ (default) or Zenoh, whose router "
+     "`miro naming --zenoh` hosts at --naming (env MIRO_TRANSPORT)"),
 )  # fmt: skip
 
 

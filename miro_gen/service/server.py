@@ -39,7 +39,7 @@ from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.runtime.rpc import Servant, Stub
 from miro_gen.service.backbone import CallClient, CallServer, NameKeeper, Naming
 from miro_gen.service.introspection import SERVICE_KEY, ServiceImpl, bind_service, service_name
-from miro_gen.service.options import CommonOptions, parse_common_options
+from miro_gen.service.options import CommonOptions, UsageError, parse_common_options
 from miro_gen.transport import sockets
 from miro_gen.transport.addresses import server_addresses
 from miro_gen.transport.events import channel_link
@@ -52,6 +52,8 @@ from miro_gen.transport.rpc.invoker import ZmqInvoker
 
 if TYPE_CHECKING:  # loaded when the options call for it
     from miro_gen.service.iiop import CorbaSide
+    from miro_gen.transport.events.channels import ChannelLinks
+    from miro_gen.transport.zenoh.invoker import ZenohInvoker
 
 StubT = TypeVar("StubT", bound=Stub)
 WAIT_STEP = 0.5  # at most this many seconds between two looks for a name being waited for
@@ -97,20 +99,46 @@ class Client:
         self, argv: Sequence[str] | None = None, *, context: zmq.Context[Any] | None = None
     ) -> None:
         self.options, self.argv = _take_options(argv)
-        if not self.options.naming_given and os.environ.get("MIRO_DISCOVERY", "1") != "0":
+        self.zenoh: Any = None  # the Zenoh session (--transport zenoh, transport.zenoh)
+        zenoh = self.options.transport == "zenoh"
+        if (
+            not zenoh
+            and not self.options.naming_given
+            and os.environ.get("MIRO_DISCOVERY", "1") != "0"
+        ):
             from miro_gen.transport.naming.discovery import naming_for  # the manual's -m 1
 
             self.options.naming = naming_for(self.options.naming)
         self.context = context if context is not None else zmq.Context.instance()
         self._configure_sockets(None)
-        self._zmq_invoker = ZmqInvoker(self.context)  # (a Server's adapter serves its arguments)
+        # (a Server's adapter serves the local objects passed as arguments)
+        self._zmq_invoker: ZmqInvoker | ZenohInvoker
+        naming_endpoint = self.options.naming
+        if zenoh:  # calls over queryables, names in the registry beside the router
+            try:
+                from miro_gen.transport.zenoh import keys, session
+                from miro_gen.transport.zenoh.invoker import ZenohInvoker
+            except ImportError as e:
+                raise UsageError(
+                    f"--transport zenoh needs the Zenoh wheel ({e}): pip install 'miro-gen[zenoh]'"
+                ) from None
+
+            self.zenoh = session.open_client(self.options.naming, self._router_wait())
+            self._zmq_invoker = ZenohInvoker(self.zenoh)
+            naming_endpoint = keys.NAMING_ENDPOINT
+        else:
+            self._zmq_invoker = ZmqInvoker(self.context)
         self.invoker: CallClient = self._zmq_invoker
         self.corba = _corba_side(self)  # the CORBA world: a CORBA naming service, IIOP
         self.naming: Naming = (
             self.corba.naming
             if self.corba is not None and self.corba.naming is not None
-            else NamingClient(self.invoker, self.options.naming, self.options.naming_context)
+            else NamingClient(self.invoker, naming_endpoint, self.options.naming_context)
         )
+
+    def _router_wait(self) -> float | None:
+        """Seconds to wait for the Zenoh router to be up (a client's: a moment)."""
+        return 2.0
 
     def resolve_name(
         self, name: str, stub: type[StubT], *, wait: float = 0.0, rebind: bool = True
@@ -198,6 +226,8 @@ class Client:
         if self.corba is not None:
             self.corba.close()
         self.invoker.close()
+        if self.zenoh is not None:
+            self.zenoh.close()
 
 
 class Server(Client):
@@ -224,12 +254,20 @@ class Server(Client):
             clock = LogClock()
             use(clock)
         self._reactor = Reactor(self.context, clock)
-        self.adapter: CallServer = ObjectAdapter(
-            self._reactor,
-            self.invoker,
-            bind=f"tcp://{self.addresses.bind}:*",
-            host=self.addresses.advertise,
-        )
+        self.channel_links: ChannelLinks | None = None  # (ZeroMQ's channels have hosts)
+        if self.zenoh is not None:
+            from miro_gen.transport.zenoh.adapter import ZenohAdapter
+            from miro_gen.transport.zenoh.links import ZenohChannels
+
+            self.adapter: CallServer = ZenohAdapter(self.zenoh, self.invoker)
+            self.channel_links = ZenohChannels(self.zenoh, self._reactor)
+        else:
+            self.adapter = ObjectAdapter(
+                self._reactor,
+                self.invoker,
+                bind=f"tcp://{self.addresses.bind}:*",
+                host=self.addresses.advertise,
+            )
         self._zmq_invoker.adapter = self.adapter
         if self.corba is not None:
             self.corba.serve(self.addresses.bind, self.addresses.advertise)
@@ -253,6 +291,10 @@ class Server(Client):
             )
             self.naming.before_first_call = leases.wait_for_naming
             self.names = leases
+            if self.zenoh is not None:  # and a liveliness token per name
+                from miro_gen.transport.zenoh.names import TokenedNames
+
+                self.names = TokenedNames(leases, self.zenoh)
         self.drain_timeout = DRAIN_TIMEOUT
         self._armed = False
         self._cleaned = False
@@ -265,6 +307,9 @@ class Server(Client):
             from miro_gen.service.log_clock import follow_log_clock
 
             follow_log_clock(self, self.options.clock.partition(":")[2] or "LogClock", clock)
+
+    def _router_wait(self) -> float | None:
+        return self.options.wait_naming  # as for the naming service (None: until it is up)
 
     def reactor(self) -> Reactor:
         return self._reactor

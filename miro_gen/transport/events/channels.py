@@ -23,7 +23,12 @@ import zmq
 from miro_gen.log import logger
 from miro_gen.transport import sockets
 from miro_gen.transport.addresses import Addresses
-from miro_gen.transport.events.links import ZmqPublishing, ZmqSubscribing
+from miro_gen.transport.events.links import (
+    PublishingLink,
+    SubscribingLink,
+    ZmqPublishing,
+    ZmqSubscribing,
+)
 from miro_gen.transport.local import bind_twin, nearest
 from miro_gen.transport.reactor import Reactor
 
@@ -34,6 +39,28 @@ DEFAULT_CHANNEL = "EventChannel"
 # Frames a channel queues for each of its peers, at most (high-water marks are set once: libzmq
 # can stall a pipe whose mark is lowered while it carries messages).
 PROXY_HWM = 1_000
+
+
+class ChannelLinks(Protocol):
+    """A backbone whose channels are names that no process hosts (Zenoh: a channel is its
+    keys, transport.zenoh.links): it links suppliers and consumers to a channel by name.
+    `endpoint`: what a channel's naming entry carries."""
+
+    @property
+    def endpoint(self) -> str: ...
+
+    def publishing(
+        self,
+        channel: str,
+        on_connection: Callable[[bool], object],
+        on_subscriptions: Callable[[list[tuple[bool, bytes]]], object],
+        hwm: int,
+        burst: int,
+    ) -> PublishingLink: ...
+
+    def subscribing(
+        self, channel: str, on_readable: Callable[[], object], hwm: int
+    ) -> SubscribingLink: ...
 
 
 @dataclass
@@ -50,6 +77,8 @@ class EventChannel:
     # Looks the channel up again (in the naming service) when its host has gone: None for a
     # channel at fixed endpoints (one hosted here, or made by hand).
     resolve: Callable[[], EventChannel] | None = field(default=None, repr=False)
+    # Over a backbone without channel hosts (Zenoh), what links suppliers and consumers.
+    links: ChannelLinks | None = field(default=None, repr=False)
 
     def endpoints(self, context: zmq.Context[Any]) -> tuple[str, str]:
         """(supplier, consumer) endpoints for sockets of `context`: in the process that hosts
@@ -66,9 +95,11 @@ class EventChannel:
         on_subscriptions: Callable[[list[tuple[bool, bytes]]], object],
         hwm: int,
         burst: int,
-    ) -> ZmqPublishing:
+    ) -> PublishingLink:
         """A supplier's link to this channel (transport.events.links), found again when the
         channel moves (when it has a name to be looked up by)."""
+        if self.links is not None:
+            return self.links.publishing(self.name, on_connection, on_subscriptions, hwm, burst)
         context = self.reactor.context
         resolve = self.resolve
         return ZmqPublishing(
@@ -81,8 +112,10 @@ class EventChannel:
             burst,
         )
 
-    def subscribing(self, on_readable: Callable[[], object], hwm: int) -> ZmqSubscribing:
+    def subscribing(self, on_readable: Callable[[], object], hwm: int) -> SubscribingLink:
         """A consumer's link to this channel (transport.events.links)."""
+        if self.links is not None:
+            return self.links.subscribing(self.name, on_readable, hwm)
         context = self.reactor.context
         resolve = self.resolve
         return ZmqSubscribing(
@@ -191,6 +224,11 @@ class ChannelServer(Protocol):
     @property
     def corba(self) -> ChannelDoors | None: ...
 
+    @property
+    def channel_links(self) -> ChannelLinks | None:
+        """The links of a backbone without channel hosts (None: ZeroMQ's proxies)."""
+        ...
+
     def reactor(self) -> Reactor: ...
 
     def bind_entry(self, entry: MiroNaming.Entry) -> None: ...
@@ -211,6 +249,15 @@ class EventChannelFactory:
         full = self.server.naming.full_name(name)
         if full in self._channels:
             return self._channels[full]
+        links = self.server.channel_links
+        if links is not None:  # a name only: no process hosts it
+            channel = EventChannel(
+                full, links.endpoint, "", self.server.reactor(), self.server.naming.context,
+                links=links,
+            )  # fmt: skip
+            self.server.bind_entry(MiroNaming.Entry(full, CHANNEL_REPO_ID, links.endpoint, b"", ""))
+            self._channels[full] = channel
+            return channel
         # Bound and advertised like the server's objects (miro_gen.transport.addresses).
         addresses = self.server.addresses
         ch_host = ChannelHost(self.server.context, addresses.bind, addresses.advertise)
@@ -249,7 +296,17 @@ class EventChannelFactory:
 
 def resolve_channel(server: ChannelServer, name: str = DEFAULT_CHANNEL) -> EventChannel:
     """The channel bound as `name` (naming rules as for objects)."""
+    links = server.channel_links
+    if links is not None and "*" in name:  # a fleet's channel pattern: no entry to look up
+        return EventChannel(name, links.endpoint, "", server.reactor(), server.naming.context,
+                            links=links)  # fmt: skip
     entry = server.naming.resolve(name)
+    if links is not None:
+        if entry.repo_id != CHANNEL_REPO_ID:
+            raise MiroNaming.NotFound(name=f"{entry.name} (bound, but not an event channel)")
+        return EventChannel(
+            entry.name, entry.endpoint, "", server.reactor(), server.naming.context, links=links
+        )
     supplier, consumer = channel_endpoints(entry)
     return EventChannel(
         entry.name,

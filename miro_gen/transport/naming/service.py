@@ -140,6 +140,18 @@ class Registry(MiroNaming__POA.Registry):
             self.table.keep(binding, time.time())
         _log.info("bound %s (%s at %s)", binding.name, binding.repo_id, binding.endpoint)
 
+    def end_lease(self, name: str, endpoint: str) -> bool:
+        """End the lease of `name` now, if it is live and bound at `endpoint`: its server is
+        known to be gone (the Zenoh backbone's liveliness, transport.zenoh.registry). The name
+        is then kept for its owner, as one whose lease ran out; whether it was live."""
+        now = time.monotonic()
+        with self._lock:
+            b = self.table.get(name)
+            if b is None or b.entry.endpoint != endpoint or not b.live(now):
+                return False
+            b.expires = now
+        return True
+
     def purge(self) -> None:
         """Keep the bindings whose leases ended for their owners; forget those kept long
         enough."""

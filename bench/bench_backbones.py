@@ -1,0 +1,262 @@
+"""Benchmark: the Zenoh backbone against raw Zenoh, and the ZeroMQ backbone beside them, in one
+run on loopback.
+
+    python bench/bench_backbones.py [--calls N] [--events N] [--runs R]
+
+Calls: a generated stub's getData() to a server in another process, p50 of the round trip,
+(1) over the Zenoh backbone (`--transport zenoh`, through the router in `miro naming --zenoh`),
+(2) a raw Zenoh get() to a queryable in another process through the same router, replying the
+same bytes (its callback replies at once, as plain Zenoh code does), and (3) over the ZeroMQ
+backbone (`miro naming`, direct connection). Events: ExampleEvents pushed by a supplier and
+counted by a consumer of another session (both in this process, so both sides share one
+interpreter, as the raw pair does): events/s over the Zenoh backbone, raw Zenoh put/subscribe
+of the same bytes through the same router, and over ZeroMQ (a channel hosted by the supplier's
+process). Everything is measured in interleaved blocks, repeated R times (5); medians with
+their spread (min-max) and the load average. Issue 26's targets: calls at most 1.25x raw Zenoh
+get/reply, events at least 0.8x raw Zenoh put/subscribe.
+
+Zenoh's default config sends messages of 3 KiB and more between processes of one host through
+shared memory; the messages here are smaller, and each row says whether it was on
+(`MIRO_ZENOH_SHM=0` turns it off for every session of the run, router included).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path[:0] = [str(ROOT / "generated"), str(ROOT), str(ROOT / "tests")]
+os.environ.setdefault("MIRO_DISCOVERY", "0")
+
+import Miro  # noqa: E402
+import zenoh  # noqa: E402
+from loopback import free_port, service_env  # noqa: E402
+
+from miro_gen import (  # noqa: E402
+    Client,
+    EventChannelFactory,
+    Server,
+    StructuredEvent,
+    StructuredPushConsumer,
+    StructuredPushSupplier,
+)
+from miro_gen.transport.events import KEEP_ALL  # noqa: E402
+from miro_gen.transport.zenoh.session import config, locator, shared_memory  # noqa: E402
+
+NAMED = str(ROOT / "tests" / "procs" / "named_example.py")
+RAW_ECHO = """
+import json, sys, time, zenoh
+conf = zenoh.Config()
+conf.insert_json5("mode", '"client"')
+conf.insert_json5("connect/endpoints", json.dumps([sys.argv[1]]))
+conf.insert_json5("scouting/multicast/enabled", "false")
+s = zenoh.open(conf)
+reply, head = bytes.fromhex(sys.argv[2]), bytes(16)
+def answer(query):
+    query.reply(query.key_expr, reply, attachment=head)
+q = s.declare_queryable("bench/echo", answer)
+print("READY", flush=True)
+while True:
+    time.sleep(3600)
+"""
+
+
+def start(argv: list[str]) -> subprocess.Popen[str]:
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
+                            env=service_env())  # fmt: skip
+    assert proc.stdout is not None
+    line = proc.stdout.readline()
+    assert line.startswith(("READY", "naming service at")), line
+    return proc
+
+
+def naming(zenoh_backbone: bool) -> tuple[subprocess.Popen[str], str]:
+    endpoint = f"tcp://127.0.0.1:{free_port()}"
+    extra = ["--zenoh"] if zenoh_backbone else []
+    argv = [sys.executable, "-m", "miro_gen.cli.main", "naming", *extra, "--endpoint", endpoint,
+            "--log-file", "none"]  # fmt: skip
+    return start(argv), endpoint
+
+
+def p50(samples: list[float]) -> float:
+    return statistics.median(samples)
+
+
+def time_calls(call: object, n: int) -> list[float]:
+    clock, out = time.perf_counter, []
+    for _ in range(n):
+        t = clock()
+        call()  # type: ignore[operator]
+        out.append(clock() - t)
+    return out
+
+
+class Counter(StructuredPushConsumer):
+    def __init__(self, *args: object) -> None:
+        super().__init__(*args, depth=KEEP_ALL)  # type: ignore[arg-type]  (counts every event)
+        self.count = 0
+        self.done = threading.Event()
+        self.want = 0
+
+    def push_structured_event(self, event: StructuredEvent) -> None:
+        self.count += 1
+        if self.count >= self.want:
+            self.done.set()
+
+
+def ours_events(
+    supplier: StructuredPushSupplier, consumer: Counter, server: Server, n: int
+) -> float:
+    """Events/s: `n` events pushed (in turns of 100 on the supplier's reactor) until the
+    consumer counted them all, or what it counted in a generous time."""
+    consumer.count, consumer.want = 0, n
+    consumer.done.clear()
+    event = Miro.ExampleEventIDL(1, Miro.ExampleStructIDL(1.0, 2.0))
+    t = time.perf_counter()
+    for i in range(0, n, 100):
+
+        def turn() -> None:
+            for _ in range(100):
+                supplier.push("ExampleEvent", event)
+
+        server.reactor().call_soon(turn)
+        if i % 2000 == 0:
+            time.sleep(0)  # let the reactor run
+    consumer.done.wait(30)
+    return consumer.count / (time.perf_counter() - t)
+
+
+def raw_events(pub: object, got: list[int], done: threading.Event, payload: bytes, n: int) -> float:
+    got[0] = 0
+    done.clear()
+    t = time.perf_counter()
+    for _ in range(n):
+        pub.put(payload)  # type: ignore[attr-defined]
+    done.wait(30)
+    return got[0] / (time.perf_counter() - t)
+
+
+def spread(values: list[float]) -> str:
+    return f"{statistics.median(values):10.1f} ({min(values):.1f}-{max(values):.1f})"
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    ap.add_argument("--calls", type=int, default=1000, help="calls per row, block and run")
+    ap.add_argument("--events", type=int, default=20000, help="events per row and run")
+    ap.add_argument("--runs", type=int, default=5)
+    args = ap.parse_args()
+    shm = shared_memory(config("client"))
+    zn, zendpoint = naming(True)
+    mn, mendpoint = naming(False)
+    procs = [zn, mn]
+    try:
+        procs.append(
+            start(
+                [sys.executable, NAMED, "--transport", "zenoh", "--naming", zendpoint, "-MNC", "r"]
+            )
+        )
+        procs.append(start([sys.executable, NAMED, "--naming", mendpoint, "-MNC", "r"]))
+        reply = Miro.ExampleStructIDL(1.0, 11.0).serialize()
+        procs.append(start([sys.executable, "-c", RAW_ECHO, locator(zendpoint), reply.hex()]))
+        zc = Client(["b", "--transport", "zenoh", "--naming", zendpoint])
+        mc = Client(["b", "--naming", mendpoint])
+        z_stub = zc.resolve_name("r/ExampleA", Miro.Example, wait=10)
+        m_stub = mc.resolve_name("r/ExampleA", Miro.Example, wait=10)
+        raw = zenoh.open(config("client", connect=locator(zendpoint)))
+        header = bytes(24)
+
+        def raw_get() -> None:
+            for r in raw.get("bench/echo", payload=header, attachment=header):
+                r.ok.payload.to_bytes()
+
+        # events: two servers per backbone, supplier and consumer in separate sessions
+        servers = {}
+        for name, options in (("zenoh", ["--transport", "zenoh", "--naming", zendpoint]),
+                              ("zmq", ["--naming", mendpoint])):  # fmt: skip
+            sup_server = Server(["s", *options, "-MNC", f"s{name}"])
+            con_server = Server(["c", *options, "-MNC", f"c{name}"])
+            for s in (sup_server, con_server):
+                threading.Thread(target=s.run, daemon=True).start()
+            channel = EventChannelFactory(sup_server).create_channel("Bench")
+            consumer = Counter(con_server.resolve_channel(f"s{name}/Bench"))
+            consumer.set_subscriptions([("*", "ExampleEvent")])
+            supplier = StructuredPushSupplier(channel)
+            servers[name] = (sup_server, con_server, supplier, consumer)
+        raw_got, raw_done = [0], threading.Event()
+        raw_n = [args.events]
+
+        def raw_sample(sample: object) -> None:
+            raw_got[0] += 1
+            if raw_got[0] >= raw_n[0]:
+                raw_done.set()
+
+        raw_sub = raw.declare_subscriber("bench/ev", raw_sample)
+        raw_pub_session = zenoh.open(config("client", connect=locator(zendpoint)))
+        raw_pub = raw_pub_session.declare_publisher("bench/ev")
+        payload = bytes(72)  # an ExampleEvent's batch frame: header and CDR, about this size
+        time.sleep(1.0)
+        for _ in range(200):  # warm up
+            z_stub.getData(), m_stub.getData(), raw_get()
+        rows: dict[str, list[float]] = {k: [] for k in ("ours-zenoh", "raw-zenoh", "ours-zmq")}
+        ev: dict[str, list[float]] = {k: [] for k in ("ours-zenoh", "raw-zenoh", "ours-zmq")}
+        call_ratio, event_ratio = [], []
+        for _ in range(args.runs):
+            a = p50(time_calls(z_stub.getData, args.calls))
+            b = p50(time_calls(raw_get, args.calls))
+            c = p50(time_calls(m_stub.getData, args.calls))
+            rows["ours-zenoh"].append(a * 1e6)
+            rows["raw-zenoh"].append(b * 1e6)
+            rows["ours-zmq"].append(c * 1e6)
+            call_ratio.append(a / b)
+            sz, _cz, supz, conz = servers["zenoh"]
+            e1 = ours_events(supz, conz, sz, args.events)
+            e2 = raw_events(raw_pub, raw_got, raw_done, payload, args.events)
+            sm, _cm, supm, conm = servers["zmq"]
+            e3 = ours_events(supm, conm, sm, args.events)
+            ev["ours-zenoh"].append(e1)
+            ev["raw-zenoh"].append(e2)
+            ev["ours-zmq"].append(e3)
+            event_ratio.append(e1 / e2)
+        load = os.getloadavg()
+        on = "on" if shm else "off"
+        print(f"load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}; {args.runs} runs; "
+              f"Zenoh shared memory {on} (messages here are under 3 KiB)")  # fmt: skip
+        print(f"{'call getData() p50, us (median, min-max)':44} {'':>10}")
+        names = {"ours-zenoh": "miro-gen over Zenoh (via router)",
+                 "raw-zenoh": "raw Zenoh get/reply (via router)",
+                 "ours-zmq": "miro-gen over ZeroMQ (direct)"}  # fmt: skip
+        for k, v in rows.items():
+            print(f"  {names[k]:42} {spread(v)}  shm {on if 'zenoh' in k else 'n/a'}")
+        print(f"  ratio miro-gen/raw Zenoh p50: {statistics.median(call_ratio):.2f} "
+              f"(runs {', '.join(f'{r:.2f}' for r in call_ratio)}; target <= 1.25)")  # fmt: skip
+        print("events/s (median, min-max)")
+        for k, v in ev.items():
+            print(f"  {names[k].replace('get/reply', 'put/subscribe'):42} {spread(v)}  "
+                  f"shm {on if 'zenoh' in k else 'n/a'}")  # fmt: skip
+        print(f"  ratio miro-gen/raw Zenoh events/s: {statistics.median(event_ratio):.2f} "
+              f"(runs {', '.join(f'{r:.2f}' for r in event_ratio)}; target >= 0.8)")  # fmt: skip
+        for sup_server, con_server, _, _ in servers.values():
+            sup_server.shutdown()
+            con_server.shutdown()
+        raw_sub.undeclare()
+        zc.close()
+        mc.close()
+    finally:
+        for p in procs:
+            p.kill()
+            p.wait()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

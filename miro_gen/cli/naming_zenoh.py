@@ -1,0 +1,58 @@
+"""`miro naming --zenoh`: the Zenoh router and the name registry in this process
+(transport.zenoh.registry), until SIGINT or SIGTERM."""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+
+import zmq
+
+from miro_gen import log
+from miro_gen.transport.naming.owners_log import LogError
+from miro_gen.transport.reactor import Reactor
+
+_log = log.logger("MIRO")
+
+
+def zenoh_naming(ns: argparse.Namespace, endpoint: str, log_path: str | None) -> int:
+    """Serve names beside a Zenoh router listening at `endpoint` (tcp://HOST:PORT), with the
+    options `miro naming` parsed (`ns`); the exit status."""
+    try:
+        import zenoh
+    except ImportError:
+        print(
+            "miro naming: --zenoh needs the Zenoh wheel: pip install 'miro-gen[zenoh]'",
+            file=sys.stderr,
+        )
+        return 1
+    from miro_gen.transport.zenoh.registry import ZenohNaming
+
+    reactor = Reactor(zmq.Context.instance())
+    try:
+        service = ZenohNaming(
+            reactor, endpoint, ns.quota, ns.max_names, hold=ns.hold, log_path=log_path
+        )
+    except zenoh.ZError as e:
+        print(f"miro naming: cannot run a Zenoh router at {endpoint}: {e}", file=sys.stderr)
+        return 1
+    except LogError as e:
+        print(f"miro naming: {e}", file=sys.stderr)
+        return 1
+    for name in ns.channel:
+        service.keep_channel(name)
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: reactor.stop())
+    shm = "on" if service.shared_memory else "off"
+    note = f" (Zenoh router {service.zid}; shared memory {shm})"
+    if service.log is None:
+        note += "; no log of owners: after a restart, names go to whoever binds first"
+    lines = [f"naming service at {endpoint}{note}", *(f"event channel {n}" for n in ns.channel)]
+    reactor.call_soon(lambda: print("\n".join(lines), flush=True))
+    try:
+        reactor.run()
+    finally:
+        service.close()
+        reactor.close()
+    return 0

@@ -1,0 +1,201 @@
+"""The server side of calls over Zenoh: one queryable serving all of a process's objects.
+
+The queryable is declared on the key of the process's session (`keys.call_key`); its callback
+runs on Zenoh's threads and only puts the query in a queue. A pool of threads (`workers`, 16 by
+default) takes queries from there, runs the servants and replies, so a servant may block or
+call another service that calls back into this one. The process says it is up with a
+liveliness token (`keys.alive_key`), which its callers watch.
+
+As over ZeroMQ (transport.rpc.adapter): a request that does not parse is logged and dropped, one
+for an unknown object gets OBJECT_NOT_EXIST, one for an operation the object lacks
+BAD_OPERATION, one that waited until its caller stopped waiting is not run, and once the
+server drains, new requests are TRANSIENT (completed NO). With `identify_callers`, servants
+learn who calls (`transport.rpc.caller.current()`): over Zenoh that is the principal
+`zenoh`, not verified (docs/FLEET.md says what that means for names).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import itertools
+import os
+import queue
+import threading
+import time
+from typing import Any
+
+import zenoh
+
+from miro_gen.exceptions import BAD_OPERATION, OBJECT_NOT_EXIST, TRANSIENT, CompletionStatus
+from miro_gen.log import PeerWarnings, logger
+from miro_gen.runtime.cdr import ObjectRef
+from miro_gen.runtime.rpc import Invoker, Reply, Servant, system_exception_reply
+from miro_gen.transport.rpc import frames
+from miro_gen.transport.rpc.caller import Caller, serving
+from miro_gen.transport.zenoh import keys
+from miro_gen.transport.zenoh.session import direct, track, untrack
+
+_log = logger("MIRO")
+_peer_warnings = PeerWarnings(_log)
+
+DEFAULT_WORKERS = 16
+PRINCIPAL = "zenoh"  # who a caller over Zenoh is, as far as the naming table can tell
+_CALLER = Caller(PRINCIPAL, False)
+
+
+class ZenohAdapter:
+    """Serves servants on `session`'s call key; at most `workers` servant calls at once."""
+
+    def __init__(
+        self,
+        session: Any,
+        invoker: Invoker,
+        workers: int = DEFAULT_WORKERS,
+        *,
+        identify_callers: bool = False,
+    ) -> None:
+        self.session = session
+        self.invoker = invoker
+        self.zid = str(session.zid())
+        self.endpoint = keys.endpoint(self.zid)
+        self._servants: dict[bytes, Servant] = {}
+        self._keys = itertools.count(1)
+        self._prefix = f"{os.getpid()}.".encode()
+        self._lock = threading.Lock()
+        self._identify = identify_callers
+        self._queries: queue.SimpleQueue[Any] = queue.SimpleQueue()
+        self._running = 0
+        self._idle = threading.Condition(self._lock)
+        self._draining = False
+        self._closed = False
+        self._threads = [
+            threading.Thread(target=self._work, name="miro-zenoh-call", daemon=True)
+            for _ in range(workers)
+        ]
+        for t in self._threads:
+            t.start()
+        self._queryable = track(
+            session.declare_queryable(keys.call_key(self.zid), direct(self._arrived))
+        )
+        self._token = session.liveliness().declare_token(keys.alive_key(self.zid))
+
+    # ---- objects --------------------------------------------------------------------------------
+
+    def activate(self, servant: Servant, key: bytes | None = None) -> ObjectRef:
+        with self._lock:
+            if key is None:
+                key = self._prefix + str(next(self._keys)).encode()
+            self._servants[key] = servant
+        return ObjectRef(servant._repo_id, self.endpoint, key)
+
+    def deactivate(self, key: bytes) -> None:
+        with self._lock:
+            self._servants.pop(key, None)
+
+    def servants(self) -> list[tuple[bytes, Servant]]:
+        with self._lock:
+            return list(self._servants.items())
+
+    def reference_for(self, servant: Servant) -> ObjectRef:
+        with self._lock:
+            for key, s in self._servants.items():
+                if s is servant:
+                    return ObjectRef(servant._repo_id, self.endpoint, key)
+        return self.activate(servant)
+
+    # ---- requests -------------------------------------------------------------------------------
+
+    def _arrived(self, query: Any) -> None:  # Zenoh's thread: hand over, never block
+        self._queries.put((time.monotonic(), query))
+
+    def _work(self) -> None:
+        while True:
+            item = self._queries.get()
+            if item is None:
+                return
+            received, query = item
+            with self._lock:
+                self._running += 1
+            try:
+                self._serve(query, received)
+            except zenoh.ZError as e:  # the caller or the session went away
+                _log.debug("a reply was not sent: %s", e)
+            except Exception:
+                _log.exception("serving a call failed")
+            finally:
+                del query, item  # finalizes the query: its caller hears that no more come
+                with self._lock:
+                    self._running -= 1
+                    if not self._running:
+                        self._idle.notify_all()
+
+    def _serve(self, query: Any, received: float) -> None:
+        """Answer `query`, which arrived at `received` (monotonic seconds)."""
+        attachment = query.attachment
+        if attachment is None or query.payload is None:
+            _peer_warnings.warning("dropped a request without a header or a body")
+            return
+        try:
+            req = frames.decode_request(attachment.to_bytes())
+        except frames.FrameError as e:
+            _peer_warnings.warning("dropped a request: %s", e)
+            return
+        if self._draining:
+            busy = TRANSIENT(f"{self.endpoint} is stopping", completed=CompletionStatus.NO)
+            self._reply(query, req, system_exception_reply(busy))
+            return
+        servant = self._servants.get(req.key)
+        if servant is None:
+            missing = OBJECT_NOT_EXIST(f"no object with key {req.key!r} at {self.endpoint}")
+            self._reply(query, req, system_exception_reply(missing))
+            return
+        if req.operation not in servant._dispatch:
+            unknown = BAD_OPERATION(
+                f"{servant._repo_id} has no operation '{req.operation[:100]}'",
+                completed=CompletionStatus.NO,
+            )
+            self._reply(query, req, system_exception_reply(unknown))
+            return
+        body = query.payload.to_bytes()
+        if req.timeout_ms and time.monotonic() - received > req.timeout_ms / 1000:
+            return  # its caller gave up: not run
+        if self._identify:
+            with serving(_CALLER):
+                reply = servant._invoke(req.operation, body, self.invoker)
+        else:
+            reply = servant._invoke(req.operation, body, self.invoker)
+        self._reply(query, req, reply)
+
+    @staticmethod
+    def _reply(query: Any, req: frames.Request, reply: Reply) -> None:
+        if req.oneway:
+            return
+        header = frames.reply_header(req.request_id, reply.status, reply.repo_id)
+        query.reply(query.key_expr, reply.body, attachment=header)
+
+    # ---- the end --------------------------------------------------------------------------------
+
+    def drain(self, timeout: float) -> bool:
+        """Refuse new requests (TRANSIENT, completed NO) and wait up to `timeout` seconds for
+        the calls being served to finish and be answered; whether they all were."""
+        deadline = time.monotonic() + timeout
+        with self._lock:
+            self._draining = True
+            while self._running:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return False
+                self._idle.wait(left)
+        return True
+
+    def close(self) -> None:
+        """Stop serving: the queryable and the liveliness token go, the threads end."""
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+        untrack(self._queryable)
+        with contextlib.suppress(zenoh.ZError):  # the session is closed already
+            self._token.undeclare()
+        for _ in self._threads:
+            self._queries.put(None)

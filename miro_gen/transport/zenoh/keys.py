@@ -1,0 +1,165 @@
+"""The key expressions of the Zenoh backbone: one owner of their layout.
+
+    miro/call/<zid>              the queryable of one process's objects (its session id)
+    miro/alive/<zid>             liveliness: that process is up
+    miro/name/<zid>/<name>       liveliness: a name it keeps bound (the registry drops the
+                                 name when the token goes: its process died or was cut off)
+    miro/ev/<channel>/<domain>/<type>   the events of one channel, domain and type
+    miro/sub/<channel>/<prefix>/<zid>/<n>   liveliness: a consumer's subscription (its prefix,
+                                 transport.events.consumer.subscription_prefix, in hex), which
+                                 suppliers count as ZeroMQ's XPUB counts subscriptions
+
+Names, channels, domains and types become single chunks: `%`, `/`, `*`, `$`, `?`, `#`, `@` are
+percent-escaped (Zenoh forbids the others in a chunk, and one that starts with `@` matches no
+wildcard; rmw_zenoh escapes `/` too), and an empty
+text is `%` alone (a chunk may not be empty; a real `%` is always `%25`).
+"""
+
+from __future__ import annotations
+
+from typing import Final
+from urllib.parse import unquote
+
+from miro_gen.transport.events.frames import FrameError, topic
+
+PREFIX: Final = "miro"
+ENDPOINT_SCHEME: Final = "zenoh/"  # an object reference's endpoint: zenoh/<zid>
+NAMING_ENDPOINT: Final = "zenoh/naming"  # the naming registry: the router's session
+_ESCAPED: Final = {c: f"%{ord(c):02X}" for c in "%/*$?#@"}  # (`@`: Zenoh's verbatim chunks)
+_SPECIAL: Final = frozenset(_ESCAPED)
+
+
+def escape(text: str) -> str:
+    """`text` as one key chunk."""
+    if not text:
+        return "%"
+    if _SPECIAL.isdisjoint(text):
+        return text
+    return "".join(_ESCAPED.get(c, c) for c in text)
+
+
+def unescape(chunk: str) -> str:
+    """The text of a key chunk (`escape` reversed)."""
+    if chunk == "%":
+        return ""
+    return unquote(chunk) if "%" in chunk else chunk
+
+
+def endpoint(zid: str) -> str:
+    """The endpoint references to a process's objects carry."""
+    return ENDPOINT_SCHEME + zid
+
+
+def zid_of(endpoint_text: str) -> str | None:
+    """The session id an endpoint names (None: not a Zenoh endpoint)."""
+    if not endpoint_text.startswith(ENDPOINT_SCHEME):
+        return None
+    zid = endpoint_text[len(ENDPOINT_SCHEME) :]
+    return zid if zid and zid.isalnum() else None
+
+
+def call_key(zid: str) -> str:
+    return f"{PREFIX}/call/{zid}"
+
+
+def alive_key(zid: str) -> str:
+    return f"{PREFIX}/alive/{zid}"
+
+
+ALIVE_ALL: Final = f"{PREFIX}/alive/*"
+
+
+def name_token(zid: str, name: str) -> str:
+    return f"{PREFIX}/name/{zid}/{escape(name)}"
+
+
+NAME_TOKENS: Final = f"{PREFIX}/name/*/*"
+
+
+def name_of_token(key: str) -> tuple[str, str] | None:
+    """(zid, name) of a name token's key; None for another key."""
+    parts = key.split("/")
+    if len(parts) != 4 or parts[0] != PREFIX or parts[1] != "name":
+        return None
+    return parts[2], unescape(parts[3])
+
+
+def zid_of_alive(key: str) -> str | None:
+    parts = key.split("/")
+    if len(parts) != 3 or parts[0] != PREFIX or parts[1] != "alive":
+        return None
+    return parts[2]
+
+
+def event_key(channel: str, topic_frame: bytes) -> str:
+    """The key events of a topic frame (transport.events.frames.topic) travel on."""
+    fields = topic_frame.split(b"\0")
+    if len(fields) != 3 or fields[2]:
+        raise FrameError("malformed topic frame")
+    domain, type_name = fields[0].decode(), fields[1].decode()
+    return f"{PREFIX}/ev/{escape(channel)}/{escape(domain)}/{escape(type_name)}"
+
+
+def channel_chunk(channel: str) -> str:
+    """The chunk of a channel's keys; for a fleet's channel pattern (`*/EventChannel`: that
+    channel of every robot) a chunk with `$*` where the pattern has `*`."""
+    if "*" not in channel:
+        return escape(channel)
+    chunk = "$*".join(escape(part) if part else "" for part in channel.split("*"))
+    while "$*$*" in chunk:  # (`**` in a pattern)
+        chunk = chunk.replace("$*$*", "$*")
+    return "*" if chunk == "$*" else chunk
+
+
+def is_pattern(channel: str) -> bool:
+    return "*" in channel
+
+
+def sub_channel(key: str) -> str | None:
+    """The channel (or channel pattern) of a subscription token's key."""
+    parts = key.split("/")
+    if len(parts) != 6 or parts[0] != PREFIX or parts[1] != "sub":
+        return None
+    return unescape(parts[2])
+
+
+def event_selector(channel: str, prefix: bytes) -> str:
+    """The key expression a consumer's subscription prefix (`consumer.subscription_prefix`)
+    becomes: the empty prefix any domain and type, `domain\\0` any type of the domain."""
+    head = f"{PREFIX}/ev/{channel_chunk(channel)}"
+    if not prefix:
+        return f"{head}/*/*"
+    fields = prefix.split(b"\0")
+    domain = escape(fields[0].decode())
+    if len(fields) == 2 and not fields[1]:
+        return f"{head}/{domain}/*"
+    if len(fields) == 3 and not fields[2]:
+        return f"{head}/{domain}/{escape(fields[1].decode())}"
+    raise FrameError(f"not a subscription prefix: {prefix!r}")
+
+
+def topic_of(key: str) -> bytes:
+    """The topic frame of an event key (`event_key` reversed); FrameError for another key."""
+    parts = key.split("/")
+    if len(parts) != 5 or parts[0] != PREFIX or parts[1] != "ev":
+        raise FrameError(f"not an event key: {key[:200]!r}")
+    return topic(unescape(parts[3]), unescape(parts[4]))
+
+
+def sub_token(channel: str, prefix: bytes, zid: str, n: int) -> str:
+    """The liveliness token of a consumer's subscription to `prefix` on `channel`."""
+    return f"{PREFIX}/sub/{escape(channel)}/{escape(prefix.hex())}/{zid}/{n}"
+
+
+SUB_TOKENS: Final = f"{PREFIX}/sub/*/*/*/*"  # every subscription token of every channel
+
+
+def prefix_of_sub(key: str) -> bytes:
+    """The subscription prefix a token's key carries; FrameError for another key."""
+    parts = key.split("/")
+    if len(parts) != 6 or parts[0] != PREFIX or parts[1] != "sub":
+        raise FrameError(f"not a subscription token: {key[:200]!r}")
+    try:
+        return bytes.fromhex(unescape(parts[3]))
+    except ValueError:
+        raise FrameError(f"not a subscription token: {key[:200]!r}") from None

@@ -1,0 +1,256 @@
+"""Suppliers' and consumers' links to an event channel over Zenoh (the `PublishingLink` and
+`SubscribingLink` of transport.events.links).
+
+A channel over Zenoh is a name, not a process: its events of one domain and type travel on one
+key (`keys.event_key`), the batch frame (transport.events.frames) as the payload, routed by
+Zenoh from every supplier to every consumer whose key expression matches. A consumer's
+subscriptions become key expressions (`keys.event_selector`: `*` a key wildcard); one that
+another of its subscriptions covers is not declared, so that no event comes twice.
+
+Zenoh's subscriber callbacks run on Zenoh's threads: they only append (key, payload) to a
+bounded queue and, when it was empty, ask the reactor to read it (`Reactor.call_soon`, which
+never blocks). A full queue drops the newest event, which the consumer's sequence numbers
+show as missed. Suppliers put from the reactor thread with congestion control DROP, so a slow
+consumer never blocks them. Each subscription of a consumer is also a liveliness token
+(`keys.sub_token`), which the suppliers of the channel count as ZeroMQ's XPUB counts
+subscriptions: `has_subscribers()` is false while nobody listens (nothing is encoded then), and
+a consumer whose process dies stops counting when its session ends.
+
+A fleet's channel: a consumer of the channel pattern `*/EventChannel` (resolve_channel with a
+`*` in the name) hears that channel of every robot, each robot's events under its own domain
+(Miro's NotifyMulticast, without a multicast group): its keys use Zenoh's `$*` wildcard, and
+suppliers count its subscriptions when their channel matches the pattern.
+"""
+
+from __future__ import annotations
+
+import collections
+import contextlib
+import fnmatch
+import itertools
+import threading
+from collections.abc import Callable
+from typing import Any
+
+import zenoh
+
+from miro_gen.log import PeerWarnings, logger
+from miro_gen.transport.events.frames import FrameError
+from miro_gen.transport.reactor import Reactor
+from miro_gen.transport.zenoh import keys
+from miro_gen.transport.zenoh.session import direct, track, untrack
+
+_log = logger("MIRO")
+_peer_warnings = PeerWarnings(_log)
+_DROP = zenoh.CongestionControl.DROP
+_BLOCK = zenoh.CongestionControl.BLOCK
+_tokens = itertools.count(1)  # the subscription tokens of this process
+
+
+class ZenohChannels:
+    """The links of the channels of a process: its `session` and its `reactor`. `endpoint`
+    is what a channel's naming entry carries."""
+
+    def __init__(self, session: Any, reactor: Reactor) -> None:
+        self.session = session
+        self.reactor = reactor
+        self.endpoint = keys.endpoint(str(session.zid()))
+
+    def publishing(
+        self,
+        channel: str,
+        on_connection: Callable[[bool], object],
+        on_subscriptions: Callable[[list[tuple[bool, bytes]]], object],
+        hwm: int,
+        burst: int,
+    ) -> ZenohPublishing:
+        if keys.is_pattern(channel):
+            raise ValueError(f"{channel}: a fleet's channel pattern is for consumers only")
+        return ZenohPublishing(self.session, self.reactor, channel, on_connection, on_subscriptions)
+
+    def subscribing(
+        self, channel: str, on_readable: Callable[[], object], hwm: int
+    ) -> ZenohSubscribing:
+        return ZenohSubscribing(self.session, self.reactor, channel, on_readable, hwm)
+
+
+class ZenohPublishing:
+    """A supplier's link: a Zenoh publisher per topic, declared on first use."""
+
+    def __init__(
+        self,
+        session: Any,
+        reactor: Reactor,
+        channel: str,
+        on_connection: Callable[[bool], object],
+        on_subscriptions: Callable[[list[tuple[bool, bytes]]], object],
+        *,
+        blocking: bool = False,
+    ) -> None:
+        self.session = session
+        self.channel = channel
+        self._publishers: dict[bytes, Any] = {}
+        self._congestion = _BLOCK if blocking else _DROP
+        self._closed = False
+        self._reactor = reactor
+        self._on_subscriptions = on_subscriptions
+        reactor.call_soon(on_connection, True)  # a channel that no process hosts is always up
+        self._watch = track(
+            session.liveliness().declare_subscriber(
+                keys.SUB_TOKENS, direct(self._on_token), history=True
+            )
+        )
+
+    def _on_token(self, sample: Any) -> None:  # Zenoh's thread: hand over, never block
+        key = str(sample.key_expr)
+        wanted = keys.sub_channel(key)
+        if wanted is None or not (
+            wanted == self.channel
+            or (keys.is_pattern(wanted) and fnmatch.fnmatchcase(self.channel, wanted))
+        ):
+            return  # another channel's consumer
+        try:
+            prefix = keys.prefix_of_sub(key)
+        except FrameError:
+            return
+        subscribed = sample.kind == zenoh.SampleKind.PUT
+        self._reactor.call_soon(self._on_subscriptions, [(subscribed, prefix)])
+
+    @property
+    def connected(self) -> bool:
+        return not self._closed
+
+    @property
+    def moves(self) -> int:
+        return 0
+
+    def send(self, topic: bytes, body: bytes, copy: bool) -> bool:
+        publisher = self._publishers.get(topic)
+        if publisher is None:
+            publisher = self._publishers[topic] = self.session.declare_publisher(
+                keys.event_key(self.channel, topic), congestion_control=self._congestion
+            )
+        try:
+            publisher.put(body if isinstance(body, bytes) else bytes(body))
+        except zenoh.ZError:
+            return False
+        return True
+
+    def close(self) -> None:
+        self._closed = True
+        untrack(self._watch)
+        publishers, self._publishers = list(self._publishers.values()), {}
+        for p in publishers:
+            with contextlib.suppress(zenoh.ZError):
+                p.undeclare()
+
+
+class ZenohSubscribing:
+    """A consumer's link: a Zenoh subscriber per subscription not covered by another; at most
+    `hwm` frames wait for the reactor."""
+
+    def __init__(
+        self,
+        session: Any,
+        reactor: Reactor,
+        channel: str,
+        on_readable: Callable[[], object],
+        hwm: int,
+    ) -> None:
+        self.session = session
+        self.reactor = reactor
+        self.channel = channel
+        self.hwm = hwm
+        self.dropped = 0  # frames the full queue refused
+        self._on_readable = on_readable
+        self._prefixes: set[bytes] = set()
+        self._subscribers: dict[bytes, Any] = {}
+        self._tokens: dict[bytes, Any] = {}
+        self._zid = str(session.zid())
+        self._frames: collections.deque[tuple[str, bytes]] = collections.deque()
+        self._scheduled = False
+        self._lock = threading.Lock()
+        self._closed = False
+
+    @property
+    def connected(self) -> bool:
+        return not self._closed
+
+    @property
+    def moves(self) -> int:
+        return 0
+
+    # ---- Zenoh's threads: never block -----------------------------------------------------------
+
+    def _on_sample(self, sample: Any) -> None:
+        if len(self._frames) >= self.hwm:
+            self.dropped += 1
+            return
+        self._frames.append((str(sample.key_expr), sample.payload.to_bytes()))
+        if not self._scheduled:
+            self._scheduled = True
+            self.reactor.call_soon(self._ready)
+
+    # ---- the reactor thread ---------------------------------------------------------------------
+
+    def _ready(self) -> None:
+        self._scheduled = False
+        if self._frames:
+            self._on_readable()
+
+    def subscribe(self, prefix: bytes) -> None:
+        self._prefixes.add(prefix)
+        self._declare()
+        if prefix not in self._tokens:  # what suppliers count
+            key = keys.sub_token(self.channel, prefix, self._zid, next(_tokens))
+            self._tokens[prefix] = self.session.liveliness().declare_token(key)
+
+    def unsubscribe(self, prefix: bytes) -> None:
+        self._prefixes.discard(prefix)
+        self._declare()
+        token = self._tokens.pop(prefix, None)
+        if token is not None:
+            _undeclare(token)
+
+    def _declare(self) -> None:
+        """Subscribers for the prefixes no other prefix covers (ZeroMQ's prefix rule)."""
+        wanted = {
+            p for p in self._prefixes if not any(q != p and p.startswith(q) for q in self._prefixes)
+        }
+        for p in [p for p in self._subscribers if p not in wanted]:
+            untrack(self._subscribers.pop(p))
+        for p in wanted - self._subscribers.keys():
+            try:
+                selector = keys.event_selector(self.channel, p)
+            except (FrameError, UnicodeDecodeError) as e:
+                _log.warning("cannot subscribe to %r: %s", p, e)
+                continue
+            self._subscribers[p] = track(
+                self.session.declare_subscriber(selector, direct(self._on_sample))
+            )
+
+    def receive(self) -> tuple[bytes, memoryview] | None:
+        try:
+            key, payload = self._frames.popleft()
+        except IndexError:
+            return None
+        try:
+            topic = keys.topic_of(key)
+        except (FrameError, UnicodeDecodeError) as e:
+            raise ValueError(str(e)) from None
+        return topic, memoryview(payload)
+
+    def close(self) -> None:
+        self._closed = True
+        tokens, self._tokens = list(self._tokens.values()), {}
+        for token in tokens:
+            _undeclare(token)
+        subscribers, self._subscribers = list(self._subscribers.values()), {}
+        for s in subscribers:
+            untrack(s)
+        self._frames.clear()
+
+
+def _undeclare(entity: Any) -> None:
+    with contextlib.suppress(zenoh.ZError):
+        entity.undeclare()

@@ -1,0 +1,141 @@
+"""A process's Zenoh session: opened once, from where its naming service is.
+
+Every process but `miro naming --zenoh` is a Zenoh client of the router that the naming
+service hosts (as rmw_zenoh's nodes are of their router): `--naming tcp://HOST:PORT` is the
+router's `tcp/HOST:PORT`. Multicast scouting is off (nothing leaves loopback unless asked);
+each process has its own session (its id names its objects: transport.zenoh.keys); the link
+lease is the names' lease (3 s), so a cut link is noticed in about that time.
+
+Shared memory: Zenoh's default sends messages of 3 KiB and more between processes of one host
+through shared memory. `MIRO_ZENOH_SHM=0` turns it off, `1` on; the default is Zenoh's
+(on). `shared_memory(config)` says which it is, for benches and logs.
+"""
+
+from __future__ import annotations
+
+import atexit
+import contextlib
+import json
+import os
+import re
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+import zenoh
+
+from miro_gen.exceptions import TRANSIENT
+from miro_gen.log import logger
+
+_log = logger("MIRO")
+
+OPEN_RETRY = 0.2  # seconds between two attempts to reach the router
+LINK_LEASE_MS = 3000  # a cut link is noticed after this (Zenoh's default: 10 s)
+SHM_ENV = "MIRO_ZENOH_SHM"
+_TCP = re.compile(r"^tcp://(?P<host>\[[^\]]+\]|[^:/]+):(?P<port>\d+)$")
+
+
+def locator(naming: str) -> str:
+    """The Zenoh locator of a naming address (`tcp://HOST:PORT` -> `tcp/HOST:PORT`)."""
+    m = _TCP.match(naming.strip())
+    if m is None:
+        raise ValueError(f"cannot make a Zenoh locator of {naming!r}: expected tcp://HOST:PORT")
+    return f"tcp/{m.group('host')}:{m.group('port')}"
+
+
+def shm_wanted() -> bool | None:
+    """What MIRO_ZENOH_SHM asks for (None: Zenoh's default)."""
+    value = os.environ.get(SHM_ENV, "")
+    if value == "":
+        return None
+    return value not in ("0", "false", "no", "off")
+
+
+def config(mode: str, *, connect: str | None = None, listen: str | None = None) -> Any:
+    """A Zenoh config: `mode` client or router, connecting to or listening on one locator."""
+    conf = zenoh.Config()
+    conf.insert_json5("mode", json.dumps(mode))
+    if connect is not None:
+        conf.insert_json5("connect/endpoints", json.dumps([connect]))
+    if listen is not None:
+        conf.insert_json5("listen/endpoints", json.dumps([listen]))
+    else:
+        conf.insert_json5("listen/endpoints", "[]")
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("scouting/gossip/enabled", "true")
+    conf.insert_json5("transport/link/tx/lease", str(LINK_LEASE_MS))
+    shm = shm_wanted()
+    if shm is not None:
+        conf.insert_json5("transport/shared_memory/enabled", json.dumps(shm))
+    return conf
+
+
+def shared_memory(conf: Any) -> bool:
+    """Whether a config sends large messages on one host through shared memory."""
+    return bool(json.loads(conf.get_json("transport/shared_memory/enabled")))
+
+
+_callbacks: list[Any] = []  # subscribers and queryables whose callbacks are Python code
+_callbacks_lock = threading.Lock()
+
+
+def _undeclare_all() -> None:
+    """Undeclare what still calls Python code when the interpreter exits: a subscriber or a
+    queryable left declared keeps the process from ever ending (Zenoh's threads wait for the
+    interpreter), and so does closing its session then."""
+    with _callbacks_lock:
+        entities, _callbacks[:] = list(_callbacks), []
+    for entity in entities:
+        with contextlib.suppress(zenoh.ZError):
+            entity.undeclare()
+
+
+atexit.register(_undeclare_all)
+
+
+def direct(callback: Callable[[Any], object]) -> Any:
+    """`callback` run on Zenoh's own thread, as a handler: no Python thread per subscriber or
+    queryable (zenoh-python's default gives each one, which keeps a process from exiting
+    while it is declared, and costs a thread switch per sample). Only for callbacks that
+    never block and never call Zenoh: they append to a queue or hand over to the reactor."""
+    return zenoh.handlers.Callback(callback, indirect=False)
+
+
+def track(entity: Any) -> Any:
+    """`entity` (a subscriber or a queryable with a Python callback), undeclared when the
+    interpreter exits if it still is declared then."""
+    with _callbacks_lock:
+        _callbacks.append(entity)
+    return entity
+
+
+def untrack(entity: Any) -> None:
+    """Undeclare `entity` (made with `track`) now."""
+    with _callbacks_lock:
+        if entity in _callbacks:
+            _callbacks.remove(entity)
+    with contextlib.suppress(zenoh.ZError):
+        entity.undeclare()
+
+
+def open_client(naming: str, wait: float | None = 0.0) -> Any:
+    """A client session of the router at `naming` (tcp://HOST:PORT), waiting up to `wait`
+    seconds (None: no limit) for the router to be up, as a server waits for its naming
+    service; then TRANSIENT."""
+    target = locator(naming)
+    deadline = None if wait is None else time.monotonic() + wait
+    said = False
+    while True:
+        try:
+            return zenoh.open(config("client", connect=target))
+        except zenoh.ZError as e:
+            if deadline is not None and time.monotonic() >= deadline:
+                raise TRANSIENT(
+                    f"cannot reach the Zenoh router at {target} (is `miro naming --zenoh` "
+                    f"running? see --naming / MIRO_NAMING): {str(e).split(' at ')[0]}"
+                ) from None
+            if not said:
+                _log.notice("waiting for the Zenoh router at %s", target)
+                said = True
+            time.sleep(OPEN_RETRY)

@@ -1,0 +1,200 @@
+"""What only the Zenoh backbone has to show: its keys, the choice of backbone, and that a
+session other than a name's owner cannot answer for it (Zenoh lets any session declare a
+queryable on any key). The contract both backbones keep is tests/transport/test_backbones.py."""
+
+from __future__ import annotations
+
+import socket
+import threading
+from collections.abc import Iterator
+from pathlib import Path
+
+import Miro
+import Miro__POA
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from loopback import NamingProcess, RunningServer, service_env
+
+from miro_gen import Client
+from miro_gen.service.options import UsageError, parse_common_options
+from miro_gen.transport.events.frames import topic
+
+zenoh = pytest.importorskip("zenoh")
+
+from miro_gen.transport.rpc import frames  # noqa: E402
+from miro_gen.transport.zenoh import keys  # noqa: E402
+from miro_gen.transport.zenoh.session import config, locator  # noqa: E402
+
+
+@given(st.text())
+def test_a_chunk_escapes_into_one_key_chunk_and_back(text: str) -> None:
+    chunk = keys.escape(text)
+    assert chunk and not set(chunk) & set("/*$?#")
+    assert keys.unescape(chunk) == text
+
+
+@given(st.text(), st.text(), st.text())
+def test_an_event_key_gives_back_its_topic(channel: str, domain: str, type_name: str) -> None:
+    t = topic(domain, type_name)
+    if domain.count("\0") or type_name.count("\0"):
+        return  # not a topic frame (a name has no NUL)
+    key = keys.event_key(channel, t)
+    assert keys.topic_of(key) == t
+    if "*" not in channel:  # (a pattern is for consumers: it has no keys of its own)
+        selector = zenoh.KeyExpr(keys.event_selector(channel, b""))
+        assert selector.intersects(zenoh.KeyExpr(key))
+        fleet = zenoh.KeyExpr(keys.event_selector("*" + channel[len(channel) // 2 :], b""))
+        assert fleet.intersects(zenoh.KeyExpr(key))
+
+
+def test_subscriptions_become_key_expressions() -> None:
+    assert keys.event_selector("r/Events", b"") == "miro/ev/r%2FEvents/*/*"
+    assert keys.event_selector("r/Events", b"robot1\0") == "miro/ev/r%2FEvents/robot1/*"
+    assert keys.event_selector("E", topic("a/b", "T")) == "miro/ev/E/a%2Fb/T"
+
+
+def test_the_backbone_is_chosen_by_option_or_environment() -> None:
+    assert parse_common_options([])[0].transport == "zmq"
+    assert parse_common_options(["--transport", "zenoh"])[0].transport == "zenoh"
+    assert parse_common_options(["--transport=zenoh"])[0].transport == "zenoh"
+    assert parse_common_options([], {"MIRO_TRANSPORT": "zenoh"})[0].transport == "zenoh"
+    with pytest.raises(UsageError, match="unknown transport"):
+        parse_common_options(["--transport", "dds"])
+
+
+def test_sessions_never_scout_beyond_loopback() -> None:
+    conf = config("client", connect=locator("tcp://127.0.0.1:1"))
+    assert conf.get_json("scouting/multicast/enabled") == "false"
+    assert conf.get_json("connect/endpoints") == '["tcp/127.0.0.1:1"]'
+
+
+class _Example(Miro__POA.Example):
+    def __init__(self) -> None:
+        self.data = Miro.ExampleStructIDL(7.0, 7.0)
+
+    def setData(self, a: float, b: float) -> None:
+        self.data = Miro.ExampleStructIDL(a, b)
+
+    def getData(self) -> Miro.ExampleStructIDL:
+        return self.data
+
+
+@pytest.fixture(scope="module")
+def naming() -> Iterator[NamingProcess]:
+    process = NamingProcess(options=("--zenoh",))
+    yield process
+    process.stop()
+
+
+def test_a_second_session_on_the_owners_key_answers_no_call(naming: NamingProcess) -> None:
+    owner = RunningServer(naming.endpoint, "robot1", "--transport", "zenoh")
+    owner.server.add_to_name_service(_Example(), "ExampleA")
+    rogue = zenoh.open(config("client", connect=locator(naming.endpoint)))
+    heard = threading.Event()
+
+    def answer(query: object) -> None:  # answers at once, as the owner would
+        header = frames.decode_request(query.attachment.to_bytes())  # type: ignore[attr-defined]
+        reply = Miro.ExampleStructIDL(-1.0, -1.0).serialize()
+        query.reply(  # type: ignore[attr-defined]
+            query.key_expr,  # type: ignore[attr-defined]
+            reply,
+            attachment=frames.reply_header(header.request_id, 0),
+        )
+        heard.set()
+
+    queryable = rogue.declare_queryable(keys.call_key(str(owner.server.zenoh.zid())), answer)
+    client = Client(["t", "--transport", "zenoh", "--naming", naming.endpoint])
+    try:
+        example = client.resolve_name("robot1/ExampleA", Miro.Example, wait=10)
+        answers = [example.getData() for _ in range(20)]
+        assert heard.is_set()  # the rogue heard the calls, and answered them
+        assert answers == [Miro.ExampleStructIDL(7.0, 7.0)] * 20
+        assert client.invoker.foreign_replies >= 1  # type: ignore[attr-defined]
+    finally:
+        client.close()
+        queryable.undeclare()
+        rogue.close()
+        owner.stop()
+
+
+def test_the_router_beyond_loopback_needs_insecure_and_a_busy_port_is_one_line() -> None:
+    from loopback import free_port, run_miro
+
+    refused = run_miro("naming", "--zenoh", "--endpoint", f"tcp://0.0.0.0:{free_port()}")
+    assert refused.returncode == 2 and "--insecure" in refused.stderr.splitlines()[-1]
+    assert "Traceback" not in refused.stderr
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        taken = run_miro("naming", "--zenoh", "--endpoint", f"tcp://127.0.0.1:{port}",
+                         "--log-file", "none")  # fmt: skip
+    assert taken.returncode == 1 and "cannot run a Zenoh router" in taken.stderr, taken.stderr
+    assert "Traceback" not in taken.stderr and len(taken.stderr.strip().splitlines()) == 1
+
+
+def test_a_fleet_channel_hears_every_robots_channel_with_the_robot_as_domain(
+    naming: NamingProcess,
+) -> None:
+    from loopback import Recorder, eventually
+
+    from miro_gen import EventChannelFactory, StructuredPushSupplier
+
+    zenoh_options = ("--transport", "zenoh")
+    robots = [RunningServer(naming.endpoint, f"robot{i}", *zenoh_options) for i in (1, 2)]
+    base = RunningServer(naming.endpoint, "base", *zenoh_options)
+    try:
+        suppliers = [
+            StructuredPushSupplier(EventChannelFactory(r.server).create_channel("EventChannel"))
+            for r in robots
+        ]
+        fleet = Recorder(base.server.resolve_channel("*/EventChannel"))
+        fleet.set_subscriptions([("*", "ExampleEvent")])
+        eventually(lambda: all(s.has_subscribers("ExampleEvent") for s in suppliers))
+        for n, s in enumerate(suppliers):
+            s.push("ExampleEvent", Miro.ExampleEventIDL(n, Miro.ExampleStructIDL(n, n)))
+        eventually(lambda: len(fleet.events) == 2)
+        assert {e.domain_name for e in fleet.events} == {"robot1", "robot2"}
+        with pytest.raises(ValueError, match="consumers only"):
+            StructuredPushSupplier(base.server.resolve_channel("*/EventChannel"))
+    finally:
+        for r in (base, *robots):
+            r.stop()
+
+
+def test_the_base_records_every_robots_events_from_the_fleet_channel(
+    naming: NamingProcess, tmp_path: Path
+) -> None:
+    from eventlog_helpers import miro, proc, stop
+    from loopback import run_miro
+
+    env = service_env(MIRO_TRANSPORT="zenoh")
+    hosts = [proc("channel_host.py", "--transport", "zenoh", "--naming", naming.endpoint,
+                  "-MNC", robot, "EventChannel") for robot in ("robot1", "robot2")]  # fmt: skip
+    log = tmp_path / "fleet.mcap"
+    rec = None
+    try:
+        for h in hosts:
+            assert h.stdout is not None and h.stdout.readline().strip() == "READY"
+        rec = miro("log", "record", "--naming", naming.endpoint, "--channel", "*/EventChannel",
+                   "-o", str(log), env=env)  # fmt: skip
+        assert rec.stderr is not None and rec.stderr.readline().startswith("recording ")
+        for robot in ("robot1", "robot2"):
+            sup = proc("event_supplier.py", "--transport", "zenoh", "--naming", naming.endpoint,
+                       "-MNC", robot, "EventChannel", "20", "5")  # fmt: skip
+            out, err = sup.communicate(timeout=60)
+            assert sup.returncode == 0 and "DONE" in out, err
+        stop(rec)
+        rec = None
+        info = run_miro("log", "info", str(log))
+        assert info.returncode == 0, info.stderr
+        counts = {line.split()[0]: line.split()[2] for line in info.stdout.splitlines()
+                  if "events" in line and "/" in line.split()[0]}  # fmt: skip
+        assert counts == {"robot1/ExampleEvent": "20", "robot2/ExampleEvent": "20"}, info.stdout
+    finally:
+        if rec is not None:
+            rec.kill()
+        for h in hosts:
+            h.kill()
+            h.wait()
