@@ -6,17 +6,19 @@ ros2_peer.py recv TOPIC ACKS
     seconds from the first to the last, the median latency (now - header.stamp)
 ros2_peer.py send TOPIC ACKS SIZE SECONDS WINDOW
     publish Images of SIZE data bytes, stamped at sending, for SECONDS, never more than
-    WINDOW ahead of the count the receiver acknowledged on ACKS (the same credit window as
-    the miro sender of bench_ros2.py); then the `end` message
+    WINDOW ahead of the count the receiver acknowledged on ACKS (the same credit window, and
+    the same arrangement, as the miro sender of bench_ros2.py); then the `end` message
 """
 
 from __future__ import annotations
 
 import json
 import sys
+import threading
 import time
 
 import rclpy
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from sensor_msgs.msg import Image
 from std_msgs.msg import UInt64
@@ -56,33 +58,40 @@ def receive(node: Node, topic: str, acks: str) -> None:
 
 
 def send(node: Node, topic: str, acks: str, size: int, seconds: float, window: int) -> None:
+    """As the miro sender: the acks are taken by an executor on a thread of their own (as the
+    miro side's delivering thread), the sender waits on a condition for credit."""
     acked = [0]
+    moved = threading.Condition()
 
     def on_ack(m: UInt64) -> None:
-        acked[0] = max(acked[0], m.data)
+        with moved:
+            acked[0] = max(acked[0], m.data)
+            moved.notify()
 
     pub = node.create_publisher(Image, topic, 10)
     ack_sub = node.create_subscription(UInt64, acks, on_ack, 10)
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    spinner = threading.Thread(target=executor.spin, daemon=True)
+    spinner.start()
     while pub.get_subscription_count() < 1 or ack_sub.get_publisher_count() < 1:
-        rclpy.spin_once(node, timeout_sec=0.05)
+        time.sleep(0.05)
     time.sleep(0.5)  # the receiver matches this writer too
     msg = Image(height=1, width=size, encoding="mono8", step=size, data=bytes(size))
-    sent = 0
+    sent = [0]
     end = time.monotonic() + seconds
     while time.monotonic() < end:
-        stalled = time.monotonic() + QUIET
-        while sent - acked[0] >= window:
-            rclpy.spin_once(node, timeout_sec=0.1)
-            if time.monotonic() > stalled:
-                raise SystemExit(f"no ack for {QUIET:g} s after message {sent}")
+        with moved:
+            if not moved.wait_for(lambda: sent[0] - acked[0] < window, QUIET):
+                raise SystemExit(f"no ack for {QUIET:g} s after message {sent[0]}")
         msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(time.time_ns(), 1_000_000_000)
         pub.publish(msg)
-        sent += 1
-    last = time.monotonic() + QUIET
-    while acked[0] < sent and time.monotonic() < last:
-        rclpy.spin_once(node, timeout_sec=0.1)
+        sent[0] += 1
+    with moved:
+        moved.wait_for(lambda: acked[0] >= sent[0], QUIET)
     pub.publish(Image(encoding="end"))
     time.sleep(0.5)  # let the last one go out before the node does
+    executor.shutdown()
 
 
 def main() -> None:

@@ -18,6 +18,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -113,6 +114,8 @@ def test_hz_reports_the_rate_of_an_rclpy_publisher(
     )  # fmt: skip
     assert hz.stdout is not None
     reports = []
+    guard = threading.Timer(HANG, hz.kill)  # a defect ends the loop below, not the run
+    guard.start()
     try:
         for line in hz.stdout:
             if " Hz " in line:
@@ -120,6 +123,7 @@ def test_hz_reports_the_rate_of_an_rclpy_publisher(
                 if len(reports) == 2:
                     break
     finally:
+        guard.cancel()
         hz.send_signal(signal.SIGINT)
         _, err = hz.communicate(timeout=HANG)
     assert hz.returncode == 0, err
