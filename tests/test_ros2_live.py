@@ -105,6 +105,30 @@ def test_echo_prints_an_rclpy_publishers_messages_decoded(
         )
 
 
+def test_echo_of_another_type_than_the_graphs_says_so(
+    ros_types: Path, talker: subprocess.Popen[str]
+) -> None:
+    _listed(ros_types, "/rclpy_peer", "/rclpy_out")  # the talker is on the graph
+    echo = subprocess.Popen(
+        [sys.executable, "-m", "miro_gen.cli.main", "echo", "--ros2", "/rclpy_out",
+         "std_msgs/msg/String"],
+        env=_env(ros_types), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    assert echo.stderr is not None
+    guard = threading.Timer(HANG, echo.kill)
+    guard.start()
+    try:
+        line = echo.stderr.readline()
+    finally:
+        guard.cancel()
+        echo.send_signal(signal.SIGINT)
+        out, _ = echo.communicate(timeout=HANG)
+    assert (
+        "/rclpy_out is geometry_msgs/msg/Twist on the ROS 2 graph, not std_msgs/msg/String" in line
+    )
+    assert echo.returncode == 0 and out == ""
+
+
 def test_hz_reports_the_rate_of_an_rclpy_publisher(
     ros_types: Path, talker: subprocess.Popen[str]
 ) -> None:

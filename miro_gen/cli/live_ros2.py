@@ -24,6 +24,7 @@ from miro_gen.cli.eventargs import add_length_options, length_limit
 from miro_gen.cli.log_ros2 import ros2_missing, stopped_by_signals
 
 TICK = 0.1  # seconds between looks at the graph while a topic is waited for
+CHECK = 0.5  # seconds between looks for a publisher of another type than the one given
 TOLD_AFTER = 2.0  # seconds of waiting before saying what is waited for
 SPIN_TIME = 2.0  # seconds `miro list --ros2` watches discovery at least, by default
 NODES_WAIT = 10.0  # seconds it waits more, at most, for the nodes of the participants found
@@ -217,7 +218,7 @@ class Watched:
         from miro_gen.ros2.graph import best_available
 
         found = node.graph.topic_endpoints(self.topic)
-        types = sorted({names.type_from_dds(ep.dds_type) or ep.dds_type for ep in found})
+        types = _types(found)
         rtype = self.given_type
         if rtype is None:
             if not types:
@@ -236,6 +237,23 @@ class Watched:
         self.cls = cls
         self.subscribed = True
         return True
+
+    def mismatch(self, node: Any) -> str | None:
+        """Why the type given will hear none of the topic's publishers, if the graph says so."""
+        own = node.context.participant.gid
+        types = _types([e for e in node.graph.topic_endpoints(self.topic) if e.participant != own])
+        if self.given_type is None or not types or self.given_type in types:
+            return None
+        return (
+            f"{self.topic} is {', '.join(types)} on the ROS 2 graph, not {self.given_type}: "
+            "its publishers will not match"
+        )
+
+
+def _types(endpoints: list[Any]) -> list[str]:
+    from miro_gen.ros2 import names
+
+    return sorted({names.type_from_dds(ep.dds_type) or ep.dds_type for ep in endpoints})
 
 
 def _topic(p: argparse.ArgumentParser, text: str) -> str:
@@ -319,6 +337,11 @@ def echo_main(argv: Sequence[str]) -> int:
                 if watched.failed:
                     return 1
                 stop.wait(TICK)
+            while not stop.wait(CHECK):  # a type given that the graph contradicts: said once
+                why = watched.mismatch(node)
+                if why is not None:
+                    print(f"{prog}: warning: {why}", file=sys.stderr, flush=True)
+                    break
             stop.wait()
     except Ros2DomainError as e:
         return _error(prog, str(e))
