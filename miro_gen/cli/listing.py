@@ -13,6 +13,7 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
+from miro_gen.cli.live_ros2 import add_ros2_flag, wants_ros2
 from miro_gen.cli.liveargs import connect
 from miro_gen.launch.console import duration_text
 from miro_gen.live.remote import LiveError, Robot, Running
@@ -37,10 +38,15 @@ def parser() -> argparse.ArgumentParser:
         "--brief", action="store_true", help="no operations: one line per object, event and set"
     )
     p.add_argument("--json", action="store_true", help="print it all as JSON")
+    add_ros2_flag(p, "list")
     return p
 
 
 def list_main(argv: Sequence[str]) -> int:
+    if wants_ros2(argv):
+        from miro_gen.cli import live_ros2
+
+        return live_ros2.list_main(argv)
     p = parser()
     robot, ns = connect(p, "miro list", argv)
     try:

@@ -19,6 +19,7 @@ from miro_gen.cli.eventargs import (
     split_common,
     topic_arg,
 )
+from miro_gen.cli.live_ros2 import add_ros2_flag, wants_ros2
 
 MAX_TOPICS = 1000  # topics `miro hz` keeps statistics of
 DEFAULT_CHANNEL = "EventChannel"
@@ -39,6 +40,7 @@ def _parser(prog: str, description: str) -> argparse.ArgumentParser:
         help="the event channel (default: the ones the suppliers of TOPIC publish on, else "
         f"{DEFAULT_CHANNEL})",
     )
+    add_ros2_flag(p, prog.split()[-1])
     return p
 
 
@@ -148,6 +150,10 @@ def _listen(
 
 
 def echo_main(argv: Sequence[str]) -> int:
+    if wants_ros2(argv):
+        from miro_gen.cli import live_ros2
+
+        return live_ros2.echo_main(argv)
     prog = "miro echo"
     p = _parser(prog, "Print the events of TOPIC as they arrive, decoded, and sequence gaps.")
     p.add_argument("-n", "--count", type=int, default=0, help="exit after N events")
@@ -195,6 +201,10 @@ def echo_main(argv: Sequence[str]) -> int:
 
 
 def hz_main(argv: Sequence[str]) -> int:
+    if wants_ros2(argv):
+        from miro_gen.cli import live_ros2
+
+        return live_ros2.hz_main(argv)
     prog = "miro hz"
     p = _parser(
         prog,

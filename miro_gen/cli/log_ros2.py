@@ -40,7 +40,7 @@ def is_rosbag(paths: Sequence[str]) -> bool:
 
 
 @contextmanager
-def _stopped_by_signals() -> Iterator[threading.Event]:
+def stopped_by_signals() -> Iterator[threading.Event]:
     """An event set by SIGINT, SIGTERM or SIGHUP while inside the block."""
     stop = threading.Event()
     sigs = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
@@ -52,7 +52,7 @@ def _stopped_by_signals() -> Iterator[threading.Event]:
             signal.signal(s, handler)
 
 
-def _ros2_missing(prog: str) -> bool:
+def ros2_missing(prog: str) -> bool:
     try:
         import cyclonedds  # noqa: F401
     except ImportError:
@@ -65,7 +65,7 @@ def _ros2_missing(prog: str) -> bool:
 def record_ros2(prog: str, output: str, topics: list[tuple[str, str]]) -> int:
     """Record the ROS 2 topics named (all when none) into the rosbag2 MCAP file `output`,
     until a signal."""
-    if _ros2_missing(prog):
+    if ros2_missing(prog):
         return 1
     from miro_gen.eventlog.progress import StatusLine, human_bytes
     from miro_gen.ros2.bag import BagWriter
@@ -86,7 +86,7 @@ def record_ros2(prog: str, output: str, topics: list[tuple[str, str]]) -> int:
     told: set[str] = set()
     started = time.monotonic()
     try:
-        with _stopped_by_signals() as stop, Node("miro_log_record") as node:
+        with stopped_by_signals() as stop, Node("miro_log_record") as node:
             recorder = BagRecorder(node, writer, wanted)
             shown = " ".join(wanted) or "every ROS 2 topic"
             print(f"recording {shown} into {output} (rosbag2)", file=sys.stderr)
@@ -111,7 +111,7 @@ def record_ros2(prog: str, output: str, topics: list[tuple[str, str]]) -> int:
 def play_ros2(prog: str, ns: Any) -> int:
     """Play rosbag2 files onto ROS 2 topics: --rate, --loop, --start/--end, --topics and
     --wait of `miro log play` apply."""
-    if _ros2_missing(prog):
+    if ros2_missing(prog):
         return 1
     from miro_gen.eventlog.reader import LogError, LogReader
     from miro_gen.ros2.bag_io import BagPlayer
@@ -130,7 +130,7 @@ def play_ros2(prog: str, ns: Any) -> int:
         first = min((log.span()[0] for log in logs), default=0)
         start = first + int(ns.start * 1e9) if ns.start else None
         end = first + int(ns.end * 1e9) if ns.end is not None else None
-        with _stopped_by_signals() as stop, Node("miro_log_play") as node:
+        with stopped_by_signals() as stop, Node("miro_log_play") as node:
             player = BagPlayer(node, logs, wanted)
             for topic in excluded:
                 player.publishers.pop(topic, None)

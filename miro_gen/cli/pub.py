@@ -11,6 +11,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from miro_gen.cli.live_ros2 import add_ros2_flag, wants_ros2
 from miro_gen.cli.liveargs import connect
 from miro_gen.live.remote import LiveError, Robot
 
@@ -56,10 +57,15 @@ def parser() -> argparse.ArgumentParser:
         metavar="S",
         help=f"wait that long at most, then publish anyway (default {MAX_WAIT:g} s; 0: no limit)",
     )
+    add_ros2_flag(p, "pub")
     return p
 
 
 def pub_main(argv: Sequence[str]) -> int:
+    if wants_ros2(argv):
+        from miro_gen.cli import live_ros2
+
+        return live_ros2.pub_main(argv)
     p = parser()
     robot, ns = connect(p, "miro pub", argv)
     if ns.rate < 0 or ns.count < 0 or ns.max_wait < 0 or (ns.wait_matching or 0) < 0:
@@ -122,18 +128,10 @@ def _local_type(scoped: str) -> Any:
 
 
 def _value(cls: Any, text: str) -> Any:
-    import yaml
+    from miro_gen.live.values import from_text
 
-    from miro_gen.live.values import from_plain
-
-    if text == "-":
-        text = sys.stdin.read()
     try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as e:
-        raise LiveError(f"cannot read the value: {getattr(e, 'problem', e)}") from None
-    try:
-        return from_plain(cls, {} if data is None else data, "value")
+        return from_text(cls, text)
     except ValueError as e:
         raise LiveError(str(e)) from None
 

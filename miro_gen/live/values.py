@@ -33,6 +33,22 @@ def hints(obj: Any) -> dict[str, Any]:
     return typing.get_type_hints(obj)
 
 
+def from_text(hint: Any, text: str) -> Any:
+    """A value of type `hint` from YAML or JSON text (`{data: hi}`); `-` reads the standard
+    input. ValueError says what does not fit."""
+    import sys
+
+    import yaml
+
+    if text == "-":
+        text = sys.stdin.read()
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as e:
+        raise ValueError(f"cannot read the value: {getattr(e, 'problem', e)}") from None
+    return from_plain(hint, {} if data is None else data, "value")
+
+
 def from_plain(hint: Any, data: Any, where: str = "value", resolve: Resolver | None = None) -> Any:
     """`data` (plain: numbers, strings, lists, mappings) as a value of type `hint`."""
     origin = typing.get_origin(hint)

@@ -22,6 +22,7 @@ from cyclonedds.builtin import (
     BuiltinTopicDcpsSubscription,
 )
 from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState
+from cyclonedds.qos import Policy
 from rmw_dds_common.msg import Gid, NodeEntitiesInfo, ParticipantEntitiesInfo
 
 from miro_gen.ros2 import names
@@ -110,6 +111,8 @@ class Endpoint:
     dds_type: str
     reader: bool
     type_hash: str
+    reliable: bool = True
+    transient_local: bool = False
 
 
 class GraphView:
@@ -152,6 +155,7 @@ class GraphView:
             cond = ReadCondition(reader, _ALIVE)
             for sample in reader.read(N=100_000, condition=cond):
                 ud = _user_data(sample.qos)
+                qos = sample.qos or ()
                 out.append(
                     Endpoint(
                         gid_of(sample.key),
@@ -160,6 +164,8 @@ class GraphView:
                         sample.type_name,
                         is_reader,
                         ros_qos.parse_user_data(ud).get("typehash", ""),
+                        Policy.Reliability.BestEffort not in qos,
+                        Policy.Durability.TransientLocal in qos,
                     )
                 )
         return out
@@ -199,8 +205,36 @@ class GraphView:
             found.setdefault(what[1], set()).add(ros_type or ep.dds_type)
         return {k: sorted(v) for k, v in sorted(found.items())}
 
+    def unannounced(self) -> set[bytes]:
+        """Participants that have a `ros_discovery_info` writer but whose nodes have not arrived
+        yet (a Fast DDS writer sends a late joiner its last state only seconds later)."""
+        own = self.participant.gid
+        writers = {
+            ep.participant
+            for ep in self.endpoints()
+            if ep.dds_topic == DISCOVERY_TOPIC and not ep.reader and ep.participant != own
+        }
+        with self._lock:
+            return writers - set(self._participants)
+
+    def topic_endpoints(self, topic: str) -> list[Endpoint]:
+        """The readers and writers of the ROS topic `topic` (fully qualified)."""
+        dds = names.topic_to_dds(topic)
+        return [ep for ep in self.endpoints() if ep.dds_topic == dds]
+
     def close(self) -> None:
         self._info.close()
+
+
+def best_available(publishers: list[Endpoint], depth: int = 10) -> ros_qos.QosProfile:
+    """The profile a subscription takes to hear every one of `publishers`, and as much as they
+    offer (rclpy's "best available", what `ros2 topic echo` uses): reliable unless one of them
+    is best effort, transient local if all of them are."""
+    return ros_qos.QosProfile(
+        depth=depth,
+        reliable=all(p.reliable for p in publishers),
+        transient_local=bool(publishers) and all(p.transient_local for p in publishers),
+    )
 
 
 def _user_data(qos: Any) -> bytes:
