@@ -21,9 +21,10 @@ exits 1 when a target is missed.
 Both are measured as a user runs them: the installed `miro-idl` script (bytecode compiled and the
 grammar tables cached by a warm-up run, as after `pip install`) and Debian's `omniidl`.
 `--miro-idl CMD` measures another `miro-idl` (another checkout: `--miro-idl "env
-PYTHONPATH=/src/old python -P -m miro_gen.cli.idl"`); `--workdir DIR` puts the files in DIR
-instead of the system's temporary folder. Wall-clock medians are the figures; the CPU
-time (user + system) is printed beside them, the steadier figure on a shared machine.
+PYTHONPATH=/src/old python -P -m miro_gen.cli.idl"`); `--baseline CMD` times one more with the
+front-end rows, interleaved (before and after a change, in the same run); `--workdir DIR` puts
+the files in DIR instead of the system's temporary folder. Wall-clock medians are the figures;
+the CPU time (user + system) is printed beside them, the steadier figure on a shared machine.
 """
 
 from __future__ import annotations
@@ -101,6 +102,7 @@ def measure(cmds: dict[str, list[str]], repeat: int, env: dict[str, str]) -> dic
 
 OURS = "miro-idl --ast-json"
 THEIRS = "omniidl -bdump"
+BEFORE = "--baseline --ast-json"
 
 
 def compare(
@@ -110,17 +112,29 @@ def compare(
     omniidl: str | None,
     repeat: int,
     env: dict[str, str],
+    baseline: list[str] | None = None,
 ) -> dict[str, list[float]]:
-    """Time both compilers on `idl` and print a table; returns the times by command."""
+    """Time both compilers (and `baseline`, another miro-idl, when given) on `idl`, interleaved,
+    and print a table; returns the times by command."""
     cmds = {OURS: [*ours, "--ast-json", str(idl)]}
     if omniidl:
         cmds[THEIRS] = [omniidl, "-bdump", str(idl)]
+    if baseline:
+        cmds[BEFORE] = [*baseline, "--ast-json", str(idl)]
     times = measure(cmds, repeat, env)
     print()
-    print(f"{title:24} {'median s':>9} {'min s':>8} {'CPU s':>8}")
+    print(f"{title:24} {'median s':>9} {'min s':>8} {'max s':>8} {'CPU s':>8} {'CPU min-max':>12}")
     for name in cmds:
         wall, cpu = statistics.median(times[name]), statistics.median(times[name + CPU])
-        print(f"{name:24} {wall:9.3f} {min(times[name]):8.3f} {cpu:8.3f}")
+        cpus = times[name + CPU]
+        print(
+            f"{name:24} {wall:9.3f} {min(times[name]):8.3f} {max(times[name]):8.3f} {cpu:8.3f} "
+            f"{min(cpus):5.3f}-{max(cpus):5.3f}"
+        )
+    if baseline:
+        wall = statistics.median(times[OURS]) / statistics.median(times[BEFORE])
+        cpu = statistics.median(times[OURS + CPU]) / statistics.median(times[BEFORE + CPU])
+        print(f"ratio miro-idl / --baseline: {wall:.2f} (CPU times: {cpu:.2f})")
     return times
 
 
@@ -246,6 +260,11 @@ def main() -> int:
     )
     ap.add_argument("--gen-repeat", type=int, default=3, help="runs of each generator (3)")
     ap.add_argument("--miro-idl", help="the miro-idl command to measure (default: installed)")
+    ap.add_argument(
+        "--baseline",
+        help="another miro-idl command timed with the front-end rows, interleaved with them "
+        '(the code before a change: "env PYTHONPATH=/src/old python -P -m miro_gen.cli.idl")',
+    )
     ap.add_argument("--no-lark", action="store_true", help="leave out the parser comparison")
     ap.add_argument(
         "--workdir",
@@ -273,7 +292,10 @@ def main() -> int:
 
         if args.repeat:
             time_once([*ours, "--ast-json", str(big)], env)  # warm-up: bytecode, grammar cache
-            times = compare("large file", big, ours, omniidl, args.repeat, env)
+            baseline = args.baseline.split() if args.baseline else None
+            if baseline:
+                time_once([*baseline, "--ast-json", str(big)], env)
+            times = compare("large file", big, ours, omniidl, args.repeat, env, baseline)
             if omniidl:
                 ratio = statistics.median(times[OURS]) / statistics.median(times[THEIRS])
                 verdict = "ok" if ratio <= RATIO_TARGET else "MISSED"
@@ -284,9 +306,10 @@ def main() -> int:
                 print(f"ratio of CPU times: {cpu:.2f} (the steadier figure on a shared machine)")
                 ok &= ratio <= RATIO_TARGET
 
-            tiny_median = statistics.median(
-                compare("tiny file (Example.idl)", tiny, ours, omniidl, args.repeat, env)[OURS]
+            tiny_times = compare(
+                "tiny file (Example.idl)", tiny, ours, omniidl, args.repeat, env, baseline
             )
+            tiny_median = statistics.median(tiny_times[OURS])
             verdict = "ok" if tiny_median < TINY_TARGET_S else "MISSED"
             print(
                 f"miro-idl on a tiny file: {tiny_median:.3f} s "

@@ -6,7 +6,6 @@ import argparse
 import os
 import re
 import sys
-import traceback
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
@@ -61,6 +60,8 @@ def internal_error(prog: str, exc: BaseException) -> int:
         file=sys.stderr,
     )
     if os.environ.get("MIRO_DEBUG"):
+        import traceback  # here only: it costs every command start-up time
+
         traceback.print_exc()
     return 3
 

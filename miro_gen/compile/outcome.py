@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -13,20 +12,34 @@ if TYPE_CHECKING:
     from miro_gen.idl.ast import Specification
 
 
-@dataclass
 class Outcome:
     """Diagnostics at positions in the inputs (`path:line:col: error: ...`, in the order to
     show them), problems of the run itself (`errors`: output paths too long, a file that
-    cannot be written) and its warnings, the generated files, and which of them changed."""
+    cannot be written) and its warnings, the generated files, and which of them changed.
 
-    outdir: Path
-    diagnostics: list[Diagnostic] = field(default_factory=list)
-    errors: list[str] = field(default_factory=list)
-    warnings: list[str] = field(default_factory=list)
-    files: int = 0  # files generated (in memory)
-    changed: list[str] = field(default_factory=list)  # relative to outdir: written, or stale
-    written: bool = False  # `changed` were written (not a check)
-    specs: list[Specification] = field(default_factory=list)  # IDL: the resolved specifications
+    A plain class, not a dataclass: `dataclasses` imports `inspect`, a tenth of what
+    `miro-idl` imports before it reads a file."""
+
+    __slots__ = (
+        "changed",
+        "diagnostics",
+        "errors",
+        "files",
+        "outdir",
+        "specs",
+        "warnings",
+        "written",
+    )
+
+    def __init__(self, outdir: Path) -> None:
+        self.outdir = outdir
+        self.diagnostics: list[Diagnostic] = []
+        self.errors: list[str] = []
+        self.warnings: list[str] = []
+        self.files = 0  # files generated (in memory)
+        self.changed: list[str] = []  # relative to outdir: written, or stale
+        self.written = False  # `changed` were written (not a check)
+        self.specs: list[Specification] = []  # IDL: the resolved specifications
 
     @property
     def ok(self) -> bool:

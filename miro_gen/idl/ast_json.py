@@ -9,7 +9,8 @@ from typing import Any
 from miro_gen.idl import ast
 
 JsonObj = dict[str, Any]
-_ENCODER = json.JSONEncoder(ensure_ascii=False)
+# The documents are trees of fresh dicts and lists: no cycle to look for.
+_ENCODER = json.JSONEncoder(ensure_ascii=False, check_circular=False)
 
 
 def type_string(t: Any) -> str:

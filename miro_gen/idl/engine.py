@@ -36,7 +36,7 @@ from collections.abc import Callable
 from operator import itemgetter
 from typing import Any
 
-ENGINE_FORMAT = 4  # bump when the table layout below changes
+ENGINE_FORMAT = 5  # bump when the table layout below changes
 # Parser stack entries allowed: thousands of nesting levels (about 4 entries per module), far
 # beyond real IDL; deeper input is reported where it happens instead of exhausting recursion
 # in the later passes.
@@ -48,18 +48,12 @@ MAX_STACK = 20_000
 MAX_NESTING = 256
 _BRACKETS = {"{": 1, "(": 1, "[": 1, "<": 1, "}": -1, ")": -1, "]": -1, ">": -1}
 
-# Scan order for regex terminals (most specific first).
-_REGEX_ORDER = (
-    "PRAGMA",
-    "WCHAR",
-    "WSTRING",
-    "FIXED",
-    "FLOAT",
-    "INTEGER",
-    "CHAR",
-    "STRING",
-    "IDENT",
-)
+# Scan order: the regular expression tries its alternatives in turn, so the frequent tokens
+# come first where no earlier alternative could take them: identifiers after the wide literals
+# (`L"..."`, `L'x'`), punctuation before the number and quote literals (no punctuation starts
+# one: a sign is an operator). Among the numbers, the most specific first.
+_HEAD_ORDER = ("PRAGMA", "WCHAR", "WSTRING", "IDENT")
+_LITERAL_ORDER = ("FIXED", "FLOAT", "INTEGER", "CHAR", "STRING")
 _IGNORED = ("WS", "COMMENT")
 _LITERALS = ("WSTRING", "WCHAR", "STRING", "CHAR")
 
@@ -161,8 +155,9 @@ def build_tables(grammar: str) -> Tables:
         return str(terminals[name].pattern.to_regexp())
 
     skip = "(?:" + "|".join(rx(n) for n in _IGNORED) + ")*"
-    parts = [f"(?P<{n}>{rx(n)})" for n in _REGEX_ORDER]
+    parts = [f"(?P<{n}>{rx(n)})" for n in _HEAD_ORDER]
     parts += [f"(?P<{name}>{re.escape(value)})" for name, value in puncts]
+    parts += [f"(?P<{n}>{rx(n)})" for n in _LITERAL_ORDER]
     parts.append(r"(?P<_EOF>\Z)")
     literal = "|".join(rx(n) for n in _LITERALS)
     by_value = {value: name for name, value in puncts}
@@ -287,6 +282,17 @@ def _filter(include: list[tuple[int, bool, int]], trailing: int) -> Callback:
 
 def _repetition(include: list[tuple[int, bool, int]], left_recursive: bool) -> Callback:
     rest = include[1:] if left_recursive else include
+    if len(rest) == 1 and not rest[0][1] and not rest[0][2]:  # `x*` of one kept item
+        only = rest[0][0]
+        if left_recursive:
+
+            def extend(children: list[Any]) -> _Rep:
+                out: _Rep = children[0]
+                out.append(children[only])
+                return out
+
+            return extend
+        return lambda children: _Rep((children[only],))
 
     def build(children: list[Any]) -> _Rep:
         out: _Rep = children[0] if left_recursive else _Rep()
@@ -355,8 +361,7 @@ class Engine:
             if m is None:
                 raise self._bad_char(text, self.skip.match(text, pos).end())  # type: ignore[union-attr]
             kind: str = m.lastgroup  # type: ignore[assignment]
-            start = m.start(kind)
-            pos = m.end()
+            start, pos = m.span(kind)  # the token ends the match: skipped text comes first
             if kind == "_EOF":
                 kind = "$END"
                 tok = None
@@ -415,13 +420,20 @@ class Engine:
                         raise ParseFailure(start, "declarations or expressions nested too deeply")
                     break
                 size, origin, cb, pick = rules[~act]
-                if size:
-                    children = value_stack[-size:]
+                if cb is None:  # a rule that passes one child through (`?rule`)
+                    if size == 1:  # the value stays where it is: only the state changes
+                        state = states[state_stack[-2]][origin]
+                        state_stack[-1] = state
+                        continue
+                    value = value_stack[pick - size]
+                    del value_stack[-size:]
+                    del state_stack[-size:]
+                elif size:
+                    value = cb(value_stack[-size:])
                     del value_stack[-size:]
                     del state_stack[-size:]
                 else:
-                    children = []
-                value = children[pick] if cb is None else cb(children)
+                    value = cb([])
                 state = states[state_stack[-1]][origin]
                 state_stack.append(state)
                 value_stack.append(value)

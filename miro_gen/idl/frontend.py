@@ -11,7 +11,7 @@ from miro_gen.idl import ast
 from miro_gen.idl.parser import parse
 from miro_gen.idl.preprocessor import Preprocessor
 from miro_gen.idl.resolver import Resolver
-from miro_gen.idl.rosidl.unit import compile_ros2, is_interface_file
+from miro_gen.idl.rosidl import is_interface_file
 
 
 def compile_idl(
@@ -37,6 +37,8 @@ def compile_idl(
     try:
         with _recursion_limit(RECURSION_LIMIT):
             if ros2 or is_interface_file(path):
+                from miro_gen.idl.rosidl.unit import compile_ros2  # lark and the .msg readers
+
                 return compile_ros2(path, include_dirs, defines, diag)
             return _compile(path, include_dirs, defines, diag, resolver)
     except RecursionError:

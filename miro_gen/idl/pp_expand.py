@@ -47,6 +47,11 @@ INVOCATION_COST = 64
 _WORD = re.compile(r"\b[A-Za-z_]\w*")
 
 
+def words_of(text: str) -> frozenset[str]:
+    """The words of `text` (identifiers, keywords): what could name a macro."""
+    return frozenset(_WORD.findall(text))
+
+
 class Macro(NamedTuple):
     name: str
     params: tuple[str, ...] | None  # None for object-like macros

@@ -22,7 +22,7 @@ from miro_gen.idl.pp_conditions import MAX_CONDITION_DEPTH as MAX_CONDITION_DEPT
 from miro_gen.idl.pp_conditions import ConditionError, ConditionParser
 from miro_gen.idl.pp_expand import MAX_EXPANDED_LINE as MAX_EXPANDED_LINE
 from miro_gen.idl.pp_expand import MAX_EXPANSION_DEPTH as MAX_EXPANSION_DEPTH
-from miro_gen.idl.pp_expand import ExpansionBudgetExceeded, Macro, MacroExpander
+from miro_gen.idl.pp_expand import ExpansionBudgetExceeded, Macro, MacroExpander, words_of
 from miro_gen.idl.pp_lexemes import IDENT, comment_segments, strip_comments
 from miro_gen.idl.source_text import SourceText as SourceText  # importable from here as before
 
@@ -166,6 +166,12 @@ class Preprocessor:
         line_offset = 0  # adjusted by #line
         out = self._out
         out_map = self._map
+        # The words of the whole file, found in one scan: while no macro is named by any of
+        # them (most files, most of the time), no line needs the per-line look for macros.
+        # Spliced lines can join words, so a file with backslashes is looked at line by line.
+        words = None if "\\" in text else words_of(text)
+        words_gen = -1  # the macro table's generation `may_expand` was computed for
+        may_expand = True
         i = 0
         while i < n:
             raw = lines[i]
@@ -215,7 +221,10 @@ class Preprocessor:
                     if opened is not None:
                         comment_start = SourcePos(path, src_line, opened + 1)
                 if active:
-                    if self._expander.uses_macros(raw):
+                    if words_gen != self._macro_gen:
+                        words_gen = self._macro_gen
+                        may_expand = words is None or not self.macros.keys().isdisjoint(words)
+                    if may_expand and self._expander.uses_macros(raw):
                         raw, cmap = self._expander.expand_line(
                             raw, start_in_comment, SourcePos(path, src_line, 1), self._macro_gen
                         )

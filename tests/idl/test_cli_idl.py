@@ -207,3 +207,26 @@ def test_modules_nested_too_deep_for_the_file_system(tmp_path: Path) -> None:
     )
     assert line.endswith("(the file system allows 4095); nest fewer modules")
     assert not out_dir.exists()
+
+
+def test_ast_json_of_omg_idl_imports_the_front_end_only() -> None:
+    """`miro-idl --ast-json` starts in a few tens of milliseconds (issue 30: its whole run is
+    compared with omniidl's): OMG IDL loads neither the ROS 2 readers and the Lark they use,
+    nor the code generator and Jinja, nor `dataclasses`/`inspect` and `traceback`."""
+    code = (
+        "import contextlib, io, json, sys\n"
+        "from miro_gen.cli import idl\n"
+        "with contextlib.redirect_stdout(io.StringIO()):\n"
+        "    code = idl.main(['-I', 'idl', '--ast-json', 'idl/Example.idl'])\n"
+        "print(json.dumps([code, sorted(sys.modules)]))\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=60
+    )
+    assert done.returncode == 0, done.stderr
+    code, modules = json.loads(done.stdout)
+    assert code == 0
+    unwanted = ("lark", "jinja2", "dataclasses", "inspect", "traceback", "miro_gen.codegen")
+    unwanted += ("miro_gen.idl.rosidl.unit", "miro_gen.idl.rosidl.msg_parser")
+    assert [m for m in modules if m.startswith(unwanted)] == []
+    assert "miro_gen.idl.parser" in modules  # it did compile

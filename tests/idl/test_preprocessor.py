@@ -382,6 +382,36 @@ def test_redefine_replaces_macro(tmp_path: Path) -> None:
     assert const_value(tmp_path, "#define N 1\n#undef N\n#define N 2\nconst long c = N;\n") == 2
 
 
+def test_macros_expand_from_the_line_after_each_change_of_the_table(tmp_path: Path) -> None:
+    """A file's words are looked at once (issue 30): whether a line can use a macro must still
+    follow every #define, #undef and #include that changes the table, line by line."""
+    write(tmp_path / "defs.idl", "#define WIDTH 3\n")
+    text = (
+        "WIDTH HEIGHT\n"  # neither defined yet
+        '#include "defs.idl"\n'
+        "WIDTH HEIGHT\n"  # WIDTH from the header
+        "#define HEIGHT 4\n"
+        "WIDTH HEIGHT\n"
+        "#undef WIDTH\n"
+        "WIDTH HEIGHT\n"
+        "#define WIDTH 5\n"
+        "WIDTH HEIGHT\n"
+    )
+    assert pp_lines(tmp_path, text) == [
+        "WIDTH HEIGHT",
+        "3 HEIGHT",
+        "3 4",
+        "WIDTH 4",
+        "5 4",
+    ]
+
+
+def test_a_macro_name_spliced_across_lines_expands(tmp_path: Path) -> None:
+    """`WID\\` + newline + `TH` is the word WIDTH: no scan of the file's words may miss it."""
+    text = "const long c = WID\\\nTH;\n"  # WIDTH from the command line: no other WIDTH
+    assert const_value(tmp_path, text, defines={"WIDTH": "3"}) == 3
+
+
 # -- macro expansion ----------------------------------------------------------------------------
 def test_object_like_macro(tmp_path: Path) -> None:
     text = "#define N 10\n#define M (N + 1)\nconst long c = M * N;\n"

@@ -21,18 +21,12 @@ from miro_gen.idl import ast
 from miro_gen.idl.parser import parse
 from miro_gen.idl.preprocessor import Preprocessor
 from miro_gen.idl.resolver import Resolver
+from miro_gen.idl.rosidl import INTERFACE_SUFFIXES
 from miro_gen.idl.rosidl.derived import add_derived
 from miro_gen.idl.rosidl.msg_ast import file_definitions
 from miro_gen.idl.rosidl.msg_parser import PACKAGE_NAME, read_messages
 from miro_gen.idl.rosidl.redeclarations import drop_identical
 from miro_gen.idl.rosidl.type_description import NotDescribable, TypeDescriptions, type_hash
-
-INTERFACE_SUFFIXES = {".msg": "msg", ".srv": "srv", ".action": "action"}
-
-
-def is_interface_file(path: str) -> bool:
-    """Whether `path` is a `.msg`, `.srv` or `.action` file (by its name)."""
-    return Path(path).suffix in INTERFACE_SUFFIXES
 
 
 def compile_ros2(
