@@ -256,7 +256,7 @@ def test_order_restarts_and_one_ctrl_c_stops_everything(tmp_path: Path) -> None:
         "c.py",
         """
         import os, sys, time
-        runs = os.path.join(str(TESTS), "c.runs")
+        runs = os.path.join(os.path.dirname(__file__), "c.runs")
         n = len(open(runs).read()) if os.path.exists(runs) else 0
         open(runs, "a").write("x")
         print(f"c run {n}", flush=True)
