@@ -234,6 +234,13 @@ VERBS: tuple[Verb, ...] = (
         ),
     ),
     Verb(
+        "foxglove",
+        "serve the running robot to Foxglove and Lichtblick (WebSocket)",
+        run="miro_gen.cli.foxglove:foxglove_main",
+        parser="miro_gen.cli.foxglove:parser",
+        common=True,
+    ),
+    Verb(
         "bridge",
         "relay events with a CORBA event channel (bridge corba)",
         description="Relay events between miro-gen's event channels and another middleware's.",

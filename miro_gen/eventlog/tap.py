@@ -33,7 +33,8 @@ Handler = Callable[[list[RawEvent], int], object]  # events of one frame, receiv
 
 class RawEventTap:
     """Calls `handler(events, received_ns)` on the reactor thread for each frame received
-    whose topic matches `subscriptions`. `skip` type names are never delivered."""
+    whose topic matches `subscriptions`. `skip` type names are never delivered; what waits in
+    ZeroMQ beyond `queue_bytes` (of frames of the largest size) is dropped."""
 
     def __init__(
         self,
@@ -41,6 +42,7 @@ class RawEventTap:
         subscriptions: Iterable[tuple[str, str]],
         handler: Handler,
         skip: Iterable[str] = (),
+        queue_bytes: int = QUEUE_BYTES,
     ) -> None:
         self.channel = channel
         self.reactor = channel.reactor
@@ -53,7 +55,7 @@ class RawEventTap:
         self._wanted: dict[bytes, bool] = {}
         context = self.reactor.context
         self.socket: zmq.Socket[Any] = sockets.connecting_socket(context, zmq.SUB)
-        self.socket.setsockopt(zmq.RCVHWM, sockets.queue_limit(context, QUEUE_BYTES))
+        self.socket.setsockopt(zmq.RCVHWM, sockets.queue_limit(context, queue_bytes))
         for prefix in {subscription_prefix(d, t) for d, t in self.filters}:
             self.socket.setsockopt(zmq.SUBSCRIBE, prefix)
         resolve = channel.resolve
