@@ -89,7 +89,13 @@ class Robot:
         self.naming = NamingProcess(options=("--channel", "EventChannel"))
         self.procs: list[subprocess.Popen[str]] = []
         self.robot, self.robot_out = self.start_robot("robot1")
-        self.bridge = self._popen(
+        self.bridge, self.bridge_err, self.url = self.start_bridge()
+
+    def start_bridge(
+        self, *options: str, context: str = "bridge"
+    ) -> tuple[subprocess.Popen[str], Lines, str]:
+        """`miro foxglove` on a free port: the process, its standard error, its URL."""
+        bridge = self._popen(
             [
                 sys.executable,
                 "-m",
@@ -98,18 +104,18 @@ class Robot:
                 "--naming",
                 self.naming.endpoint,
                 "-MNC",
-                "bridge",
+                context,
                 "--port",
                 "0",
                 "--refresh",
                 "0.2",
+                *options,
             ],
             self.env,
         )
-        assert self.bridge.stderr is not None
-        self.bridge_err = Lines(self.bridge.stderr)
-        port = self.bridge_err.wait_for(r"serving EventChannel at ws://127\.0\.0\.1:(\d+) ")[1]
-        self.url = f"ws://127.0.0.1:{port}"
+        err = Lines(bridge.stderr)
+        port = err.wait_for(r"serving EventChannel at ws://127\.0\.0\.1:(\d+) ")[1]
+        return bridge, err, f"ws://127.0.0.1:{port}"
 
     def _popen(self, argv: list[str], env: dict[str, str]) -> subprocess.Popen[str]:
         proc = subprocess.Popen(
@@ -134,10 +140,11 @@ class Robot:
         out.wait_for("^READY$")
         return proc, out
 
-    def client(self, *steps: dict[str, Any]) -> list[dict[str, Any]]:
-        """Run client.mjs with `steps`; its results (the server's info first)."""
+    def client(self, *steps: dict[str, Any], url: str | None = None) -> list[dict[str, Any]]:
+        """Run client.mjs with `steps` (on the bridge at `url`, default the first); its
+        results, the server's info left out."""
         done = subprocess.run(
-            ["node", str(FOXGLOVE / "client.mjs"), self.url, json.dumps(list(steps))],
+            ["node", str(FOXGLOVE / "client.mjs"), url or self.url, json.dumps(list(steps))],
             capture_output=True,
             text=True,
             timeout=WAIT,

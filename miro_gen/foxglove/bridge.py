@@ -170,6 +170,7 @@ class Bridge:
         self.context = foxglove.Context()
         self._schemas: dict[str, str] = {}  # type hash -> data schema text
         self._offer_service: dict[str, Running] = {}  # type hash -> a service offering it
+        self._offers: dict[str, list[Any]] = {}  # service -> its offers (MiroService.Offer)
         self.topics = Topics(channel, self.context, self._schema_of_topic)
         self.publishing = ClientPublishing(
             channel, server.options.naming_context, self._offered_schema
@@ -235,12 +236,16 @@ class Bridge:
         """One round: topics, services, parameters as they are now."""
         services = self.robot.services()
         offers = []
+        known = {}
         for s in services:
-            if s.description is None:
-                continue
-            for o in s.description.offers:
+            # A service still bound that did not answer this time (busy, a lost reply) keeps
+            # the topics it offered: they go when it does.
+            found = self._offers.get(s.name, []) if s.description is None else s.description.offers
+            known[s.name] = found
+            for o in found:
                 offers.append(o)
                 self._offer_service.setdefault(o.type_hash, s)
+        self._offers = known
         self.topics.update(topics_of(offers, self.channel.name))
         entries = [
             e

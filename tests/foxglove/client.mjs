@@ -19,6 +19,9 @@
 //   {"op": "channels", "has": [...], "lacks": [...]}  once the advertised topics have and
 //                                                    lack those: the topics advertised
 //   {"op": "status"}                                 the next status message
+//   {"op": "count", "topics": [...], "keys": {T: "u32"|"u64last"}, "last": T, "until": N}
+//                                                    each message's number (see the step)
+//   {"op": "stall", "topic": T}                      subscribe, then never read again
 //   {"op": "wait", "ms": MS}
 import wsProtocol from "@foxglove/ws-protocol";
 import { parseIDL } from "@foxglove/omgidl-parser";
@@ -215,6 +218,40 @@ for (const step of steps) {
     ws.send(buf);
     const state = await take("playback");
     out({ playback: state });
+  } else if (step.op === "count") {
+    // The numbers of the messages received of each topic (the first member, an unsigned long,
+    // read straight from the CDR: a camera's megabytes are not decoded) until `until` of
+    // `last` have arrived.
+    const subs = new Map();
+    const seen = {};
+    for (const topic of step.topics) {
+      const channel = await until(() => channels.get(topic));
+      subs.set(client.subscribe(channel.id), topic);
+      seen[topic] = [];
+    }
+    await until(() => {
+      for (let i = events.length - 1; i >= 0; i--) {
+        const e = events[i];
+        if (e.kind !== "message" || !subs.has(e.event.subscriptionId)) continue;
+        events.splice(i, 1);
+        const d = e.event.data;
+        const key = step.keys[subs.get(e.event.subscriptionId)];
+        seen[subs.get(e.event.subscriptionId)].push(
+          key === "u32" ? d.getUint32(4, true) : Number(d.getBigUint64(d.byteLength - 8, true)),
+        );
+      }
+      return seen[step.last].length >= step.until ? true : undefined;
+    });
+    for (const sub of subs.keys()) client.unsubscribe(sub);
+    out({ counts: seen });
+  } else if (step.op === "stall") {
+    // Subscribe to `topic`, then stop reading the socket: a client that does not keep up.
+    const channel = await until(() => channels.get(step.topic));
+    client.subscribe(channel.id);
+    await new Promise((r) => setTimeout(r, 100));
+    ws._socket.pause();
+    out({ stalled: step.topic });
+    await new Promise(() => {}); // until killed
   } else if (step.op === "channels") {
     await until(() =>
       (step.has ?? []).every((t) => channels.has(t)) &&
