@@ -8,6 +8,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from miro_gen.cli.eventargs import COMMON, make_server, resolve_or_wait, split_common
+from miro_gen.foxglove import DEFAULT_BACKLOG, DEFAULT_PORT
 
 EXTRA = "pip install 'miro-gen[foxglove]'"
 
@@ -35,8 +36,6 @@ def parser() -> argparse.ArgumentParser:
 
 def add_listen_options(p: argparse.ArgumentParser) -> None:
     """Where and how the WebSocket server listens (also `miro log play --foxglove`)."""
-    from miro_gen.foxglove import DEFAULT_BACKLOG, DEFAULT_PORT
-
     p.add_argument(
         "--address",
         default="127.0.0.1",
@@ -84,6 +83,23 @@ def listen_of(p: argparse.ArgumentParser, ns: argparse.Namespace, insecure: bool
     except BridgeError as e:
         p.error(str(e))
     return listen
+
+
+def listen_at(p: argparse.ArgumentParser, text: str, argv: Sequence[str]) -> object:
+    """The `Listen` of `[ADDR:]PORT` (`miro log play --foxglove`): loopback unless --insecure."""
+    address, _, port = text.rpartition(":")
+    try:
+        number = int(port)
+    except ValueError:
+        p.error(f"--foxglove takes [ADDR:]PORT, not {text!r}")
+    ns = argparse.Namespace(
+        address=address.strip("[]") or "127.0.0.1",
+        port=number,
+        tls_cert=None,
+        tls_key=None,
+        client_queue=DEFAULT_BACKLOG,
+    )
+    return listen_of(p, ns, insecure(argv))
 
 
 def insecure(argv: Sequence[str]) -> bool:
