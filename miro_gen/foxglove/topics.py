@@ -13,18 +13,15 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import foxglove
 
 from miro_gen import clock
-from miro_gen.eventlog.tap import RawEventTap
+from miro_gen.eventlog.tap import PayloadTap
 from miro_gen.eventlog.types import topic_name
 from miro_gen.log import logger
 from miro_gen.transport.events import EventChannel
-
-if TYPE_CHECKING:
-    from miro_gen.transport.event_frames import RawEvent
 
 _log = logger("MIRO")
 TAP_BYTES = 64 << 20  # what a topic's tap may queue in ZeroMQ before frames are dropped
@@ -51,7 +48,7 @@ class _Advertised:
     topic: Topic
     channel: foxglove.Channel
     subscribers: set[int] = field(default_factory=set)
-    tap: RawEventTap | None = None
+    tap: PayloadTap | None = None
 
 
 class Topics:
@@ -152,16 +149,22 @@ class Topics:
             if a.tap is not None or not a.subscribers or self._by_id.get(a.channel.id()) is not a:
                 return
         t = a.topic
-        log = a.channel.log
+        raw_hash = bytes.fromhex(t.type_hash)
+        # The SDK's own BaseChannel when there is one: the wrapper's checks cost as much as
+        # the log itself, for each small event.
+        base = getattr(a.channel, "base", None)
+        log = base.log if base is not None else lambda data, at, _: a.channel.log(data, log_time=at)
+        now = clock.current().time_ns
 
-        def forward(events: list[RawEvent], received_ns: int) -> None:
-            now = clock.current().time_ns()  # the player's time under --clock log
-            for e in events:
-                if e.type_hash == t.type_hash:
-                    log(e.data, log_time=now)
-            self.forwarded += len(events)
+        def forward(payloads: list[bytes], frame_hash: bytes, received_ns: int) -> None:
+            if frame_hash != raw_hash:
+                return  # another type under the same name: not this channel's schema
+            at = now()  # the player's time under --clock log
+            for data in payloads:
+                log(data, at, None)
+            self.forwarded += len(payloads)
 
-        a.tap = RawEventTap(self.channel, [(t.domain, t.type_name)], forward, queue_bytes=TAP_BYTES)
+        a.tap = PayloadTap(self.channel, (t.domain, t.type_name), forward, queue_bytes=TAP_BYTES)
 
     def _close_tap(self, a: _Advertised) -> None:
         with self._lock:
