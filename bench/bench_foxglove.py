@@ -17,6 +17,12 @@ subscribes and counts the messages (and bytes) that reach it from its first to t
 `--seconds` (at least 2 s of work per run). Printed: messages/s and MB/s of each, their medians
 with the spread (min-max), ours/raw and the load average. Target (issue 31): at least 0.8x raw
 for both sizes; `--check` exits 1 when missed.
+
+With `--fairness`: a supplier pushes a 6 MB camera (Miro::ImageEventIDL) at 30 Hz and a 100 Hz
+small topic (Miro::ExampleEventIDL) through `miro foxglove` (its default --client-queue) to
+the client of tests/foxglove/client.mjs, which counts what it received of each by the numbers
+the supplier gave (`frame`, `counter`) during 300 of the small ones: the share of each that
+arrived, per run. Target (issue 31): at least 95% of each.
 """
 
 from __future__ import annotations
@@ -229,6 +235,93 @@ def run_ours(size: int, seconds: float, rate: float) -> dict[str, float]:
         stop(*reversed(procs))
 
 
+STREAMS = """
+import sys
+import Miro
+from miro_gen import Server, StructuredPushSupplier
+server = Server(sys.argv[:1] + ["--naming", sys.argv[1], "-MNC", "bench"])
+supplier = StructuredPushSupplier(server.resolve_channel("EventChannel"))
+form = Miro.ImageFormatIDL(1024, 6_000_000 // 3072, Miro.IMAGE_RGB8, 3072)
+pixels = bytes(6_000_000)
+n = {"camera": 0, "fast": 0}
+def camera(_=None):
+    supplier.push("Camera", Miro.ImageEventIDL(Miro.TimeIDL(0, 0), n["camera"], form, pixels))
+    n["camera"] += 1
+def fast(_=None):
+    supplier.push("Fast", Miro.ExampleEventIDL(n["fast"], Miro.ExampleStructIDL()))
+    n["fast"] += 1
+server.reactor().schedule_timer(0.0, 1 / 30, camera)
+server.reactor().schedule_timer(0.0, 1 / 100, fast)
+server.reactor().call_soon(lambda: print("READY", flush=True))
+server.run()
+"""
+
+
+def fairness(repeats: int) -> bool:
+    """The camera beside the small topic; whether every share met 95%."""
+    naming_endpoint = f"tcp://127.0.0.1:{free_port()}"
+    miro = [sys.executable, "-m", "miro_gen.cli.main"]
+    naming = subprocess.Popen(
+        [*miro, "naming", "--endpoint", naming_endpoint, "--channel", "EventChannel"],
+        stdout=subprocess.PIPE,
+        text=True,
+        env=ENV,
+    )
+    procs = [naming]
+    met = True
+    try:
+        assert naming.stdout is not None
+        naming.stdout.readline()
+        streams = subprocess.Popen(
+            [sys.executable, "-c", STREAMS, naming_endpoint],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.DEVNULL,
+            text=True,
+            env=ENV,
+        )
+        procs.append(streams)
+        assert streams.stdout is not None
+        streams.stdout.readline()
+        bridge = subprocess.Popen(
+            [*miro, "foxglove", "--naming", naming_endpoint, "-MNC", "bridge", "--port", "0"],
+            stderr=subprocess.PIPE,
+            text=True,
+            env=ENV,
+        )
+        procs.append(bridge)
+        assert bridge.stderr is not None
+        url = "ws://127.0.0.1:" + bridge.stderr.readline().split("ws://127.0.0.1:")[1].split()[0]
+        # TimeIDL is two longs: the frame number is at 4 + 8 (after the encapsulation)
+        step = {
+            "op": "count",
+            "topics": ["bench/Camera", "bench/Fast"],
+            "keys": {"bench/Camera": 12, "bench/Fast": 4},
+            "last": "bench/Fast",
+            "until": 300,
+        }
+        print("| run | camera frames | camera share | small events | small share |")
+        print("|---|---:|---:|---:|---:|")
+        for run in range(repeats):
+            done = subprocess.run(
+                ["node", str(NODE_DIR / "client.mjs"), url, json.dumps([step])],
+                capture_output=True,
+                text=True,
+                cwd=NODE_DIR,
+                timeout=120,
+            )
+            counts = json.loads(done.stdout.splitlines()[1])["counts"]
+            shares = []
+            for topic in ("bench/Camera", "bench/Fast"):
+                got = counts[topic]
+                shares.append((len(got), len(got) / (got[-1] - got[0] + 1)))
+            met &= all(share >= 0.95 for _, share in shares)
+            (nc, sc), (nf, sf) = shares
+            print(f"| {run + 1} | {nc} | {sc:.1%} | {nf} | {sf:.1%} |", flush=True)
+    finally:
+        stop(*reversed(procs))
+    return met
+
+
 def spread(values: list[float]) -> str:
     return f"{statistics.median(values):,.0f} ({min(values):,.0f}-{max(values):,.0f})"
 
@@ -238,6 +331,9 @@ def main() -> int:
     p.add_argument("--seconds", type=float, default=3.0, help="counted per run (default 3)")
     p.add_argument("--repeats", type=int, default=5, help="interleaved runs of each (default 5)")
     p.add_argument("--check", action="store_true", help=f"exit 1 below {TARGET}x raw")
+    p.add_argument(
+        "--fairness", action="store_true", help="the 6 MB, 30 Hz camera beside a 100 Hz topic"
+    )
     ns = p.parse_args()
     try:
         import foxglove  # noqa: F401
@@ -248,6 +344,11 @@ def main() -> int:
         print("bench_foxglove: skipped: run `npm ci` in tests/foxglove first")
         return 0
     load = os.getloadavg()[0]
+    if ns.fairness:
+        print(f"load average {load:.1f}; a 6 MB camera at 30 Hz beside a 100 Hz topic")
+        met = fairness(ns.repeats)
+        print(f"load average after: {os.getloadavg()[0]:.1f}; target 95% of each")
+        return 1 if ns.check and not met else 0
     missed = False
     print(f"load average {load:.1f}; {ns.repeats} interleaved runs of {ns.seconds:g} s each")
     print("| events | ours msg/s | raw SDK msg/s | ours MB/s | raw MB/s | ours/raw (median) |")

@@ -333,3 +333,30 @@ def test_beyond_loopback_it_takes_tls_or_insecure() -> None:
     assert "Traceback" not in done.stderr
     done = run_miro("foxglove", "--tls-cert", "/nonexistent.pem", "--tls-key", "/x.pem")
     assert done.returncode == 2 and "/nonexistent.pem" in done.stderr
+
+
+def test_a_client_of_the_older_subprotocol_alone_is_refused_at_the_handshake(
+    robot: Robot,
+) -> None:
+    """What docs/FOXGLOVE.md says of older apps: foxglove.websocket.v1 alone gets HTTP 400."""
+    script = (
+        'import WebSocket from "ws";\n'
+        "const ws = new WebSocket(process.argv[1], [process.argv[2]]);\n"
+        'ws.on("open", () => { console.log("open " + ws.protocol); ws.close(); });\n'
+        'ws.on("unexpected-response", (_req, res) => { console.log("http " + res.statusCode);'
+        " process.exit(0); });\n"
+        'ws.on("error", (e) => { console.log("error " + e.message); });\n'
+    )
+
+    def handshake(subprotocol: str) -> str:
+        done = subprocess.run(
+            ["node", "--input-type=module", "-e", script, robot.url, subprotocol],
+            capture_output=True,
+            text=True,
+            timeout=WAIT,
+            cwd=FOXGLOVE,
+        )
+        return done.stdout.strip()
+
+    assert handshake("foxglove.websocket.v1") == "http 400"
+    assert handshake("foxglove.sdk.v1") == "open foxglove.sdk.v1"

@@ -1,6 +1,6 @@
 """`miro foxglove` with a big topic beside a small one, and a client that stops reading.
 
-tests/procs/fox_streams.py pushes a 6 MB `Camera` at 30 Hz and a 100 Hz `Fast` topic; a
+tests/procs/fox_streams.py pushes a 6 MB `Camera` (15 Hz) and a 100 Hz `Fast` topic; a
 Foxglove client (tests/foxglove/client.mjs, Foxglove's ws-protocol client) subscribes to both
 and counts, by the numbers the supplier gave them, what it received: each topic at least 95%
 of what was pushed while it listened (the camera does not starve the small topic, nor the
@@ -24,6 +24,10 @@ from test_foxglove_bridge import FOXGLOVE, PROCS, Lines, Robot, _skip_reason
 
 pytestmark = pytest.mark.skipif(_skip_reason() is not None, reason=str(_skip_reason()))
 CAMERA_BYTES = 6_000_000
+# 15 Hz, not the camera's 30: 180 MB/s is more than the test's client keeps up with on a
+# loaded 2-core machine (and a client that does not keep up is the next test's);
+# bench/bench_foxglove.py --fairness runs the 30 Hz camera.
+CAMERA_HZ = 15
 SLOW_QUEUE = 8  # the second bridge's --client-queue
 
 
@@ -40,7 +44,7 @@ class Streams(Robot):
                 "-MNC",
                 context,
                 str(CAMERA_BYTES),
-                "30",
+                str(CAMERA_HZ),
                 "100",
             ],
             self.robot_env,
@@ -71,7 +75,7 @@ def count(streams: Streams, fast: int, url: str | None = None) -> dict[str, list
         {
             "op": "count",
             "topics": ["robot1/Camera", "robot1/Fast"],
-            "keys": {"robot1/Camera": "u32", "robot1/Fast": "u64last"},
+            "keys": {"robot1/Camera": 4, "robot1/Fast": "u64last"},
             "last": "robot1/Fast",
             "until": fast,
         },
@@ -82,9 +86,9 @@ def count(streams: Streams, fast: int, url: str | None = None) -> dict[str, list
 
 
 def test_a_big_topic_does_not_starve_a_small_one(streams: Streams) -> None:
-    counts = count(streams, 300)  # three seconds of the fast topic, some 90 camera frames
+    counts = count(streams, 300)  # three seconds of the fast topic, some 45 camera frames
     camera, fast = counts["robot1/Camera"], counts["robot1/Fast"]
-    assert len(camera) >= 30
+    assert len(camera) >= 15
     assert received_share(fast) >= 0.95, fast
     assert received_share(camera) >= 0.95, camera
 

@@ -19,7 +19,7 @@
 //   {"op": "channels", "has": [...], "lacks": [...]}  once the advertised topics have and
 //                                                    lack those: the topics advertised
 //   {"op": "status"}                                 the next status message
-//   {"op": "count", "topics": [...], "keys": {T: "u32"|"u64last"}, "last": T, "until": N}
+//   {"op": "count", "topics": [...], "keys": {T: OFFSET|"u64last"}, "last": T, "until": N}
 //                                                    each message's number (see the step)
 //   {"op": "stall", "topic": T}                      subscribe, then never read again
 //   {"op": "seekPlay", "topic": T, "seek": "NS", "speed": X, "count": N}
@@ -223,9 +223,9 @@ for (const step of steps) {
     const state = await take("playback");
     out({ playback: state });
   } else if (step.op === "count") {
-    // The numbers of the messages received of each topic (the first member, an unsigned long,
-    // read straight from the CDR: a camera's megabytes are not decoded) until `until` of
-    // `last` have arrived.
+    // The numbers of the messages received of each topic, read straight from the CDR (a
+    // camera's megabytes are not decoded): an unsigned long at the byte offset `keys[topic]`,
+    // or "u64last", the last 8 bytes; until `until` of `last` have arrived.
     const subs = new Map();
     const seen = {};
     for (const topic of step.topics) {
@@ -241,7 +241,9 @@ for (const step of steps) {
         const d = e.event.data;
         const key = step.keys[subs.get(e.event.subscriptionId)];
         seen[subs.get(e.event.subscriptionId)].push(
-          key === "u32" ? d.getUint32(4, true) : Number(d.getBigUint64(d.byteLength - 8, true)),
+          key === "u64last"
+            ? Number(d.getBigUint64(d.byteLength - 8, true))
+            : d.getUint32(key, true),
         );
       }
       return seen[step.last].length >= step.until ? true : undefined;
