@@ -129,6 +129,7 @@ class Topics:
                 return
             first = not a.subscribers
             a.subscribers.add(client)
+        _log.debug("foxglove: client %d subscribes to %s", client, a.topic.name)
         if first:
             self.reactor.call_soon(self._open_tap, a)
 
@@ -139,6 +140,7 @@ class Topics:
                 return
             a.subscribers.discard(client)
             last = not a.subscribers
+        _log.debug("foxglove: client %d unsubscribes from %s", client, a.topic.name)
         if last:
             self.reactor.call_soon(self._close_tap, a)
 
@@ -165,6 +167,7 @@ class Topics:
             self.forwarded += len(payloads)
 
         a.tap = PayloadTap(self.channel, (t.domain, t.type_name), forward, queue_bytes=TAP_BYTES)
+        _log.debug("foxglove: reading %s from %s", t.name, self.channel.name)
 
     def _close_tap(self, a: _Advertised) -> None:
         with self._lock:
