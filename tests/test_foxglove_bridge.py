@@ -360,3 +360,11 @@ def test_a_client_of_the_older_subprotocol_alone_is_refused_at_the_handshake(
 
     assert handshake("foxglove.websocket.v1") == "http 400"
     assert handshake("foxglove.sdk.v1") == "open foxglove.sdk.v1"
+
+
+def test_a_port_in_use_is_said_in_one_line(robot: Robot) -> None:
+    port = robot.url.rsplit(":", 1)[1]
+    done = robot.miro("foxglove", "--port", port, "-MNC", "bridge3")
+    assert done.returncode == 1, done.stderr
+    assert f"cannot serve on 127.0.0.1:{port}" in done.stderr
+    assert "Traceback" not in done.stderr

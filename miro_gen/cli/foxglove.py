@@ -127,7 +127,7 @@ def foxglove_main(argv: Sequence[str]) -> int:
         p.error("--refresh must be more than 0")
     if sdk_missing():
         return 1
-    from miro_gen.foxglove.bridge import Bridge, Listen
+    from miro_gen.foxglove.bridge import Bridge, BridgeError, Listen
     from miro_gen.live.remote import LiveError, Robot
 
     listen = listen_of(p, ns, insecure(argv))
@@ -146,7 +146,12 @@ def foxglove_main(argv: Sequence[str]) -> int:
         return 1
     try:
         bridge = Bridge(server, robot, channel, listen, ns.refresh)
-    except Exception:
+    except BridgeError as e:  # the port is taken, a certificate the SDK refuses
+        print(f"{prog}: {e}", file=sys.stderr)
+        robot.close()
+        server.close()
+        return 1
+    except BaseException:
         robot.close()
         server.close()
         raise

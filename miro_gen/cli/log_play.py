@@ -212,9 +212,15 @@ def _run(p: argparse.ArgumentParser, prog: str, argv: Sequence[str], ns: Any, fi
     publish_clock: Callable[[Any], object] = clock
     door = None
     if ns.foxglove is not None:
+        from miro_gen.foxglove.bridge import BridgeError
         from miro_gen.foxglove.playback import PlaybackDoor
 
-        door = PlaybackDoor(files, ns.foxglove)
+        try:
+            door = PlaybackDoor(files, ns.foxglove)
+        except BridgeError as e:  # the port is taken
+            print(f"{prog}: {e}", file=sys.stderr)
+            server.close()
+            return 1
         send, publish_clock = _both(routes.send, door.send), _both(clock, door.clock)
         print(
             f"{prog}: serving the replay to Foxglove at ws://{ns.foxglove.address}:{door.port}",
