@@ -8,10 +8,11 @@ import argparse
 import signal
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from miro_gen.cli.eventargs import COMMON, make_server, split_common, topic_arg
+from miro_gen.foxglove import DEFAULT_PORT as FOXGLOVE_PORT
 
 SWITCH_INTERVAL = 0.0001  # seconds a thread holds the interpreter before another may take it
 KEYS = (
@@ -154,6 +155,15 @@ def play_main(argv: Sequence[str]) -> int:
         action="store_true",
         help="then wait until every topic played has a consumer on its channel (Miro's -a)",
     )
+    p.add_argument(
+        "--foxglove",
+        nargs="?",
+        const=f"127.0.0.1:{FOXGLOVE_PORT}",
+        metavar="[ADDR:]PORT",
+        help="also serve the replay to Foxglove or Lichtblick, whose playback controls then "
+        f"drive it (default 127.0.0.1:{FOXGLOVE_PORT}; another address needs --insecure; "
+        "the foxglove extra)",
+    )
     ns = p.parse_args(split_common(p, argv))
     if not ns.rate > 0:
         p.error("--rate must be more than 0")
@@ -162,6 +172,12 @@ def play_main(argv: Sequence[str]) -> int:
 
     if is_rosbag(ns.files):  # onto ROS 2 topics, as ros2 bag play
         return play_ros2(prog, ns)
+    if ns.foxglove is not None:
+        from miro_gen.cli.foxglove import listen_at, sdk_missing
+
+        ns.foxglove = listen_at(p, ns.foxglove, argv)
+        if sdk_missing():
+            return 1
     from miro_gen.eventlog.fileset import FileSet
 
     files = FileSet()
@@ -202,9 +218,30 @@ def _run(p: argparse.ArgumentParser, prog: str, argv: Sequence[str], ns: Any, fi
         print(f"{prog}: error: no channel to play into", file=sys.stderr)
         server.close()
         return 1
+    send: Callable[[Any], object] = routes.send
+    publish_clock: Callable[[Any], object] = clock
+    door = None
+    if ns.foxglove is not None:
+        from miro_gen.foxglove.bridge import BridgeError
+        from miro_gen.foxglove.playback import PlaybackDoor
+
+        try:
+            door = PlaybackDoor(files, ns.foxglove)
+        except BridgeError as e:  # the port is taken
+            print(f"{prog}: {e}", file=sys.stderr)
+            server.close()
+            return 1
+        send, publish_clock = _both(routes.send, door.send), _both(clock, door.clock)
+        print(
+            f"{prog}: serving the replay to Foxglove at ws://{ns.foxglove.address}:{door.port}",
+            file=sys.stderr,
+            flush=True,
+        )
     reactor_thread = threading.Thread(target=server.run, name="miro-reactor", daemon=True)
     reactor_thread.start()
-    player = Player(files, routes.send, clock, rate=ns.rate, loop=ns.loop)
+    player = Player(files, send, publish_clock, rate=ns.rate, loop=ns.loop)
+    if door is not None:
+        door.attach(player)
     status = StatusLine()
     shown = [0.0]
 
@@ -271,6 +308,8 @@ def _run(p: argparse.ArgumentParser, prog: str, argv: Sequence[str], ns: Any, fi
     finally:
         player.close()
         time.sleep(0.2)  # let the last frames leave
+        if door is not None:
+            door.close()
         server.shutdown()
         reactor_thread.join(5)
     names = " ".join(ns.files)
@@ -280,3 +319,13 @@ def _run(p: argparse.ArgumentParser, prog: str, argv: Sequence[str], ns: Any, fi
         print(f"{where}: error: {player.error}", file=sys.stderr)
         return 1
     return 0
+
+
+def _both(first: Callable[[Any], object], second: Callable[[Any], object]) -> Callable[[Any], None]:
+    """One callback that calls `first`, then `second`."""
+
+    def call(value: Any) -> None:
+        first(value)
+        second(value)
+
+    return call

@@ -239,6 +239,13 @@ VERBS: tuple[Verb, ...] = (
         ),
     ),
     Verb(
+        "foxglove",
+        "serve the running robot to Foxglove and Lichtblick (WebSocket)",
+        run="miro_gen.cli.foxglove:foxglove_main",
+        parser="miro_gen.cli.foxglove:parser",
+        common=True,
+    ),
+    Verb(
         "bridge",
         "relay events with a CORBA event channel or ROS 2 topics (bridge corba, ros2)",
         description="Relay events between miro-gen's event channels and another middleware's.",
