@@ -15,9 +15,6 @@ message size becomes MARSHAL.
 
 from __future__ import annotations
 
-import itertools
-import os
-import threading
 import time
 from collections.abc import Callable, Hashable, Sequence
 
@@ -31,7 +28,6 @@ from miro_gen.exceptions import (
     CompletionStatus,
 )
 from miro_gen.log import PeerWarnings, logger
-from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.runtime.rpc import (
     Invoker,
     Reply,
@@ -44,6 +40,7 @@ from miro_gen.transport.reactor import Reactor
 from miro_gen.transport.rpc import frames
 from miro_gen.transport.rpc.caller import Caller, caller_of, serving
 from miro_gen.transport.rpc.dispatch import Dispatcher, Peer
+from miro_gen.transport.rpc.objects import ObjectTable
 
 _log = logger("MIRO")
 _peer_warnings = PeerWarnings(_log)  # what peers send: rate-limited, with counts
@@ -53,7 +50,7 @@ MAX_PENDING = 10_000  # requests queued for workers; beyond this, TRANSIENT (try
 MAX_PENDING_BYTES = 256 << 20  # and bytes of their bodies
 
 
-class ObjectAdapter:
+class ObjectAdapter(ObjectTable):
     """Serves servants on `bind` (a ZeroMQ endpoint, port `*` for any free one) and on the
     endpoints `also_bind` gives for the one bound, advertising `host` as the address other
     processes reach it at; at most `workers` servant calls run at once. `reactor` gives the
@@ -74,6 +71,7 @@ class ObjectAdapter:
         identify_callers: bool = False,
         serve: bool = True,
     ) -> None:
+        super().__init__()  # the object table
         self.reactor = reactor
         self.invoker = invoker
         self.socket = sockets.listening_socket(reactor.context, zmq.ROUTER)
@@ -88,10 +86,6 @@ class ObjectAdapter:
         for endpoint in self.also_bound:
             self.socket.bind(endpoint)
         self.endpoint = _advertised(self.bound, host)
-        self._servants: dict[bytes, Servant] = {}
-        self._keys = itertools.count(1)
-        self._prefix = f"{os.getpid()}.".encode()
-        self._lock = threading.Lock()
         self._quick: dict[tuple[type, str], bool] = {}  # (servant class, operation): @nonblocking
         self._workers = workers
         self._identify = identify_callers
@@ -112,33 +106,6 @@ class ObjectAdapter:
                 identify=self._identify,
             )
 
-    # ---- objects --------------------------------------------------------------------------------
-
-    def activate(self, servant: Servant, key: bytes | None = None) -> ObjectRef:
-        """Serve `servant` under `key` (a fresh one by default); its reference."""
-        with self._lock:
-            if key is None:
-                key = self._prefix + str(next(self._keys)).encode()
-            self._servants[key] = servant
-        return ObjectRef(servant._repo_id, self.endpoint, key)
-
-    def deactivate(self, key: bytes) -> None:
-        with self._lock:
-            self._servants.pop(key, None)
-
-    def servants(self) -> list[tuple[bytes, Servant]]:
-        """(key, servant) of every object served here."""
-        with self._lock:
-            return list(self._servants.items())
-
-    def reference_for(self, servant: Servant) -> ObjectRef:
-        """The reference of a servant, activating it on first use."""
-        with self._lock:
-            for key, s in self._servants.items():
-                if s is servant:
-                    return ObjectRef(servant._repo_id, self.endpoint, key)
-        return self.activate(servant)
-
     # ---- requests (on the thread that owns the socket) ------------------------------------------
 
     def _receive(self, parts: list[bytes], peer: Peer | None) -> _Call | list[bytes] | None:
@@ -153,7 +120,7 @@ class ObjectAdapter:
         except frames.FrameError as e:
             _peer_warnings.warning("dropped a request: %s", e)
             return None
-        servant = self._servants.get(req.key)
+        servant = self.servant(req.key)
         if servant is None:
             missing = OBJECT_NOT_EXIST(f"no object with key {req.key!r} at {self.endpoint}")
             return _reply_frames(routing, req, system_exception_reply(missing))

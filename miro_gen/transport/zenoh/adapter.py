@@ -17,8 +17,6 @@ learn who calls (`transport.rpc.caller.current()`): over Zenoh that is the princ
 from __future__ import annotations
 
 import contextlib
-import itertools
-import os
 import queue
 import threading
 import time
@@ -28,10 +26,10 @@ import zenoh
 
 from miro_gen.exceptions import BAD_OPERATION, OBJECT_NOT_EXIST, TRANSIENT, CompletionStatus
 from miro_gen.log import PeerWarnings, logger
-from miro_gen.runtime.cdr import ObjectRef
-from miro_gen.runtime.rpc import Invoker, Reply, Servant, system_exception_reply
+from miro_gen.runtime.rpc import Invoker, Reply, system_exception_reply
 from miro_gen.transport.rpc import frames
 from miro_gen.transport.rpc.caller import Caller, serving
+from miro_gen.transport.rpc.objects import ObjectTable
 from miro_gen.transport.zenoh import keys
 from miro_gen.transport.zenoh.session import direct, track, untrack
 
@@ -43,7 +41,7 @@ PRINCIPAL = "zenoh"  # who a caller over Zenoh is, as far as the naming table ca
 _CALLER = Caller(PRINCIPAL, False)
 
 
-class ZenohAdapter:
+class ZenohAdapter(ObjectTable):
     """Serves servants on `session`'s call key; at most `workers` servant calls at once."""
 
     def __init__(
@@ -54,13 +52,11 @@ class ZenohAdapter:
         *,
         identify_callers: bool = False,
     ) -> None:
+        super().__init__()  # the object table
         self.session = session
         self.invoker = invoker
         self.zid = str(session.zid())
         self.endpoint = keys.endpoint(self.zid)
-        self._servants: dict[bytes, Servant] = {}
-        self._keys = itertools.count(1)
-        self._prefix = f"{os.getpid()}.".encode()
         self._lock = threading.Lock()
         self._identify = identify_callers
         self._queries: queue.SimpleQueue[Any] = queue.SimpleQueue()
@@ -78,30 +74,6 @@ class ZenohAdapter:
             session.declare_queryable(keys.call_key(self.zid), direct(self._arrived))
         )
         self._token = session.liveliness().declare_token(keys.alive_key(self.zid))
-
-    # ---- objects --------------------------------------------------------------------------------
-
-    def activate(self, servant: Servant, key: bytes | None = None) -> ObjectRef:
-        with self._lock:
-            if key is None:
-                key = self._prefix + str(next(self._keys)).encode()
-            self._servants[key] = servant
-        return ObjectRef(servant._repo_id, self.endpoint, key)
-
-    def deactivate(self, key: bytes) -> None:
-        with self._lock:
-            self._servants.pop(key, None)
-
-    def servants(self) -> list[tuple[bytes, Servant]]:
-        with self._lock:
-            return list(self._servants.items())
-
-    def reference_for(self, servant: Servant) -> ObjectRef:
-        with self._lock:
-            for key, s in self._servants.items():
-                if s is servant:
-                    return ObjectRef(servant._repo_id, self.endpoint, key)
-        return self.activate(servant)
 
     # ---- requests -------------------------------------------------------------------------------
 
@@ -144,7 +116,7 @@ class ZenohAdapter:
             busy = TRANSIENT(f"{self.endpoint} is stopping", completed=CompletionStatus.NO)
             self._reply(query, req, system_exception_reply(busy))
             return
-        servant = self._servants.get(req.key)
+        servant = self.servant(req.key)
         if servant is None:
             missing = OBJECT_NOT_EXIST(f"no object with key {req.key!r} at {self.endpoint}")
             self._reply(query, req, system_exception_reply(missing))
