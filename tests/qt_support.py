@@ -12,9 +12,10 @@ import pytest
 os.environ["QT_QPA_PLATFORM"] = "offscreen"  # never a real window, with or without a display
 
 try:  # the Qt tests import Qt from here, so that this runs first
-    from PySide6.QtCore import QObject, QThread, QTimer, Signal
+    from PySide6.QtCore import QObject, QPoint, Qt, QThread, QTimer, Signal
     from PySide6.QtGui import QCloseEvent, QImage
-    from PySide6.QtWidgets import QApplication, QLabel, QPushButton, QWidget
+    from PySide6.QtTest import QTest
+    from PySide6.QtWidgets import QApplication, QFileDialog, QLabel, QPushButton, QWidget
 except ImportError as e:  # PySide6 missing, or a system library Qt needs (libEGL, ...)
     pytest.skip(
         f"PySide6 cannot be imported ({e}): pip install miro-gen[qt]", allow_module_level=True
@@ -24,13 +25,17 @@ except ImportError as e:  # PySide6 missing, or a system library Qt needs (libEG
 __all__ = [
     "QApplication",
     "QCloseEvent",
+    "QFileDialog",
     "QImage",
     "QLabel",
     "QObject",
+    "QPoint",
     "QPushButton",
+    "QTest",
     "QThread",
     "QTimer",
     "QWidget",
+    "Qt",
     "Signal",
     "application",
     "qt_run",

@@ -20,11 +20,8 @@ import pytest
 import zmq
 from eventlog_helpers import T0, read_events, write_log
 from loopback import run_miro, service_env
-from PySide6.QtCore import QPoint, Qt
-from PySide6.QtTest import QTest
-from PySide6.QtWidgets import QFileDialog
 from qt_procs import ServiceProcess
-from qt_support import application, qt_run, qt_wait
+from qt_support import QFileDialog, QPoint, Qt, QTest, application, qt_run, qt_wait
 
 from miro_gen import Server
 from miro_gen.eventlog.fileset import FileSet, at_time
