@@ -154,11 +154,14 @@ def rss_mb(pid: int) -> float:
     raise AssertionError(f"no VmRSS for process {pid}")
 
 
-def eventually(check: Callable[[], bool], seconds: float = 10) -> None:
-    """Wait until check() is true; fail after `seconds`."""
+def eventually(
+    check: Callable[[], bool], seconds: float = 10, why: Callable[[], str] | None = None
+) -> None:
+    """Wait until check() is true; fail after `seconds` (a guard against a hang, not a bound on
+    how long it may take), saying `why()` when given."""
     end = time.monotonic() + seconds
     while time.monotonic() < end:
         if check():
             return
         time.sleep(0.01)
-    raise AssertionError("condition not reached in time")
+    raise AssertionError(why() if why is not None else "condition not reached in time")

@@ -32,7 +32,7 @@ from corba_peers import (
     notify_tools_missing,
     readline,
 )
-from loopback import free_port, service_env
+from loopback import eventually, free_port, service_env
 from miro_cli import REPO
 
 from miro_gen import Server
@@ -221,10 +221,11 @@ def run(binary: Path, world: World, *args: str) -> tuple[int, str]:
 
 def until_subscribed(binary: Path, world: World, wanted: str) -> None:
     """Wait until the C++ side sees `wanted` ("robot1 Gps") among the subscriptions."""
-    deadline = time.monotonic() + WAIT
-    while wanted not in subscription_types(binary, world):
-        assert time.monotonic() < deadline, f"{wanted} never subscribed"
-        time.sleep(0.05)
+    eventually(
+        lambda: wanted in subscription_types(binary, world),
+        WAIT,
+        lambda: f"{wanted} never subscribed",
+    )
 
 
 def gps_line(i: int) -> str:
@@ -288,10 +289,11 @@ def test_python_events_reach_a_cpp_consumer_as_it_subscribed(
     elsewhere = StructuredPushSupplier(python.channel, domain_name="robot2")
     try:
         expect(consumer, "CONNECTED")
-        deadline = time.monotonic() + WAIT
-        while not supplier.has_subscribers("Gps"):  # the C++ subscription, through the door
-            assert time.monotonic() < deadline, "the C++ consumer's subscription never came"
-            time.sleep(0.02)
+        eventually(  # the C++ subscription, through the door
+            lambda: supplier.has_subscribers("Gps"),
+            WAIT,
+            lambda: "the C++ consumer's subscription never came",
+        )
         assert not supplier.has_subscribers("Laser")
         assert not elsewhere.has_subscribers("Gps")
         for i in range(3):
@@ -327,10 +329,11 @@ def test_a_cpp_supplier_sees_the_python_consumers_subscriptions(
             notify_bin, world
         )
         collectors.pop().close()
-        deadline = time.monotonic() + WAIT
-        while f"{ROBOT} Odometry" in subscription_types(notify_bin, world):
-            assert time.monotonic() < deadline, "the subscription outlived its consumer"
-            time.sleep(0.05)
+        eventually(
+            lambda: f"{ROBOT} Odometry" not in subscription_types(notify_bin, world),
+            WAIT,
+            lambda: "the subscription outlived its consumer",
+        )
     finally:
         for c in collectors:
             c.close()
@@ -421,10 +424,7 @@ def test_a_killed_cpp_consumer_stops_no_one(
             gps_line(i) for i in range(4, 12)
         ]
         assert [e.payload.time.sec for e in collector.wait(12)] == [1000 + i for i in range(12)]
-        deadline = time.monotonic() + WAIT
-        while not world.log_says("dropped its consumer"):
-            assert time.monotonic() < deadline, world.host_log.read_text()
-            time.sleep(0.05)
+        eventually(lambda: world.log_says("dropped its consumer"), WAIT, world.host_log.read_text)
     finally:
         for p in (doomed, survivor, supplier):
             p.kill()
@@ -458,10 +458,11 @@ def test_nameclt_lists_the_robot_that_miro_naming_alone_names(
     if world.kind != "miro-naming":
         pytest.skip("omniNames lists what it holds itself")
     python.server.add_to_name_service(Example(), "Example")
-    deadline = time.monotonic() + WAIT
-    while "Example" not in nameclt(world, "list", ROBOT).stdout:
-        assert time.monotonic() < deadline, nameclt(world, "list", ROBOT)
-        time.sleep(0.05)
+    eventually(
+        lambda: "Example" in nameclt(world, "list", ROBOT).stdout,
+        WAIT,
+        lambda: str(nameclt(world, "list", ROBOT)),
+    )
     listed = nameclt(world, "list", ROBOT).stdout.split()
     assert "EventChannel" in listed and "Example" in listed
     root = nameclt(world, "list").stdout.split()
