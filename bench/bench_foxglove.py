@@ -172,14 +172,17 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def count(url: str, seconds: float) -> dict[str, Any]:
-    done = subprocess.run(
-        ["node", "--input-type=module", "-e", COUNTER, url, str(seconds)],
-        capture_output=True,
-        text=True,
-        cwd=NODE_DIR,
-        timeout=seconds + 60,
-    )
+def count(url: str, seconds: float, who: str) -> dict[str, Any]:
+    try:
+        done = subprocess.run(
+            ["node", "--input-type=module", "-e", COUNTER, url, str(seconds)],
+            capture_output=True,
+            text=True,
+            cwd=NODE_DIR,
+            timeout=seconds + 60,
+        )
+    except subprocess.TimeoutExpired:
+        raise SystemExit(f"bench_foxglove: no message from {who} in a minute") from None
     if done.returncode != 0:
         raise SystemExit(f"the client failed: {done.stderr}")
     result: dict[str, Any] = json.loads(done.stdout)
@@ -198,9 +201,9 @@ def stop(*procs: subprocess.Popen[str]) -> None:
             p.wait()
 
 
-def run_raw(size: int, seconds: float) -> dict[str, Any]:
+def run_raw(size: int, seconds: float, queue: int) -> dict[str, Any]:
     server = subprocess.Popen(
-        [sys.executable, "-c", RAW_SERVER, str(size), str(DEFAULT_BACKLOG)],
+        [sys.executable, "-c", RAW_SERVER, str(size), str(queue)],
         stdout=subprocess.PIPE,
         stderr=subprocess.DEVNULL,  # the SDK's lines about the client that went
         text=True,
@@ -209,12 +212,12 @@ def run_raw(size: int, seconds: float) -> dict[str, Any]:
     try:
         assert server.stdout is not None
         port = int(server.stdout.readline())
-        return count(f"ws://127.0.0.1:{port}", seconds)
+        return count(f"ws://127.0.0.1:{port}", seconds, "the raw server")
     finally:
         stop(server)
 
 
-def run_ours(size: int, seconds: float, rate: float) -> dict[str, Any]:
+def run_ours(size: int, seconds: float, rate: float, queue: int) -> dict[str, Any]:
     naming_endpoint = f"tcp://127.0.0.1:{free_port()}"
     miro = [sys.executable, "-m", "miro_gen.cli.main"]
     naming = subprocess.Popen(
@@ -238,7 +241,18 @@ def run_ours(size: int, seconds: float, rate: float) -> dict[str, Any]:
         assert supplier.stdout is not None
         supplier.stdout.readline()
         bridge = subprocess.Popen(
-            [*miro, "foxglove", "--naming", naming_endpoint, "-MNC", "bridge", "--port", "0"],
+            [
+                *miro,
+                "foxglove",
+                "--naming",
+                naming_endpoint,
+                "-MNC",
+                "bridge",
+                "--port",
+                "0",
+                "--client-queue",
+                str(queue),
+            ],
             stderr=subprocess.PIPE,
             text=True,
             env=ENV,
@@ -247,7 +261,7 @@ def run_ours(size: int, seconds: float, rate: float) -> dict[str, Any]:
         assert bridge.stderr is not None
         line = bridge.stderr.readline()
         port = line.split("ws://127.0.0.1:")[1].split()[0]
-        return count(f"ws://127.0.0.1:{port}", seconds)
+        return count(f"ws://127.0.0.1:{port}", seconds, "the bridge")
     finally:
         stop(*reversed(procs))
 
@@ -349,6 +363,12 @@ def main() -> int:
     p.add_argument("--repeats", type=int, default=5, help="interleaved runs of each (default 5)")
     p.add_argument("--check", action="store_true", help=f"exit 1 below {TARGET}x raw")
     p.add_argument(
+        "--client-queue",
+        type=int,
+        default=DEFAULT_BACKLOG,
+        help=f"messages kept per client by both servers (default: the bridge's, {DEFAULT_BACKLOG})",
+    )
+    p.add_argument(
         "--fairness", action="store_true", help="the 6 MB, 30 Hz camera beside a 100 Hz topic"
     )
     ns = p.parse_args()
@@ -367,7 +387,10 @@ def main() -> int:
         print(f"load average after: {os.getloadavg()[0]:.1f}; target 95% of each")
         return 1 if ns.check and not met else 0
     missed = False
-    print(f"load average {load:.1f}; {ns.repeats} interleaved runs of {ns.seconds:g} s each")
+    print(
+        f"load average {load:.1f}; {ns.repeats} interleaved runs of {ns.seconds:g} s each;"
+        f" client queue {ns.client_queue} messages"
+    )
     print(
         "| events | ours msg/s | raw SDK msg/s | ours MB/s | raw MB/s | ours/raw (median) "
         "| ours/raw per run |"
@@ -377,8 +400,8 @@ def main() -> int:
         ours: list[dict[str, Any]] = []
         raw: list[dict[str, Any]] = []
         for _ in range(ns.repeats):
-            raw.append(run_raw(size, ns.seconds))
-            ours.append(run_ours(size, ns.seconds, raw[-1]["rate"]))
+            raw.append(run_raw(size, ns.seconds, ns.client_queue))
+            ours.append(run_ours(size, ns.seconds, raw[-1]["rate"], ns.client_queue))
             if ours[-1]["digest"] != raw[-1]["digest"]:
                 raise SystemExit(f"bench_foxglove: the client got other bytes from us ({name})")
         ratio = statistics.median(o["rate"] for o in ours) / statistics.median(
