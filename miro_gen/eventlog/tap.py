@@ -9,8 +9,7 @@ counts the events it missed per supplier and type from their sequence numbers.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Iterable
-from struct import error as StructError
+from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
 import zmq
@@ -21,15 +20,13 @@ from miro_gen.transport import sockets
 from miro_gen.transport.events import EventChannel, subscription_prefix
 from miro_gen.transport.events.channel_link import ChannelLink
 from miro_gen.transport.events.frames import (
-    BATCH_HEADER,
-    EVENT,
-    EVENT_HEADER,
     FrameError,
     RawEvent,
+    batch_payloads,
     parse_batch,
-    read_batch_head,
     split_topic,
 )
+from miro_gen.transport.events.frames import topic as topic_frame
 from miro_gen.transport.events.gaps import GapCounter
 from miro_gen.transport.events.links import SubscribingLink
 
@@ -42,7 +39,8 @@ LINK_FRAMES = 100_000  # frames a backbone's link (Zenoh's) keeps waiting for th
 
 Handler = Callable[[list[RawEvent], int], object]  # events of one frame, receive time ns
 # The payloads of one frame, its raw type hash, the receive time (PayloadTap).
-PayloadHandler = Callable[[list[bytes], bytes, int], object]
+PayloadHandler = Callable[[Sequence[bytes], bytes, int], object]
+COPY_BELOW = 64 << 10  # frames smaller than this are copied whole before their payloads
 
 
 class RawEventTap:
@@ -179,36 +177,27 @@ class PayloadTap(RawEventTap):
     ) -> None:
         self.forward = handler
         super().__init__(channel, [topic], self._handed, queue_bytes=queue_bytes)
-        self._topic = topic
+        self._head = topic_frame(*topic)
 
     def _handed(self, events: list[RawEvent], received_ns: int) -> None:  # pragma: no cover
         raise AssertionError("PayloadTap hands over payloads (_parse)")
 
-    COPY = False  # the payloads are copied once, out of ZeroMQ's frame
+    COPY = False  # frames as zmq.Frame: large payloads are copied once, out of ZeroMQ's buffer
 
     def _parse(self, parts: list[Any]) -> list[RawEvent]:
         if len(parts) != 2:
             raise FrameError(f"{len(parts)} frames, expected 2")
         head, body = parts  # zmq.Frame from ZeroMQ's socket, bytes from a backbone's link
-        if split_topic(head if isinstance(head, bytes) else head.bytes) != self._topic:
-            return []
-        view = memoryview(body) if isinstance(body, bytes) else body.buffer
-        body = view
-        count, _, raw_hash = read_batch_head(body)
-        payloads = []
-        at = BATCH_HEADER
-        for _ in range(count):
-            try:
-                n = EVENT.unpack_from(body, at)[3]
-            except StructError:
-                raise FrameError("event header is truncated") from None
-            at += EVENT_HEADER
-            if at + n > len(body):
-                raise FrameError("event payload is truncated")
-            payloads.append(bytes(view[at : at + n]))
-            at += n
-        if at != len(body):
-            raise FrameError("trailing bytes after the events")
+        if not isinstance(head, bytes):
+            head = head.bytes
+        if head != self._head:
+            split_topic(head)  # a malformed one is a bad frame
+            return []  # another topic under the subscribed prefix
+        if not isinstance(body, bytes):
+            # a batch of small events: one copy of the frame, whose slices are cheaper than
+            # a view's; a large payload: read in place
+            body = body.bytes if len(body) < COPY_BELOW else body.buffer
+        raw_hash, payloads = batch_payloads(body)
         self.received += len(payloads)
         if payloads:
             self.forward(payloads, raw_hash, time.time_ns())

@@ -32,6 +32,7 @@ from foxglove.websocket import (
 from miro_gen import clock
 from miro_gen.exceptions import ActionableError, SystemException
 from miro_gen.foxglove import DEFAULT_BACKLOG, DEFAULT_PORT
+from miro_gen.foxglove.buffers import keep_large_buffers
 from miro_gen.foxglove.parameters import Parameters
 from miro_gen.foxglove.publish import ClientPublishing
 from miro_gen.foxglove.services import Services
@@ -85,6 +86,7 @@ class Listen:
             raise BridgeError("--client-queue must be 1 or more")
 
     def start(self, name: str, **kwargs: Any) -> WebSocketServer:
+        keep_large_buffers()  # the process forwards what the robot sends: images too
         try:
             return foxglove.start_server(
                 name=name,

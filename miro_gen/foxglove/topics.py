@@ -11,7 +11,7 @@ a slow client loses frames, never makes the bridge buffer without bound.
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -158,11 +158,11 @@ class Topics:
         log = base.log if base is not None else lambda data, at, _: a.channel.log(data, log_time=at)
         now = clock.current().time_ns
 
-        def forward(payloads: list[bytes], frame_hash: bytes, received_ns: int) -> None:
+        def forward(payloads: Sequence[bytes], frame_hash: bytes, received_ns: int) -> None:
             if frame_hash != raw_hash:
                 return  # another type under the same name: not this channel's schema
             at = now()  # the player's time under --clock log
-            for data in payloads:
+            for data in payloads:  # the CDR payloads as received
                 log(data, at, None)
             self.forwarded += len(payloads)
 
