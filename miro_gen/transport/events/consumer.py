@@ -27,7 +27,7 @@ from miro_gen.transport.events.frames import (
 )
 from miro_gen.transport.events.gaps import GapCounter, gap
 from miro_gen.transport.events.links import SubscribingLink
-from miro_gen.transport.events.queue import DEFAULT_DEPTH, EventQueue, Waiting
+from miro_gen.transport.events.queue import DEFAULT_DEPTH, KEEP_ALL, EventQueue, Waiting
 from miro_gen.transport.events.supplier import HWM, LARGE_EVENT
 
 _log = logger("MIRO")
@@ -82,7 +82,8 @@ class StructuredPushConsumer:
         self.received = 0
         self.undecodable = 0  # events whose type hash matches no imported generated type
         self.lag = 0.0  # seconds between the push and the delivery of the last event delivered
-        self.link: SubscribingLink = channel.subscribing(self._readable, HWM)
+        keep_all = self.queue.depth == KEEP_ALL
+        self.link: SubscribingLink = channel.subscribing(self._readable, HWM, keep_all=keep_all)
 
     @property
     def missed(self) -> int:
