@@ -8,12 +8,17 @@ Calls: a generated stub's getData() to a server in another process, p50 of the r
 (2) a raw Zenoh get() to a queryable in another process through the same router, replying the
 same bytes (its callback replies at once, as plain Zenoh code does), and (3) over the ZeroMQ
 backbone (`miro naming`, direct connection). Events: ExampleEvents pushed by a supplier and
-counted by a consumer of another session (both in this process, so both sides share one
-interpreter, as the raw pair does): events/s over the Zenoh backbone, raw Zenoh put/subscribe
-of the same bytes through the same router, and over ZeroMQ (a channel hosted by the supplier's
-process). Everything is measured in interleaved blocks, repeated R times (5); medians with
+counted by a keep-all consumer of another session (both in this process, so both sides share
+one interpreter, as the raw pairs do): events/s over the Zenoh backbone; raw Zenoh
+put/subscribe through the same router, one put per event, of the event's CDR bytes encoded
+once beforehand and not decoded ("bytes"), or encoded for each put and decoded in the
+subscriber's callback with the same generated code ("typed": what a Zenoh user needs to get
+the event a consumer's handler gets; the callback runs it on Zenoh's thread, with no hand-off);
+and over ZeroMQ (a channel hosted by the supplier's process). The raw publishers use
+congestion control BLOCK, as ours does for a keep-all consumer, so that every event counted
+was sent. Everything is measured in interleaved blocks, repeated R times (5); medians with
 their spread (min-max) and the load average. Issue 26's targets: calls at most 1.25x raw Zenoh
-get/reply, events at least 0.8x raw Zenoh put/subscribe.
+get/reply, events at least 0.8x raw Zenoh put/subscribe (printed against both raw rows).
 
 Zenoh's default config sends messages of 3 KiB and more between processes of one host through
 shared memory; the messages here are smaller, and each row says whether it was on
@@ -134,11 +139,27 @@ def ours_events(
 
 
 def raw_events(pub: object, got: list[int], done: threading.Event, payload: bytes, n: int) -> float:
+    """Events/s: `n` puts of `payload` until the subscriber counted them all."""
     got[0] = 0
     done.clear()
     t = time.perf_counter()
+    put = pub.put  # type: ignore[attr-defined]
     for _ in range(n):
-        pub.put(payload)  # type: ignore[attr-defined]
+        put(payload)
+    done.wait(30)
+    return got[0] / (time.perf_counter() - t)
+
+
+def raw_typed_events(
+    pub: object, got: list[int], done: threading.Event, event: Miro.ExampleEventIDL, n: int
+) -> float:
+    """Events/s: `n` events encoded and put until the subscriber decoded them all."""
+    got[0] = 0
+    done.clear()
+    t = time.perf_counter()
+    put = pub.put  # type: ignore[attr-defined]
+    for _ in range(n):
+        put(event.serialize())
     done.wait(30)
     return got[0] / (time.perf_counter() - t)
 
@@ -193,23 +214,36 @@ def main() -> int:
             supplier = StructuredPushSupplier(channel)
             servers[name] = (sup_server, con_server, supplier, consumer)
         raw_got, raw_done = [0], threading.Event()
-        raw_n = [args.events]
+        raw_n = args.events
+        decode = Miro.ExampleEventIDL.deserialize
 
         def raw_sample(sample: object) -> None:
             raw_got[0] += 1
-            if raw_got[0] >= raw_n[0]:
+            if raw_got[0] >= raw_n:
                 raw_done.set()
 
+        def raw_typed_sample(sample: object) -> None:
+            decode(sample.payload.to_bytes())  # type: ignore[attr-defined]
+            raw_got[0] += 1
+            if raw_got[0] >= raw_n:
+                raw_done.set()
+
+        block = zenoh.CongestionControl.BLOCK
         raw_sub = raw.declare_subscriber("bench/ev", raw_sample)
+        raw_typed_sub = raw.declare_subscriber("bench/typed", raw_typed_sample)
         raw_pub_session = zenoh.open(config("client", connect=locator(zendpoint)))
-        raw_pub = raw_pub_session.declare_publisher("bench/ev")
-        payload = bytes(72)  # an ExampleEvent's batch frame: header and CDR, about this size
+        raw_pub = raw_pub_session.declare_publisher("bench/ev", congestion_control=block)
+        raw_typed_pub = raw_pub_session.declare_publisher("bench/typed", congestion_control=block)
+        example = Miro.ExampleEventIDL(1, Miro.ExampleStructIDL(1.0, 2.0))
+        payload = example.serialize()  # the bytes a raw Zenoh user would put
         time.sleep(1.0)
         for _ in range(200):  # warm up
             z_stub.getData(), m_stub.getData(), raw_get()
         rows: dict[str, list[float]] = {k: [] for k in ("ours-zenoh", "raw-zenoh", "ours-zmq")}
-        ev: dict[str, list[float]] = {k: [] for k in ("ours-zenoh", "raw-zenoh", "ours-zmq")}
-        call_ratio, event_ratio = [], []
+        ev: dict[str, list[float]] = {
+            k: [] for k in ("ours-zenoh", "raw-zenoh", "raw-typed", "ours-zmq")
+        }
+        call_ratio, event_ratio, typed_ratio = [], [], []
         for _ in range(args.runs):
             a = p50(time_calls(z_stub.getData, args.calls))
             b = p50(time_calls(raw_get, args.calls))
@@ -221,12 +255,15 @@ def main() -> int:
             sz, _cz, supz, conz = servers["zenoh"]
             e1 = ours_events(supz, conz, sz, args.events)
             e2 = raw_events(raw_pub, raw_got, raw_done, payload, args.events)
+            e4 = raw_typed_events(raw_typed_pub, raw_got, raw_done, example, args.events)
             sm, _cm, supm, conm = servers["zmq"]
             e3 = ours_events(supm, conm, sm, args.events)
             ev["ours-zenoh"].append(e1)
             ev["raw-zenoh"].append(e2)
+            ev["raw-typed"].append(e4)
             ev["ours-zmq"].append(e3)
             event_ratio.append(e1 / e2)
+            typed_ratio.append(e1 / e4)
         load = os.getloadavg()
         on = "on" if shm else "off"
         print(f"load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}; {args.runs} runs; "
@@ -234,6 +271,7 @@ def main() -> int:
         print(f"{'call getData() p50, us (median, min-max)':44} {'':>10}")
         names = {"ours-zenoh": "miro-gen over Zenoh (via router)",
                  "raw-zenoh": "raw Zenoh get/reply (via router)",
+                 "raw-typed": "raw Zenoh put/subscribe, typed (via router)",
                  "ours-zmq": "miro-gen over ZeroMQ (direct)"}  # fmt: skip
         for k, v in rows.items():
             print(f"  {names[k]:42} {spread(v)}  shm {on if 'zenoh' in k else 'n/a'}")
@@ -241,14 +279,16 @@ def main() -> int:
               f"(runs {', '.join(f'{r:.2f}' for r in call_ratio)}; target <= 1.25)")  # fmt: skip
         print("events/s (median, min-max)")
         for k, v in ev.items():
-            print(f"  {names[k].replace('get/reply', 'put/subscribe'):42} {spread(v)}  "
-                  f"shm {on if 'zenoh' in k else 'n/a'}")  # fmt: skip
-        print(f"  ratio miro-gen/raw Zenoh events/s: {statistics.median(event_ratio):.2f} "
-              f"(runs {', '.join(f'{r:.2f}' for r in event_ratio)}; target >= 0.8)")  # fmt: skip
+            name = names[k].replace("get/reply", "put/subscribe, bytes")
+            print(f"  {name:44} {spread(v)}  shm {on if 'zmq' not in k else 'n/a'}")
+        for what, ratios in (("bytes", event_ratio), ("typed", typed_ratio)):
+            print(f"  ratio miro-gen/raw Zenoh {what} events/s: {statistics.median(ratios):.2f} "
+                  f"(runs {', '.join(f'{r:.2f}' for r in ratios)}; target >= 0.8)")  # fmt: skip
         for sup_server, con_server, _, _ in servers.values():
             sup_server.shutdown()
             con_server.shutdown()
         raw_sub.undeclare()
+        raw_typed_sub.undeclare()
         zc.close()
         mc.close()
     finally:

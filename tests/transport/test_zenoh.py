@@ -16,8 +16,9 @@ from hypothesis import given
 from hypothesis import strategies as st
 from loopback import NamingProcess, RunningServer, service_env
 
-from miro_gen import Client
+from miro_gen import Client, StructuredEvent, StructuredPushConsumer
 from miro_gen.service.options import UsageError, parse_common_options
+from miro_gen.transport.events import KEEP_ALL, EventChannel
 from miro_gen.transport.events.frames import topic
 
 zenoh = pytest.importorskip("zenoh")
@@ -198,3 +199,52 @@ def test_the_base_records_every_robots_events_from_the_fleet_channel(
         for h in hosts:
             h.kill()
             h.wait()
+
+
+class _Tally(StructuredPushConsumer):
+    """A keep-all consumer that marks each event's counter, with some work per event (a
+    handler slower than its supplier, which keeps the Zenoh thread waiting for the GIL)."""
+
+    def __init__(self, channel: EventChannel, count: int) -> None:
+        super().__init__(channel, depth=KEEP_ALL)
+        self.seen = bytearray(count + 1)
+        self.last = threading.Event()
+
+    def push_structured_event(self, event: StructuredEvent) -> None:
+        n = event.payload.counter
+        self.seen[n] += 1
+        sum(range(300))  # work
+        if n == len(self.seen) - 1:
+            self.last.set()
+
+
+def test_a_keep_all_consumer_loses_none_of_100000_small_events(naming: NamingProcess) -> None:
+    """Suppliers put a keep-all consumer's topics with congestion control BLOCK, and its link
+    holds what waits by bytes, not frames: a supplier process pushing flat out to a consumer
+    that takes longer per event, with a busy process per core beside them, loses nothing on
+    the way. (Counts, not times.)"""
+    import subprocess
+    import sys
+
+    from eventlog_helpers import proc
+
+    count = 100_000
+    spin = "import time\nend = time.monotonic() + 60\nwhile time.monotonic() < end: pass"
+    busy = [subprocess.Popen([sys.executable, "-c", spin]) for _ in range(2)]
+    supplier = proc("flood_supplier.py", "--transport", "zenoh", "--naming", naming.endpoint,
+                    "-MNC", "flood", "Flood", str(count))  # fmt: skip
+    consumer = RunningServer(naming.endpoint, "tally", "--transport", "zenoh")
+    try:
+        assert supplier.stdout is not None and supplier.stdout.readline().strip() == "READY"
+        tally = _Tally(consumer.server.resolve_channel("flood/Flood"), count)
+        tally.set_subscriptions([("*", "ExampleEvent")])
+        assert tally.last.wait(120), f"the last event never came ({sum(tally.seen)} came)"
+        assert supplier.stdout.readline().split()[:2] == ["SENT", str(count)]
+        lost = [n for n, k in enumerate(tally.seen) if k != 1]
+        assert not lost, f"{len(lost)} events lost or doubled, first {lost[:5]}"
+        assert tally.missed == 0 and tally.dropped == 0
+    finally:
+        for p in (supplier, *busy):
+            p.kill()
+            p.wait()
+        consumer.stop()

@@ -59,7 +59,7 @@ class ChannelLinks(Protocol):
     ) -> PublishingLink: ...
 
     def subscribing(
-        self, channel: str, on_readable: Callable[[], object], hwm: int
+        self, channel: str, on_readable: Callable[[], object], hwm: int, *, keep_all: bool = False
     ) -> SubscribingLink: ...
 
 
@@ -112,10 +112,14 @@ class EventChannel:
             burst,
         )
 
-    def subscribing(self, on_readable: Callable[[], object], hwm: int) -> SubscribingLink:
-        """A consumer's link to this channel (transport.events.links)."""
+    def subscribing(
+        self, on_readable: Callable[[], object], hwm: int, *, keep_all: bool = False
+    ) -> SubscribingLink:
+        """A consumer's link to this channel (transport.events.links). `keep_all`: for a
+        consumer that keeps every event, which a backbone that can (Zenoh) then carries with
+        backpressure instead of dropping; over ZeroMQ it changes nothing."""
         if self.links is not None:
-            return self.links.subscribing(self.name, on_readable, hwm)
+            return self.links.subscribing(self.name, on_readable, hwm, keep_all=keep_all)
         context = self.reactor.context
         resolve = self.resolve
         return ZmqSubscribing(

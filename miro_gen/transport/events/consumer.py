@@ -27,7 +27,7 @@ from miro_gen.transport.events.frames import (
 )
 from miro_gen.transport.events.gaps import GapCounter, gap
 from miro_gen.transport.events.links import SubscribingLink
-from miro_gen.transport.events.queue import DEFAULT_DEPTH, EventQueue, Waiting
+from miro_gen.transport.events.queue import DEFAULT_DEPTH, KEEP_ALL, EventQueue, Waiting
 from miro_gen.transport.events.supplier import HWM, LARGE_EVENT
 
 _log = logger("MIRO")
@@ -82,7 +82,8 @@ class StructuredPushConsumer:
         self.received = 0
         self.undecodable = 0  # events whose type hash matches no imported generated type
         self.lag = 0.0  # seconds between the push and the delivery of the last event delivered
-        self.link: SubscribingLink = channel.subscribing(self._readable, HWM)
+        keep_all = self.queue.depth == KEEP_ALL
+        self.link: SubscribingLink = channel.subscribing(self._readable, HWM, keep_all=keep_all)
 
     @property
     def missed(self) -> int:
@@ -145,15 +146,15 @@ class StructuredPushConsumer:
 
     def _deliver(self) -> None:
         deliver, queue, reactor = self.push_structured_event, self.queue, self.reactor
-        pop = queue.pop
+        taken = queue.take(TURN_EVENTS)  # a turn's worth at once, not one call per event
         n = 0
-        while n < TURN_EVENTS and not reactor.stopping:
-            w = pop()
-            if w is None:
+        for i, w in enumerate(taken):
+            if reactor.stopping:
+                queue.put_back(taken[i:])
                 break
-            event = w.event
+            _, event, cls, _ = w
             try:
-                event.payload = w.cls.deserialize(event.payload)
+                event.payload = cls.deserialize(event.payload)
             except Exception as e:  # MARSHAL: a corrupt payload is reported, not delivered
                 _peer_warnings.warning("dropped an undecodable %s event: %s", event.type_name, e)
                 continue
@@ -217,20 +218,23 @@ class StructuredPushConsumer:
         first = expected
         missed = 0
         unpack, size, at = EVENT.unpack_from, len(body), BATCH_HEADER
+        # Small payloads are copied out (so that a batch's frame is not kept for one event that
+        # waits): in one step from the bytes under the view when there are such.
+        whole = body.obj if type(body.obj) is bytes and len(body.obj) == size else body
         topic_key = (domain, type_name)
-        waiting = []
+        waiting: list[Waiting] = []
+        total = 0
         keep_from = count - 1 if self.queue.latest_only else 0  # latest-only: only the last
         for i in range(count):
             seq, stamp_ns, publish_ns, n = unpack(body, at)
             at += EVENT_HEADER
             if at + n > size:
                 raise ValueError("event payload is truncated")
-            missed += gap(expected, seq)
+            if seq != expected:
+                missed += gap(expected, seq)
             expected = seq + 1
-            if cls is not None and i >= keep_from:
-                # Decoded when delivered; a small payload is copied out, so that a batch's
-                # frame is not kept for one event that waits.
-                data = body[at : at + n] if n >= LARGE_EVENT else bytes(body[at : at + n])
+            if cls is not None and i >= keep_from:  # decoded when delivered
+                data = body[at : at + n] if n >= LARGE_EVENT else bytes(whole[at : at + n])
                 event = StructuredEvent(
                     domain,
                     type_name,
@@ -241,7 +245,8 @@ class StructuredPushConsumer:
                     supplier,
                     type_hash,
                 )
-                waiting.append(Waiting(topic_key, event, cls, n))
+                waiting.append((topic_key, event, cls, n))
+                total += n
             at += n
         if at != size:
             raise ValueError("trailing bytes after the events")
@@ -252,7 +257,7 @@ class StructuredPushConsumer:
             self.undecodable += count
         elif waiting:
             self.queue.dropped += keep_from
-            self.queue.add(topic_key, waiting)
+            self.queue.add(topic_key, waiting, total)
 
     def _hold(self, frame: tuple[bytes, memoryview], raw_hash: bytes, size: int) -> bool:
         """Keep a frame whose type is not known yet until the generated packages on the path

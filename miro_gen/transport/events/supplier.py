@@ -159,9 +159,19 @@ class StructuredPushSupplier:
                 return True
             return False
         now = clock.current().time_ns()  # log time under --clock log, else the wall clock
-        type_hash = payload._type_hash
+        type_hash = offered or payload._type_hash
         stamp_ns = now if stamp is None else int(stamp * 1e9)
-        packed, framed = self._encode(t, type_hash, (seq, stamp_ns, now), payload)
+        if t.large:
+            packed, framed = self._encode_large(t, type_hash, (seq, stamp_ns, now), payload)
+        else:  # the common case, inline: a small event's header and CDR, to be batched
+            data = payload.serialize()
+            n = len(data)
+            if n + EVENT_HEADER < LARGE_EVENT:
+                packed, framed = EVENT.pack(seq, stamp_ns, now, n) + data, b""
+            else:  # the first large one of its type: alone, and the next encoded in place
+                t.large = True
+                head = EVENT.pack(seq, stamp_ns, now, n)
+                packed, framed = b"", b"".join((self._batch_head(type_hash, 1), head, data))
         size = len(framed or packed)
         if (size if framed else size + BATCH_HEADER) > self.max_frame:
             self._refuse_large(type_name, size)
@@ -190,28 +200,21 @@ class StructuredPushSupplier:
         self.reactor.call_soon(self._flush)
         return True
 
-    def _encode(
+    def _encode_large(
         self, t: _Topic, type_hash: str, head: tuple[int, int, int], payload: Any
     ) -> tuple[bytes, bytes]:
-        """(event, b"") for a small event, to be batched; (b"", its whole frame) for a large
-        one. Once a type's events are large, the next is encoded into its frame directly (its
-        payload copied once); the payload length is filled in after."""
-        if t.large:
-            prefix = self._batch_head(type_hash, 1) + EVENT.pack(*head, 0)
-            buf = encode_after(prefix, payload)
-            n = buf.size - len(prefix)
-            buf.overwrite(LENGTH_AT, LENGTH.pack(n))
-            frame = buf.value()
-            if n + EVENT_HEADER >= LARGE_EVENT:
-                return b"", frame
-            t.large = False
-            return frame[BATCH_HEADER:], b""
-        data = payload.serialize()
-        packed = EVENT.pack(*head, len(data))
-        if len(packed) + len(data) < LARGE_EVENT:
-            return packed + data, b""
-        t.large = True
-        return b"", b"".join((self._batch_head(type_hash, 1), packed, data))
+        """(b"", its whole frame) for an event of a type whose last event was large: encoded
+        into its frame directly (its payload copied once), the payload length filled in after;
+        (event, b"") when it turns out small, to be batched (and the next encoded as usual)."""
+        prefix = self._batch_head(type_hash, 1) + EVENT.pack(*head, 0)
+        buf = encode_after(prefix, payload)
+        n = buf.size - len(prefix)
+        buf.overwrite(LENGTH_AT, LENGTH.pack(n))
+        frame = buf.value()
+        if n + EVENT_HEADER >= LARGE_EVENT:
+            return b"", frame
+        t.large = False
+        return frame[BATCH_HEADER:], b""
 
     def _batch_head(self, type_hash: str, count: int) -> bytes:
         raw = self._raw_hashes.get(type_hash)

@@ -5,9 +5,11 @@
     miro/name/<zid>/<name>       liveliness: a name it keeps bound (the registry drops the
                                  name when the token goes: its process died or was cut off)
     miro/ev/<channel>/<domain>/<type>   the events of one channel, domain and type
-    miro/sub/<channel>/<prefix>/<zid>/<n>   liveliness: a consumer's subscription (its prefix,
-                                 transport.events.consumer.subscription_prefix, in hex), which
-                                 suppliers count as ZeroMQ's XPUB counts subscriptions
+    miro/sub/<channel>/<prefix>/<keep>/<zid>/<n>   liveliness: a consumer's subscription (its
+                                 prefix, transport.events.consumer.subscription_prefix, in hex),
+                                 which suppliers count as ZeroMQ's XPUB counts subscriptions;
+                                 <keep> is `all` for a keep-all consumer (its suppliers then
+                                 block rather than drop), `last` for any other
 
 Names, channels, domains and types become single chunks: `%`, `/`, `*`, `$`, `?`, `#`, `@` are
 percent-escaped (Zenoh forbids the others in a chunk, and one that starts with `@` matches no
@@ -118,7 +120,7 @@ def is_pattern(channel: str) -> bool:
 def sub_channel(key: str) -> str | None:
     """The channel (or channel pattern) of a subscription token's key."""
     parts = key.split("/")
-    if len(parts) != 6 or parts[0] != PREFIX or parts[1] != "sub":
+    if len(parts) != 7 or parts[0] != PREFIX or parts[1] != "sub":
         return None
     return unescape(parts[2])
 
@@ -146,20 +148,26 @@ def topic_of(key: str) -> bytes:
     return topic(unescape(parts[3]), unescape(parts[4]))
 
 
-def sub_token(channel: str, prefix: bytes, zid: str, n: int) -> str:
+KEEP_ALL: Final = "all"  # a subscription token's <keep> chunk: a keep-all consumer's
+KEEP_LAST: Final = "last"  # any other consumer's
+
+
+def sub_token(channel: str, prefix: bytes, zid: str, n: int, *, keep_all: bool = False) -> str:
     """The liveliness token of a consumer's subscription to `prefix` on `channel`."""
-    return f"{PREFIX}/sub/{escape(channel)}/{escape(prefix.hex())}/{zid}/{n}"
+    keep = KEEP_ALL if keep_all else KEEP_LAST
+    return f"{PREFIX}/sub/{escape(channel)}/{escape(prefix.hex())}/{keep}/{zid}/{n}"
 
 
-SUB_TOKENS: Final = f"{PREFIX}/sub/*/*/*/*"  # every subscription token of every channel
+SUB_TOKENS: Final = f"{PREFIX}/sub/*/*/*/*/*"  # every subscription token of every channel
 
 
-def prefix_of_sub(key: str) -> bytes:
-    """The subscription prefix a token's key carries; FrameError for another key."""
+def prefix_of_sub(key: str) -> tuple[bytes, bool]:
+    """(the subscription prefix, whether its consumer keeps all) of a token's key; FrameError
+    for another key."""
     parts = key.split("/")
-    if len(parts) != 6 or parts[0] != PREFIX or parts[1] != "sub":
+    if len(parts) != 7 or parts[0] != PREFIX or parts[1] != "sub":
         raise FrameError(f"not a subscription token: {key[:200]!r}")
     try:
-        return bytes.fromhex(unescape(parts[3]))
+        return bytes.fromhex(unescape(parts[3])), parts[4] == KEEP_ALL
     except ValueError:
         raise FrameError(f"not a subscription token: {key[:200]!r}") from None

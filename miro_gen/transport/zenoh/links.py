@@ -10,11 +10,18 @@ another of its subscriptions covers is not declared, so that no event comes twic
 Zenoh's subscriber callbacks run on Zenoh's threads: they only append (key, payload) to a
 bounded queue and, when it was empty, ask the reactor to read it (`Reactor.call_soon`, which
 never blocks). A full queue drops the newest event, which the consumer's sequence numbers
-show as missed. Suppliers put from the reactor thread with congestion control DROP, so a slow
-consumer never blocks them. Each subscription of a consumer is also a liveliness token
-(`keys.sub_token`), which the suppliers of the channel count as ZeroMQ's XPUB counts
-subscriptions: `has_subscribers()` is false while nobody listens (nothing is encoded then), and
-a consumer whose process dies stops counting when its session ends.
+show as missed: a keep-last consumer's queue holds at most `hwm` frames, a keep-all
+consumer's KEEP_ALL_BYTES of them, however many that is. Each subscription of a consumer is
+also a liveliness token (`keys.sub_token`), which the suppliers of the channel count as
+ZeroMQ's XPUB counts subscriptions: `has_subscribers()` is false while nobody listens (nothing
+is encoded then), and a consumer whose process dies stops counting when its session ends.
+
+Suppliers put from the reactor thread with congestion control DROP, so a slow consumer never
+blocks them, except for the topics a keep-all consumer subscribes to (its token says so): those
+go with BLOCK, so that Zenoh drops nothing on the way and a supplier faster than the network
+waits for it (at most Zenoh's `transport/link/tx/queue/congestion_control/block/wait_before_close`,
+after which Zenoh closes the link). Both kinds of publisher of a topic share the session's
+queue, so events keep their order when a keep-all consumer comes or goes.
 
 A fleet's channel: a consumer of the channel pattern `*/EventChannel` (resolve_channel with a
 `*` in the name) hears that channel of every robot, each robot's events under its own domain
@@ -45,6 +52,9 @@ _peer_warnings = PeerWarnings(_log)
 _DROP = zenoh.CongestionControl.DROP
 _BLOCK = zenoh.CongestionControl.BLOCK
 _tokens = itertools.count(1)  # the subscription tokens of this process
+# What a keep-all consumer's link holds for its reactor, at most (the consumer's own queue
+# holds as much: transport.events.queue.QUEUE_BYTES).
+KEEP_ALL_BYTES = 64 << 20
 
 
 class ZenohChannels:
@@ -69,13 +79,16 @@ class ZenohChannels:
         return ZenohPublishing(self.session, self.reactor, channel, on_connection, on_subscriptions)
 
     def subscribing(
-        self, channel: str, on_readable: Callable[[], object], hwm: int
+        self, channel: str, on_readable: Callable[[], object], hwm: int, *, keep_all: bool = False
     ) -> ZenohSubscribing:
-        return ZenohSubscribing(self.session, self.reactor, channel, on_readable, hwm)
+        return ZenohSubscribing(
+            self.session, self.reactor, channel, on_readable, hwm, keep_all=keep_all
+        )
 
 
 class ZenohPublishing:
-    """A supplier's link: a Zenoh publisher per topic, declared on first use."""
+    """A supplier's link: a Zenoh publisher per topic, declared on first use; one with
+    congestion control BLOCK besides while a keep-all consumer subscribes to the topic."""
 
     def __init__(
         self,
@@ -84,13 +97,14 @@ class ZenohPublishing:
         channel: str,
         on_connection: Callable[[bool], object],
         on_subscriptions: Callable[[list[tuple[bool, bytes]]], object],
-        *,
-        blocking: bool = False,
     ) -> None:
         self.session = session
         self.channel = channel
-        self._publishers: dict[bytes, Any] = {}
-        self._congestion = _BLOCK if blocking else _DROP
+        # Per topic: (the publisher in use, the generation of _keep_all it was chosen for).
+        self._topics: dict[bytes, tuple[Any, int]] = {}
+        self._publishers: dict[tuple[bytes, bool], Any] = {}  # (topic, blocking): publisher
+        self._keep_all: dict[bytes, int] = {}  # keep-all consumers' prefixes: how many
+        self._generation = 0  # bumped when _keep_all changes
         self._closed = False
         self._reactor = reactor
         self._on_subscriptions = on_subscriptions
@@ -110,11 +124,22 @@ class ZenohPublishing:
         ):
             return  # another channel's consumer
         try:
-            prefix = keys.prefix_of_sub(key)
+            prefix, keep_all = keys.prefix_of_sub(key)
         except FrameError:
             return
         subscribed = sample.kind == zenoh.SampleKind.PUT
-        self._reactor.call_soon(self._on_subscriptions, [(subscribed, prefix)])
+        self._reactor.call_soon(self._subscription, subscribed, prefix, keep_all)
+
+    def _subscription(self, subscribed: bool, prefix: bytes, keep_all: bool) -> None:
+        """A consumer (un)subscribed (reactor thread)."""
+        if keep_all:
+            n = self._keep_all.get(prefix, 0) + (1 if subscribed else -1)
+            if n > 0:
+                self._keep_all[prefix] = n
+            else:
+                self._keep_all.pop(prefix, None)
+            self._generation += 1
+        self._on_subscriptions([(subscribed, prefix)])
 
     @property
     def connected(self) -> bool:
@@ -125,20 +150,30 @@ class ZenohPublishing:
         return 0
 
     def send(self, topic: bytes, body: bytes, copy: bool) -> bool:
-        publisher = self._publishers.get(topic)
-        if publisher is None:
-            publisher = self._publishers[topic] = self.session.declare_publisher(
-                keys.event_key(self.channel, topic), congestion_control=self._congestion
-            )
+        known = self._topics.get(topic)
+        if known is None or known[1] != self._generation:
+            known = self._topics[topic] = (self._publisher(topic), self._generation)
         try:
-            publisher.put(body if isinstance(body, bytes) else bytes(body))
+            known[0].put(body if isinstance(body, bytes) else bytes(body))
         except zenoh.ZError:
             return False
         return True
 
+    def _publisher(self, topic: bytes) -> Any:
+        """The publisher for `topic` now: BLOCK while a keep-all consumer subscribes to it."""
+        blocking = any(topic.startswith(p) for p in self._keep_all)
+        publisher = self._publishers.get((topic, blocking))
+        if publisher is None:
+            publisher = self._publishers[topic, blocking] = self.session.declare_publisher(
+                keys.event_key(self.channel, topic),
+                congestion_control=_BLOCK if blocking else _DROP,
+            )
+        return publisher
+
     def close(self) -> None:
         self._closed = True
         untrack(self._watch)
+        self._topics = {}
         publishers, self._publishers = list(self._publishers.values()), {}
         for p in publishers:
             with contextlib.suppress(zenoh.ZError):
@@ -147,7 +182,8 @@ class ZenohPublishing:
 
 class ZenohSubscribing:
     """A consumer's link: a Zenoh subscriber per subscription not covered by another; at most
-    `hwm` frames wait for the reactor."""
+    `hwm` frames wait for the reactor, or for a keep-all consumer (`keep_all`: its suppliers
+    then block rather than drop) KEEP_ALL_BYTES."""
 
     def __init__(
         self,
@@ -156,12 +192,17 @@ class ZenohSubscribing:
         channel: str,
         on_readable: Callable[[], object],
         hwm: int,
+        *,
+        keep_all: bool = False,
     ) -> None:
         self.session = session
         self.reactor = reactor
         self.channel = channel
-        self.hwm = hwm
+        self.keep_all = keep_all
+        self.hwm = 1 << 62 if keep_all else hwm
+        self.max_bytes = KEEP_ALL_BYTES if keep_all else 1 << 62
         self.dropped = 0  # frames the full queue refused
+        self._bytes = 0  # of the frames waiting
         self._on_readable = on_readable
         self._prefixes: set[bytes] = set()
         self._subscribers: dict[bytes, Any] = {}
@@ -169,8 +210,9 @@ class ZenohSubscribing:
         self._zid = str(session.zid())
         self._frames: collections.deque[tuple[str, bytes]] = collections.deque()
         self._scheduled = False
-        self._lock = threading.Lock()
+        self._lock = threading.Lock()  # the queue's size; only ever held for a few statements
         self._closed = False
+        self._topics: dict[str, bytes] = {}  # event keys heard: their topic frames
 
     @property
     def connected(self) -> bool:
@@ -183,10 +225,13 @@ class ZenohSubscribing:
     # ---- Zenoh's threads: never block -----------------------------------------------------------
 
     def _on_sample(self, sample: Any) -> None:
-        if len(self._frames) >= self.hwm:
-            self.dropped += 1
-            return
-        self._frames.append((str(sample.key_expr), sample.payload.to_bytes()))
+        payload = sample.payload.to_bytes()
+        with self._lock:
+            if len(self._frames) >= self.hwm or self._bytes + len(payload) > self.max_bytes:
+                self.dropped += 1
+                return
+            self._bytes += len(payload)
+            self._frames.append((str(sample.key_expr), payload))
         if not self._scheduled:
             self._scheduled = True
             self.reactor.call_soon(self._ready)
@@ -202,7 +247,9 @@ class ZenohSubscribing:
         self._prefixes.add(prefix)
         self._declare()
         if prefix not in self._tokens:  # what suppliers count
-            key = keys.sub_token(self.channel, prefix, self._zid, next(_tokens))
+            key = keys.sub_token(
+                self.channel, prefix, self._zid, next(_tokens), keep_all=self.keep_all
+            )
             self._tokens[prefix] = self.session.liveliness().declare_token(key)
 
     def unsubscribe(self, prefix: bytes) -> None:
@@ -230,14 +277,20 @@ class ZenohSubscribing:
             )
 
     def receive(self) -> tuple[bytes, memoryview] | None:
-        try:
+        with self._lock:
+            if not self._frames:
+                return None
             key, payload = self._frames.popleft()
-        except IndexError:
-            return None
-        try:
-            topic = keys.topic_of(key)
-        except (FrameError, UnicodeDecodeError) as e:
-            raise ValueError(str(e)) from None
+            self._bytes -= len(payload)
+        topic = self._topics.get(key)
+        if topic is None:
+            try:
+                topic = keys.topic_of(key)
+            except (FrameError, UnicodeDecodeError) as e:
+                raise ValueError(str(e)) from None
+            if len(self._topics) >= 4096:  # bounded, whatever keys a wildcard brings
+                self._topics.clear()
+            self._topics[key] = topic
         return topic, memoryview(payload)
 
     def close(self) -> None:
@@ -248,7 +301,9 @@ class ZenohSubscribing:
         subscribers, self._subscribers = list(self._subscribers.values()), {}
         for s in subscribers:
             untrack(s)
-        self._frames.clear()
+        with self._lock:
+            self._frames.clear()
+            self._bytes = 0
 
 
 def _undeclare(entity: Any) -> None:
