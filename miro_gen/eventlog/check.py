@@ -4,12 +4,12 @@
 A file whose chunks were damaged after it was written (a flipped bit, a copy cut short, a file
 pieced together) still has a summary that looks right. So every time, `disagreements` reads
 each chunk's header where the index says it is (37 bytes per chunk, one `pread` each: a
-buffered file would read 8 KiB for each, which costs more than the summary itself) and, in a file of at most
-QUICK_CRC_BYTES whose writer stored it (ours do), the data section's CRC (bytes read, nothing
-decompressed). With `--check`, `damage` also opens every chunk: decompressed, CRC-checked,
-parsed, its events counted against the statistics; and reads the data section through once
-for chunks the index does not name. Each finding is one line, in the words of
-`reader.LogError` (a chunk by its number, offset and log times).
+buffered file would read 8 KiB for each, which costs more than the summary itself) and, in a
+file of at most QUICK_CRC_BYTES whose writer stored it (ours do), the data section's CRC
+(bytes read, nothing decompressed). With `--check`, `damage` also opens every chunk:
+decompressed, CRC-checked, parsed, its events counted against the statistics; and reads the
+data section through once for chunks the index does not name. Each finding is one line, in
+the words of `reader.LogError` (a chunk by its number, offset and log times).
 """
 
 from __future__ import annotations
