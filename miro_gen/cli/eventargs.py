@@ -9,8 +9,9 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
-from miro_gen.eventlog.types import parse_topic
-from miro_gen.service.options import UsageError, parse_common_options
+# The options' and topics' modules are imported where they are used: `miro log info` and
+# `miro log echo` use neither, and their start-up is the figure of a command that reads a
+# summary (bench/bench_logplayer.py).
 
 COMMON = "Accepts the common options (--naming tcp://HOST:PORT, -MNC NAME, -MLL N, --host ADDR)."
 
@@ -41,6 +42,8 @@ def length_limit(p: argparse.ArgumentParser, ns: argparse.Namespace) -> int | No
 
 
 def topic_arg(text: str) -> tuple[str, str]:
+    from miro_gen.eventlog.types import parse_topic
+
     try:
         return parse_topic(text)
     except ValueError as e:
@@ -50,6 +53,8 @@ def topic_arg(text: str) -> tuple[str, str]:
 def split_common(p: argparse.ArgumentParser, argv: Sequence[str]) -> list[str]:
     """The arguments left after the common options (checked here, so that a bad one is a
     usage error before any socket exists)."""
+    from miro_gen.service.options import UsageError, parse_common_options
+
     try:
         _, rest = parse_common_options(list(argv))
     except UsageError as e:
@@ -58,6 +63,7 @@ def split_common(p: argparse.ArgumentParser, argv: Sequence[str]) -> list[str]:
 
 
 def make_server(p: argparse.ArgumentParser, prog: str, argv: Sequence[str]) -> Any:
+    from miro_gen.service.options import UsageError
     from miro_gen.service.server import Server
 
     try:

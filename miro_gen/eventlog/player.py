@@ -5,7 +5,8 @@ The player keeps a *log clock*: log time advances from an anchor at `rate` log s
 second, or stands still while paused. Its *position* is a key of the file set
 (eventlog.fileset): the events at or after it are ahead. A thread of its own reads the set
 from the position on and hands each event to `send` when the clock reaches the event's log
-time, skipping the topics excluded at that moment. Everything else only changes the state
+time (it sleeps until just before, then spins: SPIN), skipping the topics excluded at that
+moment. Everything else only changes the state
 and wakes that thread, from any thread (the window's, the terminal's key reader):
 
 - `play`, `pause`, `toggle`; `stop` pauses and goes back to the start of the cut;
@@ -36,6 +37,12 @@ from miro_gen.eventlog.reader import LogError, Topic
 
 CLOCK_PERIOD = 0.5  # seconds between clock messages while nothing changes
 MAX_WAIT = 0.1  # seconds the play thread sleeps at most (its clock ticks, a close is seen)
+# Seconds before an event is due that the play thread stops sleeping and spins: a thread that
+# sleeps to the very moment wakes up a tenth of a millisecond late or more (the timer's slack,
+# the scheduler, a core waking up), one that spins is there. Short, since the spin costs a
+# core that share of the time (a fifth of it at 1,000 events a second), which the consumers on
+# the same machine may want.
+SPIN = 0.0002
 DEFAULT_HISTORY = 100
 RATES = (1 / 16, 1 / 8, 1 / 4, 1 / 2, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0)  # the speed dial's steps
 SKIP = 1 / 20  # of the cut's length: how far a skip (shift+arrow) seeks
@@ -136,6 +143,13 @@ class EventHistory:
             rows = list(self._rows)
         excluded = self.files.excluded
         return [e for e in rows if e.name not in excluded] if excluded else rows
+
+
+def _spin(seconds: float) -> None:
+    """Return after `seconds` (a fraction of a millisecond), without sleeping."""
+    until = time.monotonic() + seconds
+    while time.monotonic() < until:
+        pass
 
 
 def _check_length(length: int) -> int:
@@ -424,7 +438,15 @@ class Player:
                         self._pos = after(event.key)
                         self._shown = event.key
                         return _SEND
-                    wait = min(ahead / 1e9 / self._rate, MAX_WAIT)
+                    wait = ahead / 1e9 / self._rate
+                    if wait <= SPIN:  # the last fraction of a millisecond: spin, lock free
+                        self._cond.release()
+                        try:
+                            _spin(wait)
+                        finally:
+                            self._cond.acquire()
+                        continue
+                    wait = min(wait - SPIN, MAX_WAIT)
                 elif self._steps and self._steps[0] < 0:
                     return _RESTART  # a step back: the thread reads from the new position
                 elif self._steps:

@@ -10,9 +10,6 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from miro_gen.runtime import registry
-from miro_gen.runtime.cdr import IdlUnion
-
 TRUNCATE = 10  # elements of a sequence or byte string shown, by default, before it is abridged
 
 
@@ -32,6 +29,8 @@ def payload_text(
 ) -> str:
     """The decoded payload (as `cls`, else the generated type of its hash), long sequences
     abridged past `limit` elements (None: whole), or why it cannot be decoded."""
+    from miro_gen.runtime import registry  # here: `miro log info` shows dates, no payload
+
     if cls is None and type_hash:
         cls = registry.find(type_hash)
     if cls is None:
@@ -59,6 +58,7 @@ def summary(value: Any, limit: int, show: Callable[[Any], str]) -> str | None:
 def abridged(value: Any, limit: int) -> str:
     """`repr(value)`, with every sequence or byte string of more than `limit` elements in it
     abridged to its length and first elements."""
+    from miro_gen.runtime.cdr import IdlUnion
 
     def show(v: Any) -> str:
         short = summary(v, limit, show)

@@ -8,16 +8,6 @@ here are compiled from the data schemas in the log (`types_from_schemas`).
 
 from __future__ import annotations
 
-import atexit
-import importlib
-import importlib.util
-import shutil
-import sys
-import tempfile
-from pathlib import Path
-
-from miro_gen.compile.foreign import PACKAGES, ForeignSchemaError, compile_foreign
-
 ANY = "*"
 
 
@@ -54,6 +44,18 @@ def types_from_schemas(schemas: list[str]) -> str | None:
     or a package of that name exists here already."""
     if not any(s.strip() for s in schemas):
         return None
+    # Imported here: naming and matching topics is all that most log tools need of this
+    # module, and the compiler's imports would cost every `miro log info` its start-up.
+    import atexit
+    import importlib
+    import importlib.util
+    import shutil
+    import sys
+    import tempfile
+    from pathlib import Path
+
+    from miro_gen.compile.foreign import PACKAGES, ForeignSchemaError, compile_foreign
+
     folder = Path(tempfile.mkdtemp(prefix="miro-log-types-"))
     atexit.register(shutil.rmtree, folder, True)
     try:
