@@ -317,10 +317,28 @@ def put_octets(
     put_bulk(buf, data, len(data))
 
 
+_octet_views = threading.local()
+
+
+class octet_views:  # noqa: N801 - used as a `with` block, like a function
+    """While active on this thread, sequences of octets decoded from a read-only memoryview
+    are read-only memoryviews of it, not copies (a consumer's zero-copy reads from shared
+    memory: transport.events). They are valid only as long as the memory under them is."""
+
+    def __enter__(self) -> None:
+        _octet_views.on = True
+
+    def __exit__(self, *exc: object) -> None:
+        _octet_views.on = False
+
+
 def get_octets(
     data: bytes | bytearray | memoryview, off: int, e: int, bound: int | None, what: str
 ) -> tuple[bytes, int]:
     n, off = get_length(data, off, e, bound, 1, what)
+    if type(data) is memoryview and data.readonly and getattr(_octet_views, "on", False):
+        view: Any = data[off : off + n]  # stands in for bytes (octet_views)
+        return view, off + n
     return bytes(data[off : off + n]), off + n
 
 
