@@ -123,16 +123,21 @@ class StructuredPushConsumer:
         offers.subscribed(self, self.channel.name, subs)
 
         marker = self._marker
+        # Large events from this host come through shared memory (its marker); a keep-all
+        # consumer says so, so that suppliers wait for it (a prefix no frame starts with).
+        markers = [marker] if marker else []
+        if marker and self._keep_all:
+            markers.append(shm.keep_all_marker())
 
         def apply() -> None:
             for p in self._prefixes - prefixes:
                 self.link.unsubscribe(p)
-                if marker:
-                    self.link.unsubscribe(marker + p)
+                for m in markers:
+                    self.link.unsubscribe(m + p)
             for p in prefixes - self._prefixes:
                 self.link.subscribe(p)
-                if marker:  # large events from this host: through shared memory
-                    self.link.subscribe(marker + p)
+                for m in markers:
+                    self.link.subscribe(m + p)
             self._segments.close()  # lanes only in the rings of what it still subscribes to
             self._prefixes = prefixes
             self._filters = subs

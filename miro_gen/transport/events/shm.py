@@ -108,6 +108,14 @@ def topic_marker() -> bytes:
     return b"\x01shm-" + key + b"\0" if key else b""
 
 
+def keep_all_marker() -> bytes:
+    """What precedes a keep-all consumer's third subscription to a prefix, which no frame ever
+    matches: it tells suppliers how many keep-all consumers to expect lanes of, so that they
+    wait for one that has not mapped the ring yet instead of lapping it."""
+    key = host_key()
+    return b"\x02shm-" + key + b"\0" if key else b""
+
+
 def slot_count() -> int:
     try:
         return max(2, int(os.environ.get("MIRO_SHM_SLOTS", SLOTS)))
@@ -151,16 +159,19 @@ class Ring:
         self.waited = 0  # puts that waited for a keep-all consumer's credit
         self.closed = False
 
-    def put(self, payload: bytes | memoryview, wait: float = WAIT_KEEP_ALL) -> Descriptor | None:
+    def put(
+        self, payload: bytes | memoryview, keep_all: int = 0, wait: float = WAIT_KEEP_ALL
+    ) -> Descriptor | None:
         """Write `payload` into a slot; its descriptor, or None when no slot frees up within
-        `wait` seconds (keep-all consumers behind, every slot held) or it does not fit."""
+        `wait` seconds (keep-all consumers behind, every slot held) or it does not fit.
+        `keep_all`: keep-all consumers subscribed, whose lanes a reused slot waits for."""
         n = len(payload)
         if n > self.slot_size:
             return None
         with self._lock:
             if self.closed:
                 return None
-            slot = self._free_slot(wait)
+            slot = self._free_slot(wait, keep_all)
             if slot is None:
                 return None
             w = self._writes
@@ -177,16 +188,21 @@ class Ring:
             _Q.pack_into(mem, at + _GEN, gen + 1)
             return Descriptor(os.getpid(), self.fd, self.segment_id, slot, gen + 1, w, n)
 
-    def _free_slot(self, wait: float) -> int | None:
+    def _free_slot(self, wait: float, keep_all: int) -> int | None:
         """The next slot in turn that no consumer holds and every keep-all consumer has read
-        (waiting up to `wait` seconds for their credits)."""
+        (waiting up to `wait` seconds for their credits, and for the lanes of `keep_all`
+        consumers to be there)."""
         deadline = None
         pause = 0.0001
         while True:
             blocked = False
+            lanes = self._keep_all_lanes() if keep_all else 0
             for k in range(self.slots):
                 slot = (self._next + k) % self.slots
-                state = self._reusable(self._slot_write[slot])
+                w = self._slot_write[slot]
+                state = self._reusable(w)
+                if state == 0 and w >= 0 and lanes < keep_all:
+                    state = 2  # a keep-all consumer has yet to map the ring: not past it
                 if state == 0:
                     self._next = (slot + 1) % self.slots
                     return slot
@@ -201,6 +217,14 @@ class Ring:
                 self.waited += 1
             time.sleep(pause)
             pause = min(pause * 2, 0.005)
+
+    def _keep_all_lanes(self) -> int:
+        mem, at = self._mem, self._lanes_at
+        n = 0
+        for lane in range(self.lanes):
+            claimed, keep_all = _LANE.unpack_from(mem, at + lane * _LANE.size)[:2]
+            n += claimed and keep_all
+        return n
 
     def _reusable(self, w: int) -> int:
         """0: a slot last written with write `w` may be written again; 1: a live consumer

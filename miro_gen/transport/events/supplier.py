@@ -61,6 +61,7 @@ class _Topic:
     __slots__ = (
         "frame",
         "generation",
+        "keep_all",
         "large",
         "last",
         "last_hash",
@@ -76,6 +77,7 @@ class _Topic:
         self.frame = frame
         self.shm_frame = marker + frame
         self.shared = False
+        self.keep_all = 0  # keep-all consumers of this host (transport.events.shm)
         self.ring: shm.Ring | None = None
         self.large = False
         self.seq = itertools.count()
@@ -122,6 +124,7 @@ class StructuredPushSupplier:
         # Large events through shared memory to consumers of this host (transport.events.shm):
         # not over a backbone without channel hosts, nor where the platform has no memfd.
         self._marker = shm.topic_marker() if shm.enabled() and channel.links is None else b""
+        self._keep_all_marker = shm.keep_all_marker()
         self._rings_lock = threading.Lock()
         # A turn's events leave in a burst of frames (100,000 small events: about 30), which the
         # link must hold until the channel reads them: room for a full queue of batches
@@ -151,6 +154,10 @@ class StructuredPushSupplier:
             )
             t.subscribed = plain > 0 or bool(shared)
             t.shared = bool(shared) and shared >= plain
+            if t.shared:
+                marker = self._keep_all_marker
+                keep_all = marker + t.frame
+                t.keep_all = sum(n for p, n in subs if p.startswith(marker) and keep_all.startswith(p))
             t.generation = generation  # a change meanwhile bumped _generation: recomputed next
         return t.subscribed
 
@@ -262,7 +269,7 @@ class StructuredPushSupplier:
                     ring = t.ring = shm.Ring(self.max_frame)
         if len(data) > ring.slot_size:  # larger than any message: refused as such
             return b"", b"".join((self._batch_head(type_hash, 1), data)), None
-        d = ring.put(data)
+        d = ring.put(data, t.keep_all)
         if d is None:
             return b"", b"", None
         frame = b"".join(
