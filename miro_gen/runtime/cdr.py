@@ -109,6 +109,16 @@ class Encoder(bytearray):
         kept = sum(memoryview(p).nbytes for p in self.parts) if self.parts is not None else 0
         return kept + len(self) - self.skip
 
+    def copy_into(self, out: memoryview) -> int:
+        """Write the encoded value into `out` (at least `size` bytes, a shared-memory slot):
+        each byte copied once, as by `value()`; how many were written."""
+        at = 0
+        for part in (*(self.parts or ()), memoryview(self)[self.skip :]):
+            m = memoryview(part).cast("B")
+            out[at : at + m.nbytes] = m
+            at += m.nbytes
+        return at
+
     def overwrite(self, at: int, data: bytes) -> None:
         """Replace bytes at offset `at`, before the first payload set aside (a header's)."""
         first = self if self.parts is None else self.parts[0]

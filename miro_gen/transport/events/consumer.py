@@ -331,7 +331,7 @@ class StructuredPushConsumer:
                         missed += 1
                         at += n
                         continue
-                    held = d.length  # in the queue's byte count as if it were here
+                    held = n  # the payload is in the supplier's pool, which bounds it
                 else:
                     data = body[at : at + n] if n >= LARGE_EVENT else bytes(body[at : at + n])
                     held = n

@@ -43,7 +43,7 @@ import struct
 import sys
 import threading
 import time
-from typing import Final, NamedTuple
+from typing import Final, NamedTuple, Protocol
 
 MAGIC: Final = b"MIROSHM1"
 SLOTS: Final = 16  # slots in a supplier's ring, by default (MIRO_SHM_SLOTS)
@@ -64,6 +64,15 @@ _FLOCK = struct.Struct("hhqqi4x")  # struct flock (Linux): type, whence, start, 
 # The descriptor: supplier pid, its fd of the segment, segment id, slot, generation, write
 # index, payload length.
 DESCRIPTOR: Final = struct.Struct("<IIQIQQQ")
+
+
+class Encoded(Protocol):
+    """An encoded value not yet put together (runtime.cdr.Encoder)."""
+
+    @property
+    def size(self) -> int: ...
+
+    def copy_into(self, out: memoryview) -> int: ...
 
 
 class Descriptor(NamedTuple):
@@ -160,12 +169,13 @@ class Ring:
         self.closed = False
 
     def put(
-        self, payload: bytes | memoryview, keep_all: int = 0, wait: float = WAIT_KEEP_ALL
+        self, payload: bytes | Encoded, keep_all: int = 0, wait: float = WAIT_KEEP_ALL
     ) -> Descriptor | None:
-        """Write `payload` into a slot; its descriptor, or None when no slot frees up within
-        `wait` seconds (keep-all consumers behind, every slot held) or it does not fit.
-        `keep_all`: keep-all consumers subscribed, whose lanes a reused slot waits for."""
-        n = len(payload)
+        """Write `payload` (bytes, or an encoder's value copied straight in) into a slot; its
+        descriptor, or None when no slot frees up within `wait` seconds (keep-all consumers
+        behind, every slot held) or it does not fit. `keep_all`: keep-all consumers
+        subscribed, whose lanes a reused slot waits for."""
+        n = len(payload) if isinstance(payload, bytes) else payload.size
         if n > self.slot_size:
             return None
         with self._lock:
@@ -184,7 +194,10 @@ class Ring:
             _Q.pack_into(mem, at + _WRITE, w)
             _Q.pack_into(mem, at + _LEN, n)
             start = self._data_at + slot * self.slot_size
-            mem[start : start + n] = payload
+            if isinstance(payload, bytes):
+                mem[start : start + n] = payload
+            else:
+                payload.copy_into(mem[start : start + n])
             _Q.pack_into(mem, at + _GEN, gen + 1)
             return Descriptor(os.getpid(), self.fd, self.segment_id, slot, gen + 1, w, n)
 

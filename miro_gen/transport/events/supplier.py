@@ -258,8 +258,10 @@ class StructuredPushSupplier:
         """As `_encode`, for a topic whose consumers are all on this host: a large event's
         payload goes into the topic's ring, its frame carries the descriptor. (b"", b"", None)
         when no slot frees up in time (dropped: keep-all consumers behind, or all held)."""
-        data = payload.serialize()
-        if len(data) + EVENT_HEADER < LARGE_EVENT:
+        encoded = encode_after(b"", payload)  # large payloads set aside, not copied yet
+        size = encoded.size
+        if size + EVENT_HEADER < LARGE_EVENT:
+            data = encoded.value()
             return EVENT.pack(*head, len(data)) + data, b"", None
         ring = t.ring
         if ring is None:
@@ -267,9 +269,9 @@ class StructuredPushSupplier:
                 ring = t.ring
                 if ring is None:
                     ring = t.ring = shm.Ring(self.max_frame)
-        if len(data) > ring.slot_size:  # larger than any message: refused as such
-            return b"", b"".join((self._batch_head(type_hash, 1), data)), None
-        d = ring.put(data, t.keep_all)
+        if size > ring.slot_size:  # larger than any message: refused as such
+            return b"", b"".join((self._batch_head(type_hash, 1), encoded.value())), None
+        d = ring.put(encoded, t.keep_all)  # the encoder copies into the slot
         if d is None:
             return b"", b"", None
         frame = b"".join(
