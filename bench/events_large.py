@@ -26,8 +26,8 @@ import tempfile
 import threading
 import time
 from collections.abc import Callable
-from typing import Any
 from pathlib import Path
+from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT / "generated"), str(ROOT)]
@@ -342,16 +342,16 @@ class Setup:
             self.supplier = Process("large-ours-supplier", endpoint, env=env)
             views = "zero-copy" if "zero_copy" in name else "bytes"
             self.consumers = [
-                Process("large-ours-consumer", endpoint, self.supplier.said, "Image", views, env=env)
+                Process(
+                    "large-ours-consumer", endpoint, self.supplier.said, "Image", views, env=env
+                )
                 for _ in range(consumers)
             ]
         else:
             shm = "on" if "on)" in name else "off"
             port = str(free_port())
             self.supplier = Process("large-zenoh-supplier", port, shm)
-            self.consumers = [
-                Process("large-zenoh-consumer", port, shm) for _ in range(consumers)
-            ]
+            self.consumers = [Process("large-zenoh-consumer", port, shm) for _ in range(consumers)]
         time.sleep(1.0)
         frames_per_second(self.supplier, self.consumers, 20, SIZES[0], 100)  # connect, warm up
 
@@ -403,7 +403,9 @@ def throughput(
         finally:
             for setup in setups:
                 setup.close()
-    head = f"{'large events':34} {'readers':>7} {'size':>5} {'frames/s':>9} {'spread':>17} {'lost':>6}"
+    head = (
+        f"{'large events':34} {'readers':>7} {'size':>5} {'frames/s':>9} {'spread':>17} {'lost':>6}"
+    )
     print(head)
     for (name, n, size), runs in results.items():
         spread = f"{min(runs):.0f}-{max(runs):.0f}"

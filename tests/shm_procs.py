@@ -10,6 +10,13 @@ real processes on one host, so that large events take shared memory.
         event (ok: its checksum holds); `STATS` on stdin prints `STATS received missed
         dropped torn segments`.
 
+    python tests/shm_procs.py flood NAMING CHANNEL COUNT [RATE]
+        waits for a subscriber, pushes COUNT small events (Miro::TimeIDL), RATE a second
+        (default: flat out); prints
+        `SENT sent dropped`, then waits for its stdin to close.
+    python tests/shm_procs.py count NAMING CHANNEL
+        a keep-all consumer of them; `STATS` prints `STATS received missed dropped`.
+
 Each image's data is its number repeated, and its time's usec field is the CRC-32 of the data:
 a payload read while it was rewritten (torn) fails the check.
 """
@@ -93,11 +100,45 @@ def consume(naming: str, channel_name: str, depth: int, delay: float, zero_copy:
     server.shutdown()
 
 
+def flood(naming: str, channel_name: str, count: int, rate: float) -> None:
+    server = Server(["flooder", "--naming", naming, "-MNC", "s"])
+    threading.Thread(target=server.run, daemon=True).start()
+    supplier = StructuredPushSupplier(server.resolve_channel(channel_name))
+    while not supplier.has_subscribers("Tick"):
+        time.sleep(0.01)
+    time.sleep(0.3)
+    start = time.monotonic()
+    for n in range(count):
+        supplier.push("Tick", Miro.TimeIDL(n, 0))
+        if rate and n % 20 == 19:  # paced: many small frames, not a few large ones
+            time.sleep(max(0.0, start + n / rate - time.monotonic()))
+    time.sleep(1.0)
+    print("SENT", supplier.sent, supplier.dropped, flush=True)
+    sys.stdin.read()
+    server.shutdown()
+
+
+def count(naming: str, channel_name: str) -> None:
+    server = Server(["counter", "--naming", naming, "-MNC", "c"])
+    c = StructuredPushConsumer(server.resolve_channel(channel_name), depth=0)
+    c.set_subscriptions([("s", "Tick")])
+    threading.Thread(target=server.run, daemon=True).start()
+    print("READY", flush=True)
+    for line in sys.stdin:
+        if line.strip() == "STATS":
+            print("STATS", c.received, c.missed, c.dropped, flush=True)
+    server.shutdown()
+
+
 if __name__ == "__main__":
     role, naming, channel_name = sys.argv[1:4]
     rest = sys.argv[4:]
     os.environ.setdefault("MIRO_LOG_LEVEL", "warning")
-    if role == "supply":
+    if role == "flood":
+        flood(naming, channel_name, int(rest[0]), float(rest[1]) if len(rest) > 1 else 0.0)
+    elif role == "count":
+        count(naming, channel_name)
+    elif role == "supply":
         pace = float(rest[2]) if len(rest) > 2 else 0.0
         supply(naming, channel_name, int(rest[0]), int(rest[1]), pace)
     else:

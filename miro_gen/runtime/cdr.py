@@ -330,7 +330,7 @@ def put_octets(
 _octet_views = threading.local()
 
 
-class octet_views:  # noqa: N801 - used as a `with` block, like a function
+class octet_views:
     """While active on this thread, sequences of octets decoded from a read-only memoryview
     are read-only memoryviews of it, not copies (a consumer's zero-copy reads from shared
     memory: transport.events). They are valid only as long as the memory under them is."""

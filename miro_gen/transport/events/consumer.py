@@ -104,7 +104,12 @@ class StructuredPushConsumer:
         self.received = 0
         self.undecodable = 0  # events whose type hash matches no imported generated type
         self.lag = 0.0  # seconds between the push and the delivery of the last event delivered
-        self.link: SubscribingLink = channel.subscribing(self._readable, HWM)
+        if channel.links is None:  # ZeroMQ: a keep-all consumer's queue is not cut short
+            self.link: SubscribingLink = channel.subscribing(
+                self._readable, HWM, keep_all=self._keep_all
+            )
+        else:
+            self.link = channel.subscribing(self._readable, HWM)
 
     @property
     def missed(self) -> int:

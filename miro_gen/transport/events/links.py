@@ -138,7 +138,9 @@ class ZmqPublishing:
 class ZmqSubscribing:
     """A consumer's SUB socket connected to its channel's proxy at `endpoint` (found again with
     `find`, None for fixed endpoints); `on_readable()` runs on the reactor thread when frames
-    wait. At most `hwm` frames wait per peer."""
+    wait. At most `hwm` frames wait per peer, fewer when the largest message allowed is large
+    (`sockets.queue_limit`), except for a keep-all consumer (`keep_all`): it must not lose
+    what it would keep while its process is not scheduled, so its queue is `hwm` frames."""
 
     def __init__(
         self,
@@ -147,10 +149,14 @@ class ZmqSubscribing:
         find: Callable[[], str] | None,
         on_readable: Callable[[], object],
         hwm: int,
+        keep_all: bool = False,
     ) -> None:
         context = reactor.context
         self.socket: zmq.Socket[Any] = sockets.connecting_socket(context, zmq.SUB)
-        self.socket.setsockopt(zmq.RCVHWM, min(hwm, sockets.queue_limit(context)))
+        limit = hwm if keep_all else min(hwm, sockets.queue_limit(context))
+        self.socket.setsockopt(zmq.RCVHWM, limit)
+        if keep_all:  # and room in the kernel (bytes), as the channel's side has
+            self.socket.setsockopt(zmq.RCVBUF, 4 << 20)
         self.link = ChannelLink(reactor, self.socket, endpoint, find, lambda up: None)
         self._recv = self.socket.recv_multipart
         reactor.call_soon(reactor.register, self.socket, on_readable)

@@ -331,11 +331,11 @@ class Segment:
         """Whether the slot of `d` still holds its write (checked again after a read: a
         changed generation means the read may be torn)."""
         at = _SLOT_AT + d.slot * _SLOT.size
-        gen, w, n = _SLOT.unpack_from(self.mem, at)[:3]
-        return gen == d.generation and w == d.write and n == d.length
+        gen, w, n, _ = _SLOT.unpack_from(self.mem, at)
+        return bool(gen == d.generation and w == d.write and n == d.length)
 
     def valid(self, d: Descriptor) -> bool:
-        return 0 <= d.slot < self.slots and d.length <= self.slot_size
+        return bool(0 <= d.slot < self.slots and d.length <= self.slot_size)
 
     def release(self, d: Descriptor, keep_all: bool) -> None:
         """Done with `d`: its slot may be reused (a keep-all consumer's credit with it)."""

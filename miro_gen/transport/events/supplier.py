@@ -149,15 +149,19 @@ class StructuredPushSupplier:
             marker = self._marker
             # Consumers of this host subscribe to each prefix twice, plainly and after the
             # marker; anyone else only plainly. All local: large events take shared memory.
-            shared = marker and sum(
-                n for p, n in subs if p.startswith(marker) and t.shm_frame.startswith(p)
-            )
-            t.subscribed = plain > 0 or bool(shared)
-            t.shared = bool(shared) and shared >= plain
+            shared = 0
+            if marker:
+                shared = sum(
+                    n for p, n in subs if p.startswith(marker) and t.shm_frame.startswith(p)
+                )
+            t.subscribed = plain > 0 or shared > 0
+            t.shared = shared > 0 and shared >= plain
             if t.shared:
                 marker = self._keep_all_marker
                 keep_all = marker + t.frame
-                t.keep_all = sum(n for p, n in subs if p.startswith(marker) and keep_all.startswith(p))
+                t.keep_all = sum(
+                    n for p, n in subs if p.startswith(marker) and keep_all.startswith(p)
+                )
             t.generation = generation  # a change meanwhile bumped _generation: recomputed next
         return t.subscribed
 
