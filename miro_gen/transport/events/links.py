@@ -26,6 +26,7 @@ from miro_gen.transport.events.channel_link import ChannelLink
 from miro_gen.transport.reactor import Reactor
 
 _NOBLOCK = int(zmq.NOBLOCK)
+KEEP_ALL_FRAMES = 512  # frames a keep-all consumer's socket queues, at least
 
 
 class PublishingLink(Protocol):
@@ -140,7 +141,9 @@ class ZmqSubscribing:
     `find`, None for fixed endpoints); `on_readable()` runs on the reactor thread when frames
     wait. At most `hwm` frames wait per peer, fewer when the largest message allowed is large
     (`sockets.queue_limit`), except for a keep-all consumer (`keep_all`): it must not lose
-    what it would keep while its process is not scheduled, so its queue is `hwm` frames."""
+    what it would keep while its process is not scheduled, so its queue is KEEP_ALL_FRAMES
+    frames (128 MiB of full batches of small events; large events from this host are
+    descriptors, from other hosts up to the largest message each)."""
 
     def __init__(
         self,
@@ -153,7 +156,8 @@ class ZmqSubscribing:
     ) -> None:
         context = reactor.context
         self.socket: zmq.Socket[Any] = sockets.connecting_socket(context, zmq.SUB)
-        limit = hwm if keep_all else min(hwm, sockets.queue_limit(context))
+        queue = sockets.queue_limit(context)
+        limit = min(hwm, max(queue, KEEP_ALL_FRAMES)) if keep_all else min(hwm, queue)
         self.socket.setsockopt(zmq.RCVHWM, limit)
         if keep_all:  # and room in the kernel (bytes), as the channel's side has
             self.socket.setsockopt(zmq.RCVBUF, 4 << 20)

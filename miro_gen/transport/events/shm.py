@@ -279,6 +279,7 @@ class Segment:
 
     def __init__(self, pid: int, fd: int, segment_id: int, keep_all: bool, first: int) -> None:
         self.pid = pid
+        self.closed = False  # (events still queued may name it: they are then dropped)
         self.supplier_fd = fd
         self.segment_id = segment_id
         self.fd = os.open(f"/proc/{pid}/fd/{fd}", os.O_RDWR | os.O_CLOEXEC)
@@ -319,7 +320,9 @@ class Segment:
 
     def hold(self, d: Descriptor) -> memoryview | None:
         """The payload of `d`, read-only, held (never rewritten) until `release`; None when its
-        slot has been written again since (the descriptor is stale)."""
+        slot has been written again since (the descriptor is stale), or the mapping is closed."""
+        if self.closed:
+            return None
         _Q.pack_into(self.mem, self._lane_base + _HOLD, d.write + 1)
         if not self.current(d):
             _Q.pack_into(self.mem, self._lane_base + _HOLD, 0)
@@ -330,6 +333,8 @@ class Segment:
     def current(self, d: Descriptor) -> bool:
         """Whether the slot of `d` still holds its write (checked again after a read: a
         changed generation means the read may be torn)."""
+        if self.closed:
+            return False
         at = _SLOT_AT + d.slot * _SLOT.size
         gen, w, n, _ = _SLOT.unpack_from(self.mem, at)
         return bool(gen == d.generation and w == d.write and n == d.length)
@@ -339,12 +344,14 @@ class Segment:
 
     def release(self, d: Descriptor, keep_all: bool) -> None:
         """Done with `d`: its slot may be reused (a keep-all consumer's credit with it)."""
+        if self.closed:
+            return
         _Q.pack_into(self.mem, self._lane_base + _HOLD, 0)
         if keep_all:
             self.ack(d.write + 1)
 
     def ack(self, acked: int) -> None:
-        if acked > self.acked:
+        if acked > self.acked and not self.closed:
             self.acked = acked
             _Q.pack_into(self.mem, self._lane_base + _ACKED, acked)
 
@@ -358,6 +365,7 @@ class Segment:
         return (info.st_dev, info.st_ino) == (mine.st_dev, mine.st_ino)
 
     def close(self) -> None:
+        self.closed = True
         with contextlib.suppress(Exception):
             self._readonly.release()
         with contextlib.suppress(Exception):
