@@ -49,7 +49,7 @@ MAGIC: Final = b"MIROSHM1"
 SLOTS: Final = 16  # slots in a supplier's ring, by default (MIRO_SHM_SLOTS)
 LANES: Final = 64  # consumer processes that may map one segment at once
 WAIT_KEEP_ALL: Final = 1.0  # seconds a push waits for a keep-all consumer's credit, at most
-DEFAULT: Final = "0"  # MIRO_SHM when unset
+DEFAULT: Final = "1"  # MIRO_SHM when unset
 
 # The segment: a header, the slots' headers, the lanes, then the slots' data (page-aligned).
 _HEAD = struct.Struct("<8sQIIQ")  # magic, segment id, slots, lanes, slot size
@@ -91,8 +91,8 @@ def available() -> bool:
 
 
 def enabled() -> bool:
-    """Whether large events take the ring: MIRO_SHM=1 turns it on (off by default until its
-    tests pass on main), MIRO_SHM=0 off."""
+    """Whether large events take the ring: on by default, MIRO_SHM=0 turns it off (any other
+    value than 1 does)."""
     return available() and os.environ.get("MIRO_SHM", DEFAULT) == "1"
 
 

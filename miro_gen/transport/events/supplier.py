@@ -13,7 +13,7 @@ from typing import Any
 
 from miro_gen import clock
 from miro_gen.log import logger
-from miro_gen.runtime.cdr import encode_after
+from miro_gen.runtime.cdr import Encoder, encode_after
 from miro_gen.transport import sockets
 from miro_gen.transport.events import offers, shm
 from miro_gen.transport.events.channels import EventChannel
@@ -262,11 +262,20 @@ class StructuredPushSupplier:
         """As `_encode`, for a topic whose consumers are all on this host: a large event's
         payload goes into the topic's ring, its frame carries the descriptor. (b"", b"", None)
         when no slot frees up in time (dropped: keep-all consumers behind, or all held)."""
-        encoded = encode_after(b"", payload)  # large payloads set aside, not copied yet
-        size = encoded.size
-        if size + EVENT_HEADER < LARGE_EVENT:
-            data = encoded.value()
-            return EVENT.pack(*head, len(data)) + data, b"", None
+        encoded: bytes | Encoder
+        if t.large:  # after a large one: encoded straight into the slot (its data set aside)
+            encoded = encode_after(b"", payload)
+            size = encoded.size
+            if size + EVENT_HEADER < LARGE_EVENT:
+                t.large = False
+                data = encoded.value()
+                return EVENT.pack(*head, len(data)) + data, b"", None
+        else:
+            encoded = payload.serialize()
+            size = len(encoded)
+            if size + EVENT_HEADER < LARGE_EVENT:
+                return EVENT.pack(*head, size) + encoded, b"", None
+            t.large = True
         ring = t.ring
         if ring is None:
             with self._rings_lock:
@@ -274,7 +283,8 @@ class StructuredPushSupplier:
                 if ring is None:
                     ring = t.ring = shm.Ring(self.max_frame)
         if size > ring.slot_size:  # larger than any message: refused as such
-            return b"", b"".join((self._batch_head(type_hash, 1), encoded.value())), None
+            whole = encoded if isinstance(encoded, bytes) else encoded.value()
+            return b"", b"".join((self._batch_head(type_hash, 1), whole)), None
         d = ring.put(encoded, t.keep_all)  # the encoder copies into the slot
         if d is None:
             return b"", b"", None
