@@ -31,6 +31,7 @@ from miro_gen.runtime import registry
 from miro_gen.runtime.datatypes import IdlType as IdlType  # generated code's bases, as before
 from miro_gen.runtime.datatypes import IdlUnion as IdlUnion
 from miro_gen.runtime.datatypes import default_discriminator as default_discriminator
+from miro_gen.runtime.views import active as _views
 
 # Which generated class has a type hash or a repository id: miro_gen.runtime.registry (these
 # names stay importable from here).
@@ -327,27 +328,12 @@ def put_octets(
     put_bulk(buf, data, len(data))
 
 
-_octet_views = threading.local()
-
-
-class octet_views:
-    """While active on this thread, sequences of octets decoded from a read-only memoryview
-    are read-only memoryviews of it, not copies (a consumer's zero-copy reads from shared
-    memory: transport.events). They are valid only as long as the memory under them is."""
-
-    def __enter__(self) -> None:
-        _octet_views.on = True
-
-    def __exit__(self, *exc: object) -> None:
-        _octet_views.on = False
-
-
 def get_octets(
     data: bytes | bytearray | memoryview, off: int, e: int, bound: int | None, what: str
 ) -> tuple[bytes, int]:
     n, off = get_length(data, off, e, bound, 1, what)
-    if type(data) is memoryview and data.readonly and getattr(_octet_views, "on", False):
-        view: Any = data[off : off + n]  # stands in for bytes (octet_views)
+    if type(data) is memoryview and data.readonly and getattr(_views, "on", False):
+        view: Any = data[off : off + n]  # stands in for bytes (runtime.views)
         return view, off + n
     return bytes(data[off : off + n]), off + n
 

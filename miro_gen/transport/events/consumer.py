@@ -13,8 +13,8 @@ from struct import error as StructError
 
 from miro_gen.log import PeerWarnings, logger
 from miro_gen.runtime import registry
-from miro_gen.runtime.cdr import octet_views
 from miro_gen.runtime.datatypes import IdlType
+from miro_gen.runtime.views import octet_views
 from miro_gen.transport.events import offers, shm
 from miro_gen.transport.events.channels import EventChannel
 from miro_gen.transport.events.event import StructuredEvent
