@@ -285,7 +285,10 @@ class StructuredPushSupplier:
         if size > ring.slot_size:  # larger than any message: refused as such
             whole = encoded if isinstance(encoded, bytes) else encoded.value()
             return b"", b"".join((self._batch_head(type_hash, 1), whole)), None
-        d = ring.put(encoded, t.keep_all)  # the encoder copies into the slot
+        # The encoder copies into the slot. On the reactor thread a push does not wait for
+        # credits: a keep-all consumer of this process could not return them meanwhile.
+        wait = 0.0 if self.reactor.in_reactor_thread() else shm.WAIT_KEEP_ALL
+        d = ring.put(encoded, t.keep_all, wait)
         if d is None:
             return b"", b"", None
         frame = b"".join(
