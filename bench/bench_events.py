@@ -496,8 +496,15 @@ def main() -> int:
     )
     ap.add_argument("--events", type=int, default=300_000, help="events per throughput run")
     ap.add_argument("--check", action="store_true", help="exit 1 when a target is missed")
-    ap.add_argument("--large-events", type=int, default=60, help="large events per run (60)")
-    ap.add_argument("--repeat", type=int, default=3, help="runs per large size (median; 3)")
+    ap.add_argument(
+        "--large-events",
+        type=int,
+        default=1000,
+        help="large events per run, at least (1000; runs last about 2 s)",
+    )
+    ap.add_argument(
+        "--repeat", type=int, default=5, help="interleaved rounds of large-event runs (median; 5)"
+    )
     only = ap.add_mutually_exclusive_group()
     only.add_argument("--small-only", action="store_true", help="skip the large events")
     only.add_argument("--large-only", action="store_true", help="only the large events")

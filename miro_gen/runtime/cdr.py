@@ -31,6 +31,7 @@ from miro_gen.runtime import registry
 from miro_gen.runtime.datatypes import IdlType as IdlType  # generated code's bases, as before
 from miro_gen.runtime.datatypes import IdlUnion as IdlUnion
 from miro_gen.runtime.datatypes import default_discriminator as default_discriminator
+from miro_gen.runtime.views import active as _views
 
 # Which generated class has a type hash or a repository id: miro_gen.runtime.registry (these
 # names stay importable from here).
@@ -108,6 +109,16 @@ class Encoder(bytearray):
         """Bytes encoded so far."""
         kept = sum(memoryview(p).nbytes for p in self.parts) if self.parts is not None else 0
         return kept + len(self) - self.skip
+
+    def copy_into(self, out: memoryview) -> int:
+        """Write the encoded value into `out` (at least `size` bytes, a shared-memory slot):
+        each byte copied once, as by `value()`; how many were written."""
+        at = 0
+        for part in (*(self.parts or ()), memoryview(self)[self.skip :]):
+            m = memoryview(part).cast("B")
+            out[at : at + m.nbytes] = m
+            at += m.nbytes
+        return at
 
     def overwrite(self, at: int, data: bytes) -> None:
         """Replace bytes at offset `at`, before the first payload set aside (a header's)."""
@@ -321,6 +332,9 @@ def get_octets(
     data: bytes | bytearray | memoryview, off: int, e: int, bound: int | None, what: str
 ) -> tuple[bytes, int]:
     n, off = get_length(data, off, e, bound, 1, what)
+    if type(data) is memoryview and data.readonly and getattr(_views, "on", False):
+        view: Any = data[off : off + n]  # stands in for bytes (runtime.views)
+        return view, off + n
     return bytes(data[off : off + n]), off + n
 
 

@@ -39,6 +39,7 @@ DEFAULT_CHANNEL = "EventChannel"
 # Frames a channel queues for each of its peers, at most (high-water marks are set once: libzmq
 # can stall a pipe whose mark is lowered while it carries messages).
 PROXY_HWM = 1_000
+SOCKET_BUFFER = 4 << 20  # bytes; Linux caps it at net.core.wmem_max (often 4 MiB, or 208 KiB)
 
 
 class ChannelLinks(Protocol):
@@ -116,8 +117,9 @@ class EventChannel:
         self, on_readable: Callable[[], object], hwm: int, *, keep_all: bool = False
     ) -> SubscribingLink:
         """A consumer's link to this channel (transport.events.links). `keep_all`: for a
-        consumer that keeps every event, which a backbone that can (Zenoh) then carries with
-        backpressure instead of dropping; over ZeroMQ it changes nothing."""
+        consumer that keeps every event: a backbone that can (Zenoh) carries its events with
+        backpressure instead of dropping them; over ZeroMQ its queues hold `hwm` frames
+        whatever the largest message allowed."""
         if self.links is not None:
             return self.links.subscribing(self.name, on_readable, hwm, keep_all=keep_all)
         context = self.reactor.context
@@ -128,6 +130,7 @@ class EventChannel:
             None if resolve is None else lambda: resolve().endpoints(context)[1],
             on_readable,
             hwm,
+            keep_all,
         )
 
 
@@ -148,6 +151,10 @@ class ChannelHost:
             s.setsockopt(zmq.SNDHWM, hwm)
             s.setsockopt(zmq.RCVHWM, hwm)
         self.xpub.setsockopt(zmq.XPUB_VERBOSER, 1)  # every (un)subscription reaches suppliers
+        # Besides its frames, each consumer's connection queues up to SOCKET_BUFFER bytes in the
+        # kernel: a queue in bytes, which holds thousands of small frames for a keep-all
+        # consumer whose process is not scheduled for a moment (not one more 8 MiB frame).
+        self.xpub.setsockopt(zmq.SNDBUF, SOCKET_BUFFER)
         port_in = self.xsub.bind_to_random_port(f"tcp://{bind_host}")
         port_out = self.xpub.bind_to_random_port(f"tcp://{bind_host}")
         self.supplier_endpoint = f"tcp://{advertise}:{port_in}"

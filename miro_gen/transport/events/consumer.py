@@ -14,13 +14,16 @@ from struct import error as StructError
 from miro_gen.log import PeerWarnings, logger
 from miro_gen.runtime import registry
 from miro_gen.runtime.datatypes import IdlType
-from miro_gen.transport.events import offers
+from miro_gen.runtime.views import octet_views
+from miro_gen.transport.events import offers, shm
 from miro_gen.transport.events.channels import EventChannel
 from miro_gen.transport.events.event import StructuredEvent
 from miro_gen.transport.events.frames import (
     BATCH_HEADER,
     EVENT,
     EVENT_HEADER,
+    SHM,
+    batch_flags,
     read_batch_head,
     split_topic,
     topic,
@@ -39,6 +42,7 @@ TURN_FRAMES = 256  # frames a consumer reads per reactor turn
 # generated packages on the path are imported (in a thread: runtime.registry.discover).
 HOLD_FRAMES = 1000
 HOLD_BYTES = 64 << 20
+SWEEP_EVERY = 1.0  # seconds between looks for mappings of suppliers that have died
 ANY = "*"
 
 
@@ -60,14 +64,32 @@ class StructuredPushConsumer:
     newest 10 per topic by default, as ROS 2 keeps them; `latest_only` keeps the newest one;
     `depth=KEEP_ALL` keeps everything up to the queue's byte limit. `missed` counts events lost
     on the way (sequence gaps), `dropped` those this consumer skipped because its handler fell
-    behind, `lag` how old (seconds since it was pushed) the last event delivered was."""
+    behind, `lag` how old (seconds since it was pushed) the last event delivered was.
+
+    Large events from suppliers on this host arrive through shared memory (transport.events.shm)
+    and are decoded from it: the payload is the same as over the network. With `zero_copy`,
+    their sequences of octets (image data) are not copied but read-only memoryviews of the
+    shared slot instead (`numpy.frombuffer` makes a read-only array of one): valid only while
+    `push_structured_event` runs, after which the slot may be written again; copy what must
+    outlive the handler."""
 
     def __init__(
-        self, channel: EventChannel, *, depth: int = DEFAULT_DEPTH, latest_only: bool = False
+        self,
+        channel: EventChannel,
+        *,
+        depth: int = DEFAULT_DEPTH,
+        latest_only: bool = False,
+        zero_copy: bool = False,
     ) -> None:
         self.channel = channel
         self.reactor = channel.reactor
         self.queue = EventQueue(depth, latest_only)
+        self.zero_copy = zero_copy
+        self._keep_all = depth == KEEP_ALL and not latest_only
+        self._marker = shm.topic_marker() if shm.enabled() and channel.links is None else b""
+        self._segments = shm.Segments(self._keep_all)
+        self._sweeper: int | None = None
+        self.torn = 0  # shared-memory events rewritten while read (dropped, counted in dropped)
         self._filters: list[tuple[str, str]] = []
         self._prefixes: set[bytes] = set()
         self._gaps = GapCounter()  # per (supplier, type name), bounded
@@ -82,8 +104,9 @@ class StructuredPushConsumer:
         self.received = 0
         self.undecodable = 0  # events whose type hash matches no imported generated type
         self.lag = 0.0  # seconds between the push and the delivery of the last event delivered
-        keep_all = self.queue.depth == KEEP_ALL
-        self.link: SubscribingLink = channel.subscribing(self._readable, HWM, keep_all=keep_all)
+        self.link: SubscribingLink = channel.subscribing(
+            self._readable, HWM, keep_all=self._keep_all
+        )
 
     @property
     def missed(self) -> int:
@@ -101,11 +124,23 @@ class StructuredPushConsumer:
         prefixes = {subscription_prefix(d, t) for d, t in subs}
         offers.subscribed(self, self.channel.name, subs)
 
+        marker = self._marker
+        # Large events from this host come through shared memory (its marker); a keep-all
+        # consumer says so, so that suppliers wait for it (a prefix no frame starts with).
+        markers = [marker] if marker else []
+        if marker and self._keep_all:
+            markers.append(shm.keep_all_marker())
+
         def apply() -> None:
             for p in self._prefixes - prefixes:
                 self.link.unsubscribe(p)
+                for m in markers:
+                    self.link.unsubscribe(m + p)
             for p in prefixes - self._prefixes:
                 self.link.subscribe(p)
+                for m in markers:
+                    self.link.subscribe(m + p)
+            self._segments.close()  # lanes only in the rings of what it still subscribes to
             self._prefixes = prefixes
             self._filters = subs
             self._topics.clear()
@@ -153,25 +188,79 @@ class StructuredPushConsumer:
                 queue.put_back(taken[i:])
                 break
             _, event, cls, _ = w
-            try:
-                event.payload = cls.deserialize(event.payload)
-            except Exception as e:  # MARSHAL: a corrupt payload is reported, not delivered
-                _peer_warnings.warning("dropped an undecodable %s event: %s", event.type_name, e)
-                continue
+            shared = event.payload if type(event.payload) is _Shared else None
+            if shared is not None:
+                if not self._decode_shared(event, cls, shared):
+                    continue
+            else:
+                try:
+                    event.payload = cls.deserialize(event.payload)
+                except Exception as e:  # MARSHAL: a corrupt payload is reported, not delivered
+                    _peer_warnings.warning(
+                        "dropped an undecodable %s event: %s", event.type_name, e
+                    )
+                    continue
             n += 1
             self.lag = time.time() - event.publish_time
             try:
                 deliver(event)
             except Exception:
                 _log.exception("push_structured_event failed on %s", event.type_name)
+            if shared is not None:
+                shared.segment.release(shared.descriptor, self._keep_all)
         self.received += n
         if len(queue) and not reactor.stopping:
             self._schedule()  # the rest next turn: other handlers get theirs meanwhile
+
+    def _decode_shared(self, event: StructuredEvent, cls: type[IdlType], shared: _Shared) -> bool:
+        """Decode an event from its slot, which it then holds until released; False (the
+        event dropped and counted) when the slot was written again before or during the read."""
+        seg, d = shared.segment, shared.descriptor
+        view = seg.hold(d)
+        if view is None:  # lapped: a keep-last consumer a ring behind
+            self.queue.dropped += 1
+            return False
+        try:
+            if self.zero_copy:
+                with octet_views():
+                    event.payload = cls.deserialize(view)
+            else:
+                event.payload = cls.deserialize(view)
+        except Exception as e:
+            seg.release(d, self._keep_all)
+            if seg.current(d):
+                _peer_warnings.warning("dropped an undecodable %s event: %s", event.type_name, e)
+            else:
+                self.torn += 1
+                self.queue.dropped += 1
+            return False
+        if not seg.current(d):  # rewritten while read: torn
+            seg.release(d, self._keep_all)
+            self.torn += 1
+            self.queue.dropped += 1
+            return False
+        return True
+
+    def _shared(self, d: shm.Descriptor) -> _Shared | None:
+        """The mapping of a descriptor's segment (mapped on first use), None if it cannot be."""
+        seg = self._segments.segment(d)
+        if seg is None or not seg.valid(d):
+            return None
+        if self._sweeper is None:  # unmap the segments of suppliers that die
+            self._sweeper = self.reactor.schedule_timer(
+                SWEEP_EVERY, SWEEP_EVERY, lambda _: self._segments.sweep()
+            )
+        return _Shared(seg, d)
 
     def _topic(self, head: bytes) -> tuple[str, str, bool]:
         """(domain, type name, whether subscribed) of a topic frame."""
         known = self._topics.get(head)
         if known is None:
+            if head[:1] == b"\x01":  # shared memory: ours, or another host's (not for us)
+                marker = self._marker
+                if not marker or not head.startswith(marker):
+                    return "", "", False
+                head = head[len(marker) :]
             domain, type_name = split_topic(head)
             known = (domain, type_name, self._wanted(domain, type_name))
             if len(self._topics) >= 4096:  # a bounded cache, whatever the channel carries
@@ -213,6 +302,9 @@ class StructuredPushConsumer:
             return
         if held:
             cls = self._class(raw_hash, domain, type_name)
+        shared = batch_flags(body) & SHM
+        if shared and count != 1:
+            raise ValueError("a shared-memory frame has one descriptor")
         type_hash = raw_hash.hex()
         expected = self._gaps.expected(supplier, type_name)
         first = expected
@@ -233,8 +325,23 @@ class StructuredPushConsumer:
             if seq != expected:
                 missed += gap(expected, seq)
             expected = seq + 1
-            if cls is not None and i >= keep_from:  # decoded when delivered
-                data = body[at : at + n] if n >= LARGE_EVENT else bytes(whole[at : at + n])
+            if cls is not None and i >= keep_from:
+                # Decoded when delivered; a small payload is copied out, so that a batch's
+                # frame is not kept for one event that waits.
+                data: object
+                if shared:
+                    if n != shm.DESCRIPTOR.size:
+                        raise ValueError("malformed shared-memory descriptor")
+                    d = shm.Descriptor(*shm.DESCRIPTOR.unpack_from(body, at))
+                    data = self._shared(d)
+                    if data is None:  # not mappable here: lost on the way
+                        missed += 1
+                        at += n
+                        continue
+                    held = n  # the payload is in the supplier's pool, which bounds it
+                else:
+                    data = body[at : at + n] if n >= LARGE_EVENT else bytes(whole[at : at + n])
+                    held = n
                 event = StructuredEvent(
                     domain,
                     type_name,
@@ -245,8 +352,8 @@ class StructuredPushConsumer:
                     supplier,
                     type_hash,
                 )
-                waiting.append((topic_key, event, cls, n))
-                total += n
+                waiting.append((topic_key, event, cls, held))
+                total += held
             at += n
         if at != size:
             raise ValueError("trailing bytes after the events")
@@ -290,3 +397,16 @@ class StructuredPushConsumer:
     def close(self) -> None:
         offers.unsubscribed(self)
         self.link.close()
+        if self._sweeper is not None:
+            self.reactor.cancel_timer(self._sweeper)
+        self.reactor.call_soon(self._segments.close)
+
+
+class _Shared:
+    """A payload in shared memory, waiting in the queue: its segment and descriptor."""
+
+    __slots__ = ("descriptor", "segment")
+
+    def __init__(self, segment: shm.Segment, descriptor: shm.Descriptor) -> None:
+        self.segment = segment
+        self.descriptor = descriptor

@@ -8,7 +8,8 @@ An event message is two ZeroMQ frames, a topic frame and a batch frame, little-e
 
     batch frame    offset  size  field
                    0       1     version (VERSION)
-                   1       1     flags (0)
+                   1       1     flags: 0, or SHM (its one event's payload is a descriptor
+                                 of a payload in shared memory: transport.events.shm)
                    2       2     number of events n (at most MAX_EVENTS)
                    4       8     supplier id (random per supplier)
                    12      32    type hash of the payloads (SHA-256 of the data schema, raw)
@@ -39,6 +40,7 @@ BATCH_HEADER: Final = BATCH.size  # bytes before a frame's first event
 EVENT_HEADER: Final = EVENT.size  # bytes before each payload
 LENGTH_AT: Final = BATCH_HEADER + EVENT_HEADER - LENGTH.size  # the first event's payload length
 MAX_EVENTS: Final = 0xFFFF  # the count is 16 bits
+SHM: Final = 1  # flag: the payload is in shared memory, the frame carries its descriptor
 
 
 class FrameError(ValueError):
@@ -74,9 +76,14 @@ def split_topic(frame: bytes) -> tuple[str, str]:
         raise FrameError(f"topic is not UTF-8: {e}") from None
 
 
-def batch_head(count: int, supplier: int, raw_hash: bytes) -> bytes:
+def batch_head(count: int, supplier: int, raw_hash: bytes, flags: int = 0) -> bytes:
     """The header of a batch frame of `count` events with the type hash `raw_hash`."""
-    return BATCH.pack(VERSION, 0, count, supplier, raw_hash)
+    return BATCH.pack(VERSION, flags, count, supplier, raw_hash)
+
+
+def batch_flags(body: bytes | memoryview) -> int:
+    """The flags of a batch frame (0 for a truncated one: `read_batch_head` reports it)."""
+    return body[1] if len(body) > 1 else 0
 
 
 def read_batch_head(body: bytes | memoryview) -> tuple[int, int, bytes]:
@@ -93,6 +100,8 @@ def read_batch_head(body: bytes | memoryview) -> tuple[int, int, bytes]:
 def parse_batch(domain: str, type_name: str, body: bytes) -> list[RawEvent]:
     """The events of a batch frame, their payloads copied out as they are."""
     count, supplier, raw_hash = read_batch_head(body)
+    if batch_flags(body) & SHM:
+        raise FrameError("a shared-memory descriptor, not events")
     type_hash = raw_hash.hex()
     at = BATCH_HEADER
     out = []

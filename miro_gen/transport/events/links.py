@@ -26,6 +26,7 @@ from miro_gen.transport.events.channel_link import ChannelLink
 from miro_gen.transport.reactor import Reactor
 
 _NOBLOCK = int(zmq.NOBLOCK)
+KEEP_ALL_FRAMES = 512  # frames a keep-all consumer's socket queues, at least
 
 
 class PublishingLink(Protocol):
@@ -138,7 +139,11 @@ class ZmqPublishing:
 class ZmqSubscribing:
     """A consumer's SUB socket connected to its channel's proxy at `endpoint` (found again with
     `find`, None for fixed endpoints); `on_readable()` runs on the reactor thread when frames
-    wait. At most `hwm` frames wait per peer."""
+    wait. At most `hwm` frames wait per peer, fewer when the largest message allowed is large
+    (`sockets.queue_limit`), except for a keep-all consumer (`keep_all`): it must not lose
+    what it would keep while its process is not scheduled, so its queue is KEEP_ALL_FRAMES
+    frames (128 MiB of full batches of small events; large events from this host are
+    descriptors, from other hosts up to the largest message each)."""
 
     def __init__(
         self,
@@ -147,10 +152,15 @@ class ZmqSubscribing:
         find: Callable[[], str] | None,
         on_readable: Callable[[], object],
         hwm: int,
+        keep_all: bool = False,
     ) -> None:
         context = reactor.context
         self.socket: zmq.Socket[Any] = sockets.connecting_socket(context, zmq.SUB)
-        self.socket.setsockopt(zmq.RCVHWM, min(hwm, sockets.queue_limit(context)))
+        queue = sockets.queue_limit(context)
+        limit = min(hwm, max(queue, KEEP_ALL_FRAMES)) if keep_all else min(hwm, queue)
+        self.socket.setsockopt(zmq.RCVHWM, limit)
+        if keep_all:  # and room in the kernel (bytes), as the channel's side has
+            self.socket.setsockopt(zmq.RCVBUF, 4 << 20)
         self.link = ChannelLink(reactor, self.socket, endpoint, find, lambda up: None)
         self._recv = self.socket.recv_multipart
         reactor.call_soon(reactor.register, self.socket, on_readable)

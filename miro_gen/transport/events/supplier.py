@@ -13,9 +13,9 @@ from typing import Any
 
 from miro_gen import clock
 from miro_gen.log import logger
-from miro_gen.runtime.cdr import encode_after
+from miro_gen.runtime.cdr import Encoder, encode_after
 from miro_gen.transport import sockets
-from miro_gen.transport.events import offers
+from miro_gen.transport.events import offers, shm
 from miro_gen.transport.events.channels import EventChannel
 from miro_gen.transport.events.frames import (
     BATCH_HEADER,
@@ -23,6 +23,7 @@ from miro_gen.transport.events.frames import (
     EVENT_HEADER,
     LENGTH,
     LENGTH_AT,
+    SHM,
     batch_head,
     topic,
 )
@@ -47,27 +48,37 @@ MAX_BATCH_BYTES = 256 * 1024
 
 
 class _Framed(list[bytes]):
-    """A large event's whole batch frame: it travels alone."""
+    """A large event's whole batch frame: it travels alone (a second item: its own topic
+    frame, a descriptor's)."""
 
 
 class _Topic:
     """What a supplier keeps per type name: the topic frame, the sequence numbers, whether
     anyone subscribes (recomputed when the subscriptions change), the events not yet sent,
-    whether the last event was large."""
+    whether the last event was large, whether its large events go through shared memory (all its
+    subscribers are on this host: transport.events.shm) and the ring they go through."""
 
     __slots__ = (
         "frame",
         "generation",
+        "keep_all",
         "large",
         "last",
         "last_hash",
         "pending",
+        "ring",
         "seq",
+        "shared",
+        "shm_frame",
         "subscribed",
     )
 
-    def __init__(self, frame: bytes) -> None:
+    def __init__(self, frame: bytes, marker: bytes) -> None:
         self.frame = frame
+        self.shm_frame = marker + frame
+        self.shared = False
+        self.keep_all = 0  # keep-all consumers of this host (transport.events.shm)
+        self.ring: shm.Ring | None = None
         self.large = False
         self.seq = itertools.count()
         self.generation = -1  # of the supplier's subscriptions that `subscribed` reflects
@@ -110,6 +121,11 @@ class StructuredPushSupplier:
         self.max_frame = sockets.policy(self.reactor.context).max_message_size
         self._connected = False
         self._lost: set[bytes] = set()  # the subscriptions when the channel went away
+        # Large events through shared memory to consumers of this host (transport.events.shm):
+        # not over a backbone without channel hosts, nor where the platform has no memfd.
+        self._marker = shm.topic_marker() if shm.enabled() and channel.links is None else b""
+        self._keep_all_marker = shm.keep_all_marker()
+        self._rings_lock = threading.Lock()
         # A turn's events leave in a burst of frames (100,000 small events: about 30), which the
         # link must hold until the channel reads them: room for a full queue of batches
         # (QUEUE_BYTES), more only when the supplier's own events are larger than a batch.
@@ -121,14 +137,31 @@ class StructuredPushSupplier:
     def _topic(self, type_name: str) -> _Topic:
         t = self._topics.get(type_name)
         if t is None:  # setdefault: two threads creating it at once share one counter
-            t = self._topics.setdefault(type_name, _Topic(topic(self.domain_name, type_name)))
+            frame = topic(self.domain_name, type_name)
+            t = self._topics.setdefault(type_name, _Topic(frame, self._marker))
         return t
 
     def _subscribed(self, t: _Topic) -> bool:
         generation = self._generation
         if t.generation != generation:
-            subs = list(self._subscriptions)
-            t.subscribed = any(t.frame.startswith(p) for p in subs)
+            subs = list(self._subscriptions.items())
+            plain = sum(n for p, n in subs if t.frame.startswith(p))
+            marker = self._marker
+            # Consumers of this host subscribe to each prefix twice, plainly and after the
+            # marker; anyone else only plainly. All local: large events take shared memory.
+            shared = 0
+            if marker:
+                shared = sum(
+                    n for p, n in subs if p.startswith(marker) and t.shm_frame.startswith(p)
+                )
+            t.subscribed = plain > 0 or shared > 0
+            t.shared = shared > 0 and shared >= plain
+            if t.shared:
+                marker = self._keep_all_marker
+                keep_all = marker + t.frame
+                t.keep_all = sum(
+                    n for p, n in subs if p.startswith(marker) and keep_all.startswith(p)
+                )
             t.generation = generation  # a change meanwhile bumped _generation: recomputed next
         return t.subscribed
 
@@ -161,7 +194,16 @@ class StructuredPushSupplier:
         now = clock.current().time_ns()  # log time under --clock log, else the wall clock
         type_hash = offered or payload._type_hash
         stamp_ns = now if stamp is None else int(stamp * 1e9)
-        if t.large:
+        shared = None
+        if t.shared:
+            packed, framed, shared = self._encode_shared(
+                t, type_hash, (seq, stamp_ns, now), payload
+            )
+            if not (packed or framed):  # no slot in time
+                with self._lock:
+                    self.dropped += 1
+                return True
+        elif t.large:
             packed, framed = self._encode_large(t, type_hash, (seq, stamp_ns, now), payload)
         else:  # the common case, inline: a small event's header and CDR, to be batched
             data = payload.serialize()
@@ -173,7 +215,7 @@ class StructuredPushSupplier:
                 head = EVENT.pack(seq, stamp_ns, now, n)
                 packed, framed = b"", b"".join((self._batch_head(type_hash, 1), head, data))
         size = len(framed or packed)
-        if (size if framed else size + BATCH_HEADER) > self.max_frame:
+        if shared is None and (size if framed else size + BATCH_HEADER) > self.max_frame:
             self._refuse_large(type_name, size)
             return True
         with self._lock:
@@ -183,7 +225,8 @@ class StructuredPushSupplier:
             if framed:  # alone, as it is
                 if not t.pending:
                     self._dirty.append(t)
-                t.pending.append((type_hash, _Framed((framed,))))
+                alone = _Framed((framed,) if shared is None else (framed, t.shm_frame))
+                t.pending.append((type_hash, alone))
                 t.last, t.last_hash = [], ""
             elif type_hash == t.last_hash and t.pending:
                 t.last.append(packed)
@@ -216,11 +259,56 @@ class StructuredPushSupplier:
         t.large = False
         return frame[BATCH_HEADER:], b""
 
-    def _batch_head(self, type_hash: str, count: int) -> bytes:
+    def _encode_shared(
+        self, t: _Topic, type_hash: str, head: tuple[int, int, int], payload: Any
+    ) -> tuple[bytes, bytes, shm.Descriptor | None]:
+        """As `_encode_large` and the inline case, for a topic whose consumers are all on this
+        host: a large event's payload goes into the topic's ring, its frame carries the
+        descriptor. (b"", b"", None) when no slot frees up in time (dropped: keep-all consumers
+        behind, or all held)."""
+        encoded: bytes | Encoder
+        if t.large:  # after a large one: encoded straight into the slot (its data set aside)
+            encoded = encode_after(b"", payload)
+            size = encoded.size
+            if size + EVENT_HEADER < LARGE_EVENT:
+                t.large = False
+                data = encoded.value()
+                return EVENT.pack(*head, len(data)) + data, b"", None
+        else:
+            encoded = payload.serialize()
+            size = len(encoded)
+            if size + EVENT_HEADER < LARGE_EVENT:
+                return EVENT.pack(*head, size) + encoded, b"", None
+            t.large = True
+        ring = t.ring
+        if ring is None:
+            with self._rings_lock:
+                ring = t.ring
+                if ring is None:
+                    ring = t.ring = shm.Ring(self.max_frame)
+        if size > ring.slot_size:  # larger than any message: refused as such
+            whole = encoded if isinstance(encoded, bytes) else encoded.value()
+            return b"", b"".join((self._batch_head(type_hash, 1), whole)), None
+        # The encoder copies into the slot. On the reactor thread a push does not wait for
+        # credits: a keep-all consumer of this process could not return them meanwhile.
+        wait = 0.0 if self.reactor.in_reactor_thread() else shm.WAIT_KEEP_ALL
+        d = ring.put(encoded, t.keep_all, wait)
+        if d is None:
+            return b"", b"", None
+        frame = b"".join(
+            (
+                self._batch_head(type_hash, 1, SHM),
+                EVENT.pack(*head, shm.DESCRIPTOR.size),
+                shm.DESCRIPTOR.pack(*d),
+            )
+        )
+        return b"", frame, d
+
+    def _batch_head(self, type_hash: str, count: int, flags: int = 0) -> bytes:
         raw = self._raw_hashes.get(type_hash)
         if raw is None:
             raw = self._raw_hashes[type_hash] = bytes.fromhex(type_hash)
-        return batch_head(count, self.supplier_id, raw)
+        return batch_head(count, self.supplier_id, raw, flags)
 
     def _flush(self) -> None:
         with self._lock:
@@ -234,7 +322,7 @@ class StructuredPushSupplier:
         for frame, runs in queues:
             for type_hash, events in runs:
                 if type(events) is _Framed:
-                    self._send_body(frame, events[0], 1)
+                    self._send_body(events[-1] if len(events) > 1 else frame, events[0], 1)
                     continue
                 if len(events) <= MAX_BATCH_EVENTS and sum(map(len, events)) <= MAX_BATCH_BYTES:
                     self._send(frame, type_hash, events)
@@ -309,3 +397,6 @@ class StructuredPushSupplier:
 
     def close(self) -> None:
         self.link.close()
+        for t in list(self._topics.values()):
+            if t.ring is not None:
+                t.ring.close()

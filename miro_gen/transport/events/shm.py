@@ -1,0 +1,415 @@
+"""Large events through shared memory between processes of one host (docs/PROTOCOL.md, "Large
+events in shared memory"): a supplier's ring of slots in a memfd segment, and the small
+descriptor that travels through the event channel instead of the payload.
+
+A supplier writes an event's encoded payload into a slot of its ring for the event's type
+(`Ring.put`; one ring per supplier and type, so that a consumer's credits cover every write of
+the ring it maps) and sends a
+descriptor (`Descriptor`, DESCRIPTOR.size bytes) over its usual link; a consumer on the same
+host maps the segment through `/proc/<pid>/fd/<fd>` (`Segments.segment`) and reads the payload
+in place. The segment is a memfd: it has no name in any file system, and it is gone when the
+last process that has it open or mapped is gone, kill -9 included.
+
+No torn data, no slot reused under a reader:
+
+* every slot has a generation, odd while the supplier writes it (a seqlock); a descriptor names
+  the generation it was written with, and a reader checks it before and after it reads;
+* every consumer process that maps the segment holds a lane in it, claimed with an OFD lock
+  (`fcntl`), which the kernel releases when the process dies, so the supplier can tell a live
+  lane from a dead one. In its lane the consumer says which write it holds (`hold`: while its
+  handler reads the slot, never reused meanwhile) and, for a keep-all consumer, how far it has
+  read (`acked`: the credits it returns; the supplier waits for them, for at most
+  `WAIT_KEEP_ALL` seconds, before it reuses a slot a keep-all consumer has not read);
+* a keep-last consumer that falls a ring behind finds its slot's generation changed and drops
+  the event (the oldest goes first), counted in its `dropped`.
+
+The pool: `slots` slots (MIRO_SHM_SLOTS, default SLOTS) of up to `slot_size` bytes each (the
+largest message allowed); pages are committed as they are first written, so a ring of 1 MiB
+events holds slots x 1 MiB.
+
+This module owns the segment's bytes and nothing else: no sockets, no reactor.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import functools
+import hashlib
+import mmap
+import os
+import random
+import struct
+import sys
+import threading
+import time
+from typing import Final, NamedTuple, Protocol
+
+MAGIC: Final = b"MIROSHM1"
+SLOTS: Final = 16  # slots in a supplier's ring, by default (MIRO_SHM_SLOTS)
+LANES: Final = 64  # consumer processes that may map one segment at once
+WAIT_KEEP_ALL: Final = 1.0  # seconds a push waits for a keep-all consumer's credit, at most
+DEFAULT: Final = "1"  # MIRO_SHM when unset
+
+# The segment: a header, the slots' headers, the lanes, then the slots' data (page-aligned).
+_HEAD = struct.Struct("<8sQIIQ")  # magic, segment id, slots, lanes, slot size
+_SLOT = struct.Struct("<QQQQ")  # generation (odd: being written), write index, length, spare
+_LANE = struct.Struct("<QQQQ")  # claimed (1), keep-all (1), acked (writes read), hold (write+1)
+_Q = struct.Struct("<Q")
+_SLOT_AT = 64
+_GEN, _WRITE, _LEN = 0, 8, 16
+_CLAIMED, _KEEP_ALL, _ACKED, _HOLD = 0, 8, 16, 24
+_FLOCK = struct.Struct("hhqqi4x")  # struct flock (Linux): type, whence, start, len, pid
+
+# The descriptor: supplier pid, its fd of the segment, segment id, slot, generation, write
+# index, payload length.
+DESCRIPTOR: Final = struct.Struct("<IIQIQQQ")
+
+
+class Encoded(Protocol):
+    """An encoded value not yet put together (runtime.cdr.Encoder)."""
+
+    @property
+    def size(self) -> int: ...
+
+    def copy_into(self, out: memoryview) -> int: ...
+
+
+class Descriptor(NamedTuple):
+    pid: int
+    fd: int
+    segment: int
+    slot: int
+    generation: int
+    write: int
+    length: int
+
+
+def available() -> bool:
+    """Whether this platform has what the ring needs (Linux: memfd, OFD locks, /proc)."""
+    return sys.platform.startswith("linux") and hasattr(os, "memfd_create")
+
+
+def enabled() -> bool:
+    """Whether large events take the ring: on by default, MIRO_SHM=0 turns it off (any other
+    value than 1 does)."""
+    return available() and os.environ.get("MIRO_SHM", DEFAULT) == "1"
+
+
+@functools.cache
+def host_key() -> bytes:
+    """Who can map a segment of this process: same boot, same PID namespace (the pid in a
+    descriptor means the same process), same user (may open /proc/<pid>/fd)."""
+    try:
+        with open("/proc/sys/kernel/random/boot_id", "rb") as f:
+            boot = f.read().strip()
+        pidns = os.stat("/proc/self/ns/pid").st_ino
+    except OSError:
+        return b""
+    digest = hashlib.sha256(b"%s:%d:%d" % (boot, pidns, os.getuid())).hexdigest()[:16]
+    return digest.encode()
+
+
+def topic_marker() -> bytes:
+    """What precedes the topic of an event sent as a descriptor, and a consumer's subscription
+    to them: consumers of other hosts (users, PID namespaces) never match it."""
+    key = host_key()
+    return b"\x01shm-" + key + b"\0" if key else b""
+
+
+def keep_all_marker() -> bytes:
+    """What precedes a keep-all consumer's third subscription to a prefix, which no frame ever
+    matches: it tells suppliers how many keep-all consumers to expect lanes of, so that they
+    wait for one that has not mapped the ring yet instead of lapping it."""
+    key = host_key()
+    return b"\x02shm-" + key + b"\0" if key else b""
+
+
+def slot_count() -> int:
+    try:
+        return max(2, int(os.environ.get("MIRO_SHM_SLOTS", SLOTS)))
+    except ValueError:
+        return SLOTS
+
+
+def _lock(fd: int, kind: int, start: int, cmd: int) -> int:
+    """An OFD lock request of one byte at `start`; the lock type the kernel answers."""
+    answer = fcntl.fcntl(fd, cmd, _FLOCK.pack(kind, os.SEEK_SET, start, 1, 0))
+    return int(_FLOCK.unpack(answer)[0])
+
+
+def _layout(slots: int, lanes: int) -> tuple[int, int]:
+    """(offset of the lanes, offset of the first slot's data)."""
+    lanes_at = _SLOT_AT + slots * _SLOT.size
+    data_at = lanes_at + lanes * _LANE.size
+    return lanes_at, -(-data_at // mmap.PAGESIZE) * mmap.PAGESIZE
+
+
+class Ring:
+    """A supplier's ring (one per supplier, all its types): `put` writes a payload into a free
+    slot and returns its descriptor. Thread-safe."""
+
+    def __init__(self, slot_size: int, slots: int | None = None, lanes: int = LANES) -> None:
+        self.slots = slot_count() if slots is None else slots
+        self.lanes = lanes
+        self.slot_size = -(-slot_size // mmap.PAGESIZE) * mmap.PAGESIZE
+        self.segment_id = random.getrandbits(63)
+        self._lanes_at, self._data_at = _layout(self.slots, lanes)
+        size = self._data_at + self.slots * self.slot_size
+        self.fd = os.memfd_create("miro-events", os.MFD_CLOEXEC)
+        os.ftruncate(self.fd, size)
+        self._map = mmap.mmap(self.fd, size)
+        self._mem = memoryview(self._map)
+        _HEAD.pack_into(self._mem, 0, MAGIC, self.segment_id, self.slots, lanes, self.slot_size)
+        self._writes = 0  # writes so far; write w goes to a slot free for it
+        self._slot_write = [-1] * self.slots  # the write each slot holds
+        self._next = 0
+        self._lock = threading.Lock()
+        self.waited = 0  # puts that waited for a keep-all consumer's credit
+        self.closed = False
+
+    def put(
+        self, payload: bytes | Encoded, keep_all: int = 0, wait: float = WAIT_KEEP_ALL
+    ) -> Descriptor | None:
+        """Write `payload` (bytes, or an encoder's value copied straight in) into a slot; its
+        descriptor, or None when no slot frees up within `wait` seconds (keep-all consumers
+        behind, every slot held) or it does not fit. `keep_all`: keep-all consumers
+        subscribed, whose lanes a reused slot waits for."""
+        n = len(payload) if isinstance(payload, bytes) else payload.size
+        if n > self.slot_size:
+            return None
+        with self._lock:
+            if self.closed:
+                return None
+            slot = self._free_slot(wait, keep_all)
+            if slot is None:
+                return None
+            w = self._writes
+            self._writes += 1
+            self._slot_write[slot] = w
+            at = _SLOT_AT + slot * _SLOT.size
+            mem = self._mem
+            gen = _Q.unpack_from(mem, at + _GEN)[0] + 1  # odd: being written
+            _Q.pack_into(mem, at + _GEN, gen)
+            _Q.pack_into(mem, at + _WRITE, w)
+            _Q.pack_into(mem, at + _LEN, n)
+            start = self._data_at + slot * self.slot_size
+            if isinstance(payload, bytes):
+                mem[start : start + n] = payload
+            else:
+                payload.copy_into(mem[start : start + n])
+            _Q.pack_into(mem, at + _GEN, gen + 1)
+            return Descriptor(os.getpid(), self.fd, self.segment_id, slot, gen + 1, w, n)
+
+    def _free_slot(self, wait: float, keep_all: int) -> int | None:
+        """The next slot in turn that no consumer holds and every keep-all consumer has read
+        (waiting up to `wait` seconds for their credits, and for the lanes of `keep_all`
+        consumers to be there)."""
+        deadline = None
+        pause = 0.0001
+        while True:
+            blocked = False
+            lanes = self._keep_all_lanes() if keep_all else 0
+            for k in range(self.slots):
+                slot = (self._next + k) % self.slots
+                w = self._slot_write[slot]
+                state = self._reusable(w)
+                if state == 0 and w >= 0 and lanes < keep_all:
+                    state = 2  # a keep-all consumer has yet to map the ring: not past it
+                if state == 0:
+                    self._next = (slot + 1) % self.slots
+                    return slot
+                if state == 2:
+                    blocked = True  # a keep-all consumer has not read it: wait, in order
+                    break
+            if deadline is None:
+                deadline = time.monotonic() + wait
+            if time.monotonic() >= deadline:
+                return None
+            if blocked:
+                self.waited += 1
+            time.sleep(pause)
+            pause = min(pause * 2, 0.005)
+
+    def _keep_all_lanes(self) -> int:
+        mem, at = self._mem, self._lanes_at
+        n = 0
+        for lane in range(self.lanes):
+            claimed, keep_all = _LANE.unpack_from(mem, at + lane * _LANE.size)[:2]
+            n += claimed and keep_all
+        return n
+
+    def _reusable(self, w: int) -> int:
+        """0: a slot last written with write `w` may be written again; 1: a live consumer
+        holds it; 2: a live keep-all consumer has not read it yet."""
+        if w < 0:
+            return 0
+        mem, at = self._mem, self._lanes_at
+        for lane in range(self.lanes):
+            base = at + lane * _LANE.size
+            claimed, keep_all, acked, hold = _LANE.unpack_from(mem, base)
+            if not claimed:
+                continue
+            if hold == w + 1 or (keep_all and acked <= w):
+                if not self._alive(base):
+                    _LANE.pack_into(mem, base, 0, 0, 0, 0)  # its process died: free it
+                    continue
+                return 1 if hold == w + 1 else 2
+        return 0
+
+    def _alive(self, base: int) -> bool:
+        """Whether a process still holds the lane at `base` (its OFD lock)."""
+        try:
+            return _lock(self.fd, fcntl.F_WRLCK, base, fcntl.F_OFD_GETLK) != fcntl.F_UNLCK
+        except OSError:
+            return True
+
+    def close(self) -> None:
+        with self._lock:
+            if self.closed:
+                return
+            self.closed = True
+            self._mem.release()
+            self._map.close()
+            os.close(self.fd)
+
+
+class Segment:
+    """A consumer's mapping of a supplier's segment, and its lane in it."""
+
+    def __init__(self, pid: int, fd: int, segment_id: int, keep_all: bool, first: int) -> None:
+        self.pid = pid
+        self.closed = False  # (events still queued may name it: they are then dropped)
+        self.supplier_fd = fd
+        self.segment_id = segment_id
+        self.fd = os.open(f"/proc/{pid}/fd/{fd}", os.O_RDWR | os.O_CLOEXEC)
+        try:
+            size = os.fstat(self.fd).st_size
+            self._map = mmap.mmap(self.fd, size)
+        except (OSError, ValueError):
+            os.close(self.fd)
+            raise
+        self.mem = memoryview(self._map)
+        self._readonly = self.mem.toreadonly()
+        try:
+            magic, sid, slots, lanes, slot_size = _HEAD.unpack_from(self.mem, 0)
+            if magic != MAGIC or sid != segment_id:
+                raise OSError("not the segment the descriptor names")
+            self.slots, self.slot_size = slots, slot_size
+            self._lanes_at, self._data_at = _layout(slots, lanes)
+            if self._data_at + slots * slot_size > size:
+                raise OSError("segment smaller than its header says")
+            self.acked = first
+            self.lane = self._claim(lanes, keep_all)
+        except Exception:
+            self.close()
+            raise
+
+    def _claim(self, lanes: int, keep_all: bool) -> int:
+        for lane in range(lanes):
+            base = self._lanes_at + lane * _LANE.size
+            try:
+                _lock(self.fd, fcntl.F_WRLCK, base, fcntl.F_OFD_SETLK)
+            except OSError:
+                continue  # another live process has it
+            # Credits from the first write seen on: those before are not waited for.
+            _LANE.pack_into(self.mem, base, 1, int(keep_all), self.acked, 0)
+            self._lane_base = base
+            return lane
+        raise OSError("every lane of the segment is taken")
+
+    def hold(self, d: Descriptor) -> memoryview | None:
+        """The payload of `d`, read-only, held (never rewritten) until `release`; None when its
+        slot has been written again since (the descriptor is stale), or the mapping is closed."""
+        if self.closed:
+            return None
+        _Q.pack_into(self.mem, self._lane_base + _HOLD, d.write + 1)
+        if not self.current(d):
+            _Q.pack_into(self.mem, self._lane_base + _HOLD, 0)
+            return None
+        start = self._data_at + d.slot * self.slot_size
+        return self._readonly[start : start + d.length]
+
+    def current(self, d: Descriptor) -> bool:
+        """Whether the slot of `d` still holds its write (checked again after a read: a
+        changed generation means the read may be torn)."""
+        if self.closed:
+            return False
+        at = _SLOT_AT + d.slot * _SLOT.size
+        gen, w, n, _ = _SLOT.unpack_from(self.mem, at)
+        return bool(gen == d.generation and w == d.write and n == d.length)
+
+    def valid(self, d: Descriptor) -> bool:
+        return bool(0 <= d.slot < self.slots and d.length <= self.slot_size)
+
+    def release(self, d: Descriptor, keep_all: bool) -> None:
+        """Done with `d`: its slot may be reused (a keep-all consumer's credit with it)."""
+        if self.closed:
+            return
+        _Q.pack_into(self.mem, self._lane_base + _HOLD, 0)
+        if keep_all:
+            self.ack(d.write + 1)
+
+    def ack(self, acked: int) -> None:
+        if acked > self.acked and not self.closed:
+            self.acked = acked
+            _Q.pack_into(self.mem, self._lane_base + _ACKED, acked)
+
+    def supplier_alive(self) -> bool:
+        """Whether the supplier still has its segment open (its process is alive)."""
+        try:
+            info = os.stat(f"/proc/{self.pid}/fd/{self.supplier_fd}")
+        except OSError:
+            return False
+        mine = os.fstat(self.fd)
+        return (info.st_dev, info.st_ino) == (mine.st_dev, mine.st_ino)
+
+    def close(self) -> None:
+        self.closed = True
+        with contextlib.suppress(Exception):
+            self._readonly.release()
+        with contextlib.suppress(Exception):
+            self.mem.release()
+        with contextlib.suppress(Exception):
+            self._map.close()
+        with contextlib.suppress(OSError):
+            os.close(self.fd)
+
+
+class Segments:
+    """A consumer process's mappings, one per supplier segment it has seen (at most MAX)."""
+
+    MAX = 64
+
+    def __init__(self, keep_all: bool) -> None:
+        self.keep_all = keep_all
+        self._by_id: dict[int, Segment] = {}
+        self.refused = 0  # descriptors whose segment could not be mapped
+
+    def segment(self, d: Descriptor) -> Segment | None:
+        seg = self._by_id.get(d.segment)
+        if seg is not None:
+            return seg
+        self.sweep()
+        if len(self._by_id) >= self.MAX:
+            return None
+        try:
+            seg = Segment(d.pid, d.fd, d.segment, self.keep_all, d.write)
+        except (OSError, ValueError, struct.error):
+            self.refused += 1
+            return None
+        self._by_id[d.segment] = seg
+        return seg
+
+    def sweep(self) -> int:
+        """Unmap the segments of suppliers that are gone; how many."""
+        gone = [s for s in self._by_id.values() if not s.supplier_alive()]
+        for s in gone:
+            del self._by_id[s.segment_id]
+            s.close()
+        return len(gone)
+
+    def close(self) -> None:
+        for s in self._by_id.values():
+            s.close()
+        self._by_id.clear()
