@@ -152,6 +152,9 @@ def open_client(naming: str, wait: float | None = 0.0, tls: TlsFiles | None = No
                     f"{str(e).split(' at ')[0].strip()}"
                 ) from None
             if not said:
-                _log.notice("waiting for the Zenoh router at %s%s", target, refused_hint(tls))
+                # A server that waits on says so as loudly as one waiting for ZeroMQ's naming
+                # service; a client's moment ends in its TRANSIENT anyway.
+                say = _log.warning if wait is None or wait > 2.0 else _log.notice
+                say("waiting for the Zenoh router at %s%s", target, refused_hint(tls))
                 said = True
             time.sleep(OPEN_RETRY)
