@@ -165,7 +165,8 @@ def naming_main(argv: Sequence[str]) -> int:
         "--zenoh",
         action="store_true",
         help="the Zenoh backbone's naming service: a Zenoh router listening at --endpoint "
-        "with the name registry beside it, for services run with --transport zenoh "
+        "with the name registry beside it, for services run with --transport zenoh; with a "
+        "key, mutual TLS: only sessions holding a certificate of its CA get in "
         "(docs/FLEET.md)",
     )
     p.add_argument(
