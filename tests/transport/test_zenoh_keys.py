@@ -56,6 +56,10 @@ def test_a_robots_certificate_is_of_the_fleets_ca(keys: Path) -> None:
 def test_wrong_missing_or_exposed_key_files_are_one_line(keys: Path, tmp_path: Path) -> None:
     with pytest.raises(UsageError, match=r"no TLS certificate .*nothing\.cert\.pem beside it"):
         read_tls(str(tmp_path / "nothing"))
+    for suffix in (".key_secret", ".key"):  # a CURVE key made before TLS
+        shutil.copy(keys / f"fleet{suffix}", tmp_path / f"old{suffix}")
+    with pytest.raises(UsageError, match=r"a key made before TLS: .*miro keys new --force"):
+        read_tls(str(tmp_path / "old.key_secret"))
     mixed = tmp_path / "mixed"  # robot1's certificate and key, another fleet's CA
     for suffix in (".cert.pem", ".cert_secret.pem"):
         shutil.copy(keys / f"robot1{suffix}", tmp_path / f"mixed{suffix}")
