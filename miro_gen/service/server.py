@@ -53,6 +53,7 @@ from miro_gen.transport.rpc.invoker import ZmqInvoker
 if TYPE_CHECKING:  # loaded when the options call for it
     from miro_gen.service.iiop import CorbaSide
     from miro_gen.transport.events.channels import ChannelLinks
+    from miro_gen.transport.tlsfiles import TlsFiles
     from miro_gen.transport.zenoh.invoker import ZenohInvoker
 
 StubT = TypeVar("StubT", bound=Stub)
@@ -142,7 +143,7 @@ class Client:
         """Seconds to wait for the Zenoh router to be up (a client's: a moment)."""
         return 2.0
 
-    def _zenoh_tls(self) -> Any:
+    def _zenoh_tls(self) -> TlsFiles | None:
         """The TLS files of this process's Zenoh session (None: plain TCP), from its options
         and where the router is (transport.zenoh.security): ZeroMQ's rules, Zenoh's TLS."""
         from miro_gen.transport.zenoh.security import tls_for
