@@ -1,8 +1,8 @@
 """Linux network namespaces as hosts for tests: a hub namespace with a bridge, and one namespace
 per host joined to it by a veth link, with addresses in 10.77.0.0/24 (or another /24); the
-processes started in them hold a fleet key (CURVE) made for the run. Skipped, saying why, without
-root, iproute2 or the right to make namespaces. Shared by the tests across robots (multihost,
-discovery, IIOP attacks, a robot's bring-up)."""
+processes started in them hold a fleet key (CURVE, and TLS for Zenoh) made for the run.
+Skipped, saying why, without root, iproute2 or the right to make namespaces. Shared by the
+tests across robots (multihost, discovery, IIOP attacks, a robot's bring-up, Zenoh fleets)."""
 
 from __future__ import annotations
 

@@ -78,7 +78,8 @@ def naming_main(argv: Sequence[str]) -> int:
         default=os.environ.get("MIRO_KEYS") or None,
         metavar="FILE",
         help="the robot's or fleet's key (`miro keys new`; default $MIRO_KEYS): only processes "
-        "holding it may connect, and everything is encrypted (CURVE). Needed when --endpoint "
+        "holding it may connect, and everything is encrypted (CURVE; with --zenoh, mutual TLS "
+        "with the key's certificates). Needed when --endpoint "
         f"is not loopback, unless {sockets.DEFAULT_KEY} exists or --insecure is given",
     )
     p.add_argument(
@@ -164,7 +165,8 @@ def naming_main(argv: Sequence[str]) -> int:
         "--zenoh",
         action="store_true",
         help="the Zenoh backbone's naming service: a Zenoh router listening at --endpoint "
-        "with the name registry beside it, for services run with --transport zenoh "
+        "with the name registry beside it, for services run with --transport zenoh; with a "
+        "key, mutual TLS: only sessions holding a certificate of its CA get in "
         "(docs/FLEET.md)",
     )
     p.add_argument(
@@ -198,26 +200,31 @@ def naming_main(argv: Sequence[str]) -> int:
         if ns.max_message_size is not None:
             size = byte_size(ns.max_message_size, "--max-message-size")
         log.configure(ns.log_level)  # (before the policy: --insecure warns what it opens)
-        policy = sockets.policy_for(
-            keys=ns.keys,
-            insecure=ns.insecure,
-            max_message_size=size,
-            binds=sockets.endpoint_host(endpoint),
-            serves=NAMING_SERVES,
-        )
+        if ns.zenoh:
+            from miro_gen.transport.zenoh.security import tls_for
+
+            tls = tls_for(
+                keys=ns.keys,
+                insecure=ns.insecure,
+                binds=sockets.endpoint_host(endpoint),
+                serves=NAMING_SERVES,
+            )
+        else:
+            policy = sockets.policy_for(
+                keys=ns.keys,
+                insecure=ns.insecure,
+                max_message_size=size,
+                binds=sockets.endpoint_host(endpoint),
+                serves=NAMING_SERVES,
+            )
     except UsageError as e:
         p.error(str(e))
-    policy = dataclasses.replace(policy, max_connections=ns.max_connections)
     if ns.zenoh:
         from miro_gen.cli.naming_zenoh import zenoh_naming
 
-        if not ns.insecure and not sockets.is_loopback(sockets.endpoint_host(endpoint)):
-            p.error(
-                "beyond loopback the Zenoh backbone runs only with --insecure: it has no keys "
-                "yet (TLS), so anyone who reaches it may bind names and call (docs/FLEET.md)"
-            )
         log_path = ns.log_file or default_path(endpoint)
-        return zenoh_naming(ns, endpoint, None if log_path == "none" else log_path)
+        return zenoh_naming(ns, endpoint, None if log_path == "none" else log_path, tls)
+    policy = dataclasses.replace(policy, max_connections=ns.max_connections)
     if ns.channel and not ns.host and re.search(r"://(0\.0\.0\.0|\*):", endpoint):
         p.error(
             "--channel with an --endpoint on every interface needs --host ADDRESS: the "
@@ -416,6 +423,9 @@ def nslist_main(argv: Sequence[str]) -> int:
         client = Client(["miro nslist", *argv])
     except UsageError as e:
         p.error(str(e))
+    except SystemException as e:  # the Zenoh router is down, or refuses this session
+        print(f"miro nslist: {e.message}", file=sys.stderr)
+        return 1
     ns = p.parse_args(client.argv[1:])
     try:
         with naming_errors(client.options.naming, "list names"):
@@ -458,6 +468,9 @@ def nsunbind_main(argv: Sequence[str]) -> int:
         client = Client(["miro nsunbind", *argv])
     except UsageError as e:
         p.error(str(e))
+    except SystemException as e:  # the Zenoh router is down, or refuses this session
+        print(f"miro nsunbind: {e.message}", file=sys.stderr)
+        return 1
     ns = p.parse_args(client.argv[1:])
     if not hasattr(client.naming, "registry_stub"):
         client.close()

@@ -10,15 +10,20 @@ import sys
 import zmq
 
 from miro_gen import log
+from miro_gen.transport import sockets
 from miro_gen.transport.naming.owners_log import LogError
 from miro_gen.transport.reactor import Reactor
+from miro_gen.transport.tlsfiles import TlsFiles
 
 _log = log.logger("MIRO")
 
 
-def zenoh_naming(ns: argparse.Namespace, endpoint: str, log_path: str | None) -> int:
-    """Serve names beside a Zenoh router listening at `endpoint` (tcp://HOST:PORT), with the
-    options `miro naming` parsed (`ns`); the exit status."""
+def zenoh_naming(
+    ns: argparse.Namespace, endpoint: str, log_path: str | None, tls: TlsFiles | None = None
+) -> int:
+    """Serve names beside a Zenoh router listening at `endpoint` (tcp://HOST:PORT; with `tls`,
+    mutual TLS at tls/HOST:PORT), with the options `miro naming` parsed (`ns`); the exit
+    status."""
     try:
         import zenoh
     except ImportError:
@@ -32,10 +37,11 @@ def zenoh_naming(ns: argparse.Namespace, endpoint: str, log_path: str | None) ->
     reactor = Reactor(zmq.Context.instance())
     try:
         service = ZenohNaming(
-            reactor, endpoint, ns.quota, ns.max_names, hold=ns.hold, log_path=log_path
+            reactor, endpoint, ns.quota, ns.max_names, hold=ns.hold, log_path=log_path, tls=tls
         )
     except zenoh.ZError as e:
-        print(f"miro naming: cannot run a Zenoh router at {endpoint}: {e}", file=sys.stderr)
+        why = str(e).split(" at /")[0]  # (Zenoh's errors end with the Rust source's place)
+        print(f"miro naming: cannot run a Zenoh router at {endpoint}: {why}", file=sys.stderr)
         return 1
     except LogError as e:
         print(f"miro naming: {e}", file=sys.stderr)
@@ -46,6 +52,13 @@ def zenoh_naming(ns: argparse.Namespace, endpoint: str, log_path: str | None) ->
         signal.signal(sig, lambda *_: reactor.stop())
     shm = "on" if service.shared_memory else "off"
     note = f" (Zenoh router {service.zid}; shared memory {shm})"
+    if tls is not None:
+        note += (
+            f"; mutual TLS at {service.locator} with the key {tls.name}: only sessions whose "
+            f"certificate its CA ({tls.ca}) signed get in"
+        )
+    elif ns.insecure and not sockets.is_loopback(sockets.endpoint_host(endpoint)):
+        note += "; --insecure: in the clear, open to anyone who can reach it"
     if service.log is None:
         note += "; no log of owners: after a restart, names go to whoever binds first"
     lines = [f"naming service at {endpoint}{note}", *(f"event channel {n}" for n in ns.channel)]

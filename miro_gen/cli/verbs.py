@@ -225,15 +225,18 @@ VERBS: tuple[Verb, ...] = (
     ),
     Verb(
         "keys",
-        "make the key of a robot or fleet (CURVE)",
+        "make the key of a robot or fleet (CURVE, and TLS for Zenoh)",
         description="Make the key that the processes of a robot (or of a fleet) share: with it "
         "(--keys FILE, or MIRO_KEYS), every connection is encrypted and only processes that "
-        "hold it can call, publish or subscribe (ZeroMQ CURVE).",
+        "hold it can call, publish or subscribe (ZeroMQ CURVE; on the Zenoh backbone, mutual "
+        "TLS with the certificates made beside it).",
         subs=(
             Verb(
                 "new",
                 "write a new key pair: NAME.key_secret (secret: copy it to each machine that "
-                "must take part, readable by its user only) and NAME.key (public)",
+                "must take part, readable by its user only) and NAME.key (public), and the TLS "
+                "files of the Zenoh backbone: a CA (NAME.ca.pem, NAME.ca_secret.pem) and "
+                "NAME's certificate (NAME.cert.pem, NAME.cert_secret.pem)",
                 run="miro_gen.cli.keys:new_main",
             ),
         ),

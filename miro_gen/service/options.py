@@ -20,8 +20,9 @@ takes what it knows and leaves the service's own ones. The contract (DESIGN.md, 
   the one towards the naming service (see `miro_gen.transport.addresses`, docs/PROTOCOL.md);
 * `--bind ADDR|IFACE` (env `MIRO_BIND`): the interface a server listens on instead of every
   interface (`0.0.0.0`) when other hosts must reach it;
-* `--keys FILE` (env `MIRO_KEYS`): the robot's or fleet's CURVE key (`miro keys new`);
-  `--insecure`: no CURVE even beyond loopback (docs/SECURITY.md);
+* `--keys FILE` (env `MIRO_KEYS`): the robot's or fleet's key (`miro keys new`): CURVE on
+  ZeroMQ, mutual TLS on Zenoh (transport.zenoh.security); `--insecure`: neither, even beyond
+  loopback (docs/SECURITY.md);
 * `--transport zmq|zenoh` (env `MIRO_TRANSPORT`): the backbone (docs/FLEET.md);
 * `--max-message-size BYTES` (env `MIRO_MAX_MESSAGE_SIZE`; suffixes K, M, G): the largest
   message a socket accepts (default 8M, like omniORB's `giopMaxMsgSize`);
@@ -312,6 +313,11 @@ COMMON_HELP = (
     ("--clock wall|log|log:CHANNEL", "run on wall time (default) or a log player's time"),
     ("--transport zmq|zenoh", "the backbone: ZeroMQ (default) or Zenoh, whose router "
      "`miro naming --zenoh` hosts at --naming (env MIRO_TRANSPORT)"),
+    ("--keys FILE", "the robot's or fleet's key (`miro keys new`; env MIRO_KEYS; default "
+     "~/.config/miro/fleet.key_secret when it exists): CURVE on ZeroMQ, mutual TLS on Zenoh; "
+     "needed beyond loopback"),
+    ("--insecure", "beyond loopback without a key: in the clear, open to anyone who can "
+     "connect (docs/SECURITY.md)"),
 )  # fmt: skip
 
 

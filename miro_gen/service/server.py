@@ -53,6 +53,7 @@ from miro_gen.transport.rpc.invoker import ZmqInvoker
 if TYPE_CHECKING:  # loaded when the options call for it
     from miro_gen.service.iiop import CorbaSide
     from miro_gen.transport.events.channels import ChannelLinks
+    from miro_gen.transport.tlsfiles import TlsFiles
     from miro_gen.transport.zenoh.invoker import ZenohInvoker
 
 StubT = TypeVar("StubT", bound=Stub)
@@ -123,7 +124,9 @@ class Client:
                     f"--transport zenoh needs the Zenoh wheel ({e}): pip install 'miro-gen[zenoh]'"
                 ) from None
 
-            self.zenoh = session.open_client(self.options.naming, self._router_wait())
+            self.zenoh = session.open_client(
+                self.options.naming, self._router_wait(), self._zenoh_tls()
+            )
             self._zmq_invoker = ZenohInvoker(self.zenoh)
             naming_endpoint = keys.NAMING_ENDPOINT
         else:
@@ -139,6 +142,14 @@ class Client:
     def _router_wait(self) -> float | None:
         """Seconds to wait for the Zenoh router to be up (a client's: a moment)."""
         return 2.0
+
+    def _zenoh_tls(self) -> TlsFiles | None:
+        """The TLS files of this process's Zenoh session (None: plain TCP), from its options
+        and where the router is (transport.zenoh.security): ZeroMQ's rules, Zenoh's TLS."""
+        from miro_gen.transport.zenoh.security import tls_for
+
+        o = self.options
+        return tls_for(keys=o.keys, insecure=o.insecure, talks_to=sockets.endpoint_host(o.naming))
 
     def resolve_name(
         self, name: str, stub: type[StubT], *, wait: float = 0.0, rebind: bool = True
@@ -205,6 +216,12 @@ class Client:
         """The limits and security of this process's sockets (transport.sockets), from its
         options, what it binds on and where its naming service is."""
         o = self.options
+        if o.transport == "zenoh":  # ZeroMQ carries nothing beyond this process: plain
+            plain = sockets.policy_for(
+                keys=None, insecure=False, max_message_size=o.max_message_size
+            )
+            sockets.configure(self.context, plain)
+            return
         policy = sockets.policy_for(
             keys=o.keys,
             insecure=o.insecure,

@@ -68,26 +68,39 @@ def write_key_pair(base: str, *, replace: bool = False) -> tuple[str, str]:
     secret_path, public_path = base + KEY_SUFFIX, base + PUBLIC_SUFFIX
     if not replace and os.path.lexists(secret_path):
         raise FileExistsError(secret_path)
-    folder = os.path.dirname(os.path.abspath(base))
-    os.makedirs(folder, mode=0o700, exist_ok=True)
     public, secret = zmq.curve_keypair()
+    install(
+        [
+            (public_path, certificate(public, None), 0o644),
+            (secret_path, certificate(public, secret), 0o600),
+        ]
+    )
+    return public_path, secret_path
+
+
+def install(files: list[tuple[str, str, int]]) -> None:
+    """Write each (path, text, mode) as a new file beside its place, then rename them all into
+    place (see the module's docstring): none is renamed unless all were written."""
+    folders = {os.path.dirname(os.path.abspath(path)) for path, _, _ in files}
+    for folder in sorted(folders):
+        os.makedirs(folder, mode=0o700, exist_ok=True)
     written: list[str] = []
     try:
-        written.append(_write_new(public_path, certificate(public, None), 0o644))
-        written.append(_write_new(secret_path, certificate(public, secret), 0o600))
-        os.replace(written[0], public_path)
-        os.replace(written[1], secret_path)
+        for path, text, mode in files:
+            written.append(_write_new(path, text, mode))
+        for (path, _, _), temporary in zip(files, written, strict=True):
+            os.replace(temporary, path)
     finally:
         for temporary in written:
             with contextlib.suppress(FileNotFoundError):
                 os.unlink(temporary)
-    with contextlib.suppress(OSError):  # the renames survive a power cut
-        fd = os.open(folder, os.O_RDONLY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
-    return public_path, secret_path
+    for folder in sorted(folders):
+        with contextlib.suppress(OSError):  # the renames survive a power cut
+            fd = os.open(folder, os.O_RDONLY)
+            try:
+                os.fsync(fd)
+            finally:
+                os.close(fd)
 
 
 def read_key_pair(path: str) -> tuple[str, bytes, bytes]:

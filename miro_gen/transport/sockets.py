@@ -231,7 +231,7 @@ def policy_for(
         wide_peer = talks_to
     if insecure:
         for line in insecure_exposure(keys, wide_bind, wide_peer, serves):
-            _say_once(line)
+            say_once(line)
         return SocketPolicy(size)
     if keys:
         return SocketPolicy(size, read_keys(keys))
@@ -276,7 +276,7 @@ def insecure_exposure(
     return lines
 
 
-def _say_once(line: str) -> None:
+def say_once(line: str) -> None:
     """A warning, once per process (a process makes its policy more than once)."""
     if line not in _said:
         _said.add(line)

@@ -4,6 +4,8 @@
     python tests/procs/zenoh_probe.py NAMING call NAME N     # setData/getData N times
     python tests/procs/zenoh_probe.py NAMING rogue NAME      # answer for NAME's server
 
+`--insecure` anywhere: the probe's session is in the clear beyond loopback (its key unused).
+
 `rogue` declares a queryable on the key of the session that serves NAME and answers every
 query there with a wrong value; it prints READY and runs until killed.
 """
@@ -23,8 +25,11 @@ from miro_gen import Client  # noqa: E402
 
 
 def main() -> None:
-    naming, what, arg, *more = sys.argv[1:]
-    client = Client(["probe", "--transport", "zenoh", "--naming", naming, "-MNC", "base"])
+    insecure = ["--insecure"] if "--insecure" in sys.argv else []
+    naming, what, arg, *more = [a for a in sys.argv[1:] if a != "--insecure"]
+    client = Client(
+        ["probe", "--transport", "zenoh", "--naming", naming, "-MNC", "base", *insecure]
+    )
     if what == "list":
         for entry in client.naming.entries(arg):
             print(entry.name, entry.endpoint)

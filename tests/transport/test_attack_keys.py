@@ -25,6 +25,12 @@ def no_default_key(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.delenv("MIRO_KEYS", raising=False)
 
 
+# What `miro keys new NAME` writes: the CURVE pair and the TLS files (transport.tlsfiles)
+SUFFIXES = sorted(
+    [".key", ".key_secret", ".ca.pem", ".ca_secret.pem", ".cert.pem", ".cert_secret.pem"]
+)
+
+
 def mode(path: Path) -> int:
     return path.lstat().st_mode & 0o777
 
@@ -49,6 +55,7 @@ def test_force_replaces_a_planted_link_and_never_writes_through_it(tmp_path: Pat
     other.write_text("other\n")
     (keys / "fleet.key_secret").symlink_to(victim)
     (keys / "fleet.key").symlink_to(other)
+    (keys / "fleet.cert_secret.pem").symlink_to(victim)  # (the TLS key: the same)
 
     made = new_key(keys / "fleet", "--force")
     assert made.returncode == 0, made.stderr
@@ -61,7 +68,11 @@ def test_force_replaces_a_planted_link_and_never_writes_through_it(tmp_path: Pat
     pub, sec = load_certificate(secret)
     assert sec is not None and len(sec) == 40
     assert load_certificate(public) == (pub, None)
-    assert sorted(p.name for p in keys.iterdir()) == ["fleet.key", "fleet.key_secret"]
+    assert sorted(p.name for p in keys.iterdir()) == [f"fleet{s}" for s in SUFFIXES]
+    tls = keys / "fleet.cert_secret.pem"
+    assert (
+        not tls.is_symlink() and mode(tls) == 0o600 and mode(keys / "fleet.ca_secret.pem") == 0o600
+    )
     assert sockets.read_keys(str(secret)).public == pub  # and it is accepted
 
 
@@ -96,7 +107,7 @@ def test_without_force_even_a_dangling_link_is_not_followed(tmp_path: Path) -> N
 def test_the_suffix_may_be_given(tmp_path: Path) -> None:
     made = new_key(tmp_path / "robot.key_secret")
     assert made.returncode == 0, made.stderr
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["robot.key", "robot.key_secret"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [f"robot{s}" for s in SUFFIXES]
 
 
 # ---- reading ------------------------------------------------------------------------------------

@@ -1,6 +1,7 @@
 """A fleet on the Zenoh backbone: a base and three robots as Linux network namespaces joined by
 veth links to a bridge (tests/netns.py makes them), `miro naming --zenoh` at the base
-hosting the Zenoh router and the name registry, each robot's services its Zenoh clients.
+hosting the Zenoh router and the name registry, each robot's services its Zenoh clients; all
+hold the fleet's key (netns.py gives it), so every link is mutual TLS (test_zenoh_security.py).
 
 Shown here, across the links: every robot's names visible at the base; calls base -> robot; a
 robot's events at the base through the router, all of them in order; a killed server's names
@@ -41,7 +42,7 @@ def fleet(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Hosts]:
     for hosts in network(ADDRESSES, tag="-z"):
         logs = tmp_path_factory.mktemp("fleet")
         naming = hosts.popen(
-            "base", "-m", "miro_gen.cli.main", "naming", "--zenoh", "--insecure",
+            "base", "-m", "miro_gen.cli.main", "naming", "--zenoh",
             "--endpoint", NAMING, "--log-file", "none", stderr=logs / "naming.err",
         )  # fmt: skip
         assert naming.stdout is not None

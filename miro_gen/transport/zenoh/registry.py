@@ -34,6 +34,7 @@ from miro_gen.transport.naming.owners_log import OwnersLog, Restored
 from miro_gen.transport.naming.service import PURGE_INTERVAL, Registry
 from miro_gen.transport.naming.table import Table
 from miro_gen.transport.reactor import Reactor
+from miro_gen.transport.tlsfiles import TlsFiles
 from miro_gen.transport.zenoh import keys
 from miro_gen.transport.zenoh.adapter import ZenohAdapter
 from miro_gen.transport.zenoh.invoker import ZenohInvoker
@@ -55,10 +56,11 @@ class ZenohNaming:
         *,
         hold: float = DEFAULT_HOLD,
         log_path: str | None = None,
+        tls: TlsFiles | None = None,
     ) -> None:
         self.reactor = reactor
-        self.locator = locator(naming)
-        conf = config("router", listen=self.locator)
+        self.locator = locator(naming, tls)  # tls/...: only sessions with a key of its CA
+        conf = config("router", listen=self.locator, tls=tls)
         self.shared_memory = shared_memory(conf)
         self.session: Any = zenoh.open(conf)
         self.zid = str(self.session.zid())

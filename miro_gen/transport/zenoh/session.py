@@ -4,7 +4,8 @@ Every process but `miro naming --zenoh` is a Zenoh client of the router that the
 service hosts (as rmw_zenoh's nodes are of their router): `--naming tcp://HOST:PORT` is the
 router's `tcp/HOST:PORT`. Multicast scouting is off (nothing leaves loopback unless asked);
 each process has its own session (its id names its objects: transport.zenoh.keys); the link
-lease is the names' lease (3 s), so a cut link is noticed in about that time.
+lease is the names' lease (3 s), so a cut link is noticed in about that time. With a key, the
+link is mutual TLS, `tls/HOST:PORT` (transport.zenoh.security says when).
 
 Shared memory: Zenoh's default sends messages of 3 KiB and more between processes of one host
 through shared memory. `MIRO_ZENOH_SHM=0` turns it off, `1` on; the default is Zenoh's
@@ -27,6 +28,8 @@ import zenoh
 
 from miro_gen.exceptions import TRANSIENT
 from miro_gen.log import logger
+from miro_gen.transport.tlsfiles import TlsFiles
+from miro_gen.transport.zenoh.security import configure_tls, refused_hint, scheme
 
 _log = logger("MIRO")
 
@@ -36,12 +39,13 @@ SHM_ENV = "MIRO_ZENOH_SHM"
 _TCP = re.compile(r"^tcp://(?P<host>\[[^\]]+\]|[^:/]+):(?P<port>\d+)$")
 
 
-def locator(naming: str) -> str:
-    """The Zenoh locator of a naming address (`tcp://HOST:PORT` -> `tcp/HOST:PORT`)."""
+def locator(naming: str, tls: TlsFiles | None = None) -> str:
+    """The Zenoh locator of a naming address (`tcp://HOST:PORT` -> `tcp/HOST:PORT`, or
+    `tls/HOST:PORT` with TLS files)."""
     m = _TCP.match(naming.strip())
     if m is None:
         raise ValueError(f"cannot make a Zenoh locator of {naming!r}: expected tcp://HOST:PORT")
-    return f"tcp/{m.group('host')}:{m.group('port')}"
+    return f"{scheme(tls)}/{m.group('host')}:{m.group('port')}"
 
 
 def shm_wanted() -> bool | None:
@@ -52,8 +56,15 @@ def shm_wanted() -> bool | None:
     return value not in ("0", "false", "no", "off")
 
 
-def config(mode: str, *, connect: str | None = None, listen: str | None = None) -> Any:
-    """A Zenoh config: `mode` client or router, connecting to or listening on one locator."""
+def config(
+    mode: str,
+    *,
+    connect: str | None = None,
+    listen: str | None = None,
+    tls: TlsFiles | None = None,
+) -> Any:
+    """A Zenoh config: `mode` client or router, connecting to or listening on one locator,
+    with mutual TLS when `tls` is given (the locator is then `tls/...`)."""
     conf = zenoh.Config()
     conf.insert_json5("mode", json.dumps(mode))
     if connect is not None:
@@ -68,6 +79,8 @@ def config(mode: str, *, connect: str | None = None, listen: str | None = None) 
     shm = shm_wanted()
     if shm is not None:
         conf.insert_json5("transport/shared_memory/enabled", json.dumps(shm))
+    if tls is not None:
+        configure_tls(conf, tls, listening=listen is not None)
     return conf
 
 
@@ -119,23 +132,29 @@ def untrack(entity: Any) -> None:
         entity.undeclare()
 
 
-def open_client(naming: str, wait: float | None = 0.0) -> Any:
-    """A client session of the router at `naming` (tcp://HOST:PORT), waiting up to `wait`
-    seconds (None: no limit) for the router to be up, as a server waits for its naming
-    service; then TRANSIENT."""
-    target = locator(naming)
+def open_client(naming: str, wait: float | None = 0.0, tls: TlsFiles | None = None) -> Any:
+    """A client session of the router at `naming` (tcp://HOST:PORT), over mutual TLS with
+    `tls`, waiting up to `wait` seconds (None: no limit) for the router to be up, as a server
+    waits for its naming service; then TRANSIENT. A router that refuses this session (TLS
+    without a key of its CA, or no TLS) looks the same as one that is down: Zenoh says only
+    that it could not connect, so the TRANSIENT says both."""
+    target = locator(naming, tls)
     deadline = None if wait is None else time.monotonic() + wait
     said = False
     while True:
         try:
-            return zenoh.open(config("client", connect=target))
+            return zenoh.open(config("client", connect=target, tls=tls))
         except zenoh.ZError as e:
             if deadline is not None and time.monotonic() >= deadline:
                 raise TRANSIENT(
                     f"cannot reach the Zenoh router at {target} (is `miro naming --zenoh` "
-                    f"running? see --naming / MIRO_NAMING): {str(e).split(' at ')[0]}"
+                    f"running? see --naming / MIRO_NAMING{refused_hint(tls)}): "
+                    f"{str(e).split(' at ')[0].strip()}"
                 ) from None
             if not said:
-                _log.notice("waiting for the Zenoh router at %s", target)
+                # A server that waits on says so as loudly as one waiting for ZeroMQ's naming
+                # service; a client's moment ends in its TRANSIENT anyway.
+                say = _log.warning if wait is None or wait > 2.0 else _log.notice
+                say("waiting for the Zenoh router at %s%s", target, refused_hint(tls))
                 said = True
             time.sleep(OPEN_RETRY)
