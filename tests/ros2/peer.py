@@ -5,6 +5,8 @@ environment of tests/ros2_env.py. Prints one JSON document on stdout when done.
   peer.py pub TYPE TOPIC SPEC TIMEOUT       publish SPEC (JSON) at 20 Hz until stdin closes
   peer.py graph NODE TIMEOUT [SERVICE TYPE] wait for node NODE; print the graph (and whether a
                                             client of SERVICE sees it ready)
+  peer.py call TYPE SERVICE SPECS TIMEOUT   call SERVICE with each request of SPECS (a JSON
+                                            list) in turn; print the responses (null: none)
 """
 
 from __future__ import annotations
@@ -102,6 +104,18 @@ def main() -> None:
                 rclpy.spin_once(node, timeout_sec=0.1)
                 break
         result = {"graph": graph(node), "service_ready": bool(client and client.service_is_ready())}
+    elif mode == "call":
+        cls, service, specs, timeout = sys.argv[2], sys.argv[3], sys.argv[4], float(sys.argv[5])
+        client = node.create_client(message_class(cls), service)
+        deadline = time.monotonic() + timeout
+        ready = client.wait_for_service(timeout_sec=timeout)
+        responses: list[Any] = []
+        for spec in json.loads(specs) if ready else []:
+            request = fill(message_class(cls).Request(), canon.expand(spec))
+            future = client.call_async(request)
+            rclpy.spin_until_future_complete(node, future, timeout_sec=deadline - time.monotonic())
+            responses.append(canon.canon(future.result()) if future.done() else None)
+        result = {"ready": ready, "responses": responses}
     node.destroy_node()
     rclpy.shutdown()
     print(json.dumps(result))
