@@ -5,9 +5,9 @@ the `related_sample_identity` inline QoS rmw_fastrtps needs (ros2/rmw_cyclonedds
 It announces itself by SPDP to the ports of participant indices 0 to 32 on 127.0.0.1 (as
 LOCALHOST discovery does) and talks only with the Fast DDS participants (vendor eProsima) that
 answer: it sends them the SEDP data of its endpoints (reliable: HEARTBEATs, ACKNACKs answered)
-and reads no SEDP of theirs. A reader takes the DATA addressed to it (or, unaddressed, when it
-is the only one), acknowledges it and asks again for what is missing; a writer sends each
-sample to one remote reader. DATA_FRAG (samples over ~64 KB) is not read. Handlers run on the
+and reads their SEDP publications (which topic each writer writes). A reader takes the DATA
+addressed to it, or unaddressed from a writer of its topic, acknowledges it and asks again for
+what is missing; a writer sends each sample to one remote reader. DATA_FRAG (samples over ~64 KB) is not read. Handlers run on the
 participant's thread.
 """
 
@@ -41,6 +41,7 @@ class Sample:
     seq: int
     payload: bytes
     inline_qos: dict[int, bytes]
+    vendor: bytes = b""  # the writer's participant's vendor id
 
     def related_guid(self) -> Guid | None:
         """The GUID of the writer's `related_sample_identity` (rmw_fastrtps puts its client's
@@ -71,6 +72,12 @@ class _WriterState:
         self.got.add(seq)
         self._advance()
         return True
+
+    def skip(self, seqs: list[int]) -> None:
+        for seq in seqs:
+            if seq >= self.low:
+                self.got.add(seq)
+        self._advance()
 
     def heartbeat(self, first: int, last: int) -> list[int]:
         if self.low < first:
@@ -141,6 +148,8 @@ class RtpsParticipant:
         self._writers: dict[bytes, Writer] = {}
         self._sedp: dict[bytes, list[bytes]] = {wire.SEDP_PUB_WRITER: [], wire.SEDP_SUB_WRITER: []}
         self._next_key = 1
+        self._topics: dict[bytes, str] = {}  # a remote writer's GUID → its topic
+        self._sedp_reader = Reader(wire.SEDP_PUB_READER, "", "", self._on_publication)
         self._hb = 0
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="miro-rtps", daemon=True)
@@ -190,10 +199,12 @@ class RtpsParticipant:
             except OSError as e:  # a full buffer or a port gone: the protocol repeats
                 log.debug("rtps: send to %s failed: %s", addr, e)
 
-    def send_user(self, prefix: bytes, msg: bytes) -> None:
+    def send_user(self, prefix: bytes, msg: bytes, builtin: bool = False) -> None:
+        """A message to a peer's user (or, for its builtin endpoints, metatraffic) locators."""
         peer = self._peers.get(prefix)
         if peer is not None:
-            self._sendto(wire.header(self.prefix) + msg, peer.user or peer.meta)
+            where = peer.meta if builtin else (peer.user or peer.meta)
+            self._sendto(wire.header(self.prefix) + msg, where)
 
     def _announce_spdp(self) -> None:
         payload = wire.spdp_data(self.prefix, self.domain, self.port, self.port, self._user_data)
@@ -252,8 +263,8 @@ class RtpsParticipant:
 
     def _on_message(self, raw: bytes) -> None:
         for sub in wire.read_message(raw):
-            if sub.vendor != wire.EPROSIMA or sub.source == self.prefix:
-                continue  # only Fast DDS peers are answered here
+            if sub.source == self.prefix:
+                continue
             if sub.destination and sub.destination != self.prefix:
                 continue
             if sub.kind == wire.DATA and sub.writer == wire.SPDP_WRITER:
@@ -262,6 +273,11 @@ class RtpsParticipant:
                 self._on_data(sub)
             elif sub.kind == wire.HEARTBEAT:
                 self._on_heartbeat(sub)
+            elif sub.kind == wire.GAP:
+                reader = self._reader_for(sub)
+                if reader is not None:
+                    key = bytes(Guid(sub.source, sub.writer))
+                    reader.writers.setdefault(key, _WriterState()).skip(sub.irrelevant)
             elif sub.kind == wire.ACKNACK:
                 self._on_acknack(sub)
 
@@ -284,14 +300,26 @@ class RtpsParticipant:
             else:
                 self._peers[prefix].meta, self._peers[prefix].user = meta, user
         if new:
-            log.debug("rtps: Fast DDS participant %s at %s", prefix.hex(), meta)
+            log.debug("rtps: participant %s at %s", prefix.hex(), meta)
             self._announce_spdp()
             self._announce_sedp(only=prefix)
 
+    def _on_publication(self, sample: Sample) -> None:
+        """A Fast DDS writer's SEDP data: remember its topic."""
+        try:
+            params = wire.payload_params(sample.payload)
+            guid, topic = params[wire.PID_ENDPOINT_GUID], params[wire.PID_TOPIC_NAME]
+            self._topics[guid[:16]] = wire.read_string(topic)
+        except (KeyError, wire.RtpsError, struct.error, UnicodeDecodeError):
+            return  # a disposal (no topic) or data we do not read
+
     def _reader_for(self, sub: wire.Submessage) -> Reader | None:
+        if sub.writer == wire.SEDP_PUB_WRITER:
+            return self._sedp_reader
         if sub.reader != wire.UNKNOWN_ENTITY:
             return self._readers.get(sub.reader)
-        return next(iter(self._readers.values())) if len(self._readers) == 1 else None
+        topic = self._topics.get(sub.source + sub.writer)
+        return next((r for r in self._readers.values() if r.topic == topic), None)
 
     def _on_data(self, sub: wire.Submessage) -> None:
         reader = self._reader_for(sub)
@@ -300,7 +328,7 @@ class RtpsParticipant:
         writer = Guid(sub.source, sub.writer)
         state = reader.writers.setdefault(bytes(writer), _WriterState())
         if state.mark(sub.seq):
-            reader.handler(Sample(writer, sub.seq, sub.payload, sub.inline_qos))
+            reader.handler(Sample(writer, sub.seq, sub.payload, sub.inline_qos, sub.vendor))
 
     def _on_heartbeat(self, sub: wire.Submessage) -> None:
         reader = self._reader_for(sub)
@@ -312,7 +340,8 @@ class RtpsParticipant:
             return
         state.count += 1
         ack = wire.acknack(reader.entity, sub.writer, state.low, missing, state.count)
-        self.send_user(sub.source, wire.info_dst(sub.source) + ack)
+        builtin = sub.writer[3] & 0xC0 == 0xC0
+        self.send_user(sub.source, wire.info_dst(sub.source) + ack, builtin)
 
     def _on_acknack(self, sub: wire.Submessage) -> None:
         with self.lock:

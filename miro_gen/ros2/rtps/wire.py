@@ -33,9 +33,9 @@ SEDP_SUB_WRITER, SEDP_SUB_READER = b"\x00\x00\x04\xc2", b"\x00\x00\x04\xc7"
 UNKNOWN_ENTITY = b"\x00\x00\x00\x00"
 USER_WRITER_NO_KEY, USER_READER_NO_KEY = 0x03, 0x04
 
-# Builtin endpoint set bits: participant announcer/detector, publications and subscriptions
-# announcers (we read no SEDP of others: the peers' endpoints are not needed to answer them).
-BUILTIN_ENDPOINTS = (1 << 0) | (1 << 1) | (1 << 2) | (1 << 4)
+# Builtin endpoint set bits: participant announcer/detector, publications announcer/detector
+# (the peers' writers: which topic an unaddressed DATA is of), subscriptions announcer.
+BUILTIN_ENDPOINTS = (1 << 0) | (1 << 1) | (1 << 2) | (1 << 3) | (1 << 4)
 
 # Parameter ids
 PID_SENTINEL, PID_LEASE_DURATION, PID_TOPIC_NAME, PID_TYPE_NAME = 0x0001, 0x0002, 0x0005, 0x0007
@@ -113,6 +113,11 @@ def data(
 
 def heartbeat(reader: bytes, writer: bytes, first: int, last: int, count: int) -> bytes:
     return _sub(HEARTBEAT, 0, reader + writer + _sn(first) + _sn(last) + struct.pack("<i", count))
+
+
+def gap(reader: bytes, writer: bytes, start: int, end: int) -> bytes:
+    """A GAP: the numbers from `start` to `end - 1` are not for this reader."""
+    return _sub(GAP, 0, reader + writer + _sn(start) + _sn(end) + struct.pack("<I", 0))
 
 
 def acknack(reader: bytes, writer: bytes, base: int, missing: list[int], count: int) -> bytes:
@@ -215,6 +220,7 @@ class Submessage:
     missing: list[int] = field(default_factory=list)
     final: bool = False
     destination: bytes = b""
+    irrelevant: list[int] = field(default_factory=list)  # GAP
 
 
 def _read_sn(raw: bytes, at: int, order: str) -> int:
@@ -302,6 +308,16 @@ def read_message(raw: bytes) -> Iterator[Submessage]:
             sub = Submessage(HEARTBEAT, source, vendor, body[:4], body[4:8])
             sub.first, sub.last = _read_sn(body, 8, order), _read_sn(body, 16, order)
             sub.final, sub.destination = bool(flags & 0x02), destination
+            yield sub
+        elif kind == GAP and len(body) >= 28:
+            sub = Submessage(GAP, source, vendor, body[:4], body[4:8])
+            start, base = _read_sn(body, 8, order), _read_sn(body, 16, order)
+            (bits,) = struct.unpack_from(order + "I", body, 24)
+            words = struct.unpack_from(order + f"{(bits + 31) // 32}I", body, 28)
+            sub.irrelevant = list(range(start, base)) + [
+                base + i for i in range(bits) if words[i // 32] >> (31 - i % 32) & 1
+            ]
+            sub.destination = destination
             yield sub
         elif kind == ACKNACK and len(body) >= 24:
             sub = Submessage(ACKNACK, source, vendor, body[:4], body[4:8])
