@@ -7,8 +7,8 @@ LOCALHOST discovery does) and talks only with the Fast DDS participants (vendor 
 answer: it sends them the SEDP data of its endpoints (reliable: HEARTBEATs, ACKNACKs answered)
 and reads their SEDP publications (which topic each writer writes). A reader takes the DATA
 addressed to it, or unaddressed from a writer of its topic, acknowledges it and asks again for
-what is missing; a writer sends each sample to one remote reader. DATA_FRAG (samples over ~64 KB) is not read. Handlers run on the
-participant's thread.
+what is missing; a writer sends each sample to one remote reader. DATA_FRAG (samples over
+~64 KB) is not read. Handlers run on the participant's thread.
 """
 
 from __future__ import annotations
@@ -136,7 +136,9 @@ class RtpsParticipant:
 
     def __init__(self, domain: int, user_data: bytes = b"") -> None:
         self.domain = domain
-        self.prefix = wire.VENDOR_ID + struct.pack(">H", os.getpid() & 0xFFFF) + secrets.token_bytes(8)
+        self.prefix = (
+            wire.VENDOR_ID + struct.pack(">H", os.getpid() & 0xFFFF) + secrets.token_bytes(8)
+        )
         self.lock = threading.RLock()
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self._sock.bind(("127.0.0.1", 0))
@@ -224,7 +226,11 @@ class RtpsParticipant:
                 for writer, samples in self._sedp.items():
                     if not samples:
                         continue
-                    reader = wire.SEDP_PUB_READER if writer == wire.SEDP_PUB_WRITER else wire.SEDP_SUB_READER
+                    reader = (
+                        wire.SEDP_PUB_READER
+                        if writer == wire.SEDP_PUB_WRITER
+                        else wire.SEDP_SUB_READER
+                    )
                     acked = peer.sedp_acked.get(writer, 0)
                     subs = [
                         wire.data(reader, writer, i + 1, s)
@@ -250,13 +256,13 @@ class RtpsParticipant:
                 next_announce = now + ANNOUNCE_PERIOD
             try:
                 raw = self._sock.recv(65536)
-            except (TimeoutError, socket.timeout):
+            except TimeoutError:
                 continue
             except OSError:
                 return
             try:
                 self._on_message(raw)
-            except wire.RtpsError as e:
+            except (wire.RtpsError, struct.error, UnicodeDecodeError) as e:
                 log.debug("rtps: a malformed message was dropped: %s", e)
             except Exception:  # a handler's defect must not end the participant
                 log.exception("rtps: handling a message failed")

@@ -100,9 +100,7 @@ def info_ts(seconds: float) -> bytes:
     return _sub(INFO_TS, 0, struct.pack("<iI", whole, int((seconds - whole) * 2**32)))
 
 
-def data(
-    reader: bytes, writer: bytes, seq: int, payload: bytes, inline_qos: bytes = b""
-) -> bytes:
+def data(reader: bytes, writer: bytes, seq: int, payload: bytes, inline_qos: bytes = b"") -> bytes:
     """A DATA submessage carrying `payload` (a serialized payload: encapsulation header and
     body), with `inline_qos` (a parameter list ending with its sentinel) when given."""
     flags = 0x04 | (0x02 if inline_qos else 0)
@@ -228,6 +226,16 @@ def _read_sn(raw: bytes, at: int, order: str) -> int:
     return (high << 32) | low
 
 
+def _read_set(raw: bytes, at: int, order: str) -> tuple[int, list[int]]:
+    """A SequenceNumberSet at `at`: its base and the numbers whose bits are set."""
+    base = _read_sn(raw, at, order)
+    (bits,) = struct.unpack_from(order + "I", raw, at + 8)
+    if bits > 256 or at + 12 + 4 * ((bits + 31) // 32) > len(raw):
+        raise RtpsError(f"a sequence number set of {bits} bits does not fit its submessage")
+    words = struct.unpack_from(order + f"{(bits + 31) // 32}I", raw, at + 12)
+    return base, [base + i for i in range(bits) if words[i // 32] >> (31 - i % 32) & 1]
+
+
 def read_params(raw: bytes, order: str = "<") -> dict[int, bytes]:
     """A parameter list's values by id (the last of a repeated id; see `read_param_items`)."""
     return dict(read_param_items(raw, order))
@@ -311,21 +319,15 @@ def read_message(raw: bytes) -> Iterator[Submessage]:
             yield sub
         elif kind == GAP and len(body) >= 28:
             sub = Submessage(GAP, source, vendor, body[:4], body[4:8])
-            start, base = _read_sn(body, 8, order), _read_sn(body, 16, order)
-            (bits,) = struct.unpack_from(order + "I", body, 24)
-            words = struct.unpack_from(order + f"{(bits + 31) // 32}I", body, 28)
-            sub.irrelevant = list(range(start, base)) + [
-                base + i for i in range(bits) if words[i // 32] >> (31 - i % 32) & 1
-            ]
+            start = _read_sn(body, 8, order)
+            base, listed = _read_set(body, 16, order)
+            if base - start > 4096:
+                raise RtpsError(f"a GAP of {base - start} sequence numbers")
+            sub.irrelevant = list(range(start, base)) + listed
             sub.destination = destination
             yield sub
         elif kind == ACKNACK and len(body) >= 24:
             sub = Submessage(ACKNACK, source, vendor, body[:4], body[4:8])
-            sub.base = _read_sn(body, 8, order)
-            (bits,) = struct.unpack_from(order + "I", body, 16)
-            words = struct.unpack_from(order + f"{(bits + 31) // 32}I", body, 20)
-            sub.missing = [
-                sub.base + i for i in range(bits) if words[i // 32] >> (31 - i % 32) & 1
-            ]
+            sub.base, sub.missing = _read_set(body, 8, order)
             sub.final, sub.destination = bool(flags & 0x02), destination
             yield sub
