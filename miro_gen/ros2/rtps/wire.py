@@ -223,7 +223,7 @@ class Submessage:
 
 def _read_sn(raw: bytes, at: int, order: str) -> int:
     high, low = struct.unpack_from(order + "iI", raw, at)
-    return (high << 32) | low
+    return int(high) << 32 | int(low)
 
 
 def _read_set(raw: bytes, at: int, order: str) -> tuple[int, list[int]]:
