@@ -109,7 +109,13 @@ class Service(Generic[Req, Res]):
 
 
 class Client(Generic[Req, Res]):
-    """Calls one ROS 2 service: `call(request, timeout)` → its response."""
+    """Calls one ROS 2 service: `call(request, timeout)` → its response.
+
+    Its request writer and reply reader are in the context's own RTPS participant (ros2/rtps):
+    a request goes to each service's request reader the peers announced, as that reader's
+    vendor expects it (a Fast DDS one: the bare body, our reply reader named in its
+    related_sample_identity; any other: rmw_cyclonedds' request header); the first reply
+    that names this client's request is the response."""
 
     def __init__(
         self, node: Node, srv_type: type[Message], name: str,
@@ -120,15 +126,24 @@ class Client(Generic[Req, Res]):
         self._id = secrets.randbits(64)
         self._seq = 0
         self._lock = threading.Lock()
-        self._pending: dict[int, list[Any]] = {}
-        request_topic, reply_topic = names.service_to_dds(self.name)
-        h = srv_type._ros2_type_hash
-        self._reader = node.reader(self._response, reply_topic, qos, h, self._on_reply, True)
-        self._writer = node.writer(self._request, request_topic, qos, h, True)
+        self._pending: dict[tuple[str, int], list[Any]] = {}
+        self._request_topic, self._reply_topic = names.service_to_dds(self.name)
+        self._rtps = rtps = node.context.rtps
+        user_data = ros_qos.type_hash_user_data(srv_type._ros2_type_hash)
+        self._reader = rtps.reader(
+            self._reply_topic, dds_type(self._response), self._on_reply, user_data
+        )
+        self._reader_guid = wire.Guid(rtps.prefix, self._reader.entity)
+        self._writer = rtps.writer(self._request_topic, dds_type(self._request), user_data)
+        announcer = node.context.announcer
+        announcer.add_endpoint(node.key, bytes(self._reader_guid), reader=True)
+        announcer.add_endpoint(node.key, bytes(self._writer.guid), reader=False)
 
     def service_is_ready(self) -> bool:
-        """Whether a service's request reader and reply writer are both matched."""
-        return self._writer.matched() > 0 and self._reader.matched() > 0
+        """Whether a service's request reader and reply writer are both announced."""
+        return bool(self._rtps.remote_readers(self._request_topic)) and (
+            self._rtps.remote_writer_count(self._reply_topic) > 0
+        )
 
     def wait_for_service(self, timeout: float = 10.0) -> bool:
         done = threading.Event()
@@ -141,31 +156,54 @@ class Client(Generic[Req, Res]):
         return True
 
     def call(self, request: Req, timeout: float = 10.0) -> Res:
+        body = request.serialize()
+        slot: list[Any] = [threading.Event()]
+        keys: list[tuple[str, int]] = []
         with self._lock:
             self._seq += 1
             seq = self._seq
-            slot: list[Any] = [threading.Event()]
-            self._pending[seq] = slot
+            keys.append(("c", seq))
+            self._pending[("c", seq)] = slot
+        fast_qos = wire.related_sample_identity(self._reader_guid, wire.UNKNOWN_SEQ)
         try:
-            self._writer.write(with_header(request.serialize(), self._id, seq))
+            for reader in self._rtps.remote_readers(self._request_topic):
+                if self._rtps.vendor_of(reader.prefix) == wire.EPROSIMA:
+                    with self._lock:  # the key is there before a reply can come
+                        n = self._writer.write_to(reader, body, fast_qos)
+                        keys.append(("f", n))
+                        self._pending[("f", n)] = slot
+                else:
+                    self._writer.write_to(reader, with_header(body, self._id, seq))
             if not slot[0].wait(timeout):
                 raise ServiceTimeout(f"service {self.name}: no reply within {timeout} s")
             return slot[1]  # type: ignore[no-any-return]
         finally:
             with self._lock:
-                self._pending.pop(seq, None)
+                for key in keys:
+                    self._pending.pop(key, None)
 
-    def _on_reply(self, data: bytes, info: Any) -> None:
-        try:
-            client_id, seq, body = split_header(data)
-        except ValueError:
-            return
-        if client_id != self._id:
-            return  # another client's reply
+    def _on_reply(self, sample: Sample) -> None:
+        if sample.vendor == wire.EPROSIMA:
+            raw = sample.inline_qos.get(wire.PID_RELATED_SAMPLE_IDENTITY)
+            raw = raw or sample.inline_qos.get(wire.PID_CUSTOM_RELATED_SAMPLE_IDENTITY)
+            if raw is None or len(raw) < 24:
+                return
+            if raw[:16] not in (bytes(self._reader_guid), bytes(self._writer.guid)):
+                return  # another client's reply
+            high, low = struct.unpack_from("<iI", raw, 16)
+            key, body = ("f", high << 32 | low), sample.payload
+        else:
+            try:
+                client_id, seq, body = split_header(sample.payload)
+            except ValueError:
+                return
+            if client_id != self._id:
+                return  # another client's reply
+            key = ("c", seq)
         with self._lock:
-            slot = self._pending.get(seq)
-        if slot is None:
-            return  # a reply to a call that gave up
+            slot = self._pending.get(key)
+        if slot is None or slot[0].is_set():
+            return  # a reply to a call that gave up, or a second reply
         try:
             slot.append(self._response.deserialize(body))
         except Exception as e:

@@ -9,7 +9,8 @@ and run as subprocesses (tests/ros2/peer.py). All on loopback: both sides get
 - a miro client calls a miro service in another process over DDS (std_srvs/SetBool and a
   service of this test's own), with rmw_cyclonedds' request header;
 - an rclpy client (Fast DDS) calls miro services (std_srvs/SetBool, test_msgs/BasicTypes),
-  answered by miro's own RTPS participant (miro_gen/ros2/rtps) with related_sample_identity.
+  answered by miro's own RTPS participant (miro_gen/ros2/rtps) with related_sample_identity;
+- a miro client calls rclpy services (the same two) through that participant.
 """
 
 from __future__ import annotations
@@ -310,3 +311,44 @@ def test_rclpy_client_on_fast_dds_calls_miro_services(ros_types: Path, domain: i
         assert reply["int64_value"] == spec["int64_value"] - 1
         assert reply["uint64_value"] == spec["uint64_value"] // 2
         assert reply["string_value"] == spec["string_value"].upper()
+
+
+def test_miro_client_calls_rclpy_services_on_fast_dds(ros_types: Path, domain: int) -> None:
+    from miro_gen.ros2.node import Node
+    from miro_gen.ros2.services import Client
+
+    enable = _peer(domain, "serve", "std_srvs/srv/SetBool", "/robot/enable", "120",
+                   stdin=subprocess.PIPE)  # fmt: skip
+    basic = _peer(domain, "serve", "test_msgs/srv/BasicTypes", "/basic", "120",
+                  stdin=subprocess.PIPE)  # fmt: skip
+    try:
+        for peer in (enable, basic):
+            assert peer.stdout is not None and peer.stdout.readline().strip() == "ready"
+        with Node("miro_caller", namespace="/robot") as node:
+            SetBool = _cls("std_srvs/srv/SetBool_Request")
+            on = Client(node, _cls("std_srvs/srv/SetBool"), "enable")
+            types = Client(node, _cls("test_msgs/srv/BasicTypes"), "/basic")
+            assert on.wait_for_service(60) and types.wait_for_service(60)
+            replies = [on.call(SetBool(data=i % 2 == 0), timeout=30) for i in range(10)]
+            assert [(r.success, r.message) for r in replies] == [
+                (i % 2 == 0, f"rclpy {i + 1}") for i in range(10)
+            ]
+            Req = _cls("test_msgs/srv/BasicTypes_Request")
+            for i in range(5):
+                req = Req(bool_value=i % 2 == 0, float64_value=0.5 * i, int8_value=-i,
+                          uint16_value=1000 + i, int64_value=-(2**40) * i,
+                          uint64_value=2**63 + i, string_value=f"call {i}, ünïcode")  # fmt: skip
+                want = _basic_reply(req)
+                got = types.call(req, timeout=30)
+                assert canon.canon(got) == canon.canon(want)
+    finally:
+        for peer in (enable, basic):
+            assert peer.stdin is not None
+            peer.stdin.close()
+    done = []
+    for peer in (enable, basic):
+        assert peer.stdout is not None and peer.stderr is not None
+        out, err = peer.stdout.read(), peer.stderr.read()
+        assert peer.wait(timeout=60) == 0, err[-3000:]
+        done.append(json.loads(out)["calls"])
+    assert done == [10, 5]  # each call answered once

@@ -55,6 +55,7 @@ class Sample:
 class _Peer:
     meta: list[tuple[str, int]]
     user: list[tuple[str, int]]
+    vendor: bytes
     sedp_acked: dict[bytes, int] = field(default_factory=dict)
 
 
@@ -140,8 +141,7 @@ class RtpsParticipant:
             wire.VENDOR_ID + struct.pack(">H", os.getpid() & 0xFFFF) + secrets.token_bytes(8)
         )
         self.lock = threading.RLock()
-        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self._sock.bind(("127.0.0.1", 0))
+        self._sock = self._bind(domain)
         self._sock.settimeout(0.2)
         self.port = self._sock.getsockname()[1]
         self._user_data = user_data
@@ -152,10 +152,26 @@ class RtpsParticipant:
         self._next_key = 1
         self._topics: dict[bytes, str] = {}  # a remote writer's GUID → its topic
         self._sedp_reader = Reader(wire.SEDP_PUB_READER, "", "", self._on_publication)
+        self._remote_readers: dict[bytes, str] = {}  # a remote reader's GUID → its topic
+        self._sedp_sub_reader = Reader(wire.SEDP_SUB_READER, "", "", self._on_subscription)
         self._hb = 0
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="miro-rtps", daemon=True)
         self._thread.start()
+
+    @staticmethod
+    def _bind(domain: int) -> socket.socket:
+        """A socket on the metatraffic port of the first free participant index, where other
+        participants' SPDP announcements (ours among them) arrive; else on any port."""
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        for index in range(MAX_PARTICIPANT_INDEX + 1):
+            try:
+                sock.bind(("127.0.0.1", wire.spdp_port(domain, index)))
+                return sock
+            except OSError:
+                continue
+        sock.bind(("127.0.0.1", 0))
+        return sock
 
     @property
     def guid(self) -> Guid:
@@ -302,7 +318,7 @@ class RtpsParticipant:
         with self.lock:
             new = prefix not in self._peers
             if new:
-                self._peers[prefix] = _Peer(meta, user)
+                self._peers[prefix] = _Peer(meta, user, sub.vendor)
             else:
                 self._peers[prefix].meta, self._peers[prefix].user = meta, user
         if new:
@@ -319,9 +335,33 @@ class RtpsParticipant:
         except (KeyError, wire.RtpsError, struct.error, UnicodeDecodeError):
             return  # a disposal (no topic) or data we do not read
 
+    def _on_subscription(self, sample: Sample) -> None:
+        """A peer's reader's SEDP data: remember its topic."""
+        try:
+            params = wire.payload_params(sample.payload)
+            guid, topic = params[wire.PID_ENDPOINT_GUID], params[wire.PID_TOPIC_NAME]
+            self._remote_readers[guid[:16]] = wire.read_string(topic)
+        except (KeyError, wire.RtpsError, struct.error, UnicodeDecodeError):
+            return
+
+    def remote_readers(self, topic: str) -> list[Guid]:
+        """The peers' readers of `topic` (as their SEDP announced them)."""
+        with self.lock:
+            return [Guid.of(g) for g, t in self._remote_readers.items() if t == topic]
+
+    def remote_writer_count(self, topic: str) -> int:
+        with self.lock:
+            return sum(1 for t in self._topics.values() if t == topic)
+
+    def vendor_of(self, prefix: bytes) -> bytes:
+        peer = self._peers.get(prefix)
+        return peer.vendor if peer is not None else b""
+
     def _reader_for(self, sub: wire.Submessage) -> Reader | None:
         if sub.writer == wire.SEDP_PUB_WRITER:
             return self._sedp_reader
+        if sub.writer == wire.SEDP_SUB_WRITER:
+            return self._sedp_sub_reader
         if sub.reader != wire.UNKNOWN_ENTITY:
             return self._readers.get(sub.reader)
         topic = self._topics.get(sub.source + sub.writer)

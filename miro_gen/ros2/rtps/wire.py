@@ -33,9 +33,10 @@ SEDP_SUB_WRITER, SEDP_SUB_READER = b"\x00\x00\x04\xc2", b"\x00\x00\x04\xc7"
 UNKNOWN_ENTITY = b"\x00\x00\x00\x00"
 USER_WRITER_NO_KEY, USER_READER_NO_KEY = 0x03, 0x04
 
-# Builtin endpoint set bits: participant announcer/detector, publications announcer/detector
-# (the peers' writers: which topic an unaddressed DATA is of), subscriptions announcer.
-BUILTIN_ENDPOINTS = (1 << 0) | (1 << 1) | (1 << 2) | (1 << 3) | (1 << 4)
+# Builtin endpoint set bits: participant, publications and subscriptions announcers and
+# detectors (the peers' writers: which topic an unaddressed DATA is of; their readers: where a
+# request goes).
+BUILTIN_ENDPOINTS = 0b111111
 
 # Parameter ids
 PID_SENTINEL, PID_LEASE_DURATION, PID_TOPIC_NAME, PID_TYPE_NAME = 0x0001, 0x0002, 0x0005, 0x0007
@@ -47,6 +48,7 @@ PID_KEY_HASH, PID_RELATED_SAMPLE_IDENTITY = 0x0070, 0x0083
 PID_CUSTOM_RELATED_SAMPLE_IDENTITY = 0x800F
 
 LOCATOR_UDPV4 = 1
+UNKNOWN_SEQ = -(1 << 32)  # SEQUENCENUMBER_UNKNOWN: high -1, low 0
 PL_CDR_LE = b"\x00\x03\x00\x00"
 RELIABLE, BEST_EFFORT = 2, 1
 VOLATILE, TRANSIENT_LOCAL = 0, 1
