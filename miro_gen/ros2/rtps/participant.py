@@ -51,6 +51,10 @@ class Sample:
         return Guid.of(raw[:16]) if raw and len(raw) >= 24 else None
 
 
+def _loopback(locators: list[tuple[str, int]]) -> list[tuple[str, int]]:
+    return sorted({("127.0.0.1", port) for _, port in locators})
+
+
 @dataclass
 class _Peer:
     meta: list[tuple[str, int]]
@@ -312,8 +316,10 @@ class RtpsParticipant:
         domain = params.get(wire.PID_DOMAIN_ID)
         if guid is None or (domain is not None and struct.unpack("<I", domain)[0] != self.domain):
             return
-        meta = wire.read_locators(items, wire.PID_METATRAFFIC_UNICAST_LOCATOR)
-        user = wire.read_locators(items, wire.PID_DEFAULT_UNICAST_LOCATOR)
+        # This host only: a peer's ports are reached on loopback whatever address it gives
+        # (Fast DDS gives its interfaces' addresses even with LOCALHOST discovery).
+        meta = _loopback(wire.read_locators(items, wire.PID_METATRAFFIC_UNICAST_LOCATOR))
+        user = _loopback(wire.read_locators(items, wire.PID_DEFAULT_UNICAST_LOCATOR))
         prefix = guid[:12]
         with self.lock:
             new = prefix not in self._peers
