@@ -121,12 +121,12 @@ class Node:
 
     def writer(
         self, msg_type: type[Message], dds_topic: str, profile: ros_qos.QosProfile,
-        type_hash: str, request_header: bool = False,
+        type_hash: str,
     ) -> RawWriter:  # fmt: skip
         """A writer of this node (announced on the graph) on a DDS topic."""
         w = RawWriter(
             self.context.topics, dds_topic, msg_type._data_schema, profile,
-            ros_qos.type_hash_user_data(type_hash), request_header,
+            ros_qos.type_hash_user_data(type_hash),
         )  # fmt: skip
         self.context.announcer.add_endpoint(self.key, w.gid, reader=False)
         self._closers.append(lambda: self._drop(w.gid, w.close))
@@ -134,13 +134,13 @@ class Node:
 
     def reader(
         self, msg_type: type[Message], dds_topic: str, profile: ros_qos.QosProfile,
-        type_hash: str, handler: Callable[[bytes, Any], None], request_header: bool = False,
+        type_hash: str, handler: Callable[[bytes, Any], None],
     ) -> RawReader:  # fmt: skip
         """A reader of this node (announced on the graph) on a DDS topic."""
         ctx = self.context
         r = RawReader(
             ctx.topics, dds_topic, msg_type._data_schema, profile, handler, ctx.dispatcher,
-            ros_qos.type_hash_user_data(type_hash), request_header,
+            ros_qos.type_hash_user_data(type_hash),
         )  # fmt: skip
         ctx.announcer.add_endpoint(self.key, r.gid, reader=True)
         self._closers.append(lambda: self._drop(r.gid, r.close))
