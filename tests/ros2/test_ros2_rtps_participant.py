@@ -39,7 +39,14 @@ def test_two_participants_match_and_a_sample_keeps_its_identity() -> None:
         for _ in range(3):
             writer.write_to(remote, payload, qos)
         eventually(lambda: len(got) == 3, 30, lambda: f"{len(got)} of 3 samples")
-        assert [s.seq for s in got] == [1, 2, 3]
+        # a sample whose datagram is lost (its HEARTBEAT with it) is sent again
+        send, lost = b.send_user, []
+        b.send_user = lambda prefix, msg, builtin=False: lost.append(msg)  # type: ignore[method-assign]
+        writer.write_to(remote, payload, qos)
+        b.send_user = send  # type: ignore[method-assign]
+        assert len(lost) == 1
+        eventually(lambda: len(got) == 4, 30, lambda: "the lost sample was not sent again")
+        assert [s.seq for s in got] == [1, 2, 3, 4]
         assert {s.writer for s in got} == {writer.guid}
         assert all(s.payload == payload for s in got)
         assert got[0].related_guid() == wire.Guid(b.prefix, b"\x00\x00\x09\x04")

@@ -113,6 +113,8 @@ class Writer:
         self._seq = 0
         self._hb = 0
         self._history: deque[tuple[int, bytes, bytes, bytes]] = deque(maxlen=64)
+        self._unacked: dict[bytes, int] = {}  # a peer's prefix → the last number sent to it
+        self._acked: dict[bytes, int] = {}  # a peer's prefix → all below acknowledged
 
     def write_to(self, reader: Guid, payload: bytes, inline_qos: bytes = b"") -> int:
         """Send one sample to one remote reader; its sequence number."""
@@ -121,8 +123,26 @@ class Writer:
             seq = self._seq
             sub = wire.data(reader.entity, self.guid.entity, seq, payload, inline_qos)
             self._history.append((seq, reader.prefix, reader.entity, sub))
+            self._unacked[reader.prefix] = seq
             self._send(reader, seq, [sub])
         return seq
+
+    def acked(self, prefix: bytes, base: int) -> None:
+        """A peer's reader acknowledged everything below `base`."""
+        self._acked[prefix] = max(self._acked.get(prefix, 0), base)
+        if self._unacked.get(prefix, base) < base:
+            del self._unacked[prefix]
+
+    def repeat(self) -> None:
+        """Send again what a peer has not acknowledged yet (with its HEARTBEAT: a lost
+        datagram would otherwise leave the peer waiting for good)."""
+        for prefix in list(self._unacked):
+            below = self._acked.get(prefix, 0)
+            mine = [h for h in self._history if h[1] == prefix and h[0] >= below]
+            if not mine:
+                del self._unacked[prefix]  # gone from the history: nothing to send again
+                continue
+            self._send(Guid(prefix, wire.UNKNOWN_ENTITY), mine[0][0], [h[3] for h in mine])
 
     def _send(self, reader: Guid, first: int, subs: list[bytes]) -> None:
         self._hb += 1
@@ -273,6 +293,9 @@ class RtpsParticipant:
             if now >= next_announce:
                 self._announce_spdp()
                 self._announce_sedp(resend=False)
+                with self.lock:
+                    for writer in self._writers.values():
+                        writer.repeat()
                 next_announce = now + ANNOUNCE_PERIOD
             try:
                 raw = self._sock.recv(65536)
@@ -402,5 +425,8 @@ class RtpsParticipant:
                 peer.sedp_acked[sub.writer] = sub.base - 1
                 if sub.missing:
                     self._announce_sedp(only=sub.source)
-            elif sub.writer in self._writers and sub.missing:
-                self._writers[sub.writer].resend(sub.source, sub.reader, sub.missing)
+            elif sub.writer in self._writers:
+                writer = self._writers[sub.writer]
+                writer.acked(sub.source, sub.base)
+                if sub.missing:
+                    writer.resend(sub.source, sub.reader, sub.missing)
