@@ -51,6 +51,9 @@ def test_two_participants_match_and_a_sample_keeps_its_identity() -> None:
         assert all(s.payload == payload for s in got)
         assert got[0].related_guid() == wire.Guid(b.prefix, b"\x00\x00\x09\x04")
         assert got[0].vendor == wire.VENDOR_ID
+        # a participant that closes says so: the other forgets its endpoints at once
+        a.close()
+        eventually(lambda: not b.remote_readers("rq/addRequest"), 30, lambda: "a not forgotten")
     finally:
         a.close()
         b.close()

@@ -144,3 +144,15 @@ def test_a_parameter_list_that_overruns_or_has_no_sentinel_is_refused() -> None:
         list(wire.read_param_items(struct.pack("<HH", 0x0005, 40) + bytes(8)))
     with pytest.raises(wire.RtpsError):
         list(wire.read_param_items(wire.param(0x0005, b"abcd")))
+
+
+def test_a_disposal_names_its_key_and_is_read_as_gone() -> None:
+    guid = Guid(PREFIX, wire.PARTICIPANT)
+    sub = wire.data(wire.SPDP_READER, wire.SPDP_WRITER, 2, b"", wire.disposal(guid))
+    assert sub[1] == 0x03  # E, Q: no data
+    (data,) = wire.read_message(wire.header(PREFIX) + sub)
+    assert data.payload == b""
+    assert wire.disposed_key(data) == bytes(guid)
+    alive = wire.data(wire.SPDP_READER, wire.SPDP_WRITER, 1, wire.spdp_data(PREFIX, 0, 1, 2))
+    (data,) = wire.read_message(wire.header(PREFIX) + alive)
+    assert wire.disposed_key(data) is None

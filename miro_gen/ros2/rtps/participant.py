@@ -60,6 +60,8 @@ class _Peer:
     meta: list[tuple[str, int]]
     user: list[tuple[str, int]]
     vendor: bytes
+    lease: float = 100.0  # seconds without an announcement before it is taken as gone
+    seen: float = field(default_factory=time.monotonic)
     sedp_acked: dict[bytes, int] = field(default_factory=dict)
 
 
@@ -228,8 +230,14 @@ class RtpsParticipant:
         return r
 
     def close(self) -> None:
+        """Stop, first telling the peers that this participant is gone (SPDP disposal), so
+        that their graphs drop its endpoints at once rather than when its lease ends."""
         self._stop.set()
         self._thread.join(5)
+        gone = wire.data(wire.SPDP_READER, wire.SPDP_WRITER, 2, b"", wire.disposal(self.guid))
+        with self.lock:
+            for peer in self._peers.values():
+                self._sendto(wire.header(self.prefix) + gone, peer.meta)
         self._sock.close()
 
     # -- sending --
@@ -296,6 +304,7 @@ class RtpsParticipant:
                 with self.lock:
                     for writer in self._writers.values():
                         writer.repeat()
+                self._expire()
                 next_announce = now + ANNOUNCE_PERIOD
             try:
                 raw = self._sock.recv(65536)
@@ -330,7 +339,32 @@ class RtpsParticipant:
             elif sub.kind == wire.ACKNACK:
                 self._on_acknack(sub)
 
+    def _forget(self, key: bytes) -> None:
+        """A peer's endpoint (16-byte GUID) or, with the participant's entity id, the whole
+        participant and its endpoints, gone."""
+        with self.lock:
+            if key[12:] == wire.PARTICIPANT:
+                self._peers.pop(key[:12], None)
+                for known in (self._topics, self._remote_readers):
+                    for guid in [g for g in known if g[:12] == key[:12]]:
+                        del known[guid]
+            else:
+                self._topics.pop(key, None)
+                self._remote_readers.pop(key, None)
+
+    def _expire(self) -> None:
+        now = time.monotonic()
+        with self.lock:
+            gone = [p for p, peer in self._peers.items() if now - peer.seen > peer.lease]
+        for prefix in gone:
+            log.debug("rtps: participant %s gone (lease expired)", prefix.hex())
+            self._forget(prefix + wire.PARTICIPANT)
+
     def _on_spdp(self, sub: wire.Submessage) -> None:
+        gone = wire.disposed_key(sub)
+        if gone is not None:
+            self._forget(gone[:12] + wire.PARTICIPANT)
+            return
         if not sub.payload:
             return
         items = list(wire.read_param_items(sub.payload[4:], "<" if sub.payload[1] == 3 else ">"))
@@ -344,12 +378,15 @@ class RtpsParticipant:
         meta = _loopback(wire.read_locators(items, wire.PID_METATRAFFIC_UNICAST_LOCATOR))
         user = _loopback(wire.read_locators(items, wire.PID_DEFAULT_UNICAST_LOCATOR))
         prefix = guid[:12]
+        lease = params.get(wire.PID_LEASE_DURATION)
         with self.lock:
             new = prefix not in self._peers
             if new:
                 self._peers[prefix] = _Peer(meta, user, sub.vendor)
-            else:
-                self._peers[prefix].meta, self._peers[prefix].user = meta, user
+            peer = self._peers[prefix]
+            peer.meta, peer.user, peer.seen = meta, user, time.monotonic()
+            if lease is not None and len(lease) >= 8:
+                peer.lease = max(1.0, struct.unpack("<iI", lease[:8])[0] + 1.0)
         if new:
             log.debug("rtps: participant %s at %s", prefix.hex(), meta)
             self._announce_spdp()
@@ -398,11 +435,18 @@ class RtpsParticipant:
 
     def _on_data(self, sub: wire.Submessage) -> None:
         reader = self._reader_for(sub)
-        if reader is None or not sub.payload:
+        if reader is None:
             return
         writer = Guid(sub.source, sub.writer)
         state = reader.writers.setdefault(bytes(writer), _WriterState())
-        if state.mark(sub.seq):
+        if not state.mark(sub.seq):
+            return
+        if reader in (self._sedp_reader, self._sedp_sub_reader):
+            gone = wire.disposed_key(sub)
+            if gone is not None:
+                self._forget(gone)
+                return
+        if sub.payload:
             reader.handler(Sample(writer, sub.seq, sub.payload, sub.inline_qos, sub.vendor))
 
     def _on_heartbeat(self, sub: wire.Submessage) -> None:

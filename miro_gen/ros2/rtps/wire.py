@@ -44,7 +44,7 @@ PID_DOMAIN_ID, PID_PROTOCOL_VERSION, PID_VENDOR_ID = 0x000F, 0x0015, 0x0016
 PID_RELIABILITY, PID_DURABILITY, PID_USER_DATA = 0x001A, 0x001D, 0x002C
 PID_DEFAULT_UNICAST_LOCATOR, PID_METATRAFFIC_UNICAST_LOCATOR = 0x0031, 0x0032
 PID_PARTICIPANT_GUID, PID_BUILTIN_ENDPOINT_SET, PID_ENDPOINT_GUID = 0x0050, 0x0058, 0x005A
-PID_KEY_HASH, PID_RELATED_SAMPLE_IDENTITY = 0x0070, 0x0083
+PID_KEY_HASH, PID_STATUS_INFO, PID_RELATED_SAMPLE_IDENTITY = 0x0070, 0x0071, 0x0083
 PID_CUSTOM_RELATED_SAMPLE_IDENTITY = 0x800F
 
 LOCATOR_UDPV4 = 1
@@ -104,8 +104,9 @@ def info_ts(seconds: float) -> bytes:
 
 def data(reader: bytes, writer: bytes, seq: int, payload: bytes, inline_qos: bytes = b"") -> bytes:
     """A DATA submessage carrying `payload` (a serialized payload: encapsulation header and
-    body), with `inline_qos` (a parameter list ending with its sentinel) when given."""
-    flags = 0x04 | (0x02 if inline_qos else 0)
+    body; none for a disposal), with `inline_qos` (a parameter list ending with its
+    sentinel) when given."""
+    flags = (0x04 if payload else 0) | (0x02 if inline_qos else 0)
     body = struct.pack("<HH", 0, 16) + reader + writer + _sn(seq) + inline_qos + payload
     body += b"\x00" * (-len(body) % 4)
     return _sub(DATA, flags, body)
@@ -177,6 +178,12 @@ def spdp_data(
     if user_data:
         params.append(param(PID_USER_DATA, struct.pack("<I", len(user_data)) + user_data))
     return PL_CDR_LE + param_list(*params)
+
+
+def disposal(guid: Guid) -> bytes:
+    """The inline QoS of a DATA saying that the instance of key `guid` (a participant or an
+    endpoint, in discovery data) is disposed and unregistered: it is gone."""
+    return param_list(param(PID_KEY_HASH, bytes(guid)), param(PID_STATUS_INFO, b"\x00\x00\x00\x03"))
 
 
 def sedp_data(
@@ -262,6 +269,19 @@ def payload_params(payload: bytes) -> dict[int, bytes]:
     if len(payload) < 4 or payload[0] != 0 or payload[1] not in (2, 3):
         raise RtpsError("discovery data that is not PL_CDR")
     return read_params(payload[4:], "<" if payload[1] == 3 else ">")
+
+
+def disposed_key(sub: Submessage) -> bytes | None:
+    """The key (the GUID, for discovery data) of a DATA that disposes or unregisters an
+    instance (a participant or endpoint gone), else None."""
+    status = sub.inline_qos.get(PID_STATUS_INFO, b"")
+    if len(status) < 4 or not status[3] & 0x03:
+        return None
+    key = sub.inline_qos.get(PID_KEY_HASH)
+    if key is None and sub.payload:
+        params = payload_params(sub.payload)
+        key = params.get(PID_ENDPOINT_GUID) or params.get(PID_PARTICIPANT_GUID)
+    return key[:16] if key is not None and len(key) >= 16 else None
 
 
 def read_string(value: bytes) -> str:
