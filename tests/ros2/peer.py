@@ -142,9 +142,13 @@ def main() -> None:
         ready = client.wait_for_service(timeout_sec=timeout)
         responses: list[Any] = []
         for spec in json.loads(specs) if ready else []:
+            left = deadline - time.monotonic()
+            if left <= 0:  # (a negative timeout would wait for ever)
+                responses.append(None)
+                continue
             request = fill(message_class(cls).Request(), canon.expand(spec))
             future = client.call_async(request)
-            rclpy.spin_until_future_complete(node, future, timeout_sec=deadline - time.monotonic())
+            rclpy.spin_until_future_complete(node, future, timeout_sec=left)
             responses.append(canon.canon(future.result()) if future.done() else None)
         result = {"ready": ready, "responses": responses}
     node.destroy_node()
