@@ -44,18 +44,18 @@ class Topics:
         self._topics: dict[str, tuple[str, Topic[Any]]] = {}
         self._lock = threading.Lock()
 
-    def get(self, dds_name: str, data_schema: str, request_header: bool = False) -> Topic[Any]:
+    def get(self, dds_name: str, data_schema: str) -> Topic[Any]:
         with self._lock:
             known = self._topics.get(dds_name)
             if known is not None:
-                if known[0] != data_schema + str(request_header):
+                if known[0] != data_schema:
                     raise TypeError(f"DDS topic {dds_name!r} is used with another type already")
                 return known[1]
             topic: Topic[Any] = Topic(
-                self.participant.dds, dds_name, xtypes.idl_struct(data_schema, request_header)
+                self.participant.dds, dds_name, xtypes.idl_struct(data_schema)
             )
             typeinfo.hide(topic)
-            self._topics[dds_name] = (data_schema + str(request_header), topic)
+            self._topics[dds_name] = (data_schema, topic)
             return topic
 
 
@@ -64,9 +64,9 @@ class RawWriter:
 
     def __init__(
         self, topics: Topics, dds_name: str, data_schema: str, profile: ros_qos.QosProfile,
-        user_data: bytes = b"", request_header: bool = False,
+        user_data: bytes = b"",
     ) -> None:  # fmt: skip
-        topic = topics.get(dds_name, data_schema, request_header)
+        topic = topics.get(dds_name, data_schema)
         self._writer: DataWriter[Any] = DataWriter(
             topics.participant.dds, topic, ros_qos.dds_qos(profile, user_data)
         )
@@ -97,9 +97,8 @@ class RawReader:
     def __init__(
         self, topics: Topics, dds_name: str, data_schema: str, profile: ros_qos.QosProfile,
         handler: Handler, dispatcher: Dispatcher, user_data: bytes = b"",
-        request_header: bool = False,
     ) -> None:  # fmt: skip
-        topic = topics.get(dds_name, data_schema, request_header)
+        topic = topics.get(dds_name, data_schema)
         self._reader: DataReader[Any] = DataReader(
             topics.participant.dds, topic, ros_qos.dds_qos(profile, user_data)
         )

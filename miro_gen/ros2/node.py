@@ -19,6 +19,7 @@ from miro_gen.ros2 import qos as ros_qos
 from miro_gen.ros2.domain import Participant
 from miro_gen.ros2.endpoints import Dispatcher, RawReader, RawWriter, Topics
 from miro_gen.ros2.graph import GraphAnnouncer, GraphView
+from miro_gen.ros2.rtps.participant import RtpsParticipant
 from miro_gen.ros2.types import Message, dds_type
 
 M = TypeVar("M", bound=Message)
@@ -34,6 +35,7 @@ class Context:
         self.dispatcher = Dispatcher(self.participant)
         self.announcer = GraphAnnouncer(self.participant, self.topics)
         self._graph: GraphView | None = None
+        self._rtps: RtpsParticipant | None = None
         self._lock = threading.Lock()
 
     @property
@@ -44,7 +46,21 @@ class Context:
                 self._graph = GraphView(self.participant, self.topics, self.dispatcher)
             return self._graph
 
+    @property
+    def rtps(self) -> RtpsParticipant:
+        """Our own RTPS participant (ros2/rtps), for what Fast DDS peers need and cyclonedds
+        cannot give them: service replies with their request's identity (made when first
+        asked: a service makes it)."""
+        with self._lock:
+            if self._rtps is None:
+                self._rtps = RtpsParticipant(self.participant.domain_id, b"enclave=/;")
+            return self._rtps
+
     def close(self) -> None:
+        with self._lock:
+            rtps, self._rtps = self._rtps, None
+        if rtps is not None:
+            rtps.close()
         self.dispatcher.stop()
         self.participant.close()
 
@@ -105,12 +121,12 @@ class Node:
 
     def writer(
         self, msg_type: type[Message], dds_topic: str, profile: ros_qos.QosProfile,
-        type_hash: str, request_header: bool = False,
+        type_hash: str,
     ) -> RawWriter:  # fmt: skip
         """A writer of this node (announced on the graph) on a DDS topic."""
         w = RawWriter(
             self.context.topics, dds_topic, msg_type._data_schema, profile,
-            ros_qos.type_hash_user_data(type_hash), request_header,
+            ros_qos.type_hash_user_data(type_hash),
         )  # fmt: skip
         self.context.announcer.add_endpoint(self.key, w.gid, reader=False)
         self._closers.append(lambda: self._drop(w.gid, w.close))
@@ -118,13 +134,13 @@ class Node:
 
     def reader(
         self, msg_type: type[Message], dds_topic: str, profile: ros_qos.QosProfile,
-        type_hash: str, handler: Callable[[bytes, Any], None], request_header: bool = False,
+        type_hash: str, handler: Callable[[bytes, Any], None],
     ) -> RawReader:  # fmt: skip
         """A reader of this node (announced on the graph) on a DDS topic."""
         ctx = self.context
         r = RawReader(
             ctx.topics, dds_topic, msg_type._data_schema, profile, handler, ctx.dispatcher,
-            ros_qos.type_hash_user_data(type_hash), request_header,
+            ros_qos.type_hash_user_data(type_hash),
         )  # fmt: skip
         ctx.announcer.add_endpoint(self.key, r.gid, reader=True)
         self._closers.append(lambda: self._drop(r.gid, r.close))

@@ -8,11 +8,11 @@ alignment is unchanged, 16 being a multiple of 8). A reply repeats its request's
 client takes the replies that carry its own id.
 
 Fast DDS (rmw_fastrtps) instead relates a reply to its request through the RTPS sample
-identity, sent as inline QoS (`related_sample_identity`), which Cyclone DDS can neither write
-nor read: services between a Cyclone DDS participant and a Fast DDS one do not interoperate
-(ros2/rmw_cyclonedds#184), and neither do this module's with rclpy on Fast DDS. They do with
-each other and with rmw_cyclonedds' nodes. Discovery sees them either way: rclpy on Fast DDS
-lists these services (`get_service_names_and_types`) and their nodes.
+identity: a request has no header, and its reply must carry the request's writer GUID and
+sequence number as inline QoS (`related_sample_identity`), which Cyclone DDS can neither write
+nor read (ros2/rmw_cyclonedds#184). So a `Service` has its reader and writer in the context's
+own RTPS participant (ros2/rtps) and answers both kinds of client (on this host). A `Client`
+speaks the rmw_cyclonedds layout only: it does not call services on Fast DDS.
 """
 
 from __future__ import annotations
@@ -27,7 +27,9 @@ from typing import Any, Generic, TypeVar
 from miro_gen.ros2 import names
 from miro_gen.ros2 import qos as ros_qos
 from miro_gen.ros2.node import Node
-from miro_gen.ros2.types import Message, service_parts
+from miro_gen.ros2.rtps import wire
+from miro_gen.ros2.rtps.participant import Sample
+from miro_gen.ros2.types import Message, dds_type, service_parts
 
 log = logging.getLogger("miro.ros2")
 
@@ -57,7 +59,13 @@ def split_header(data: bytes) -> tuple[int, int, bytes]:
 
 class Service(Generic[Req, Res]):
     """Answers the requests of one ROS 2 service with `handler(request) -> response`; a
-    request that does not decode is logged and dropped (its client times out)."""
+    request that does not decode is logged and dropped (its client times out).
+
+    Its request reader and reply writer are in the context's own RTPS participant (ros2/rtps),
+    not in cyclonedds: a Fast DDS client's request is related to its reply only through RTPS
+    sample identities, which cyclonedds hides. A request from a Fast DDS participant (vendor
+    eProsima) is answered with its sample identity as the reply's related_sample_identity; any
+    other's carries rmw_cyclonedds' request header, which its reply repeats."""
 
     def __init__(
         self, node: Node, srv_type: type[Message], name: str, handler: Callable[[Req], Res],
@@ -67,23 +75,47 @@ class Service(Generic[Req, Res]):
         self._request, self._response = service_parts(srv_type)
         self._handler = handler
         request_topic, reply_topic = names.service_to_dds(self.name)
-        h = srv_type._ros2_type_hash
-        self._writer = node.writer(self._response, reply_topic, qos, h, True)
-        self._reader = node.reader(self._request, request_topic, qos, h, self._on_request, True)
+        rtps, user_data = node.context.rtps, ros_qos.type_hash_user_data(srv_type._ros2_type_hash)
+        self._writer = rtps.writer(reply_topic, dds_type(self._response), user_data)
+        self._reader = rtps.reader(
+            request_topic, dds_type(self._request), self._on_request, user_data
+        )
+        announcer = node.context.announcer
+        announcer.add_endpoint(node.key, bytes(self._writer.guid), reader=False)
+        announcer.add_endpoint(node.key, bytes(rtps.guid.prefix + self._reader.entity), True)
 
-    def _on_request(self, data: bytes, info: Any) -> None:
+    def _on_request(self, sample: Sample) -> None:
+        fast_dds = sample.vendor == wire.EPROSIMA
         try:
-            client_id, seq, body = split_header(data)
+            if fast_dds:
+                client_id, seq, body = 0, 0, sample.payload
+            else:
+                client_id, seq, body = split_header(sample.payload)
             request = self._request.deserialize(body)
         except Exception as e:
             log.warning("service %s: a request that does not decode was dropped: %s", self.name, e)
             return
-        response = self._handler(request)
-        self._writer.write(with_header(response.serialize(), client_id, seq))
+        response = self._handler(request).serialize()
+        if not fast_dds:  # to every reader of the client's participant; the client picks its own
+            to = wire.Guid(sample.writer.prefix, wire.UNKNOWN_ENTITY)
+            self._writer.write_to(to, with_header(response, client_id, seq))
+            return
+        # rmw_fastrtps names its client's reply reader in the request's related_sample_identity
+        reader = sample.related_guid()
+        if reader is None or reader.prefix != sample.writer.prefix:
+            reader = wire.Guid(sample.writer.prefix, wire.UNKNOWN_ENTITY)
+        identity = wire.related_sample_identity(sample.writer, sample.seq)
+        self._writer.write_to(reader, response, identity)
 
 
 class Client(Generic[Req, Res]):
-    """Calls one ROS 2 service: `call(request, timeout)` → its response."""
+    """Calls one ROS 2 service: `call(request, timeout)` → its response.
+
+    Its request writer and reply reader are in the context's own RTPS participant (ros2/rtps):
+    a request goes to each service's request reader the peers announced, as that reader's
+    vendor expects it (a Fast DDS one: the bare body, our reply reader named in its
+    related_sample_identity; any other: rmw_cyclonedds' request header); the first reply
+    that names this client's request is the response."""
 
     def __init__(
         self, node: Node, srv_type: type[Message], name: str,
@@ -94,15 +126,24 @@ class Client(Generic[Req, Res]):
         self._id = secrets.randbits(64)
         self._seq = 0
         self._lock = threading.Lock()
-        self._pending: dict[int, list[Any]] = {}
-        request_topic, reply_topic = names.service_to_dds(self.name)
-        h = srv_type._ros2_type_hash
-        self._reader = node.reader(self._response, reply_topic, qos, h, self._on_reply, True)
-        self._writer = node.writer(self._request, request_topic, qos, h, True)
+        self._pending: dict[tuple[str, int], list[Any]] = {}
+        self._request_topic, self._reply_topic = names.service_to_dds(self.name)
+        self._rtps = rtps = node.context.rtps
+        user_data = ros_qos.type_hash_user_data(srv_type._ros2_type_hash)
+        self._reader = rtps.reader(
+            self._reply_topic, dds_type(self._response), self._on_reply, user_data
+        )
+        self._reader_guid = wire.Guid(rtps.prefix, self._reader.entity)
+        self._writer = rtps.writer(self._request_topic, dds_type(self._request), user_data)
+        announcer = node.context.announcer
+        announcer.add_endpoint(node.key, bytes(self._reader_guid), reader=True)
+        announcer.add_endpoint(node.key, bytes(self._writer.guid), reader=False)
 
     def service_is_ready(self) -> bool:
-        """Whether a service's request reader and reply writer are both matched."""
-        return self._writer.matched() > 0 and self._reader.matched() > 0
+        """Whether a service's request reader and reply writer are both announced."""
+        return bool(self._rtps.remote_readers(self._request_topic)) and (
+            self._rtps.remote_writer_count(self._reply_topic) > 0
+        )
 
     def wait_for_service(self, timeout: float = 10.0) -> bool:
         done = threading.Event()
@@ -115,31 +156,54 @@ class Client(Generic[Req, Res]):
         return True
 
     def call(self, request: Req, timeout: float = 10.0) -> Res:
+        body = request.serialize()
+        slot: list[Any] = [threading.Event()]
+        keys: list[tuple[str, int]] = []
         with self._lock:
             self._seq += 1
             seq = self._seq
-            slot: list[Any] = [threading.Event()]
-            self._pending[seq] = slot
+            keys.append(("c", seq))
+            self._pending[("c", seq)] = slot
+        fast_qos = wire.related_sample_identity(self._reader_guid, wire.UNKNOWN_SEQ)
         try:
-            self._writer.write(with_header(request.serialize(), self._id, seq))
+            for reader in self._rtps.remote_readers(self._request_topic):
+                if self._rtps.vendor_of(reader.prefix) == wire.EPROSIMA:
+                    with self._lock:  # the key is there before a reply can come
+                        n = self._writer.write_to(reader, body, fast_qos)
+                        keys.append(("f", n))
+                        self._pending[("f", n)] = slot
+                else:
+                    self._writer.write_to(reader, with_header(body, self._id, seq))
             if not slot[0].wait(timeout):
                 raise ServiceTimeout(f"service {self.name}: no reply within {timeout} s")
             return slot[1]  # type: ignore[no-any-return]
         finally:
             with self._lock:
-                self._pending.pop(seq, None)
+                for key in keys:
+                    self._pending.pop(key, None)
 
-    def _on_reply(self, data: bytes, info: Any) -> None:
-        try:
-            client_id, seq, body = split_header(data)
-        except ValueError:
-            return
-        if client_id != self._id:
-            return  # another client's reply
+    def _on_reply(self, sample: Sample) -> None:
+        if sample.vendor == wire.EPROSIMA:
+            raw = sample.inline_qos.get(wire.PID_RELATED_SAMPLE_IDENTITY)
+            raw = raw or sample.inline_qos.get(wire.PID_CUSTOM_RELATED_SAMPLE_IDENTITY)
+            if raw is None or len(raw) < 24:
+                return
+            if raw[:16] not in (bytes(self._reader_guid), bytes(self._writer.guid)):
+                return  # another client's reply
+            high, low = struct.unpack_from("<iI", raw, 16)
+            key, body = ("f", high << 32 | low), sample.payload
+        else:
+            try:
+                client_id, seq, body = split_header(sample.payload)
+            except ValueError:
+                return
+            if client_id != self._id:
+                return  # another client's reply
+            key = ("c", seq)
         with self._lock:
-            slot = self._pending.get(seq)
-        if slot is None:
-            return  # a reply to a call that gave up
+            slot = self._pending.get(key)
+        if slot is None or slot[0].is_set():
+            return  # a reply to a call that gave up, or a second reply
         try:
             slot.append(self._response.deserialize(body))
         except Exception as e:

@@ -54,21 +54,18 @@ def dds_type_name(scoped: str) -> str:
 
 
 @functools.cache
-def idl_struct(data_schema: str, request_header: bool = False) -> type[IdlStruct]:
+def idl_struct(data_schema: str) -> type[IdlStruct]:
     """The cyclonedds class describing the type whose data schema is `data_schema` (cached:
-    a class is made once per schema, as cyclonedds registers every class it makes). With
-    `request_header`, the type as rmw_cyclonedds sends service requests and replies: the
-    client's id and the sequence number (two 64-bit integers) before the members, under the
-    same name (cyclonedds checks what arrives against it)."""
+    a class is made once per schema, as cyclonedds registers every class it makes). Services
+    do not go through cyclonedds (ros2/services.py), so no type with rmw_cyclonedds' request
+    header is made here."""
     parsed = schema.read(data_schema)
     made: dict[str, type[IdlStruct]] = {}
     top = parsed.top.scoped
     for struct in parsed.structs.values():
         fields = {m.name: _field(m.type, made) for m in struct.members}
-        if request_header and struct.scoped == top:
-            fields = {"_client_id": t.uint64, "_sequence": t.int64, **fields}
         name = dds_type_name(struct.scoped)
-        label = name.replace("::", "_") + ("_with_header" if request_header else "")
+        label = name.replace("::", "_")
         made[struct.scoped] = make_idl_struct(label, name, fields)
     return made[top]
 

@@ -5,6 +5,12 @@ environment of tests/ros2_env.py. Prints one JSON document on stdout when done.
   peer.py pub TYPE TOPIC SPEC TIMEOUT       publish SPEC (JSON) at 20 Hz until stdin closes
   peer.py graph NODE TIMEOUT [SERVICE TYPE] wait for node NODE; print the graph (and whether a
                                             client of SERVICE sees it ready)
+  peer.py serve TYPE SERVICE TIMEOUT       answer SERVICE (SetBool: success=data, message
+                                            "rclpy <n>"; BasicTypes: the request changed as
+                                            test_ros2_runtime's miro service changes it) until
+                                            stdin closes; print the number of calls
+  peer.py call TYPE SERVICE SPECS TIMEOUT   call SERVICE with each request of SPECS (a JSON
+                                            list) in turn; print the responses (null: none)
 """
 
 from __future__ import annotations
@@ -102,6 +108,49 @@ def main() -> None:
                 rclpy.spin_once(node, timeout_sec=0.1)
                 break
         result = {"graph": graph(node), "service_ready": bool(client and client.service_is_ready())}
+    elif mode == "serve":
+        cls, service, timeout = sys.argv[2], sys.argv[3], float(sys.argv[4])
+        calls = [0]
+
+        def answer(request: Any, response: Any) -> Any:
+            calls[0] += 1
+            if hasattr(request, "data"):  # std_srvs/SetBool
+                response.success = request.data
+                response.message = f"rclpy {calls[0]}"
+                return response
+            response.bool_value = not request.bool_value
+            response.float64_value = request.float64_value * 2
+            response.int8_value = -request.int8_value
+            response.uint16_value = request.uint16_value + 1
+            response.int64_value = request.int64_value - 1
+            response.uint64_value = request.uint64_value // 2
+            response.string_value = request.string_value.upper()
+            return response
+
+        node.create_service(message_class(cls), service, answer)
+        print("ready", flush=True)
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            rclpy.spin_once(node, timeout_sec=0.05)
+            if select.select([sys.stdin], [], [], 0)[0] and not sys.stdin.readline():
+                break
+        result = {"calls": calls[0]}
+    elif mode == "call":
+        cls, service, specs, timeout = sys.argv[2], sys.argv[3], sys.argv[4], float(sys.argv[5])
+        client = node.create_client(message_class(cls), service)
+        deadline = time.monotonic() + timeout
+        ready = client.wait_for_service(timeout_sec=timeout)
+        responses: list[Any] = []
+        for spec in json.loads(specs) if ready else []:
+            left = deadline - time.monotonic()
+            if left <= 0:  # (a negative timeout would wait for ever)
+                responses.append(None)
+                continue
+            request = fill(message_class(cls).Request(), canon.expand(spec))
+            future = client.call_async(request)
+            rclpy.spin_until_future_complete(node, future, timeout_sec=left)
+            responses.append(canon.canon(future.result()) if future.done() else None)
+        result = {"ready": ready, "responses": responses}
     node.destroy_node()
     rclpy.shutdown()
     print(json.dumps(result))

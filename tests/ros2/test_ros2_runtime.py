@@ -7,7 +7,10 @@ and run as subprocesses (tests/ros2/peer.py). All on loopback: both sides get
   publisher's, for std_msgs, geometry_msgs and sensor_msgs types, a 1 MB Image among them;
 - rclpy's graph lists the miro node, its topics (with their types) and its service;
 - a miro client calls a miro service in another process over DDS (std_srvs/SetBool and a
-  service of this test's own), with rmw_cyclonedds' request header.
+  service of this test's own), with rmw_cyclonedds' request header;
+- an rclpy client (Fast DDS) calls miro services (std_srvs/SetBool, test_msgs/BasicTypes),
+  answered by miro's own RTPS participant (miro_gen/ros2/rtps) with related_sample_identity;
+- a miro client calls rclpy services (the same two) through that participant.
 """
 
 from __future__ import annotations
@@ -74,6 +77,7 @@ def ros_types(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
     for pkg in ("builtin_interfaces", "std_msgs", "geometry_msgs", "sensor_msgs", "service_msgs"):
         files += sorted(str(p) for p in (share / pkg / "msg").glob("*.msg"))
     files += sorted(str(p) for p in (share / "std_srvs" / "srv").glob("*.srv"))
+    files.append(str(share / "test_msgs" / "srv" / "BasicTypes.srv"))
     done = run_miro_idl("-I", str(share), "-I", str(own.parent.parent), "-o", str(out), *files)
     assert done.returncode == 0, done.stderr
     sys.path.insert(0, str(out))
@@ -252,3 +256,99 @@ def test_miro_client_calls_a_miro_service_in_another_process_over_dds(
         assert server.stdin is not None
         server.stdin.close()
         server.wait(timeout=30)
+
+
+def _basic_reply(r: Any) -> Any:
+    """test_msgs/BasicTypes: each value changed so that an echo would not pass."""
+    out = _cls("test_msgs/srv/BasicTypes_Response")()
+    out.bool_value = not r.bool_value
+    out.float64_value = r.float64_value * 2
+    out.int8_value = -r.int8_value
+    out.uint16_value = r.uint16_value + 1
+    out.int64_value = r.int64_value - 1
+    out.uint64_value = r.uint64_value // 2
+    out.string_value = r.string_value.upper()
+    return out
+
+
+def test_rclpy_client_on_fast_dds_calls_miro_services(ros_types: Path, domain: int) -> None:
+    from miro_gen.ros2.node import Node
+    from miro_gen.ros2.services import Service
+
+    SetBool, Response = _cls("std_srvs/srv/SetBool"), _cls("std_srvs/srv/SetBool_Response")
+    calls: list[bool] = []
+
+    def enable(r: Any) -> Any:
+        calls.append(r.data)
+        return Response(success=r.data, message=f"set to {r.data} ({len(calls)})")
+
+    basic = [{"bool_value": i % 2 == 0, "float64_value": 0.5 * i, "int8_value": -i,
+              "uint16_value": 1000 + i, "int64_value": -(2**40) * i, "uint64_value": 2**63 + i,
+              "string_value": f"call {i}, ünïcode"} for i in range(5)]  # fmt: skip
+    with Node("miro_server", namespace="/robot") as node:
+        Service(node, SetBool, "enable", enable)
+        Service(node, _cls("test_msgs/srv/BasicTypes"), "/basic", _basic_reply)
+        on_off = [{"data": i % 3 != 0} for i in range(10)]
+        first = _peer(domain, "call", "std_srvs/srv/SetBool", "/robot/enable",
+                      json.dumps(on_off), "90")  # fmt: skip
+        second = _peer(domain, "call", "test_msgs/srv/BasicTypes", "/basic",
+                       json.dumps(basic), "90")  # fmt: skip
+        got, got_basic = _result(first), _result(second)
+    assert got["ready"] is True
+    # each reply went to its own request: the n-th call saw the n-th answer
+    assert got["responses"] == [
+        {"success": s["data"], "message": f"set to {s['data']} ({i + 1})"}
+        for i, s in enumerate(on_off)
+    ]
+    assert calls == [s["data"] for s in on_off]  # one call each, none answered twice
+    assert got_basic["ready"] is True
+    for spec, reply in zip(basic, got_basic["responses"], strict=True):
+        assert reply is not None
+        assert reply["bool_value"] is (not spec["bool_value"])
+        assert reply["float64_value"] == spec["float64_value"] * 2
+        assert reply["int8_value"] == -spec["int8_value"]
+        assert reply["uint16_value"] == spec["uint16_value"] + 1
+        assert reply["int64_value"] == spec["int64_value"] - 1
+        assert reply["uint64_value"] == spec["uint64_value"] // 2
+        assert reply["string_value"] == spec["string_value"].upper()
+
+
+def test_miro_client_calls_rclpy_services_on_fast_dds(ros_types: Path, domain: int) -> None:
+    from miro_gen.ros2.node import Node
+    from miro_gen.ros2.services import Client
+
+    enable = _peer(domain, "serve", "std_srvs/srv/SetBool", "/robot/enable", "120",
+                   stdin=subprocess.PIPE)  # fmt: skip
+    basic = _peer(domain, "serve", "test_msgs/srv/BasicTypes", "/basic", "120",
+                  stdin=subprocess.PIPE)  # fmt: skip
+    try:
+        for peer in (enable, basic):
+            assert peer.stdout is not None and peer.stdout.readline().strip() == "ready"
+        with Node("miro_caller", namespace="/robot") as node:
+            SetBool = _cls("std_srvs/srv/SetBool_Request")
+            on = Client(node, _cls("std_srvs/srv/SetBool"), "enable")
+            types = Client(node, _cls("test_msgs/srv/BasicTypes"), "/basic")
+            assert on.wait_for_service(60) and types.wait_for_service(60)
+            replies = [on.call(SetBool(data=i % 2 == 0), timeout=30) for i in range(10)]
+            assert [(r.success, r.message) for r in replies] == [
+                (i % 2 == 0, f"rclpy {i + 1}") for i in range(10)
+            ]
+            Req = _cls("test_msgs/srv/BasicTypes_Request")
+            for i in range(5):
+                req = Req(bool_value=i % 2 == 0, float64_value=0.5 * i, int8_value=-i,
+                          uint16_value=1000 + i, int64_value=-(2**40) * i,
+                          uint64_value=2**63 + i, string_value=f"call {i}, ünïcode")  # fmt: skip
+                want = _basic_reply(req)
+                got = types.call(req, timeout=30)
+                assert canon.canon(got) == canon.canon(want)
+    finally:
+        for peer in (enable, basic):
+            assert peer.stdin is not None
+            peer.stdin.close()
+    done = []
+    for peer in (enable, basic):
+        assert peer.stdout is not None and peer.stderr is not None
+        out, err = peer.stdout.read(), peer.stderr.read()
+        assert peer.wait(timeout=60) == 0, err[-3000:]
+        done.append(json.loads(out)["calls"])
+    assert done == [10, 5]  # each call answered once
