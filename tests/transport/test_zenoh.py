@@ -198,3 +198,58 @@ def test_the_base_records_every_robots_events_from_the_fleet_channel(
         for h in hosts:
             h.kill()
             h.wait()
+
+
+def test_a_name_bound_once_its_holder_let_it_go_vanishes_with_its_server() -> None:
+    """The second server of a name binds it from its leases' thread once the first is gone (the
+    retry path); its liveliness token must come with it, so that when this server is killed in
+    turn its name goes at once, not when its lease (two minutes here) ends."""
+    import signal
+    import subprocess
+    import sys
+
+    from loopback import eventually
+    from repo_paths import TESTS
+
+    naming = NamingProcess(options=("--zenoh", "--hold", "0"))  # a lapsed name is free at once
+    started: list[subprocess.Popen[str]] = []
+
+    def spawn(context: str) -> subprocess.Popen[str]:
+        proc = subprocess.Popen(
+            [sys.executable, str(TESTS / "procs" / "named_example.py"), "--transport", "zenoh",
+             "--naming", naming.endpoint, "-MNC", context, "shared/Retried"],
+            stdout=subprocess.PIPE, text=True, env=service_env(MIRO_TEST_LEASE="120"),
+        )  # fmt: skip
+        started.append(proc)
+        assert proc.stdout is not None and proc.stdout.readline().strip() == "READY"
+        return proc
+
+    client = Client(["t", "--transport", "zenoh", "--naming", naming.endpoint])
+
+    def holder() -> str | None:
+        return {e.name: e.endpoint for e in client.naming.entries("shared/")}.get("shared/Retried")
+
+    def tokens() -> set[str]:
+        replies = client.zenoh.liveliness().get(keys.name_token("*", "shared/Retried"))
+        return {str(r.ok.key_expr).split("/")[2] for r in replies if r.ok is not None}
+
+    try:
+        first = spawn("robot1")
+        second = spawn("robot9")  # another service: it waits for the name
+        first_endpoint = holder()
+        assert first_endpoint is not None and keys.zid_of(first_endpoint) in tokens()
+        first.send_signal(signal.SIGKILL)
+        first.wait(10)
+        eventually(lambda: holder() not in (None, first_endpoint), 30)
+        second_endpoint = holder()
+        assert second_endpoint is not None
+        eventually(lambda: tokens() == {keys.zid_of(second_endpoint)}, 30)
+        second.send_signal(signal.SIGKILL)
+        second.wait(10)
+        eventually(lambda: holder() is None, 30)  # (long before its 120 s lease ends)
+    finally:
+        client.close()
+        for proc in started:
+            proc.kill()
+            proc.wait(10)
+        naming.stop()
