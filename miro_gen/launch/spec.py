@@ -3,6 +3,7 @@
     [launch]
     context = "robot1"                      # -MNC of every service (default: the host name)
     transport = "zenoh"                     # the backbone (default: zmq; docs/FLEET.md)
+    fleet_events = { EventChannel = ["Odometry"] }  # types every robot's channel shares
 
     [naming]                                # start a naming service (else use a running one)
     channels = ["EventChannel"]
@@ -53,7 +54,7 @@ SECONDS_RANGES = {
     "stable_after": (1.0, 86400.0),
 }
 
-_LAUNCH_KEYS = {"context", "naming", "grace", "log_level", "colour", "transport"}
+_LAUNCH_KEYS = {"context", "naming", "grace", "log_level", "colour", "transport", "fleet_events"}
 _RESTART_KEYS = {"restart", "restart_delay", "restart_delay_max", "restart_limit", "stable_after"}
 _NAMING_KEYS = {
     "host", "endpoint", "channels", "announce", "insecure", "log_level", *_RESTART_KEYS
@@ -76,6 +77,7 @@ _SERVICE_KEYS = {
     "env",
     "log_level",
     "transport",
+    "fleet_events",
 }
 
 
@@ -130,6 +132,7 @@ class ServiceSpec:
     env: dict[str, str] = field(default_factory=dict)
     log_level: int | None = None
     transport: str | None = None  # zmq or zenoh (MIRO_TRANSPORT); None: the environment's
+    fleet_events: dict[str, frozenset[str]] | None = None  # MIRO_FLEET_EVENTS; None: as is
 
 
 @dataclass
@@ -157,6 +160,7 @@ class LaunchSpec:
     log_level: int | None = None
     colour: str = "auto"
     transport: str | None = None  # [launch] transport: the services' and the naming service's
+    fleet_events: dict[str, frozenset[str]] | None = None  # [launch] fleet_events
     hosts: dict[str, str | None] = field(default_factory=dict)  # name -> address to advertise
     lines: KeyLines | None = None
 
@@ -311,6 +315,7 @@ def parse_launch_text(text: str, path: Path) -> LaunchSpec:
         spec.grace = grace
     spec.log_level = r.level(launch, "launch")
     spec.transport = _transport(r, launch, "launch")
+    spec.fleet_events = _fleet_events(r, launch, "launch")
     colour = r.typed(launch, "colour", str, "auto, always or never", "launch")
     if colour is not None:
         if colour not in ("auto", "always", "never"):
@@ -360,6 +365,33 @@ def _transport(r: _Reader, table: dict[str, Any], *where: str) -> str | None:
         )
         return None
     return value  # type: ignore[no-any-return]
+
+
+def _fleet_events(
+    r: _Reader, table: dict[str, Any], *where: str
+) -> dict[str, frozenset[str]] | None:
+    """`fleet_events = { CHANNEL = ["TYPE", ...] }`: the event types each channel (by its name
+    without context) shares with every robot over Zenoh (transport.zenoh.fleet)."""
+    from miro_gen.transport.usage import UsageError
+    from miro_gen.transport.zenoh.fleet import check_name
+
+    if "fleet_events" not in table:
+        return None
+    shared: dict[str, frozenset[str]] = {}
+    for channel, types in r.table(table["fleet_events"], *where, "fleet_events").items():
+        place = (*where, "fleet_events", channel)
+        names = [types] if isinstance(types, str) else types
+        if not isinstance(names, list) or not all(isinstance(t, str) for t in names):
+            r.error(f"fleet_events.{channel} must be a list of event types", *place)
+            continue
+        if not names:
+            r.error(f'fleet_events.{channel} must name event types (or ["*"])', *place)
+            continue
+        try:
+            shared[check_name(channel, "channel")] = frozenset(check_name(t, "type") for t in names)
+        except UsageError as e:
+            r.error(f"fleet_events: {e}", *place)
+    return shared
 
 
 def _naming_url(r: _Reader, text: str, *where: str) -> str | None:
@@ -515,6 +547,9 @@ def _service(r: _Reader, name: str, table: dict[str, Any], spec: LaunchSpec) -> 
         service.log_level = spec.log_level
     own = _transport(r, table, *where)
     service.transport = own or spec.transport
+    service.fleet_events = _fleet_events(r, table, *where)
+    if service.fleet_events is None:
+        service.fleet_events = spec.fleet_events
     if spec.naming is not None and own is not None and own != (spec.transport or "zmq"):
         r.error(
             f"transport {own!r} is not the backbone of the naming service this "

@@ -413,6 +413,10 @@ class Supervisor:
             )
         if spec.transport is not None:
             env["MIRO_TRANSPORT"] = spec.transport
+        if spec.fleet_events is not None:
+            from miro_gen.transport.zenoh.fleet import FLEET_ENV, text_of
+
+            env[FLEET_ENV] = text_of(spec.fleet_events)
         env.update(spec.env)
         params = ""
         if spec.params_file is not None or spec.parameters:

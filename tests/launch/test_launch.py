@@ -515,15 +515,21 @@ def test_the_transport_key_is_checked_with_one_line_errors(tmp_path: Path) -> No
         """
         [launch]
         transport = "zenho"
+        fleet_events = { EventChannel = ["Odometry", 3], "robot1/Events" = "*" }
 
         [services.a]
         run = "a.py"
         transport = 3
+        fleet_events = { EventChannel = [] }
         """,
     )
     assert got == [
         "robot.toml:2: error: transport must be zmq or zenoh, not 'zenho' (did you mean 'zenoh'?)",
-        "robot.toml:6: error: transport must be zmq or zenoh, not 3",
+        "robot.toml:3: error: fleet_events.EventChannel must be a list of event types",
+        "robot.toml:3: error: fleet_events: channel 'robot1/Events' cannot be shared: a name "
+        "without / * ; = , or spaces",
+        "robot.toml:7: error: transport must be zmq or zenoh, not 3",
+        "robot.toml:8: error: fleet_events.EventChannel must name event types (or [\"*\"])",
     ]
     got = errors(
         tmp_path,
@@ -555,6 +561,7 @@ def test_a_file_on_zenoh_starts_the_router_and_gives_its_services_the_backbone(
         """
         [launch]
         transport = "zenoh"
+        fleet_events = { E = ["T", "U"] }
 
         [naming]
         endpoint = "tcp://127.0.0.1:5998"
@@ -565,10 +572,12 @@ def test_a_file_on_zenoh_starts_the_router_and_gives_its_services_the_backbone(
         [services.b]
         command = ["sh", "-c", "echo $MIRO_TRANSPORT"]
         transport = "zenoh"
+        fleet_events = {}
         """,
     )
     spec = read_launch_file(path)
     assert spec.transport == "zenoh" and [s.transport for s in spec.services] == ["zenoh"] * 2
+    assert [s.fleet_events for s in spec.services] == [{"E": frozenset({"T", "U"})}, {}]
     assert launch_main([str(path), "--check"]) == 0
     row = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("naming "))
     assert "naming --endpoint tcp://127.0.0.1:5998 --zenoh" in row, row

@@ -253,3 +253,64 @@ def test_a_name_bound_once_its_holder_let_it_go_vanishes_with_its_server() -> No
             proc.kill()
             proc.wait(10)
         naming.stop()
+
+
+def test_a_robots_channel_hears_the_types_the_fleet_shares_from_every_other_robot(
+    naming: NamingProcess, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """NotifyMulticast's forwarding: with ExampleEvent of EventChannel shared (MIRO_FLEET_EVENTS),
+    a consumer of robot2's own channel hears robot1's ExampleEvents under robot1 as the domain,
+    not its other types, and robot2's own events once each."""
+    from loopback import Recorder, eventually
+
+    from miro_gen import EventChannelFactory, StructuredPushSupplier
+
+    monkeypatch.setenv("MIRO_FLEET_EVENTS", "EventChannel=ExampleEvent")
+    zenoh_options = ("--transport", "zenoh")
+    robots = [RunningServer(naming.endpoint, f"robot{i}", *zenoh_options) for i in (1, 2)]
+    try:
+        channels = [EventChannelFactory(r.server).create_channel("EventChannel") for r in robots]
+        suppliers = [StructuredPushSupplier(c) for c in channels]
+        own = Recorder(channels[1])  # (robot2's own channel, as exampleD finds it)
+        own.set_subscriptions([("*", "*")])
+        assert own.channel.name == "robot2/EventChannel"
+        # robot1's supplier counts robot2's consumer for the shared type
+        eventually(lambda: suppliers[0].has_subscribers("ExampleEvent"))
+        eventually(lambda: suppliers[1].has_subscribers("OtherEvent"))
+        for n, s in enumerate(suppliers):
+            for type_name in ("OtherEvent", "ExampleEvent"):
+                s.push(type_name, Miro.ExampleEventIDL(n, Miro.ExampleStructIDL(n, n)))
+        eventually(lambda: len(own.events) >= 3)
+        for s in suppliers:  # a last one of robot2's: everything before it has come
+            s.push("ExampleEvent", Miro.ExampleEventIDL(9, Miro.ExampleStructIDL(9, 9)))
+        eventually(lambda: len(own.events) >= 5)
+        got = sorted((e.domain_name, e.type_name, e.payload.counter) for e in own.events)
+        assert got == [
+            ("robot1", "ExampleEvent", 0),
+            ("robot1", "ExampleEvent", 9),
+            ("robot2", "ExampleEvent", 1),
+            ("robot2", "ExampleEvent", 9),
+            ("robot2", "OtherEvent", 1),
+        ]
+    finally:
+        for r in robots:
+            r.stop()
+
+
+def test_the_shared_types_are_read_with_one_line_errors() -> None:
+    from miro_gen.transport.zenoh import fleet
+
+    assert fleet.parse("EventChannel=Odometry, RangeScan;Other=*") == {
+        "EventChannel": frozenset({"Odometry", "RangeScan"}),
+        "Other": frozenset({"*"}),
+    }
+    assert fleet.parse(fleet.text_of({"E": frozenset({"B", "A"})})) == {"E": frozenset("AB")}
+    for bad in ("EventChannel", "EventChannel=", "robot1/EventChannel=Odometry", "E=a b"):
+        with pytest.raises(UsageError, match="MIRO_FLEET_EVENTS: "):
+            fleet.parse(bad)
+    selectors = fleet.selectors("*/E", b"", frozenset({"T"}))
+    assert selectors == [("miro/ev/$*%2FE/*/T", b"")]
+    assert fleet.selectors("*/E", topic("robot1", "U"), frozenset({"T"})) == []
+    assert fleet.selectors("*/E", b"robot1\0", frozenset({"T"})) == [
+        ("miro/ev/$*%2FE/robot1/T", topic("robot1", "T"))
+    ]
