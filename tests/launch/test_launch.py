@@ -529,7 +529,7 @@ def test_the_transport_key_is_checked_with_one_line_errors(tmp_path: Path) -> No
         "robot.toml:3: error: fleet_events: channel 'robot1/Events' cannot be shared: a name "
         "without / * ; = , or spaces",
         "robot.toml:7: error: transport must be zmq or zenoh, not 3",
-        "robot.toml:8: error: fleet_events.EventChannel must name event types (or [\"*\"])",
+        'robot.toml:8: error: fleet_events.EventChannel must name event types (or ["*"])',
     ]
     got = errors(
         tmp_path,
