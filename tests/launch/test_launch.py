@@ -623,3 +623,31 @@ def test_the_manuals_examples_run_over_zenoh_from_a_launch_file(tmp_path: Path) 
         proc.proc.send_signal(signal.SIGINT)
         assert proc.proc.wait(30) == 0
     assert any("Zenoh router" in line for line in proc.lines), proc.lines
+
+
+def test_a_zenoh_router_on_another_host_must_be_named_not_discovered(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = write(
+        tmp_path,
+        "robot.toml",
+        """
+        [launch]
+        transport = "zenoh"
+
+        [hosts.base]
+        [hosts.robot]
+
+        [naming]
+        host = "base"
+        endpoint = "tcp://0.0.0.0:2809"
+
+        [services.a]
+        command = "true"
+        host = "robot"
+        """,
+    )
+    assert launch_main([str(path), "--check", "--host", "robot"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"{path}: error: the services of robot cannot find the Zenoh router")
+    assert len(err.splitlines()) == 1
