@@ -2,6 +2,8 @@
 
     [launch]
     context = "robot1"                      # -MNC of every service (default: the host name)
+    transport = "zenoh"                     # the backbone (default: zmq; docs/FLEET.md)
+    fleet_events = { EventChannel = ["Odometry"] }  # types every robot's channel shares
 
     [naming]                                # start a naming service (else use a running one)
     channels = ["EventChannel"]
@@ -52,9 +54,11 @@ SECONDS_RANGES = {
     "stable_after": (1.0, 86400.0),
 }
 
-_LAUNCH_KEYS = {"context", "naming", "grace", "log_level", "colour"}
+_LAUNCH_KEYS = {"context", "naming", "grace", "log_level", "colour", "transport", "fleet_events"}
 _RESTART_KEYS = {"restart", "restart_delay", "restart_delay_max", "restart_limit", "stable_after"}
-_NAMING_KEYS = {"host", "endpoint", "channels", "announce", "log_level", *_RESTART_KEYS}
+_NAMING_KEYS = {
+    "host", "endpoint", "channels", "announce", "insecure", "log_level", *_RESTART_KEYS
+}  # fmt: skip
 _HOST_KEYS = {"address"}
 _SERVICE_KEYS = {
     "run",
@@ -72,6 +76,8 @@ _SERVICE_KEYS = {
     "required",
     "env",
     "log_level",
+    "transport",
+    "fleet_events",
 }
 
 
@@ -125,6 +131,8 @@ class ServiceSpec:
     required: bool = True
     env: dict[str, str] = field(default_factory=dict)
     log_level: int | None = None
+    transport: str | None = None  # zmq or zenoh (MIRO_TRANSPORT); None: the environment's
+    fleet_events: dict[str, frozenset[str]] | None = None  # MIRO_FLEET_EVENTS; None: as is
 
 
 @dataclass
@@ -136,6 +144,7 @@ class NamingSpec:
     host: str | None = None
     channels: list[str] = field(default_factory=list)
     announce: bool = True
+    insecure: bool = False  # beyond loopback without a key (Zenoh's router: docs/FLEET.md)
     restart: RestartPolicy = field(default_factory=lambda: RestartPolicy("always", limit=None))
     log_level: int | None = None
 
@@ -150,6 +159,8 @@ class LaunchSpec:
     grace: float = 5.0
     log_level: int | None = None
     colour: str = "auto"
+    transport: str | None = None  # [launch] transport: the services' and the naming service's
+    fleet_events: dict[str, frozenset[str]] | None = None  # [launch] fleet_events
     hosts: dict[str, str | None] = field(default_factory=dict)  # name -> address to advertise
     lines: KeyLines | None = None
 
@@ -303,6 +314,8 @@ def parse_launch_text(text: str, path: Path) -> LaunchSpec:
     if grace is not None:
         spec.grace = grace
     spec.log_level = r.level(launch, "launch")
+    spec.transport = _transport(r, launch, "launch")
+    spec.fleet_events = _fleet_events(r, launch, "launch")
     colour = r.typed(launch, "colour", str, "auto, always or never", "launch")
     if colour is not None:
         if colour not in ("auto", "always", "never"):
@@ -337,6 +350,50 @@ def _context(r: _Reader, table: dict[str, Any], *where: str) -> str | None:
     return context  # type: ignore[no-any-return]
 
 
+def _transport(r: _Reader, table: dict[str, Any], *where: str) -> str | None:
+    """The backbone a table names (zmq or zenoh; docs/FLEET.md), if it names one."""
+    from miro_gen.service.options import TRANSPORTS
+
+    value = r.typed(table, "transport", str, " or ".join(TRANSPORTS), *where)
+    if value is not None and value not in TRANSPORTS:
+        close = difflib.get_close_matches(value, TRANSPORTS, 1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        r.error(
+            f"transport must be {' or '.join(TRANSPORTS)}, not {value!r}{hint}",
+            *where,
+            "transport",
+        )
+        return None
+    return value  # type: ignore[no-any-return]
+
+
+def _fleet_events(
+    r: _Reader, table: dict[str, Any], *where: str
+) -> dict[str, frozenset[str]] | None:
+    """`fleet_events = { CHANNEL = ["TYPE", ...] }`: the event types each channel (by its name
+    without context) shares with every robot over Zenoh (transport.zenoh.fleet)."""
+    from miro_gen.transport.usage import UsageError
+    from miro_gen.transport.zenoh.fleet import check_name
+
+    if "fleet_events" not in table:
+        return None
+    shared: dict[str, frozenset[str]] = {}
+    for channel, types in r.table(table["fleet_events"], *where, "fleet_events").items():
+        place = (*where, "fleet_events", channel)
+        names = [types] if isinstance(types, str) else types
+        if not isinstance(names, list) or not all(isinstance(t, str) for t in names):
+            r.error(f"fleet_events.{channel} must be a list of event types", *place)
+            continue
+        if not names:
+            r.error(f'fleet_events.{channel} must name event types (or ["*"])', *place)
+            continue
+        try:
+            shared[check_name(channel, "channel")] = frozenset(check_name(t, "type") for t in names)
+        except UsageError as e:
+            r.error(f"fleet_events: {e}", *place)
+    return shared
+
+
 def _naming_url(r: _Reader, text: str, *where: str) -> str | None:
     from miro_gen.service.options import UsageError, naming_endpoint
 
@@ -369,6 +426,9 @@ def _naming(r: _Reader, table: dict[str, Any], spec: LaunchSpec) -> NamingSpec:
     announce = r.typed(table, "announce", bool, "true or false", "naming")
     if announce is not None:
         naming.announce = announce
+    insecure = r.typed(table, "insecure", bool, "true or false", "naming")
+    if insecure is not None:
+        naming.insecure = insecure
     naming.restart = r.policy(table, naming.restart, "naming")
     naming.log_level = r.level(table, "naming")
     return naming
@@ -485,6 +545,18 @@ def _service(r: _Reader, name: str, table: dict[str, Any], spec: LaunchSpec) -> 
     service.log_level = r.level(table, *where)
     if service.log_level is None:
         service.log_level = spec.log_level
+    own = _transport(r, table, *where)
+    service.transport = own or spec.transport
+    service.fleet_events = _fleet_events(r, table, *where)
+    if service.fleet_events is None:
+        service.fleet_events = spec.fleet_events
+    if spec.naming is not None and own is not None and own != (spec.transport or "zmq"):
+        r.error(
+            f"transport {own!r} is not the backbone of the naming service this "
+            f"file starts ({spec.transport or 'zmq'}: [launch] transport)",
+            *where,
+            "transport",
+        )
     return service
 
 

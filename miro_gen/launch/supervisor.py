@@ -31,14 +31,13 @@ from typing import Any
 
 from miro_gen.launch.console import Console, Row, since
 from miro_gen.launch.documents import write_parameters
+from miro_gen.launch.names import NameWatcher
 from miro_gen.launch.spec import LaunchSpec, RestartPolicy, ServiceSpec, project_root
 from miro_gen.launch.tree import ProcessTree, kill, left, send
 
 NAMING_LABEL = "naming"
 NAMING_READY = "naming service at"
 POLL = 0.1  # seconds between looks at the children when nothing wakes the loop
-NAMES_POLL = 0.25  # seconds between looks at the naming service's names
-FIRST_POLL = 0.02  # seconds between looks while it does not answer yet
 
 
 class PlanError(Exception):
@@ -55,6 +54,13 @@ class Part:
     naming_url: str | None  # None: the services' own default (MIRO_NAMING, or 127.0.0.1:2809)
     others: dict[str, str]  # services of the file that run on other hosts -> their host
     discover: bool = False  # find the naming service by its announcement (multicast DNS)
+
+
+def backbone(spec: LaunchSpec) -> str:
+    """The file's backbone: its `[launch] transport`, else the environment's (MIRO_TRANSPORT),
+    else ZeroMQ. The naming service it starts, and the watch on names, are that backbone's."""
+    chosen = spec.transport or os.environ.get("MIRO_TRANSPORT", "").strip().lower()
+    return "zenoh" if chosen == "zenoh" else "zmq"
 
 
 def this_host() -> str:
@@ -101,6 +107,12 @@ def plan(spec: LaunchSpec, host: str | None = None) -> Part:
                 f'{naming.host} is: it is not announced; give [launch] naming = "tcp://'
                 f'ADDRESS:PORT", or [hosts.{naming.host}] address'
             )
+        elif backbone(spec) == "zenoh":
+            raise PlanError(
+                f"the services of {host} cannot find the Zenoh router on {naming.host}: it is "
+                f'not announced (no multicast DNS on Zenoh); give [launch] naming = "tcp://'
+                f'ADDRESS:PORT", or [hosts.{naming.host}] address'
+            )
         else:
             discover = True  # the one the naming host announces (multicast DNS)
     for s in chosen:
@@ -128,6 +140,10 @@ def naming_service(spec: LaunchSpec) -> ServiceSpec:
     assert spec.naming is not None
     n = spec.naming
     argv = [sys.executable, "-u", "-m", "miro_gen.cli.main", "naming", "--endpoint", n.endpoint]
+    if backbone(spec) == "zenoh":  # the Zenoh router and the registry beside it
+        argv.append("--zenoh")
+    if n.insecure:
+        argv.append("--insecure")
     for channel in n.channels:
         argv += ["--channel", channel]
     address = spec.hosts.get(n.host or "") if n.host else None
@@ -186,71 +202,6 @@ def exit_text(code: int) -> str:
         return f"signal {-code}"
 
 
-class NameWatcher:
-    """Looks at the naming service's names from a thread of its own: whether it answers, and
-    which names are bound."""
-
-    def __init__(self, url: str, changed: threading.Event | None = None) -> None:
-        self.url = url
-        self.answering = False
-        self.names: frozenset[str] = frozenset()
-        self.changed = changed if changed is not None else threading.Event()
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="launch-names", daemon=True)
-        self._thread.start()
-
-    def _run(self) -> None:
-        import MiroNaming
-        import zmq
-
-        from miro_gen.exceptions import SystemException
-        from miro_gen.runtime.cdr import ObjectRef
-        from miro_gen.service.options import UsageError, parse_common_options
-        from miro_gen.transport import sockets
-        from miro_gen.transport.naming.client import NAMING_KEY, list_entries
-        from miro_gen.transport.rpc.invoker import ZmqInvoker
-
-        context: zmq.Context[Any] = zmq.Context()
-        try:  # the key and limits its services get from the environment (or the default key)
-            env, _ = parse_common_options([])
-            policy = sockets.policy_for(
-                keys=env.keys,
-                insecure=env.insecure,
-                max_message_size=env.max_message_size,
-                talks_to=sockets.endpoint_host(self.url),
-            )
-            sockets.configure(context, policy)
-        except UsageError:
-            pass  # no key where one is needed: the services say so, and fail
-        invoker = ZmqInvoker(context)
-        ref = ObjectRef(MiroNaming.Registry._repo_id, self.url, NAMING_KEY)
-        registry = MiroNaming.Registry(ref, invoker, timeout=1.0)
-        try:
-            while not self._stop.is_set():
-                try:
-                    names = frozenset(e.name for e in list_entries(registry))
-                    answering = True
-                except SystemException:
-                    names, answering = frozenset(), False
-                if names != self.names or answering != self.answering:
-                    self.names, self.answering = names, answering
-                    self.changed.set()
-                # quickly until it first answers: everything waits for that
-                self._stop.wait(NAMES_POLL if answering else FIRST_POLL)
-        finally:
-            invoker.close()
-            context.destroy(linger=0)
-
-    def bound(self, name: str, context: str) -> bool:
-        if "/" in name:
-            return name in self.names
-        return f"{context}/{name}" in self.names or name in self.names
-
-    def close(self) -> None:
-        self._stop.set()
-        self._thread.join(3)
-
-
 class Supervisor:
     """Runs `part` of `spec`, writing to `console`, until `stop()` or a required service fails;
     `run()` returns the exit status (0, or 1 when a required service could not stay up)."""
@@ -279,7 +230,7 @@ class Supervisor:
 
     def run(self) -> int:
         if self.naming_url is not None:
-            self.watcher = NameWatcher(self.naming_url, self.wake)
+            self.watcher = NameWatcher(self.naming_url, self.wake, backbone(self.spec))
         elif self.part.discover:
             threading.Thread(target=self._discover, name="launch-discover", daemon=True).start()
         self.console.show_table(self.rows)
@@ -322,7 +273,7 @@ class Supervisor:
             if found:
                 url = found[0].url()
                 self.console.note(f"naming service found at {url}, announced by {found[0].host}")
-                self.watcher = NameWatcher(url, self.wake)
+                self.watcher = NameWatcher(url, self.wake, backbone(self.spec))
                 self.naming_url = url
                 self.wake.set()
                 return
@@ -460,6 +411,12 @@ class Supervisor:
             env["PYTHONPATH"] = os.pathsep.join(
                 [str(generated), str(self.project), *filter(None, [env.get("PYTHONPATH")])]
             )
+        if spec.transport is not None:
+            env["MIRO_TRANSPORT"] = spec.transport
+        if spec.fleet_events is not None:
+            from miro_gen.transport.zenoh.fleet import FLEET_ENV, text_of
+
+            env[FLEET_ENV] = text_of(spec.fleet_events)
         env.update(spec.env)
         params = ""
         if spec.params_file is not None or spec.parameters:

@@ -503,3 +503,151 @@ def test_the_demo_launch_file_runs_the_manuals_examples() -> None:
         assert proc.proc.wait(30) == 0
     for pid in pids:
         eventually(lambda pid=pid: not alive(pid))  # type: ignore[misc]
+
+
+# ---- the backbone: transport = "zenoh" (docs/FLEET.md) -------------------------------------------
+
+
+def test_the_transport_key_is_checked_with_one_line_errors(tmp_path: Path) -> None:
+    write(tmp_path, "a.py", "print('a')\n")
+    got = errors(
+        tmp_path,
+        """
+        [launch]
+        transport = "zenho"
+        fleet_events = { EventChannel = ["Odometry", 3], "robot1/Events" = "*" }
+
+        [services.a]
+        run = "a.py"
+        transport = 3
+        fleet_events = { EventChannel = [] }
+        """,
+    )
+    assert got == [
+        "robot.toml:2: error: transport must be zmq or zenoh, not 'zenho' (did you mean 'zenoh'?)",
+        "robot.toml:3: error: fleet_events.EventChannel must be a list of event types",
+        "robot.toml:3: error: fleet_events: channel 'robot1/Events' cannot be shared: a name "
+        "without / * ; = , or spaces",
+        "robot.toml:7: error: transport must be zmq or zenoh, not 3",
+        'robot.toml:8: error: fleet_events.EventChannel must name event types (or ["*"])',
+    ]
+    got = errors(
+        tmp_path,
+        """
+        [launch]
+        transport = "zenoh"
+
+        [naming]
+        insecure = "yes"
+
+        [services.a]
+        run = "a.py"
+        transport = "zmq"
+        """,
+    )
+    assert got == [
+        "robot.toml:5: error: insecure must be true or false, not 'yes'",
+        "robot.toml:9: error: transport 'zmq' is not the backbone of the naming service this "
+        "file starts (zenoh: [launch] transport)",
+    ]
+
+
+def test_a_file_on_zenoh_starts_the_router_and_gives_its_services_the_backbone(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = write(
+        tmp_path,
+        "robot.toml",
+        """
+        [launch]
+        transport = "zenoh"
+        fleet_events = { E = ["T", "U"] }
+
+        [naming]
+        endpoint = "tcp://127.0.0.1:5998"
+
+        [services.a]
+        command = ["sh", "-c", "echo $MIRO_TRANSPORT"]
+
+        [services.b]
+        command = ["sh", "-c", "echo $MIRO_TRANSPORT"]
+        transport = "zenoh"
+        fleet_events = {}
+        """,
+    )
+    spec = read_launch_file(path)
+    assert spec.transport == "zenoh" and [s.transport for s in spec.services] == ["zenoh"] * 2
+    assert [s.fleet_events for s in spec.services] == [{"E": frozenset({"T", "U"})}, {}]
+    assert launch_main([str(path), "--check"]) == 0
+    row = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("naming "))
+    assert "naming --endpoint tcp://127.0.0.1:5998 --zenoh" in row, row
+    plain = write(tmp_path, "plain.toml", '[services.a]\ncommand = "true"\n')
+    assert read_launch_file(plain).services[0].transport is None  # the environment's, or zmq
+
+
+def test_the_manuals_examples_run_over_zenoh_from_a_launch_file(tmp_path: Path) -> None:
+    """The demo's four services with `transport = "zenoh"`: `miro naming --zenoh` is started,
+    the services bind and find each other through its router (a ZeroMQ process could not), and
+    `after` waits for names in its registry."""
+    services = REPO / "services"
+    write(
+        tmp_path,
+        "robot.toml",
+        f"""
+        [launch]
+        transport = "zenoh"
+
+        [naming]
+        endpoint = "tcp://127.0.0.1:*"
+
+        [services.exampleA]
+        run = "{services / "exampleA.py"}"
+
+        [services.exampleB]
+        run = "{services / "exampleB.py"}"
+        args = ["--period", "0.2"]
+        after = ["ExampleA"]
+
+        [services.exampleC]
+        run = "{services / "exampleC.py"}"
+        args = ["0.2"]
+
+        [services.exampleD]
+        run = "{services / "exampleD.py"}"
+        after = ["ExampleEventChannel"]
+        """,
+    )
+    with launch(tmp_path) as proc:
+        proc.wait_for("| Received ExampleEvent #", count=2)
+        proc.wait_for("| Retrieved variables a and b are: 1 and 11")
+        proc.proc.send_signal(signal.SIGINT)
+        assert proc.proc.wait(30) == 0
+    assert any("Zenoh router" in line for line in proc.lines), proc.lines
+
+
+def test_a_zenoh_router_on_another_host_must_be_named_not_discovered(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = write(
+        tmp_path,
+        "robot.toml",
+        """
+        [launch]
+        transport = "zenoh"
+
+        [hosts.base]
+        [hosts.robot]
+
+        [naming]
+        host = "base"
+        endpoint = "tcp://0.0.0.0:2809"
+
+        [services.a]
+        command = "true"
+        host = "robot"
+        """,
+    )
+    assert launch_main([str(path), "--check", "--host", "robot"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"{path}: error: the services of robot cannot find the Zenoh router")
+    assert len(err.splitlines()) == 1

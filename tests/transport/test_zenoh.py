@@ -248,3 +248,119 @@ def test_a_keep_all_consumer_loses_none_of_100000_small_events(naming: NamingPro
             p.kill()
             p.wait()
         consumer.stop()
+
+
+def test_a_name_bound_once_its_holder_let_it_go_vanishes_with_its_server() -> None:
+    """The second server of a name binds it from its leases' thread once the first is gone (the
+    retry path); its liveliness token must come with it, so that when this server is killed in
+    turn its name goes at once, not when its lease (two minutes here) ends."""
+    import signal
+    import subprocess
+    import sys
+
+    from loopback import eventually
+    from repo_paths import TESTS
+
+    naming = NamingProcess(options=("--zenoh", "--hold", "0"))  # a lapsed name is free at once
+    started: list[subprocess.Popen[str]] = []
+
+    def spawn(context: str) -> subprocess.Popen[str]:
+        proc = subprocess.Popen(
+            [sys.executable, str(TESTS / "procs" / "named_example.py"), "--transport", "zenoh",
+             "--naming", naming.endpoint, "-MNC", context, "shared/Retried"],
+            stdout=subprocess.PIPE, text=True, env=service_env(MIRO_TEST_LEASE="120"),
+        )  # fmt: skip
+        started.append(proc)
+        assert proc.stdout is not None and proc.stdout.readline().strip() == "READY"
+        return proc
+
+    client = Client(["t", "--transport", "zenoh", "--naming", naming.endpoint])
+
+    def holder() -> str | None:
+        return {e.name: e.endpoint for e in client.naming.entries("shared/")}.get("shared/Retried")
+
+    def tokens() -> set[str]:
+        replies = client.zenoh.liveliness().get(keys.name_token("*", "shared/Retried"))
+        return {str(r.ok.key_expr).split("/")[2] for r in replies if r.ok is not None}
+
+    try:
+        first = spawn("robot1")
+        second = spawn("robot9")  # another service: it waits for the name
+        first_endpoint = holder()
+        assert first_endpoint is not None and keys.zid_of(first_endpoint) in tokens()
+        first.send_signal(signal.SIGKILL)
+        first.wait(10)
+        eventually(lambda: holder() not in (None, first_endpoint), 30)
+        second_endpoint = holder()
+        assert second_endpoint is not None
+        eventually(lambda: tokens() == {keys.zid_of(second_endpoint)}, 30)
+        second.send_signal(signal.SIGKILL)
+        second.wait(10)
+        eventually(lambda: holder() is None, 30)  # (long before its 120 s lease ends)
+    finally:
+        client.close()
+        for proc in started:
+            proc.kill()
+            proc.wait(10)
+        naming.stop()
+
+
+def test_a_robots_channel_hears_the_types_the_fleet_shares_from_every_other_robot(
+    naming: NamingProcess, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """NotifyMulticast's forwarding: with ExampleEvent of EventChannel shared (MIRO_FLEET_EVENTS),
+    a consumer of robot2's own channel hears robot1's ExampleEvents under robot1 as the domain,
+    not its other types, and robot2's own events once each."""
+    from loopback import Recorder, eventually
+
+    from miro_gen import EventChannelFactory, StructuredPushSupplier
+
+    monkeypatch.setenv("MIRO_FLEET_EVENTS", "EventChannel=ExampleEvent")
+    zenoh_options = ("--transport", "zenoh")
+    robots = [RunningServer(naming.endpoint, f"robot{i}", *zenoh_options) for i in (1, 2)]
+    try:
+        channels = [EventChannelFactory(r.server).create_channel("EventChannel") for r in robots]
+        suppliers = [StructuredPushSupplier(c) for c in channels]
+        own = Recorder(channels[1])  # robot2's own channel
+        own.set_subscriptions([("*", "*")])
+        assert own.channel.name == "robot2/EventChannel"
+        # robot1's supplier counts robot2's consumer for the shared type
+        eventually(lambda: suppliers[0].has_subscribers("ExampleEvent"))
+        eventually(lambda: suppliers[1].has_subscribers("OtherEvent"))
+        for n, s in enumerate(suppliers):
+            for type_name in ("OtherEvent", "ExampleEvent"):
+                s.push(type_name, Miro.ExampleEventIDL(n, Miro.ExampleStructIDL(n, n)))
+        for s in suppliers:  # a last one of each: once both came, none before them is to come
+            s.push("ExampleEvent", Miro.ExampleEventIDL(9, Miro.ExampleStructIDL(9, 9)))
+        last = {("robot1", 9), ("robot2", 9)}
+        eventually(lambda: last <= {(e.domain_name, e.payload.counter) for e in own.events})
+        got = sorted((e.domain_name, e.type_name, e.payload.counter) for e in own.events)
+        assert got == [
+            ("robot1", "ExampleEvent", 0),
+            ("robot1", "ExampleEvent", 9),
+            ("robot2", "ExampleEvent", 1),
+            ("robot2", "ExampleEvent", 9),
+            ("robot2", "OtherEvent", 1),
+        ]
+    finally:
+        for r in robots:
+            r.stop()
+
+
+def test_the_shared_types_are_read_with_one_line_errors() -> None:
+    from miro_gen.transport.zenoh import fleet
+
+    assert fleet.parse("EventChannel=Odometry, RangeScan;Other=*") == {
+        "EventChannel": frozenset({"Odometry", "RangeScan"}),
+        "Other": frozenset({"*"}),
+    }
+    assert fleet.parse(fleet.text_of({"E": frozenset({"B", "A"})})) == {"E": frozenset("AB")}
+    for bad in ("EventChannel", "EventChannel=", "robot1/EventChannel=Odometry", "E=a b"):
+        with pytest.raises(UsageError, match="MIRO_FLEET_EVENTS: "):
+            fleet.parse(bad)
+    selectors = fleet.selectors("*/E", b"", frozenset({"T"}))
+    assert selectors == [("miro/ev/$*%2FE/*/T", b"")]
+    assert fleet.selectors("*/E", topic("robot1", "U"), frozenset({"T"})) == []
+    assert fleet.selectors("*/E", b"robot1\0", frozenset({"T"})) == [
+        ("miro/ev/$*%2FE/robot1/T", topic("robot1", "T"))
+    ]

@@ -83,6 +83,10 @@ class Leases:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._answered = False  # the naming service has answered once
+        # Called (from the renewing thread) when that thread changed the names held: one bound
+        # once its holder let it go, one another run took. What keeps something beside each
+        # name held (a liveliness token over Zenoh, transport.zenoh.names) follows from here.
+        self.on_held_changed: Callable[[], object] | None = None
 
     @property
     def lease_ms(self) -> int:
@@ -261,11 +265,14 @@ class Leases:
         with self._lock:
             if self._stop.is_set():
                 return
-            self._held.pop(entry.name, None)
+            was_held = self._held.pop(entry.name, None) is not None
             known = self._wanted.get(entry.name)
-            if known is not None and known.holder == holder:
-                return
-            self._wanted[entry.name] = _Wanted(entry, holder, now, now)
+            if known is None or known.holder != holder:
+                self._wanted[entry.name] = _Wanted(entry, holder, now, now)
+        if was_held:
+            self._held_changed()
+        if known is not None and known.holder == holder:
+            return
         _log.warning(
             "%s %s %s: this server keeps trying to bind it (every %g s) and serves it under no "
             "name meanwhile",
@@ -275,6 +282,10 @@ class Leases:
             RETRY_HELD,
         )
         self._start()
+
+    def _held_changed(self) -> None:
+        if self.on_held_changed is not None:
+            self.on_held_changed()
 
     def _loop(self) -> None:
         registry = self.naming.registry_stub(self._invoker, RENEW_TIMEOUT, owner=True)
@@ -346,6 +357,7 @@ class Leases:
                 with contextlib.suppress(SystemException, MiroNaming.NotFound):
                     registry.unbind_as(w.entry.name, self.owner)
                 continue
+            self._held_changed()
             # Said as loudly as the warning that it was held, so that whoever saw that one
             # sees this one too.
             _log.warning(

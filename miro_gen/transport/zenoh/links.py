@@ -26,7 +26,9 @@ queue, so events keep their order when a keep-all consumer comes or goes.
 A fleet's channel: a consumer of the channel pattern `*/EventChannel` (resolve_channel with a
 `*` in the name) hears that channel of every robot, each robot's events under its own domain
 (Miro's NotifyMulticast, without a multicast group): its keys use Zenoh's `$*` wildcard, and
-suppliers count its subscriptions when their channel matches the pattern.
+suppliers count its subscriptions when their channel matches the pattern. A consumer of its own
+robot's channel hears the types its process shares with the fleet (transport.zenoh.fleet,
+MIRO_FLEET_EVENTS) from that channel of every other robot too.
 """
 
 from __future__ import annotations
@@ -44,7 +46,7 @@ import zenoh
 from miro_gen.log import PeerWarnings, logger
 from miro_gen.transport.events.frames import FrameError
 from miro_gen.transport.reactor import Reactor
-from miro_gen.transport.zenoh import keys
+from miro_gen.transport.zenoh import fleet, keys
 from miro_gen.transport.zenoh.session import direct, track, untrack
 
 _log = logger("MIRO")
@@ -59,12 +61,14 @@ KEEP_ALL_BYTES = 64 << 20
 
 class ZenohChannels:
     """The links of the channels of a process: its `session` and its `reactor`. `endpoint`
-    is what a channel's naming entry carries."""
+    is what a channel's naming entry carries; `shared` the event types each channel (by its
+    name without context) shares with the fleet (default: MIRO_FLEET_EVENTS)."""
 
-    def __init__(self, session: Any, reactor: Reactor) -> None:
+    def __init__(self, session: Any, reactor: Reactor, shared: fleet.Shared | None = None) -> None:
         self.session = session
         self.reactor = reactor
         self.endpoint = keys.endpoint(str(session.zid()))
+        self.shared = fleet.from_environment() if shared is None else shared
 
     def publishing(
         self,
@@ -81,8 +85,16 @@ class ZenohChannels:
     def subscribing(
         self, channel: str, on_readable: Callable[[], object], hwm: int, *, keep_all: bool = False
     ) -> ZenohSubscribing:
+        pattern = fleet.fleet_pattern(channel)
+        types = self.shared.get(channel.rsplit("/", 1)[-1]) if pattern is not None else None
         return ZenohSubscribing(
-            self.session, self.reactor, channel, on_readable, hwm, keep_all=keep_all
+            self.session,
+            self.reactor,
+            channel,
+            on_readable,
+            hwm,
+            keep_all=keep_all,
+            fleet=None if pattern is None or not types else (pattern, types),
         )
 
 
@@ -183,7 +195,8 @@ class ZenohPublishing:
 class ZenohSubscribing:
     """A consumer's link: a Zenoh subscriber per subscription not covered by another; at most
     `hwm` frames wait for the reactor, or for a keep-all consumer (`keep_all`: its suppliers
-    then block rather than drop) KEEP_ALL_BYTES."""
+    then block rather than drop) KEEP_ALL_BYTES. `fleet` (the fleet's channel pattern and the
+    types shared): the subscriptions also hear those types from every other robot's channel."""
 
     def __init__(
         self,
@@ -194,6 +207,7 @@ class ZenohSubscribing:
         hwm: int,
         *,
         keep_all: bool = False,
+        fleet: tuple[str, frozenset[str]] | None = None,
     ) -> None:
         self.session = session
         self.reactor = reactor
@@ -213,6 +227,10 @@ class ZenohSubscribing:
         self._lock = threading.Lock()  # the queue's size; only ever held for a few statements
         self._closed = False
         self._topics: dict[str, bytes] = {}  # event keys heard: their topic frames
+        self._fleet = fleet
+        self._own_keys = f"{keys.PREFIX}/ev/{keys.escape(channel)}/"  # (the fleet's hear them)
+        self._fleet_subscribers: dict[bytes, list[Any]] = {}
+        self._fleet_tokens: dict[bytes, list[Any]] = {}
 
     @property
     def connected(self) -> bool:
@@ -236,6 +254,10 @@ class ZenohSubscribing:
             self._scheduled = True
             self.reactor.call_soon(self._ready)
 
+    def _on_fleet_sample(self, sample: Any) -> None:
+        if not str(sample.key_expr).startswith(self._own_keys):  # (its own subscriber has it)
+            self._on_sample(sample)
+
     # ---- the reactor thread ---------------------------------------------------------------------
 
     def _ready(self) -> None:
@@ -251,12 +273,24 @@ class ZenohSubscribing:
                 self.channel, prefix, self._zid, next(_tokens), keep_all=self.keep_all
             )
             self._tokens[prefix] = self.session.liveliness().declare_token(key)
+            if self._fleet is not None:  # what the other robots' suppliers count
+                pattern, types = self._fleet
+                self._fleet_tokens[prefix] = [
+                    self.session.liveliness().declare_token(
+                        keys.sub_token(
+                            pattern, token_prefix, self._zid, next(_tokens), keep_all=self.keep_all
+                        )
+                    )
+                    for token_prefix in {t for _, t in _fleet_selectors(pattern, prefix, types)}
+                ]
 
     def unsubscribe(self, prefix: bytes) -> None:
         self._prefixes.discard(prefix)
         self._declare()
         token = self._tokens.pop(prefix, None)
         if token is not None:
+            _undeclare(token)
+        for token in self._fleet_tokens.pop(prefix, []):
             _undeclare(token)
 
     def _declare(self) -> None:
@@ -275,6 +309,21 @@ class ZenohSubscribing:
             self._subscribers[p] = track(
                 self.session.declare_subscriber(selector, direct(self._on_sample))
             )
+        if self._fleet is not None:
+            self._declare_fleet(wanted)
+
+    def _declare_fleet(self, wanted: set[bytes]) -> None:
+        """The fleet's key expressions of the prefixes no other prefix covers."""
+        assert self._fleet is not None
+        pattern, types = self._fleet
+        for p in [p for p in self._fleet_subscribers if p not in wanted]:
+            for subscriber in self._fleet_subscribers.pop(p):
+                untrack(subscriber)
+        for p in wanted - self._fleet_subscribers.keys():
+            self._fleet_subscribers[p] = [
+                track(self.session.declare_subscriber(selector, direct(self._on_fleet_sample)))
+                for selector, _ in _fleet_selectors(pattern, p, types)
+            ]
 
     def receive(self) -> tuple[bytes, memoryview] | None:
         with self._lock:
@@ -301,9 +350,22 @@ class ZenohSubscribing:
         subscribers, self._subscribers = list(self._subscribers.values()), {}
         for s in subscribers:
             untrack(s)
+        for group in [*self._fleet_tokens.values(), *self._fleet_subscribers.values()]:
+            for entity in group:
+                untrack(entity)  # (a token: undeclared)
+        self._fleet_tokens, self._fleet_subscribers = {}, {}
         with self._lock:
             self._frames.clear()
             self._bytes = 0
+
+
+def _fleet_selectors(pattern: str, prefix: bytes, types: frozenset[str]) -> list[tuple[str, bytes]]:
+    """fleet.selectors, with a prefix no key can be made of left out (said once)."""
+    try:
+        return fleet.selectors(pattern, prefix, types)
+    except (FrameError, UnicodeDecodeError) as e:
+        _log.warning("cannot subscribe to %r across the fleet: %s", prefix, e)
+        return []
 
 
 def _undeclare(entity: Any) -> None:

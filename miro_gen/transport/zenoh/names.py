@@ -34,11 +34,18 @@ class TokenedNames:
         self.zid = str(session.zid())
         self._tokens: dict[str, Any] = {}
         self._lock = threading.Lock()
+        self._stopped = False
+        # Names the leases' own thread binds (one another server held, bound once it let it
+        # go) or gives up (taken by a newer run) get or lose their tokens then, too.
+        leases.on_held_changed = self._sync
 
     def _sync(self) -> None:
-        """A token for every name held, none for the others."""
-        held = {e.name for e in self.leases.held()}
+        """A token for every name held, none for the others (from the server's thread or the
+        leases' renewing thread)."""
         with self._lock:
+            if self._stopped:
+                return
+            held = {e.name for e in self.leases.held()}
             for name in [n for n in self._tokens if n not in held]:
                 _undeclare(self._tokens.pop(name))
             for name in held - self._tokens.keys():
@@ -69,6 +76,7 @@ class TokenedNames:
     def stop(self) -> None:
         self.leases.stop()
         with self._lock:
+            self._stopped = True
             tokens, self._tokens = list(self._tokens.values()), {}
         for token in tokens:
             _undeclare(token)
