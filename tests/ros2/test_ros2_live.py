@@ -8,8 +8,8 @@ wheels' `.msg` files on its PYTHONPATH. Loopback only, a domain of each test's o
 - `miro echo --ros2` prints an rclpy publisher's messages decoded (type from the graph, or given);
 - `miro hz --ros2` reports the rate and lag of an rclpy publisher's messages;
 - an rclpy subscriber receives what `miro pub --ros2` publishes, with the values given;
-- `miro call --ros2` calls an rclpy service (type from the graph, or given) and prints its
-  response; a service that never answers is a timeout;
+- `miro call --ros2` calls an rclpy service (type from the graph, or given) and a miro service
+  in another process, and prints their responses; a service that never answers is a timeout;
 - bad input is a one-line error, never a traceback.
 """
 
@@ -206,13 +206,14 @@ def test_miro_call_calls_an_rclpy_service(ros_types: Path, domain: int) -> None:
     assert json.loads(out)["calls"] == 3
 
 
-SILENT = textwrap.dedent(
+MIRO_SERVER = textwrap.dedent(
     """
     import sys, threading
     from miro_gen.ros2.node import Node
     from miro_gen.ros2.services import Service
-    from std_srvs.srv import SetBool
-    node = Node("miro_silent")
+    from std_srvs.srv import SetBool, SetBool_Response
+    node = Node("miro_server")
+    Service(node, SetBool, "echo", lambda r: SetBool_Response(success=r.data, message="miro"))
     answered = threading.Event()
     Service(node, SetBool, "silent", lambda r: answered.wait())  # never answers
     print("ready", flush=True)
@@ -221,18 +222,22 @@ SILENT = textwrap.dedent(
 )
 
 
-def test_miro_call_of_a_service_that_never_answers_is_a_timeout(
+def test_miro_call_calls_a_miro_service_and_times_out_on_one_that_never_answers(
     ros_types: Path, domain: int
 ) -> None:
-    server = subprocess.Popen([sys.executable, "-c", SILENT], env=_env(ros_types), text=True,
+    server = subprocess.Popen([sys.executable, "-c", MIRO_SERVER], env=_env(ros_types), text=True,
                               stdin=subprocess.PIPE, stdout=subprocess.PIPE)  # fmt: skip
     try:
         assert server.stdout is not None and server.stdout.readline().strip() == "ready"
+        answered = _miro(ros_types, "call", "--ros2", "/echo", "{data: true}", "--json",
+                         "--timeout", str(HANG))  # fmt: skip
         done = _miro(ros_types, "call", "--ros2", "/silent", "std_srvs/srv/SetBool", "{data: true}",
                      "--timeout", "10")  # fmt: skip
     finally:
         server.kill()  # its handler waits for ever
         server.wait(timeout=HANG)
+    assert answered.returncode == 0, answered.stderr
+    assert json.loads(answered.stdout) == {"success": True, "message": "miro"}
     assert done.returncode == 1, done.stderr
     assert (
         done.stderr.strip()
