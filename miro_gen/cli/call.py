@@ -10,6 +10,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from miro_gen.cli.eventargs import add_length_options, length_limit
+from miro_gen.cli.live_ros2 import add_ros2_flag, wants_ros2
 from miro_gen.cli.liveargs import connect
 from miro_gen.live.remote import LiveError, Robot
 from miro_gen.live.show import Signature, dump, flow, signatures
@@ -36,10 +37,15 @@ def parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--json", action="store_true", help="print the result as JSON (sequences whole)")
     add_length_options(p)
+    add_ros2_flag(p, "call", "services")
     return p
 
 
 def call_main(argv: Sequence[str]) -> int:
+    if wants_ros2(argv):
+        from miro_gen.cli import call_ros2
+
+        return call_ros2.call_main(argv)
     p = parser()
     robot, ns = connect(p, "miro call", argv)
     if ns.timeout <= 0:

@@ -42,11 +42,11 @@ def wants_ros2(argv: Sequence[str]) -> bool:
     return False
 
 
-def add_ros2_flag(p: argparse.ArgumentParser, verb: str) -> None:
+def add_ros2_flag(p: argparse.ArgumentParser, verb: str, what: str = "topics") -> None:
     p.add_argument(
         "--ros2",
         action="store_true",
-        help=f"ROS 2 topics over DDS instead (the ros2 extra): see miro {verb} --ros2 --help",
+        help=f"ROS 2 {what} over DDS instead (the ros2 extra): see miro {verb} --ros2 --help",
     )
 
 
@@ -54,7 +54,7 @@ def _parser(verb: str, description: str) -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog=f"miro {verb} --ros2",
         description=description + " ROS_DOMAIN_ID and ROS_AUTOMATIC_DISCOVERY_RANGE apply; "
-        "the topics' types must be generated here (miro-idl on their .msg files, on PYTHONPATH).",
+        "the types must be generated here (miro-idl on their .msg or .srv files, on PYTHONPATH).",
     )
     p.add_argument("--ros2", action="store_true", help="(the ROS 2 form of the command)")
     return p

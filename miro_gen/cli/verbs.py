@@ -92,7 +92,12 @@ VERBS: tuple[Verb, ...] = (
         run="miro_gen.cli.launch:launch_main",
         parser="miro_gen.cli.launch:parser",
     ),
-    _live("call", "call an operation of a running object", "miro_gen.cli.call", "call_args"),
+    _live(
+        "call",
+        "call an operation of a running object (or a ROS 2 service: --ros2)",
+        "miro_gen.cli.call",
+        "call_args",
+    ),
     _live(
         "pub",
         "publish an event (or a ROS 2 message: --ros2) by hand",

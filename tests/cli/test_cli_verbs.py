@@ -60,6 +60,17 @@ def test_every_verb_is_completed_and_listed() -> None:
         assert ("--naming" in options) == v.common, v.name
 
 
+def test_the_ros2_forms_are_completed_and_have_their_own_help() -> None:
+    """`--ros2` is among the options completed for the verbs whose parser takes it, and
+    `miro call --ros2 --help` is the ROS 2 form's help (as `ros2 service call`)."""
+    for verb in ("call", "pub", "list"):
+        assert "--ros2" in candidates(["miro", verb, "--r"]), verb
+    from miro_gen.cli.call_ros2 import parser
+
+    text = parser().format_help()
+    assert text.startswith("usage: miro call --ros2 ") and "SERVICE [TYPE] [REQUEST]" in text
+
+
 def test_every_verb_and_sub_verb_runs_its_help() -> None:
     """`miro VERB --help` and `miro VERB SUB --help` for the whole table, in one process:
     each prints its help and exits 0 (a sub-verb its own, whoever parses it)."""

@@ -8,6 +8,8 @@ wheels' `.msg` files on its PYTHONPATH. Loopback only, a domain of each test's o
 - `miro echo --ros2` prints an rclpy publisher's messages decoded (type from the graph, or given);
 - `miro hz --ros2` reports the rate and lag of an rclpy publisher's messages;
 - an rclpy subscriber receives what `miro pub --ros2` publishes, with the values given;
+- `miro call --ros2` calls an rclpy service (type from the graph, or given) and a miro service
+  in another process, and prints their responses; a service that never answers is a timeout;
 - bad input is a one-line error, never a traceback.
 """
 
@@ -18,6 +20,7 @@ import os
 import signal
 import subprocess
 import sys
+import textwrap
 import threading
 from collections.abc import Iterator
 from pathlib import Path
@@ -176,9 +179,91 @@ def test_miro_pub_once_reaches_an_rclpy_subscriber(ros_types: Path, domain: int)
     assert _result(peer)["received"] == [{"data": "hi"}]
 
 
+def test_miro_call_calls_an_rclpy_service(ros_types: Path, domain: int) -> None:
+    peer = _peer(
+        domain, "serve", "std_srvs/srv/SetBool", "/enable", str(HANG), stdin=subprocess.PIPE
+    )  # fmt: skip  (success=data, message "rclpy <n>")
+    assert peer.stdin is not None and peer.stdout is not None
+    try:
+        assert peer.stdout.readline().strip() == "ready"
+        wait = ["--timeout", str(HANG)]
+        done = _miro(ros_types, "call", "--ros2", "/enable", "{data: true}", *wait)  # graph's type
+        assert done.returncode == 0, done.stderr
+        assert done.stdout.splitlines() == ["success: true", "message: rclpy 1"]
+        done = _miro(ros_types, "call", "--ros2", "enable", "std_srvs/srv/SetBool",
+                     "{data: false}", "--json", *wait)  # fmt: skip
+        assert done.returncode == 0, done.stderr
+        assert json.loads(done.stdout) == {"success": False, "message": "rclpy 2"}
+        done = _miro(ros_types, "call", "--ros2", "--type", "std_srvs/srv/SetBool", "/enable",
+                     *wait)  # fmt: skip
+        assert done.returncode == 0, done.stderr  # no request: the default one, data false
+        assert done.stdout.splitlines() == ["success: false", "message: rclpy 3"]
+    finally:
+        peer.stdin.close()  # stops it
+    assert peer.stderr is not None
+    out, err = peer.stdout.read(), peer.stderr.read()
+    assert peer.wait(timeout=HANG) == 0, err[-3000:]
+    assert json.loads(out)["calls"] == 3
+
+
+MIRO_SERVER = textwrap.dedent(
+    """
+    import sys, threading
+    from miro_gen.ros2.node import Node
+    from miro_gen.ros2.services import Service
+    from std_srvs.srv import SetBool, SetBool_Response
+    node = Node("miro_server")
+    Service(node, SetBool, "echo", lambda r: SetBool_Response(success=r.data, message="miro"))
+    answered = threading.Event()
+    Service(node, SetBool, "silent", lambda r: answered.wait())  # never answers
+    print("ready", flush=True)
+    sys.stdin.read()
+    """
+)
+
+
+def test_miro_call_calls_a_miro_service_and_times_out_on_one_that_never_answers(
+    ros_types: Path, domain: int
+) -> None:
+    server = subprocess.Popen([sys.executable, "-c", MIRO_SERVER], env=_env(ros_types), text=True,
+                              stdin=subprocess.PIPE, stdout=subprocess.PIPE)  # fmt: skip
+    try:
+        assert server.stdout is not None and server.stdout.readline().strip() == "ready"
+        answered = _miro(ros_types, "call", "--ros2", "/echo", "{data: true}", "--json",
+                         "--timeout", str(HANG))  # fmt: skip
+        done = _miro(ros_types, "call", "--ros2", "/silent", "std_srvs/srv/SetBool", "{data: true}",
+                     "--timeout", "10")  # fmt: skip
+    finally:
+        server.kill()  # its handler waits for ever
+        server.wait(timeout=HANG)
+    assert answered.returncode == 0, answered.stderr
+    assert json.loads(answered.stdout) == {"success": True, "message": "miro"}
+    assert done.returncode == 1, done.stderr
+    assert (
+        done.stderr.strip()
+        == "miro call --ros2: error: no reply from /silent within 10 s (--timeout)"
+    )
+    assert done.stdout == ""
+
+
 @pytest.mark.parametrize(
     ("args", "code", "says"),
     [
+        (
+            ["call", "--ros2", "/nobody", "--timeout", "1"],
+            1,
+            "no service /nobody on the ROS 2 graph after 1 s (--timeout)",
+        ),
+        (
+            ["call", "--ros2", "/x", "std_srvs/srv/Nope"],
+            1,
+            "no generated type here for std_srvs/srv/Nope (compile its .srv files",
+        ),
+        (["call", "--ros2", "/x", "std_srvs/srv/SetBool", "{dat: 1}"], 1, "has no field 'dat'"),
+        (["call", "--ros2", "/x", "std_srvs/srv/SetBool", "{data: [1"], 1, "cannot read the value"),
+        (["call", "--ros2", "/x", "--type", "std_msgs/msg/String"], 2, "is not a service type"),
+        (["call", "--ros2", "/x", "--timeout", "0"], 2, "--timeout must be more than 0"),
+        (["call", "--ros2", "/9bad"], 2, "is not a valid ROS name token"),
         (["pub", "--ros2", "/x", "std_msgs/msg/Nope"], 1, "no generated type here for std_msgs"),
         (["pub", "--ros2", "/x", "std_msgs/msg/String", "{dat: 1}"], 1, "has no field 'dat'"),
         (["pub", "--ros2", "/x", "std_msgs/msg/String", "{data: [1"], 1, "cannot read the value"),
