@@ -18,7 +18,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from miro_gen.cli.eventargs import add_length_options, length_limit
-from miro_gen.cli.live_ros2 import TICK, _error, _node_name, _parser, _topic
+from miro_gen.cli.live_ros2 import TICK, error, node_name, ros_name, verb_parser
 from miro_gen.cli.log_ros2 import ros2_missing, stopped_by_signals
 
 TIMEOUT = 10.0  # seconds, by default, for the whole call (as `miro call`)
@@ -27,7 +27,7 @@ SRV_TYPE = re.compile(r"^[A-Za-z_]\w*/srv/[A-Za-z_]\w*$")
 
 
 def parser() -> argparse.ArgumentParser:
-    p = _parser(
+    p = verb_parser(
         "call",
         "Call a ROS 2 service with REQUEST (YAML or JSON: '{data: true}'; - reads it from the "
         "standard input; default {}) and print its response, as ros2 service call does.",
@@ -75,7 +75,7 @@ def call_main(argv: Sequence[str]) -> int:
     if ns.timeout <= 0:
         p.error("--timeout must be more than 0 seconds")
     limit = length_limit(p, ns)
-    service = _topic(p, ns.service)
+    service = ros_name(p, ns.service)
     given, text = _type_and_request(p, ns)
     if ros2_missing(prog):
         return 1
@@ -89,25 +89,25 @@ def call_main(argv: Sequence[str]) -> int:
     try:
         # a type given: a bad type or request is said before any look at the graph
         found = None if given is None else _request(given, text)
-        with stopped_by_signals() as stop, Node(_node_name("call")) as node:
+        with stopped_by_signals() as stop, Node(node_name("call")) as node:
             if found is None:  # the type from the graph
                 types = _wait_for_types(node, service, deadline, stop)
                 if stop.is_set():
                     return 130
                 if len(types) != 1:
-                    return _error(prog, _not_ready(service, None, types, ns.timeout))
+                    return error(prog, _not_ready(service, None, types, ns.timeout))
                 found = _request(types[0], text)
             cls, request = found
             client: Client[Any, Any] = Client(node, cls, service)
             if not client.wait_for_service(max(deadline - time.monotonic(), 0.0)):
                 types = node.graph.services().get(service, [])
-                return _error(prog, _not_ready(service, given, types, ns.timeout))
+                return error(prog, _not_ready(service, given, types, ns.timeout))
             try:
                 response = client.call(request, timeout=max(deadline - time.monotonic(), 0.01))
             except ServiceTimeout:
-                return _error(prog, f"no reply from {service} within {ns.timeout:g} s (--timeout)")
+                return error(prog, f"no reply from {service} within {ns.timeout:g} s (--timeout)")
     except (Ros2DomainError, BadRequest) as e:
-        return _error(prog, str(e))
+        return error(prog, str(e))
     print(dump(to_plain(response, None if ns.json else limit), ns.json))
     return 0
 

@@ -50,7 +50,7 @@ def add_ros2_flag(p: argparse.ArgumentParser, verb: str, what: str = "topics") -
     )
 
 
-def _parser(verb: str, description: str) -> argparse.ArgumentParser:
+def verb_parser(verb: str, description: str) -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog=f"miro {verb} --ros2",
         description=description + " ROS_DOMAIN_ID and ROS_AUTOMATIC_DISCOVERY_RANGE apply; "
@@ -70,12 +70,12 @@ def _qos_option(p: argparse.ArgumentParser, default: str) -> None:
     )
 
 
-def _node_name(verb: str) -> str:
+def node_name(verb: str) -> str:
     """A hidden node of this process (`ros2 node list` leaves it out), as ros2cli's."""
     return f"_miro_{verb}_{os.getpid()}"
 
 
-def _error(prog: str, text: str) -> int:
+def error(prog: str, text: str) -> int:
     print(f"{prog}: error: {text}", file=sys.stderr)
     return 1
 
@@ -84,7 +84,7 @@ def _error(prog: str, text: str) -> int:
 
 
 def list_parser() -> argparse.ArgumentParser:
-    p = _parser(
+    p = verb_parser(
         "list",
         "List the ROS 2 graph: its nodes, its topics with their types and how many publish "
         "and subscribe to each, and its services with their types (as ros2 node list, "
@@ -132,7 +132,7 @@ def list_main(argv: Sequence[str]) -> int:
             endpoints = graph.endpoints()
             topics, services = graph.topics(), graph.services()
     except Ros2DomainError as e:
-        return _error(prog, str(e))
+        return error(prog, str(e))
 
     def shown(name: str) -> bool:
         hidden = any(part.startswith("_") for part in name.split("/"))
@@ -256,7 +256,7 @@ def _types(endpoints: list[Any]) -> list[str]:
     return sorted({names.type_from_dds(ep.dds_type) or ep.dds_type for ep in endpoints})
 
 
-def _topic(p: argparse.ArgumentParser, text: str) -> str:
+def ros_name(p: argparse.ArgumentParser, text: str) -> str:
     from miro_gen.ros2.names import Ros2NameError, expand_topic
 
     try:
@@ -288,7 +288,7 @@ def _wait_told(prog: str, waiting: list[Watched], started: float, told: set[str]
 
 
 def echo_parser() -> argparse.ArgumentParser:
-    p = _parser("echo", "Print the messages of a ROS 2 topic as they arrive, decoded.")
+    p = verb_parser("echo", "Print the messages of a ROS 2 topic as they arrive, decoded.")
     p.add_argument("topic", metavar="TOPIC", help="the ROS 2 topic (/chatter)")
     p.add_argument(
         "type", nargs="?", metavar="TYPE", help="its type (default: the one on the graph)"
@@ -306,7 +306,7 @@ def echo_main(argv: Sequence[str]) -> int:
     limit = length_limit(p, ns)
     if ns.count < 0:
         p.error("--count must be 0 or more")
-    topic = _topic(p, ns.topic)
+    topic = ros_name(p, ns.topic)
     if ros2_missing(prog):
         return 1
     from miro_gen.eventlog.show import clock_text, payload_text
@@ -317,7 +317,7 @@ def echo_main(argv: Sequence[str]) -> int:
     shown = [0]
     lock = threading.Lock()
     try:
-        with stopped_by_signals() as stop, Node(_node_name("echo")) as node:
+        with stopped_by_signals() as stop, Node(node_name("echo")) as node:
 
             def show(data: bytes, info: Any) -> None:
                 with lock:
@@ -344,7 +344,7 @@ def echo_main(argv: Sequence[str]) -> int:
                     break
             stop.wait()
     except Ros2DomainError as e:
-        return _error(prog, str(e))
+        return error(prog, str(e))
     return 0
 
 
@@ -352,7 +352,7 @@ def echo_main(argv: Sequence[str]) -> int:
 
 
 def hz_parser() -> argparse.ArgumentParser:
-    p = _parser(
+    p = verb_parser(
         "hz",
         "Print, every second, the rate at which the messages of ROS 2 topics arrive, the min, "
         "max and standard deviation of the period, their lag (from the publisher's source "
@@ -370,7 +370,7 @@ def hz_main(argv: Sequence[str]) -> int:
     ns = p.parse_args(argv)
     if ns.window < 1:
         p.error("--window must be 1 or more")
-    topics = list(dict.fromkeys(_topic(p, t) for t in ns.topics))
+    topics = list(dict.fromkeys(ros_name(p, t) for t in ns.topics))
     if ros2_missing(prog):
         return 1
     from miro_gen.eventlog.rates import RateWindow
@@ -394,7 +394,7 @@ def hz_main(argv: Sequence[str]) -> int:
 
     watched = [Watched(t, None) for t in topics]
     try:
-        with stopped_by_signals() as stop, Node(_node_name("hz")) as node:
+        with stopped_by_signals() as stop, Node(node_name("hz")) as node:
             started, told = time.monotonic(), set[str]()
             next_report = time.monotonic() + 1.0
             while not stop.is_set():
@@ -410,7 +410,7 @@ def hz_main(argv: Sequence[str]) -> int:
                         _report(windows, [w.topic for w in watched if w.subscribed])
                 stop.wait(TICK)
     except Ros2DomainError as e:
-        return _error(prog, str(e))
+        return error(prog, str(e))
     return 0
 
 
@@ -437,7 +437,7 @@ def _report(windows: dict[str, Any], topics: list[str]) -> None:
 
 
 def pub_parser() -> argparse.ArgumentParser:
-    p = _parser(
+    p = verb_parser(
         "pub",
         "Publish a message of TYPE with VALUE (YAML or JSON: '{data: hi}'; - reads it from "
         "the standard input; default {}) on a ROS 2 topic, once or RATE times a second.",
@@ -470,7 +470,7 @@ def pub_main(argv: Sequence[str]) -> int:
     ns = p.parse_args(argv)
     if ns.rate < 0 or ns.count < 0 or ns.max_wait < 0 or (ns.wait_matching or 0) < 0:
         p.error("--rate, --count, --wait-matching and --max-wait must be 0 or more")
-    topic = _topic(p, ns.topic)
+    topic = ros_name(p, ns.topic)
     if ros2_missing(prog):
         return 1
     from miro_gen.live.values import from_text
@@ -481,15 +481,15 @@ def pub_main(argv: Sequence[str]) -> int:
 
     cls = message_class(ns.type)
     if cls is None:
-        return _error(prog, f"no generated type here for {ns.type} {NO_TYPE}")
+        return error(prog, f"no generated type here for {ns.type} {NO_TYPE}")
     try:
         message = from_text(cls, ns.value)
     except ValueError as e:
-        return _error(prog, str(e))
+        return error(prog, str(e))
     count = ns.count or (0 if ns.rate else 1)
     wanted = ns.wait_matching if ns.wait_matching is not None else (1 if count else 0)
     try:
-        with stopped_by_signals() as stop, Node(_node_name("pub")) as node:
+        with stopped_by_signals() as stop, Node(node_name("pub")) as node:
             publisher = node.publisher(cls, topic, _profile(ns.qos_profile) or DEFAULT)
             if not _wait_matching(prog, publisher, topic, wanted, ns.max_wait, stop):
                 return 0
@@ -507,7 +507,7 @@ def pub_main(argv: Sequence[str]) -> int:
                 stop.wait(max(due - time.monotonic(), 0.0))
             publisher.wait_for_acks(ACK_WAIT)  # the last reaches reliable subscriptions
     except Ros2DomainError as e:
-        return _error(prog, str(e))
+        return error(prog, str(e))
     return 1 if count == 1 and not matched else 0  # as miro pub: a lone message nobody took
 
 

@@ -10,9 +10,9 @@ client takes the replies that carry its own id.
 Fast DDS (rmw_fastrtps) instead relates a reply to its request through the RTPS sample
 identity: a request has no header, and its reply must carry the request's writer GUID and
 sequence number as inline QoS (`related_sample_identity`), which Cyclone DDS can neither write
-nor read (ros2/rmw_cyclonedds#184). So a `Service` has its reader and writer in the context's
-own RTPS participant (ros2/rtps) and answers both kinds of client (on this host). A `Client`
-speaks the rmw_cyclonedds layout only: it does not call services on Fast DDS.
+nor read (ros2/rmw_cyclonedds#184). So a `Service` and a `Client` have their reader and writer
+in the context's own RTPS participant (ros2/rtps), and each speaks to a peer as its vendor
+expects: Fast DDS by sample identities, any other by the rmw_cyclonedds header (on this host).
 """
 
 from __future__ import annotations
