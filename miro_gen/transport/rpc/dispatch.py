@@ -40,6 +40,7 @@ import zmq
 from zmq.backend import Socket as _Socket
 
 from miro_gen.log import logger
+from miro_gen.transport.buffers import keep_large_buffers
 from miro_gen.transport.rpc.frames import ZERO_COPY_MIN
 
 _log = logger("MIRO")
@@ -342,6 +343,7 @@ class Dispatcher:
             if len(body) < ZERO_COPY_MIN:
                 _send(sock, body, _NOBLOCK)
             else:  # a large result goes without a copy
+                keep_large_buffers()
                 _send(sock, body, _NOBLOCK, False)
         except zmq.ZMQError as e:  # the caller is gone: nobody to tell
             _log.notice("could not send a reply: %s", e)
