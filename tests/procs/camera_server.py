@@ -5,13 +5,16 @@ bench/bench_rpc.py --sizes.
 
 Prints `READY <endpoint>` once it serves under the key `Camera`, then serves until killed.
 getImage() returns frame 3 with SIZE bytes of data, the byte at i being i % 251 (a pattern a
-torn or shifted copy would not keep); getWaitImage() the same with the next frame number.
+torn or shifted copy would not keep); getWaitImage() waits 20 ms, as for a camera's next frame,
+and returns the same with the next frame number: a servant that blocks, whose reply another
+thread sends (transport.rpc.dispatch).
 """
 
 from __future__ import annotations
 
 import signal
 import sys
+import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -42,6 +45,7 @@ class Camera(Miro__POA.Camera):
         return self.image
 
     def getWaitImage(self) -> Miro.ImageEventIDL:
+        time.sleep(0.02)
         self.image.frame += 1
         return self.image
 
