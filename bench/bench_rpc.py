@@ -188,9 +188,9 @@ def main() -> int:
     ap.add_argument("--seconds", type=float, default=2.0, help="per run of --sizes")
     args = ap.parse_args()
     if args.sizes:
-        from large_replies import measure
+        import large_replies
 
-        measure([int(s) for s in args.sizes.split(",")], args.runs, args.seconds)
+        large_replies.measure([int(s) for s in args.sizes.split(",")], args.runs, args.seconds)
         return 0
     server, endpoint = start([sys.executable, str(ROOT / "tests/procs/example_server.py")])
     echo, port = start([sys.executable, "-c", ECHO])
