@@ -2,6 +2,7 @@
 and beside them a Zenoh get/reply round trip.
 
     python bench/bench_rpc.py [--calls N] [--runs R] [--check]
+    python bench/bench_rpc.py --sizes 65536,1048576,8388608 [--runs R] [--seconds S]
 
 Each server runs in its own process on loopback. The raw echo returns the same bytes our reply
 carries (header and CDR body), so the ratio is the cost of everything miro-gen adds: stubs, CDR,
@@ -16,6 +17,10 @@ their first day"): the default at most 1.25x raw pyzmq (aim 1.1x), @nonblocking 
 If `eclipse-zenoh` is installed (pip install miro-gen[bench]), a Zenoh queryable in a peer of its
 own (loopback, multicast scouting off, explicit endpoints) echoes the same bytes to a querier's
 get(), for comparison only: the time to the reply's arrival, from a Python caller.
+
+With `--sizes`, large replies instead (bench/large_replies.py): Camera::getImage() returning an
+image of each size against a raw pyzmq server sending the same bytes, at least `--seconds` per
+run, five interleaved runs (target, issue 29: 1 MiB within 1.1x of raw pyzmq).
 """
 
 from __future__ import annotations
@@ -179,7 +184,14 @@ def main() -> int:
     ap.add_argument("--calls", type=int, default=5000, help="round trips per row and run")
     ap.add_argument("--runs", type=int, default=5, help="repetitions (default 5)")
     ap.add_argument("--check", action="store_true")
+    ap.add_argument("--sizes", help="large replies of these sizes in bytes, comma-separated")
+    ap.add_argument("--seconds", type=float, default=2.0, help="per run of --sizes")
     args = ap.parse_args()
+    if args.sizes:
+        import large_replies
+
+        large_replies.measure([int(s) for s in args.sizes.split(",")], args.runs, args.seconds)
+        return 0
     server, endpoint = start([sys.executable, str(ROOT / "tests/procs/example_server.py")])
     echo, port = start([sys.executable, "-c", ECHO])
     reply = [bytes(24), Miro.ExampleStructIDL(1.0, 11.0).serialize()]

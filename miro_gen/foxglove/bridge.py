@@ -32,13 +32,13 @@ from foxglove.websocket import (
 from miro_gen import clock
 from miro_gen.exceptions import ActionableError, SystemException
 from miro_gen.foxglove import DEFAULT_BACKLOG, DEFAULT_PORT
-from miro_gen.foxglove.buffers import keep_large_buffers
 from miro_gen.foxglove.parameters import Parameters
 from miro_gen.foxglove.publish import ClientPublishing
 from miro_gen.foxglove.services import Services
 from miro_gen.foxglove.topics import Topic, Topics, topics_of
 from miro_gen.live.remote import SERVICE_REPO_ID, LiveError, Robot, Running
 from miro_gen.log import logger
+from miro_gen.transport.buffers import keep_large_buffers
 from miro_gen.transport.events import CHANNEL_REPO_ID, EventChannel
 
 if TYPE_CHECKING:

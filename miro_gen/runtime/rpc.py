@@ -53,10 +53,12 @@ _OK = ReplyStatus.OK
 
 
 class Reply(NamedTuple):
-    """What a call returns: a status, a CDR body, and for exceptions their repository id."""
+    """What a call returns: a status, a CDR body, and for exceptions their repository id. A
+    transport may give a large body as a read-only view over the frame it received (decoding
+    then copies its octets once, not twice)."""
 
     status: ReplyStatus
-    body: bytes
+    body: bytes | memoryview
     repo_id: str = ""
 
 
@@ -156,7 +158,7 @@ class Stub:
 
     def _call(
         self, operation: str, body: bytes, declared: tuple[type[UserException], ...] = ()
-    ) -> bytes:
+    ) -> bytes | memoryview:
         """Invoke and return the reply body; raise what the server raised."""
         try:
             reply = self._invoker.invoke(self._ref, operation, body, timeout=self._timeout)

@@ -217,7 +217,10 @@ class _Call:
 def _reply_frames(peer: bytes, req: frames.Request, reply: Reply) -> list[bytes] | None:
     if req.oneway:
         return None
-    return [peer, frames.reply_header(req.request_id, reply.status, reply.repo_id), reply.body]
+    body = reply.body  # a skeleton's bytes (only a caller's received replies are views)
+    if type(body) is not bytes:
+        body = bytes(body)
+    return [peer, frames.reply_header(req.request_id, reply.status, reply.repo_id), body]
 
 
 def _advertised(bound: str, host: str | None) -> str:

@@ -33,14 +33,15 @@ import os
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Hashable
-from typing import Any, Protocol
+from collections.abc import Callable, Hashable, Sequence
+from typing import Any, Protocol, cast
 
 import zmq
 from zmq.backend import Socket as _Socket
 
 from miro_gen.log import logger
-from miro_gen.transport.rpc.frames import ZERO_COPY_MIN
+from miro_gen.transport.buffers import keep_large_buffers
+from miro_gen.transport.rpc.frames import ZERO_COPY_MIN, body_of
 
 _log = logger("MIRO")
 
@@ -231,7 +232,9 @@ class Dispatcher:
                 elif self._draining:
                     self._refuse_pending()
                 continue
-            out = self._receive(parts, _peer(last) if self._identify else None)
+            if type(parts[-1]) is memoryview:  # a large request: skeletons decode bytes
+                parts[-1] = bytes(parts[-1])
+            out = self._receive(cast(Frames, parts), _peer(last) if self._identify else None)
             if out is None:
                 continue
             if isinstance(out, list):
@@ -321,17 +324,20 @@ class Dispatcher:
 
     # ---- socket I/O (by the leader only) -------------------------------------------------------
 
-    def _recv_message(self) -> tuple[Frames, zmq.Frame]:
-        """A message's frames, and the last one (which knows the connection it came on)."""
+    def _recv_message(self) -> tuple[list[bytes | memoryview], zmq.Frame]:
+        """A message's frames, and the last one (which knows the connection it came on). The
+        last, a body, is a view over the frame when large (`frames.body_of`): a reply handed
+        back by another thread is forwarded without a copy."""
         sock = self.socket
         frame = _recv(sock, 0, False)
-        parts = [frame.bytes]
+        parts: list[bytes | memoryview] = []
         while frame.more:
-            frame = _recv(sock, _NOBLOCK, False)
             parts.append(frame.bytes)
+            frame = _recv(sock, _NOBLOCK, False)
+        parts.append(body_of(frame))
         return parts, frame
 
-    def _send(self, frames: Frames | None) -> None:
+    def _send(self, frames: Sequence[bytes | memoryview] | None) -> None:
         if frames is None or self._closed:
             return
         sock = self.socket
@@ -342,6 +348,7 @@ class Dispatcher:
             if len(body) < ZERO_COPY_MIN:
                 _send(sock, body, _NOBLOCK)
             else:  # a large result goes without a copy
+                keep_large_buffers()
                 _send(sock, body, _NOBLOCK, False)
         except zmq.ZMQError as e:  # the caller is gone: nobody to tell
             _log.notice("could not send a reply: %s", e)

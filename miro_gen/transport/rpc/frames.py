@@ -12,7 +12,7 @@ from __future__ import annotations
 import enum
 from struct import Struct
 from struct import error as StructError
-from typing import Final, NamedTuple
+from typing import Final, NamedTuple, Protocol
 
 from miro_gen.runtime.rpc import ReplyStatus as Status
 
@@ -25,6 +25,25 @@ class Kind(enum.IntEnum):
     REQUEST = 1  # a reply is expected
     ONEWAY = 2  # no reply
     REPLY = 3
+
+
+class Received(Protocol):
+    """A received ZeroMQ frame (`zmq.Frame`): its bytes copied, or a view over its buffer."""
+
+    @property
+    def bytes(self) -> bytes: ...
+    @property
+    def buffer(self) -> memoryview: ...
+    def __len__(self) -> int: ...
+
+
+def body_of(frame: Received) -> bytes | memoryview:
+    """A received body: from ZERO_COPY_MIN bytes on, a read-only view over the frame's buffer
+    (it keeps the frame alive), so that decoding copies each byte at most once (the `bytes`
+    of a sequence of octets); below, its bytes (a copy is cheaper than a view there)."""
+    if len(frame) < ZERO_COPY_MIN:
+        return frame.bytes
+    return frame.buffer.toreadonly()
 
 
 class FrameError(ValueError):
@@ -132,7 +151,7 @@ def reply_header(request_id: int, status: int, repo_id: str = "") -> bytes:
     return _REPLY.pack(VERSION, Kind.REPLY, status, 0, 0, request_id, len(repo)) + repo
 
 
-def ok_reply_id(frame: bytes) -> int:
+def ok_reply_id(frame: bytes | memoryview) -> int:
     """The request id of a reply that says ok and carries no repository id (the common case,
     checked with the least work); -1 for any other frame, which `decode_reply` then reads."""
     if len(frame) == _REPLY.size and frame[:4] == _OK_REPLY and frame[16:] == b"\0\0":
@@ -140,7 +159,7 @@ def ok_reply_id(frame: bytes) -> int:
     return -1
 
 
-def decode_reply(frame: bytes) -> Reply:
+def decode_reply(frame: bytes | memoryview) -> Reply:
     try:
         version, kind, status, _, _, request_id, n_repo = _REPLY.unpack_from(frame)
         ok = not status and not n_repo and version == VERSION and kind == Kind.REPLY

@@ -20,9 +20,14 @@ and never replayed (PITFALLS.md, ZeroMQ):
 
 A call is a send and a blocking receive with a time limit (checking the monitor every
 `CHECK_INTERVAL` while the reply is late); request headers are built once per object and
-operation. Sockets come from `transport.sockets` (limits, heartbeats, CURVE): a request larger
-than the maximum message size is MARSHAL before anything is sent, and a server that refuses
-the handshake (no key, another key, too many connections) is TRANSIENT at once.
+operation. A reply body of `frames.ZERO_COPY_MIN` bytes or more is a read-only view over the
+received frame (`frames.body_of`), so that the stub's decoding copies its octets once; a
+process that sends or receives such bodies keeps megabyte buffers in its heap
+(`transport.buffers`: glibc would return and re-fault them on every call).
+
+Sockets come from `transport.sockets` (limits, heartbeats, CURVE): a request larger than the
+maximum message size is MARSHAL before anything is sent, and a server that refuses the
+handshake (no key, another key, too many connections) is TRANSIENT at once.
 """
 
 from __future__ import annotations
@@ -42,6 +47,7 @@ from miro_gen.log import PeerWarnings, logger
 from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.runtime.rpc import Reply, ReplyStatus, Servant
 from miro_gen.transport import sockets
+from miro_gen.transport.buffers import keep_large_buffers
 from miro_gen.transport.rpc import frames
 
 _log = logger("MIRO")
@@ -238,13 +244,15 @@ class ZmqInvoker:
         while True:
             try:
                 frame = _recv(sock, 0, False)
-                parts = [frame.bytes]
+                parts: list[bytes | memoryview] = [frame.bytes]
                 while frame.more:
                     frame = _recv(sock, _NOBLOCK, False)
-                    parts.append(frame.bytes)
+                    parts.append(frames.body_of(frame))
             except zmq.Again:
                 self._check(conn, operation, deadline)
                 continue
+            if type(parts[-1]) is memoryview:  # a large body: keep such buffers in the heap
+                keep_large_buffers()
             if len(parts) == 2 and frames.ok_reply_id(parts[0]) == request_id:
                 if conn.rcvtimeo != CHECK_INTERVAL_MS:
                     conn.set_rcvtimeo(CHECK_INTERVAL_MS)
@@ -273,7 +281,9 @@ class ZmqInvoker:
             )
         conn.set_rcvtimeo(min(CHECK_INTERVAL_MS, int(left * 1000) + 1))
 
-    def _other_reply(self, conn: _Connection, parts: list[bytes], request_id: int) -> Reply | None:
+    def _other_reply(
+        self, conn: _Connection, parts: list[bytes | memoryview], request_id: int
+    ) -> Reply | None:
         """A message that is not an ok reply to `request_id`: an exception reply to it, or
         None (a late reply to an earlier call, or a malformed one: logged and dropped)."""
         if len(parts) != 2:
@@ -332,6 +342,7 @@ def _sent(sock: zmq.Socket[Any], header: bytes, body: bytes) -> bool:
         if len(body) < frames.ZERO_COPY_MIN:
             _send(sock, body, _NOBLOCK)
         else:  # a large request goes without a copy
+            keep_large_buffers()
             _send(sock, body, _NOBLOCK, False)
     except zmq.ZMQError:
         return False

@@ -1,12 +1,14 @@
-"""The allocator of a process that forwards large messages to Foxglove: buffers up to
-`MMAP_BELOW` come from the heap and freed ones stay there, instead of glibc's default of
-mapping each megabyte buffer afresh and returning it when freed.
+"""The allocator of a process that moves large messages: buffers up to `MMAP_BELOW` come from
+the heap and freed ones stay there, instead of glibc's default of mapping each megabyte buffer
+afresh and returning it when freed.
 
-Every event the bridge forwards takes new buffers of its size (ZeroMQ's, the payload's bytes,
-the Foxglove SDK's WebSocket frame); with glibc's defaults each new one of a megabyte is
-faulted in page by page and trimmed again when freed. Measured on 1 MB events at 150/s
-(the bench's pipeline, load about 6): the bridge's CPU per event fell from about 2.5 ms to
-1.2 ms. The cost: up to `TRIM_ABOVE` bytes of freed heap are kept for the next messages.
+Every large message takes new buffers of its size (ZeroMQ's, the body's `bytes`, an encoder's);
+with glibc's defaults each new one of a megabyte is faulted in page by page and trimmed again
+when freed. Measured: the Foxglove bridge's CPU per 1 MB event fell from about 2.5 ms to 1.2 ms
+(1 MB events at 150/s, load about 6); a caller's 1 MiB reply (bench_rpc.py --sizes, bench/
+README.md). The transport sets it in a process once it sends or receives a call body of
+`rpc.frames.ZERO_COPY_MIN` or more, the bridge when it starts. The cost: up to `TRIM_ABOVE`
+bytes of freed heap are kept for the next messages.
 """
 
 from __future__ import annotations
@@ -27,6 +29,8 @@ _state: list[bool] = []
 def keep_large_buffers() -> bool:
     """Set this process's allocator for large messages, once; False where the C library has
     no `mallopt` (not glibc) or refuses the values."""
+    if _state:  # the common case once set: no lock
+        return _state[0]
     with _done:
         if not _state:
             _state.append(_tune())
