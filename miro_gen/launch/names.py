@@ -94,14 +94,24 @@ class NameWatcher:
 
         from miro_gen.exceptions import TRANSIENT
         from miro_gen.runtime.cdr import ObjectRef
+        from miro_gen.service.options import UsageError, parse_common_options
+        from miro_gen.transport import sockets
         from miro_gen.transport.naming.client import NAMING_KEY
         from miro_gen.transport.zenoh import keys
         from miro_gen.transport.zenoh.invoker import ZenohInvoker
+        from miro_gen.transport.zenoh.security import tls_for
         from miro_gen.transport.zenoh.session import open_client
 
+        try:  # the key its services get from the environment (or the default key)
+            env, _ = parse_common_options([])
+            tls = tls_for(
+                keys=env.keys, insecure=env.insecure, talks_to=sockets.endpoint_host(self.url)
+            )
+        except UsageError:
+            tls = None  # no key where one is needed: the services say so, and fail
         while True:
             try:
-                session = open_client(self.url, 0.0)
+                session = open_client(self.url, 0.0, tls)
                 break
             except TRANSIENT:
                 if self._stop.wait(FIRST_POLL):

@@ -3,7 +3,8 @@ a base and three robots as Linux network namespaces (tests/netns.py), each runni
 with `miro launch fleet.toml --host NAME`.
 
 The file says `transport = "zenoh"`, so the base's part is `miro naming --zenoh` (the router and
-the name registry) and every service runs on Zenoh; it shares ExampleEvent of
+the name registry) and every service runs on Zenoh, under mutual TLS with the fleet's key that
+every namespace's processes hold (MIRO_KEYS, tests/netns.py); it shares ExampleEvent of
 ExampleEventChannel with the fleet (`fleet_events`, Miro's NotifyMulticast). Shown across the
 links: ExampleB on robot2 polls ExampleA on robot1 (the manual's output); ExampleD on robot2
 hears robot1's ExampleC on robot1's channel; ExampleD on robot3, on its own robot's channel,
@@ -60,7 +61,6 @@ address = "{ADDRESSES["robot3"]}"
 [naming]
 host = "base"
 endpoint = "{NAMING}"
-insecure = true
 
 [services.exampleA]
 host = "robot1"
