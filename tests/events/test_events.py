@@ -210,7 +210,7 @@ def test_a_turn_with_more_events_than_a_batch_holds(servers: Callable[[str], Ser
     eventually(lambda: supplier.has_subscribers("ExampleEvent"))
     total = 70_000
     value = event(1)
-    # All pushed on the reactor thread, in one turn: they leave together when it ends.
+    # All pushed on the reactor thread, in one turn: they leave in frames as they fill.
     channel.reactor.call_soon(lambda: [supplier.push("ExampleEvent", value) for _ in range(total)])
     eventually(lambda: len(consumer.events) == total, 30)
     assert consumer.missed == 0

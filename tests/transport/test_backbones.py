@@ -275,6 +275,33 @@ def test_a_supplier_knows_whether_anyone_subscribes(servers: Callable[[str], Ser
     eventually(lambda: not supplier.has_subscribers("ExampleEvent"))
 
 
+def test_a_long_turn_sends_its_events_before_it_ends_in_order_and_all(
+    servers: Callable[[str], Server],
+) -> None:
+    """A reactor turn that pushes 20,000 events sends the first of them while it is still
+    pushing (so that the network and the consumer work meanwhile), and a keep-all consumer
+    gets every one, in order."""
+    host = servers("robot6")
+    channel = EventChannelFactory(host).create_channel("Long")
+    supplier = StructuredPushSupplier(channel)
+    consumer = Recorder(servers("gui").resolve_channel("robot6/Long"))
+    consumer.set_subscriptions([("*", "ExampleEvent")])
+    eventually(lambda: supplier.has_subscribers("ExampleEvent"))
+    total = 20_000
+    sent_during_turn: list[int] = []
+
+    def turn() -> None:
+        for n in range(total):
+            supplier.push("ExampleEvent", _event(n))
+        sent_during_turn.append(supplier.sent)  # still within the turn
+
+    channel.reactor.call_soon(turn)
+    eventually(lambda: len(consumer.events) >= total, 60)
+    assert 0 < sent_during_turn[0] < total
+    assert [e.payload.counter for e in consumer.events] == list(range(total))
+    assert (consumer.missed, consumer.dropped, supplier.dropped) == (0, 0, 0)
+
+
 def test_names_and_calls_come_back_after_the_naming_service_restarts(backbone: Backbone) -> None:
     own = Backbone(backbone.name, NamingProcess(options=backbone.naming.options))
     try:

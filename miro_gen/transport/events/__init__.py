@@ -11,7 +11,9 @@ Each event carries its domain (by convention the supplier's naming context: the 
 name, the type hash of its payload, a sequence number per supplier and type (so consumers count
 what they missed), the source time stamp and the publish time (the bytes: transport.events.frames).
 Events pushed within one reactor turn leave in one frame per topic (split at MAX_BATCH_EVENTS /
-MAX_BATCH_BYTES), so throughput is not capped at one ZeroMQ message per event; at low rates that is
+MAX_BATCH_BYTES; a long turn of pushes on the reactor thread sends every EARLY_FLUSH_BYTES, so
+that the network and the consumers need not wait for its end), so throughput is not capped at
+one ZeroMQ message per event; at low rates that is
 one event per frame, as fast as a single message; an event of LARGE_EVENT bytes or more travels
 alone, copied once into its frame and decoded in place from the consumer's; between processes of
 one host it is written into a shared-memory ring instead and only a descriptor travels

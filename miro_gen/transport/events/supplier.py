@@ -1,6 +1,7 @@
 """Suppliers of an event channel (Miro's StructuredPushSupplier): `push()` from any thread,
-events batched per reactor turn into one frame per topic, large ones alone and copied once,
-nothing encoded while nobody subscribes, every queue bounded and what overflows counted.
+events batched per reactor turn (or per EARLY_FLUSH_BYTES of a long one) into one frame per
+topic, large ones alone and copied once, nothing encoded while nobody subscribes, every queue
+bounded and what overflows counted.
 The overview is transport.events; the bytes are transport.events.frames.
 """
 
@@ -45,6 +46,12 @@ LARGE_EVENT = 64 * 1024
 # behind a thread pushing flat out. An event larger than MAX_BATCH_BYTES travels alone.
 MAX_BATCH_EVENTS = 16_384
 MAX_BATCH_BYTES = 256 * 1024
+# Pushes on the reactor thread send what waits once it reaches this many bytes, rather than at
+# the end of the reactor's turn: a long turn (a timer or a handler pushing thousands of events)
+# otherwise encodes them all before the first leaves, and the link, the network, the router
+# and the consumers wait for it, then it for them. Sent early, their work overlaps its own;
+# on a loaded machine (every thread waits for a core) that overlap is most of the throughput.
+EARLY_FLUSH_BYTES = 32 * 1024
 
 
 class _Framed(list[bytes]):
@@ -92,7 +99,8 @@ class _Topic:
 
 class StructuredPushSupplier:
     """Pushes events into a channel. `push()` may be called from any thread; the sending
-    happens on the reactor thread, once per turn for all events pushed meanwhile.
+    happens on the reactor thread, once per turn for all events pushed meanwhile (and, for
+    pushes on the reactor thread, whenever EARLY_FLUSH_BYTES wait).
 
     Events wait for that turn in a bounded queue (QUEUE_EVENTS events, QUEUE_BYTES bytes): when
     the reactor cannot keep up, `push()` drops the newest and counts them in `dropped`, as it
@@ -126,10 +134,11 @@ class StructuredPushSupplier:
         self._marker = shm.topic_marker() if shm.enabled() and channel.links is None else b""
         self._keep_all_marker = shm.keep_all_marker()
         self._rings_lock = threading.Lock()
-        # A turn's events leave in a burst of frames (100,000 small events: about 30), which the
-        # link must hold until the channel reads them: room for a full queue of batches
-        # (QUEUE_BYTES), more only when the supplier's own events are larger than a batch.
-        burst = QUEUE_BYTES // MAX_BATCH_BYTES
+        # A turn's events leave in a burst of frames (100,000 small events: about 140, sent as
+        # they fill EARLY_FLUSH_BYTES), which the link must hold until the channel reads them
+        # (on this very reactor, when this process hosts the channel): room for a full queue
+        # of them (QUEUE_BYTES), more only when the supplier's own events are larger.
+        burst = QUEUE_BYTES // EARLY_FLUSH_BYTES
         self.link: PublishingLink = channel.publishing(
             self._connection_changed, self._subscriptions_changed, HWM, burst
         )
@@ -237,10 +246,14 @@ class StructuredPushSupplier:
                 t.pending.append((type_hash, t.last))
             self._queued += 1
             self._queued_bytes += size
-            if self._flush_pending:
+            early = self._queued_bytes >= EARLY_FLUSH_BYTES
+            if self._flush_pending and not early:
                 return True
-            self._flush_pending = True
-        self.reactor.call_soon(self._flush)
+            scheduled, self._flush_pending = self._flush_pending, True
+        if early and self.reactor.in_reactor_thread():
+            self._flush()  # a long turn of pushes: send what it has so far (see EARLY_FLUSH_BYTES)
+        elif not scheduled:
+            self.reactor.call_soon(self._flush)
         return True
 
     def _encode_large(
