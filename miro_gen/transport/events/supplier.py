@@ -299,9 +299,11 @@ class StructuredPushSupplier:
                 ring = t.ring
                 if ring is None:
                     ring = t.ring = shm.Ring(self.max_frame)
-        if size > ring.slot_size:  # larger than any message: refused as such
+        if size > ring.slot_size:  # larger than any message: framed as over the network, so
+            # that push refuses it as such (its size is over max_frame)
             whole = encoded if isinstance(encoded, bytes) else encoded.value()
-            return b"", b"".join((self._batch_head(type_hash, 1), whole)), None
+            event_head = EVENT.pack(*head, size)
+            return b"", b"".join((self._batch_head(type_hash, 1), event_head, whole)), None
         # The encoder copies into the slot. On the reactor thread a push does not wait for
         # credits: a keep-all consumer of this process could not return them meanwhile.
         wait = 0.0 if self.reactor.in_reactor_thread() else shm.WAIT_KEEP_ALL
