@@ -3,22 +3,24 @@ run on loopback.
 
     python bench/bench_backbones.py [--calls N] [--events N] [--runs R]
 
-Calls: a generated stub's getData() to a server in another process, p50 of the round trip,
-(1) over the Zenoh backbone (`--transport zenoh`, through the router in `miro naming --zenoh`),
-(2) a raw Zenoh get() to a queryable in another process through the same router, replying the
-same bytes (its callback replies at once, as plain Zenoh code does), and (3) over the ZeroMQ
-backbone (`miro naming`, direct connection). Events: ExampleEvents pushed by a supplier and
-counted by a keep-all consumer of another session (both in this process, so both sides share
-one interpreter, as the raw pairs do): events/s over the Zenoh backbone; raw Zenoh
-put/subscribe through the same router, one put per event, of the event's CDR bytes encoded
-once beforehand and not decoded ("bytes"), or encoded for each put and decoded in the
-subscriber's callback with the same generated code ("typed": what a Zenoh user needs to get
-the event a consumer's handler gets; the callback runs it on Zenoh's thread, with no hand-off);
-and over ZeroMQ (a channel hosted by the supplier's process). The raw publishers use
-congestion control BLOCK, as ours does for a keep-all consumer, so that every event counted
-was sent. Everything is measured in interleaved blocks, repeated R times (5); medians with
-their spread (min-max) and the load average. Issue 26's targets: calls at most 1.25x raw Zenoh
-get/reply, events at least 0.8x raw Zenoh put/subscribe (printed against both raw rows).
+Calls: a generated stub's getData() to a server in another process, p50 of the round trip, (1)
+over the Zenoh backbone (`--transport zenoh`, through the router in `miro naming --zenoh`), and
+the same to a servant whose getData is marked `@nonblocking` (the server runs it on Zenoh's
+thread instead of handing it to a worker thread, as raw Zenoh's callback replies), (2) a raw
+Zenoh get() to a queryable in another process through the same router, replying the same bytes
+(its callback replies at once, as plain Zenoh code does), and (3) over the ZeroMQ backbone
+(`miro naming`, direct connection). Events: ExampleEvents pushed by a supplier and counted by a
+keep-all consumer of another session (both in this process, so both sides share one interpreter,
+as the raw pairs do): events/s over the Zenoh backbone; raw Zenoh put/subscribe through the same
+router, one put per event, of the event's CDR bytes encoded once beforehand and not decoded
+("bytes"), or encoded for each put and decoded in the subscriber's callback with the same
+generated code ("typed": what a Zenoh user needs to get the event a consumer's handler gets; the
+callback runs it on Zenoh's thread, with no hand-off); and over ZeroMQ (a channel hosted by the
+supplier's process). The raw publishers use congestion control BLOCK, as ours does for a
+keep-all consumer, so that every event counted was sent. Everything is measured in interleaved
+blocks, repeated R times (5); medians with their spread (min-max) and the load average. Issue
+26's targets: calls at most 1.25x raw Zenoh get/reply, events at least 0.8x raw Zenoh
+put/subscribe (printed against both raw rows).
 
 Zenoh's default config sends messages of 3 KiB and more between processes of one host through
 shared memory; the messages here are smaller, and each row says whether it was on
@@ -70,6 +72,18 @@ q = s.declare_queryable("bench/echo", answer)
 print("READY", flush=True)
 while True:
     time.sleep(3600)
+"""
+QUICK_SERVER = """
+import sys
+sys.path[:0] = [sys.argv.pop(1)]
+import named_example
+from miro_gen import nonblocking
+class Quick(named_example.Example):
+    @nonblocking
+    def getData(self):
+        return super().getData()
+named_example.Example = Quick
+named_example.main()
 """
 
 
@@ -187,12 +201,17 @@ def main() -> int:
             )
         )
         procs.append(start([sys.executable, NAMED, "--naming", mendpoint, "-MNC", "r"]))
+        procs.append(
+            start([sys.executable, "-c", QUICK_SERVER, str(Path(NAMED).parent), "--transport",
+                   "zenoh", "--naming", zendpoint, "-MNC", "q"])
+        )  # fmt: skip
         reply = Miro.ExampleStructIDL(1.0, 11.0).serialize()
         procs.append(start([sys.executable, "-c", RAW_ECHO, locator(zendpoint), reply.hex()]))
         zc = Client(["b", "--transport", "zenoh", "--naming", zendpoint])
         mc = Client(["b", "--naming", mendpoint])
         z_stub = zc.resolve_name("r/ExampleA", Miro.Example, wait=10)
         m_stub = mc.resolve_name("r/ExampleA", Miro.Example, wait=10)
+        q_stub = zc.resolve_name("q/ExampleA", Miro.Example, wait=10)
         raw = zenoh.open(config("client", connect=locator(zendpoint)))
         header = bytes(24)
 
@@ -238,20 +257,25 @@ def main() -> int:
         payload = example.serialize()  # the bytes a raw Zenoh user would put
         time.sleep(1.0)
         for _ in range(200):  # warm up
-            z_stub.getData(), m_stub.getData(), raw_get()
-        rows: dict[str, list[float]] = {k: [] for k in ("ours-zenoh", "raw-zenoh", "ours-zmq")}
+            z_stub.getData(), q_stub.getData(), m_stub.getData(), raw_get()
+        rows: dict[str, list[float]] = {
+            k: [] for k in ("ours-zenoh", "ours-quick", "raw-zenoh", "ours-zmq")
+        }
         ev: dict[str, list[float]] = {
             k: [] for k in ("ours-zenoh", "raw-zenoh", "raw-typed", "ours-zmq")
         }
-        call_ratio, event_ratio, typed_ratio = [], [], []
+        call_ratio, quick_ratio, event_ratio, typed_ratio = [], [], [], []
         for _ in range(args.runs):
             a = p50(time_calls(z_stub.getData, args.calls))
+            q = p50(time_calls(q_stub.getData, args.calls))
             b = p50(time_calls(raw_get, args.calls))
             c = p50(time_calls(m_stub.getData, args.calls))
             rows["ours-zenoh"].append(a * 1e6)
+            rows["ours-quick"].append(q * 1e6)
             rows["raw-zenoh"].append(b * 1e6)
             rows["ours-zmq"].append(c * 1e6)
             call_ratio.append(a / b)
+            quick_ratio.append(q / b)
             sz, _cz, supz, conz = servers["zenoh"]
             e1 = ours_events(supz, conz, sz, args.events)
             e2 = raw_events(raw_pub, raw_got, raw_done, payload, args.events)
@@ -270,13 +294,15 @@ def main() -> int:
               f"Zenoh shared memory {on} (messages here are under 3 KiB)")  # fmt: skip
         print(f"{'call getData() p50, us (median, min-max)':44} {'':>10}")
         names = {"ours-zenoh": "miro-gen over Zenoh (via router)",
+                 "ours-quick": "  the same, getData @nonblocking",
                  "raw-zenoh": "raw Zenoh get/reply (via router)",
                  "raw-typed": "raw Zenoh put/subscribe, typed (via router)",
                  "ours-zmq": "miro-gen over ZeroMQ (direct)"}  # fmt: skip
         for k, v in rows.items():
-            print(f"  {names[k]:42} {spread(v)}  shm {on if 'zenoh' in k else 'n/a'}")
-        print(f"  ratio miro-gen/raw Zenoh p50: {statistics.median(call_ratio):.2f} "
-              f"(runs {', '.join(f'{r:.2f}' for r in call_ratio)}; target <= 1.25)")  # fmt: skip
+            print(f"  {names[k]:42} {spread(v)}  shm {on if k != 'ours-zmq' else 'n/a'}")
+        for what, ratios in (("", call_ratio), (", @nonblocking", quick_ratio)):
+            print(f"  ratio miro-gen/raw Zenoh p50{what}: {statistics.median(ratios):.2f} "
+                  f"(runs {', '.join(f'{r:.2f}' for r in ratios)}; target <= 1.25)")  # fmt: skip
         print("events/s (median, min-max)")
         for k, v in ev.items():
             name = names[k].replace("get/reply", "put/subscribe, bytes")

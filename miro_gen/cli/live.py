@@ -149,15 +149,37 @@ def _listen(
         return None
 
 
+def echo_parser() -> argparse.ArgumentParser:
+    """`miro echo`'s options (its run and shell completion read them)."""
+    p = _parser(
+        "miro echo", "Print the events of TOPIC as they arrive, decoded, and sequence gaps."
+    )
+    p.add_argument("-n", "--count", type=int, default=0, help="exit after N events")
+    add_length_options(p)
+    return p
+
+
+def hz_parser() -> argparse.ArgumentParser:
+    """`miro hz`'s options (its run and shell completion read them)."""
+    p = _parser(
+        "miro hz",
+        "Print, every second, the rate at which the events of TOPIC arrive, the min, max and "
+        "standard deviation of the period, their lag (how long after their push they arrive: "
+        "a consumer that falls behind sees it grow), the events missed (sequence gaps: "
+        "dropped on the way, or by a supplier while its channel was gone) and the bandwidth "
+        "(payload bytes a second).",
+    )
+    p.add_argument("-w", "--window", type=int, default=100, help="periods averaged (default 100)")
+    return p
+
+
 def echo_main(argv: Sequence[str]) -> int:
     if wants_ros2(argv):
         from miro_gen.cli import live_ros2
 
         return live_ros2.echo_main(argv)
     prog = "miro echo"
-    p = _parser(prog, "Print the events of TOPIC as they arrive, decoded, and sequence gaps.")
-    p.add_argument("-n", "--count", type=int, default=0, help="exit after N events")
-    add_length_options(p)
+    p = echo_parser()
     ns = p.parse_args(split_common(p, argv))
     limit = length_limit(p, ns)
     from miro_gen.eventlog.show import clock_text, payload_text
@@ -206,15 +228,7 @@ def hz_main(argv: Sequence[str]) -> int:
 
         return live_ros2.hz_main(argv)
     prog = "miro hz"
-    p = _parser(
-        prog,
-        "Print, every second, the rate at which the events of TOPIC arrive, the min, max and "
-        "standard deviation of the period, their lag (how long after their push they arrive: "
-        "a consumer that falls behind sees it grow), the events missed (sequence gaps: "
-        "dropped on the way, or by a supplier while its channel was gone) and the bandwidth "
-        "(payload bytes a second).",
-    )
-    p.add_argument("-w", "--window", type=int, default=100, help="periods averaged (default 100)")
+    p = hz_parser()
     ns = p.parse_args(split_common(p, argv))
     if ns.window < 1:
         p.error("--window must be 1 or more")

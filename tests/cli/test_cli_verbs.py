@@ -63,8 +63,10 @@ def test_every_verb_is_completed_and_listed() -> None:
 def test_the_ros2_forms_are_completed_and_have_their_own_help() -> None:
     """`--ros2` is among the options completed for the verbs whose parser takes it, and
     `miro call --ros2 --help` is the ROS 2 form's help (as `ros2 service call`)."""
-    for verb in ("call", "pub", "list"):
+    for verb in ("call", "pub", "list", "echo", "hz"):
         assert "--ros2" in candidates(["miro", verb, "--r"]), verb
+    assert "--count" in candidates(["miro", "echo", "--c"])
+    assert "--window" in candidates(["miro", "hz", "--w"])
     from miro_gen.cli.call_ros2 import parser
 
     text = parser().format_help()

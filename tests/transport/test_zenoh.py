@@ -14,9 +14,10 @@ import Miro__POA
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
-from loopback import NamingProcess, RunningServer, service_env
+from loopback import NamingProcess, RunningServer, eventually, service_env
 
-from miro_gen import Client, StructuredEvent, StructuredPushConsumer
+from miro_gen import Client, StructuredEvent, StructuredPushConsumer, nonblocking
+from miro_gen.exceptions import TIMEOUT
 from miro_gen.service.options import UsageError, parse_common_options
 from miro_gen.transport.events import KEEP_ALL, EventChannel
 from miro_gen.transport.events.frames import topic
@@ -25,6 +26,7 @@ zenoh = pytest.importorskip("zenoh")
 
 from miro_gen.transport.rpc import frames  # noqa: E402
 from miro_gen.transport.zenoh import keys  # noqa: E402
+from miro_gen.transport.zenoh.adapter import DEFAULT_WORKERS  # noqa: E402
 from miro_gen.transport.zenoh.session import config, locator  # noqa: E402
 
 
@@ -117,6 +119,62 @@ def test_a_second_session_on_the_owners_key_answers_no_call(naming: NamingProces
         queryable.undeclare()
         rogue.close()
         owner.stop()
+
+
+class _Busy(Miro__POA.Example):
+    """setData waits for `release`; getData answers at once, marked @nonblocking when the
+    class says so."""
+
+    def __init__(self, release: threading.Event) -> None:
+        self.release = release
+        self.ran = 0
+
+    def setData(self, a: float, b: float) -> None:
+        self.ran += 1
+        self.release.wait(60)
+
+    def getData(self) -> Miro.ExampleStructIDL:
+        return Miro.ExampleStructIDL(float(self.ran), 0.0)
+
+
+class _QuickBusy(_Busy):
+    @nonblocking
+    def getData(self) -> Miro.ExampleStructIDL:
+        return Miro.ExampleStructIDL(float(self.ran), 0.0)
+
+
+def test_a_nonblocking_method_is_answered_while_every_worker_blocks(
+    naming: NamingProcess,
+) -> None:
+    """An operation marked @nonblocking runs on Zenoh's thread, as over ZeroMQ on the thread
+    that received it: it is answered while every worker of the server is held by a servant
+    that blocks, where an unmarked one waits for a worker (its caller gives up)."""
+    release = threading.Event()
+    plain, quick = _Busy(release), _QuickBusy(release)
+    server = RunningServer(naming.endpoint, "busy", "--transport", "zenoh")
+    server.server.add_to_name_service(plain, "Plain")
+    server.server.add_to_name_service(quick, "Quick")
+    client = Client(["t", "--transport", "zenoh", "--naming", naming.endpoint])
+    blocked: list[threading.Thread] = []
+    try:
+        plain_stub = client.resolve_name("busy/Plain", Miro.Example, wait=10)
+        quick_stub = client.resolve_name("busy/Quick", Miro.Example, wait=10)
+        for _ in range(DEFAULT_WORKERS):
+            t = threading.Thread(target=plain_stub.setData, args=(0.0, 0.0), daemon=True)
+            t.start()
+            blocked.append(t)
+        eventually(lambda: plain.ran == DEFAULT_WORKERS)  # every worker is held
+        assert [quick_stub.getData() for _ in range(5)] == [Miro.ExampleStructIDL(0.0, 0.0)] * 5
+        impatient = Miro.Example(plain_stub._ref, plain_stub._invoker, timeout=0.5)
+        with pytest.raises(TIMEOUT):
+            impatient.getData()  # waits for a worker
+        assert all(t.is_alive() for t in blocked)
+    finally:
+        release.set()
+        for t in blocked:
+            t.join(10)
+        client.close()
+        server.stop()
 
 
 def test_the_router_beyond_loopback_needs_insecure_and_a_busy_port_is_one_line() -> None:

@@ -1,10 +1,14 @@
 """The server side of calls over Zenoh: one queryable serving all of a process's objects.
 
 The queryable is declared on the key of the process's session (`keys.call_key`); its callback
-runs on Zenoh's threads and only puts the query in a queue. A pool of threads (`workers`, 16 by
-default) takes queries from there, runs the servants and replies, so a servant may block or
-call another service that calls back into this one. The process says it is up with a
-liveliness token (`keys.alive_key`), which its callers watch.
+runs on Zenoh's threads: it reads the request header and answers what needs no servant, runs
+operations marked `@nonblocking` there (as over ZeroMQ, where they run on the receiving
+thread: no thread switch, as raw Zenoh code that replies in its callback), and puts every other
+query in a queue. A pool of threads (`workers`, 16 by default) takes queries from there, runs
+the servants and replies, so a servant may block or call another service that calls back into
+this one (on Zenoh's thread that would stop the session's reading, and a nested call's reply
+would never arrive). The process says it is up with a liveliness token (`keys.alive_key`),
+which its callers watch.
 
 As over ZeroMQ (transport.rpc.adapter): a request that does not parse is logged and dropped, one
 for an unknown object gets OBJECT_NOT_EXIST, one for an operation the object lacks
@@ -26,7 +30,7 @@ import zenoh
 
 from miro_gen.exceptions import BAD_OPERATION, OBJECT_NOT_EXIST, TRANSIENT, CompletionStatus
 from miro_gen.log import PeerWarnings, logger
-from miro_gen.runtime.rpc import Invoker, Reply, system_exception_reply
+from miro_gen.runtime.rpc import Invoker, Reply, Servant, is_nonblocking, system_exception_reply
 from miro_gen.transport.rpc import frames
 from miro_gen.transport.rpc.caller import Caller, serving
 from miro_gen.transport.rpc.objects import ObjectTable
@@ -60,6 +64,7 @@ class ZenohAdapter(ObjectTable):
         self._lock = threading.Lock()
         self._identify = identify_callers
         self._queries: queue.SimpleQueue[Any] = queue.SimpleQueue()
+        self._quick: dict[tuple[type, str], bool] = {}  # (servant class, operation): @nonblocking
         self._running = 0
         self._idle = threading.Condition(self._lock)
         self._draining = False
@@ -77,60 +82,98 @@ class ZenohAdapter(ObjectTable):
 
     # ---- requests -------------------------------------------------------------------------------
 
-    def _arrived(self, query: Any) -> None:  # Zenoh's thread: hand over, never block
-        self._queries.put((time.monotonic(), query))
+    def _arrived(self, query: Any) -> None:
+        """Zenoh's thread: read the header, answer what needs no servant, run an operation
+        marked @nonblocking here (as raw Zenoh code replies in its callback: no thread switch),
+        and hand everything else to the workers. Never blocks."""
+        received = time.monotonic()
+        with self._lock:
+            self._running += 1
+        handed = False
+        try:
+            call = self._accept(query)
+            if call is None:
+                return
+            req, servant, quick = call
+            if quick:
+                self._run(query, req, servant, received)
+            else:
+                self._queries.put((received, query, req, servant))
+                handed = True
+        except zenoh.ZError as e:  # the caller or the session went away
+            _log.debug("a reply was not sent: %s", e)
+        except Exception:
+            _log.exception("serving a call failed")
+        finally:
+            del query  # finalizes the query unless a worker has it
+            if not handed:
+                self._done()
+
+    def _done(self) -> None:
+        with self._lock:
+            self._running -= 1
+            if not self._running:
+                self._idle.notify_all()
 
     def _work(self) -> None:
         while True:
             item = self._queries.get()
             if item is None:
                 return
-            received, query = item
-            with self._lock:
-                self._running += 1
+            received, query, req, servant = item
             try:
-                self._serve(query, received)
+                self._run(query, req, servant, received)
             except zenoh.ZError as e:  # the caller or the session went away
                 _log.debug("a reply was not sent: %s", e)
             except Exception:
                 _log.exception("serving a call failed")
             finally:
                 del query, item  # finalizes the query: its caller hears that no more come
-                with self._lock:
-                    self._running -= 1
-                    if not self._running:
-                        self._idle.notify_all()
+                self._done()
 
-    def _serve(self, query: Any, received: float) -> None:
-        """Answer `query`, which arrived at `received` (monotonic seconds)."""
+    def _accept(self, query: Any) -> tuple[frames.Request, Servant, bool] | None:
+        """The request `query` carries, its servant and whether the operation is @nonblocking;
+        None when it was dropped or answered already (a bad frame, draining, no such object or
+        operation)."""
         attachment = query.attachment
         if attachment is None or query.payload is None:
             _peer_warnings.warning("dropped a request without a header or a body")
-            return
+            return None
         try:
             req = frames.decode_request(attachment.to_bytes())
         except frames.FrameError as e:
             _peer_warnings.warning("dropped a request: %s", e)
-            return
+            return None
         if self._draining:
             busy = TRANSIENT(f"{self.endpoint} is stopping", completed=CompletionStatus.NO)
             self._reply(query, req, system_exception_reply(busy))
-            return
+            return None
         servant = self.servant(req.key)
         if servant is None:
             missing = OBJECT_NOT_EXIST(f"no object with key {req.key!r} at {self.endpoint}")
             self._reply(query, req, system_exception_reply(missing))
-            return
+            return None
         if req.operation not in servant._dispatch:
             unknown = BAD_OPERATION(
                 f"{servant._repo_id} has no operation '{req.operation[:100]}'",
                 completed=CompletionStatus.NO,
             )
             self._reply(query, req, system_exception_reply(unknown))
-            return
-        body = query.payload.to_bytes()
+            return None
+        kind = (type(servant), req.operation)
+        quick = self._quick.get(kind)
+        if quick is None:
+            if len(self._quick) >= 4096:  # operations are checked against _dispatch: bounded
+                self._quick.clear()
+            quick = self._quick[kind] = is_nonblocking(servant, req.operation)
+        return req, servant, quick
+
+    def _run(self, query: Any, req: frames.Request, servant: Servant, received: float) -> None:
+        """Run the servant for `req`, which arrived at `received` (monotonic seconds), and
+        answer `query`."""
         if req.timeout_ms and time.monotonic() - received > req.timeout_ms / 1000:
             return  # its caller gave up: not run
+        body = query.payload.to_bytes()
         if self._identify:
             with serving(_CALLER):
                 reply = servant._invoke(req.operation, body, self.invoker)

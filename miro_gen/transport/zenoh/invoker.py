@@ -55,6 +55,7 @@ class ZenohInvoker:
         self.adapter = adapter
         self._ids = itertools.count(1)
         self._tails: dict[tuple[bytes, str], bytes] = {}
+        self._routes: dict[str, tuple[str, str]] = {}  # endpoint: (session id, call key)
         self._alive: set[str] = set()
         self._closed = False
         self._lock = threading.Lock()
@@ -116,7 +117,15 @@ class ZenohInvoker:
             raise TRANSIENT("the object reference has no endpoint (nil reference?)")
         if len(body) > MAX_BODY:
             raise MARSHAL(f"{operation}: the request is too large", completed=CompletionStatus.NO)
-        zid = self._target(ref.endpoint)
+        route = self._routes.get(ref.endpoint)
+        if route is None:
+            zid = self._target(ref.endpoint)
+            route = (zid, keys.call_key(zid))
+            if _cacheable(ref.endpoint):
+                if len(self._routes) >= 4096:
+                    self._routes.clear()
+                self._routes[ref.endpoint] = route
+        zid, key = route
         if not self._is_up(zid):
             raise TRANSIENT(f"cannot reach {ref.endpoint} for {operation}: its process is not up")
         wait = timeout if timeout is not None and timeout > 0 else 0.0
@@ -127,7 +136,6 @@ class ZenohInvoker:
             tail = self._tails[(ref.key, operation)] = frames.request_tail(ref.key, operation)
         request_id = next(self._ids)
         header = frames.request_header(tail, request_id, int(wait * 1000), oneway)
-        key = keys.call_key(zid)
         if oneway:
             self.session.get(
                 key, _ignore, target=_ALL, consolidation=_NO_CONSOLIDATION,
@@ -183,6 +191,12 @@ class ZenohInvoker:
                 return
             self._closed = True
         untrack(self._watch)
+
+
+def _cacheable(endpoint: str) -> bool:
+    """Whether the session an endpoint names stays the same: not the naming service's, which
+    is whichever router this session is connected to now."""
+    return endpoint != keys.NAMING_ENDPOINT
 
 
 def _ignore(_reply: Any) -> None:
