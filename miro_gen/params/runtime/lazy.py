@@ -12,6 +12,7 @@ so that whoever imports `hashlib` or `hmac` later gets them whole, with OpenSSL.
 
 from __future__ import annotations
 
+import _imp
 import sys
 
 _HIDDEN = "_hashlib"
@@ -20,17 +21,22 @@ _WITHOUT = ("hashlib", "hmac")  # the modules that load _hashlib when they can
 
 def load_secrets() -> None:
     """Import `secrets` without OpenSSL; nothing if it or OpenSSL's module is loaded already
-    (there is nothing left to save)."""
-    if (
-        "secrets" in sys.modules
-        or _HIDDEN in sys.modules
-        or any(name in sys.modules for name in _WITHOUT)
-    ):
-        return
-    sys.modules[_HIDDEN] = None  # type: ignore[assignment]  # `import _hashlib` fails
+    (there is nothing left to save). Under the interpreter's import lock, so that no other
+    thread imports `hashlib` while `_hashlib` is hidden."""
+    _imp.acquire_lock()
     try:
-        import secrets  # noqa: F401
+        if (
+            "secrets" in sys.modules
+            or _HIDDEN in sys.modules
+            or any(name in sys.modules for name in _WITHOUT)
+        ):
+            return
+        sys.modules[_HIDDEN] = None  # type: ignore[assignment]  # `import _hashlib` fails
+        try:
+            import secrets  # noqa: F401
+        finally:
+            del sys.modules[_HIDDEN]
+            for name in _WITHOUT:
+                sys.modules.pop(name, None)
     finally:
-        del sys.modules[_HIDDEN]
-        for name in _WITHOUT:
-            sys.modules.pop(name, None)
+        _imp.release_lock()
