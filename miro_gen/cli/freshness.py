@@ -10,18 +10,22 @@ repository is:
 
 `check()` answers quickly when nothing changed: it keeps the digests of the inputs (and of the
 compilers that made the output) in `.miro/fresh.json`, and only when they differ compiles them
-(miro_gen.compile, as those commands do, in this process) and compares. `ensure_fresh()`
-regenerates what is stale, or, when `generated/` cannot be written, raises `StaleError` naming
-the commands to run.
-"""
+(miro_gen.compile, as those commands do, in this process) and compares. Beside the digests it
+keeps each file's size, mtime, ctime and inode as they were when it was hashed: when every file
+still has them, nothing is read or hashed (a service's start without hashlib's OpenSSL). Any
+edit changes the ctime, which no one can set back (an edit that restores the mtime, `cp -p`,
+`touch -d`); a file changed within the file system's clock tick of being hashed could keep it,
+so the stat is kept only for files settled `SETTLE_NS` before (until then they are hashed).
+`ensure_fresh()` regenerates what is stale, or, when `generated/` cannot be written, raises
+`StaleError` naming the commands to run."""
 
 from __future__ import annotations
 
 import contextlib
-import hashlib
 import json
 import os
 import sys
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,6 +38,8 @@ if TYPE_CHECKING:
 
 STAMP = Path(".miro") / "fresh.json"
 _TOOL_SOURCES = ("codegen", "idl", "params/compiler")  # in miro_gen: what decides generated code
+_TOOL_SUFFIXES = (".py", ".j2", ".lark", ".xml")
+SETTLE_NS = 2_000_000_000  # a file's stat is trusted once it is this much older than the check
 
 
 class StaleError(Exception):
@@ -96,11 +102,32 @@ def find_project(start: Path) -> Project | None:
 
 
 def _digest(paths: Sequence[Path]) -> dict[str, str]:
+    import hashlib  # here: a check whose stats all match hashes nothing
+
     out = {}
     for p in paths:
         with contextlib.suppress(OSError):
             out[str(p)] = hashlib.sha256(p.read_bytes()).hexdigest()
     return out
+
+
+Stats = dict[str, list[int]]  # a file's path -> [size, mtime_ns, ctime_ns, inode]
+
+
+def _stats(paths: Sequence[Path]) -> Stats:
+    """What the file system says of each file (a missing one is left out)."""
+    out = {}
+    for p in paths:
+        with contextlib.suppress(OSError):
+            st = os.stat(p)
+            out[str(p)] = [st.st_size, st.st_mtime_ns, st.st_ctime_ns, st.st_ino]
+    return out
+
+
+def _settled(stats: Stats, now_ns: int) -> bool:
+    """Whether every file was last changed `SETTLE_NS` before `now_ns`: a later change would
+    then show in its ctime (one changed in the same clock tick as its stat might not)."""
+    return all(max(mtime, ctime) < now_ns - SETTLE_NS for _, mtime, ctime, _ in stats.values())
 
 
 def _tool_sources() -> list[Path]:
@@ -112,44 +139,77 @@ def _tool_sources() -> list[Path]:
     return folders if shipped is None else [*folders, shipped]
 
 
-def _tool_digest() -> str:
+def _tool_files() -> list[Path]:
+    """The files of `_tool_sources()` whose contents decide the generated code, in order."""
+    return [
+        p
+        for folder in _tool_sources()
+        for p in sorted(folder.rglob("*"))
+        if p.suffix in _TOOL_SUFFIXES and p.is_file()
+    ]
+
+
+def _tool_digest(files: Sequence[Path]) -> str:
     """One hash of the sources that decide what the compilers write: another version of
     miro-gen (an upgrade, an edited template) makes other code."""
+    import hashlib
+
     from miro_gen import __version__  # in the first line of every generated file
 
     h = hashlib.sha256(__version__.encode())
     for folder in _tool_sources():
-        for p in sorted(folder.rglob("*")):
-            if p.is_file() and p.suffix in (".py", ".j2", ".lark", ".xml"):
+        for p in files:
+            if p.is_relative_to(folder):
                 h.update(p.relative_to(folder.parent).as_posix().encode())
                 h.update(p.read_bytes())
     return h.hexdigest()
 
 
-def _inputs(project: Project) -> dict[str, object]:
+def _input_files(project: Project) -> list[Path]:
     idl_dir = project.root / "idl"
     includes = sorted(idl_dir.rglob("*.idl")) if idl_dir.is_dir() else []
-    files = sorted({*project.idl_files, *project.param_files, *includes})
+    return sorted({*project.idl_files, *project.param_files, *includes})
+
+
+def _inputs(project: Project, tool_files: Sequence[Path]) -> dict[str, object]:
+    """The digests that decide whether `generated/` is fresh (what the stamp records)."""
     return {
-        "tool": _tool_digest(),
+        "tool": _tool_digest(tool_files),
         "commands": project.commands(),
-        "files": _digest(files),
+        "files": _digest(_input_files(project)),
     }
 
 
-def _stamp_matches(project: Project, inputs: dict[str, object]) -> bool:
+def _all_stats(project: Project, tool_files: Sequence[Path]) -> Stats:
+    """The stats of every file the digests cover, and of the file that holds miro-gen's
+    version (which the tool's digest includes)."""
+    version = resources.PACKAGE / "__init__.py"
+    return _stats([version, *tool_files, *_input_files(project)])
+
+
+def _read_stamp(project: Project) -> dict[str, object] | None:
     try:
-        return bool(json.loads((project.root / STAMP).read_text()) == inputs)
+        stamp = json.loads((project.root / STAMP).read_text())
     except (OSError, ValueError):
-        return False
+        return None
+    return stamp if isinstance(stamp, dict) else None
 
 
-def _write_stamp(project: Project, inputs: dict[str, object]) -> None:
+def _digests(stamp: dict[str, object] | None) -> dict[str, object] | None:
+    """What a stamp says of the inputs' digests (without the files' stats)."""
+    if stamp is None:
+        return None
+    return {k: v for k, v in stamp.items() if k != "stats"}
+
+
+def _write_stamp(project: Project, inputs: dict[str, object], stats: Stats, now_ns: int) -> None:
+    """Record the digests, and the stats they were taken with if every file has settled."""
+    stamp = dict(inputs, stats=stats) if _settled(stats, now_ns) else inputs
     path = project.root / STAMP
     with contextlib.suppress(OSError):  # a read-only tree: checked in full next time
         path.parent.mkdir(exist_ok=True)
         tmp = path.with_suffix(".tmp")
-        tmp.write_text(json.dumps(inputs, indent=1))
+        tmp.write_text(json.dumps(stamp, indent=1))
         os.replace(tmp, path)
 
 
@@ -199,8 +259,20 @@ class Freshness:
 
 def check(project: Project) -> Freshness:
     """Whether `generated/` is what the inputs make today."""
-    inputs = _inputs(project)
-    if _stamp_matches(project, inputs):
+    now_ns = time.time_ns()  # before the stats: a change after them is newer than this
+    tool_files = _tool_files()
+    stats = _all_stats(project, tool_files)  # before reading: a later change shows next time
+    stamp = _read_stamp(project)
+    if (
+        stamp is not None
+        and stamp.get("stats") == stats
+        and stamp.get("commands") == project.commands()
+    ):
+        return Freshness(True)  # every file as it was when hashed: nothing read
+    inputs = _inputs(project, tool_files)
+    if _digests(stamp) == inputs:
+        if stamp is not None and stamp.get("stats") != stats:
+            _write_stamp(project, inputs, stats, now_ns)  # touched, or settled since
         return Freshness(True)
     stale, errors = [], []
     for done in _compile(project, check=True):
@@ -208,7 +280,7 @@ def check(project: Project) -> Freshness:
             errors += _problems(done) or ["the compiler failed"]
         stale += [f"{project.relative(p)} is out of date" for p in done.paths()]
     if not stale and not errors:
-        _write_stamp(project, inputs)
+        _write_stamp(project, inputs, stats, now_ns)
     return Freshness(not stale and not errors, stale, errors)
 
 
@@ -226,13 +298,16 @@ def ensure_fresh(project: Project) -> list[str]:
             f"{project.generated} is out of date and cannot be written here; "
             f"run in {project.root}: {project.command_text()}"
         )
-    inputs = _inputs(project)
+    now_ns = time.time_ns()
+    tool_files = _tool_files()
+    stats = _all_stats(project, tool_files)
+    inputs = _inputs(project, tool_files)
     wrote: list[str] = []
     for done in _compile(project, check=False):
         if not done.ok:
             raise StaleError("\n".join(_problems(done)) or "the compiler failed")
         wrote += [f"wrote {project.relative(p)}" for p in done.paths()]
-    _write_stamp(project, inputs)
+    _write_stamp(project, inputs, stats, now_ns)
     return wrote
 
 

@@ -26,7 +26,6 @@ import dataclasses
 import os
 import sys
 import time
-import uuid
 from collections.abc import Callable, MutableSequence, Sequence
 from typing import TYPE_CHECKING, Any, TypeVar
 
@@ -290,9 +289,10 @@ class Server(Client):
             self.corba.serve(self.addresses.bind, self.addresses.advertise)
         self.lease = lease
         # The owner of its names: this service (the same across its restarts, by `miro launch`
-        # or by hand) and this run of it; the naming service adds who it checks we are.
+        # or by hand) and this run of it (128 random bits in hex, as uuid4().hex was, without
+        # uuid's import of platform at start); the naming service adds who it checks we are.
         service = f"{self.options.naming_context}/{service_name(self.argv[0])}"
-        self.owner = MiroNaming.Owner(service, uuid.uuid4().hex)
+        self.owner = MiroNaming.Owner(service, os.urandom(16).hex())
         self.names: NameKeeper
         if self.corba is not None and self.corba.names is not None:
             self.names = self.corba.names  # bindings in a CORBA naming service: no leases

@@ -13,8 +13,6 @@ bytes of freed heap are kept for the next messages.
 
 from __future__ import annotations
 
-import ctypes
-import ctypes.util
 import threading
 
 M_TRIM_THRESHOLD = -1  # glibc's mallopt parameters (malloc.h)
@@ -38,6 +36,9 @@ def keep_large_buffers() -> bool:
 
 
 def _tune() -> bool:
+    import ctypes  # here: ctypes.util brings subprocess and tempfile, which a process that
+    import ctypes.util  # never moves a large message does not need at start
+
     try:
         libc = ctypes.CDLL(ctypes.util.find_library("c") or None)
         mallopt = libc.mallopt

@@ -14,9 +14,7 @@ permission for the group or others), or that belongs to another user, is refused
 from __future__ import annotations
 
 import contextlib
-import datetime
 import os
-import secrets
 
 from miro_gen.transport.usage import UsageError
 
@@ -29,6 +27,8 @@ _NEW = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0) | os.
 def certificate(public: bytes, secret: bytes | None) -> str:
     """The text of a ZeroMQ certificate (ZPL): the public key, and the secret one if given
     (zmq.auth.load_certificate reads it)."""
+    import datetime  # here: a service that only reads keys starts without it
+
     what = "Secret" if secret is not None else "Public"
     lines = [
         f"#   ZeroMQ CURVE {what} Certificate, made by miro keys new on "
@@ -45,7 +45,7 @@ def certificate(public: bytes, secret: bytes | None) -> str:
 def _write_new(path: str, text: str, mode: int) -> str:
     """Write `text` to a new file beside `path` (see the module's docstring); its name."""
     folder, name = os.path.split(path)
-    temporary = os.path.join(folder, f".{name}.{secrets.token_hex(8)}.new")
+    temporary = os.path.join(folder, f".{name}.{os.urandom(8).hex()}.new")
     fd = os.open(temporary, _NEW, 0o600)
     try:
         os.fchmod(fd, mode)  # exactly: the umask only takes away

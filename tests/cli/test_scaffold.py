@@ -201,6 +201,37 @@ def test_miro_run_starts_a_service_against_a_real_naming_service(project: Path) 
         naming.stop()
 
 
+def test_a_server_starts_without_what_it_does_not_use(project: Path) -> None:
+    """A `miro new` server, once it serves, has not loaded the compilers, lxml (no parameter
+    document here), nor hashlib's OpenSSL (which pydantic's `secrets` would bring)."""
+    unwanted = ("_hashlib", "hashlib", "lark", "jinja2", "lxml", "miro_gen.compile", "asyncio")
+    code = (
+        "import atexit, runpy, sys\n"
+        f"unwanted = {unwanted!r}\n"
+        "def report():\n"
+        "    print('loaded:', sorted(m for m in sys.modules if m.startswith(unwanted)))\n"
+        "sys.argv[0] = 'my_server'\n"
+        "atexit.register(report)\n"
+        "runpy.run_module('services.my_server', run_name='__main__', alter_sys=True)\n"
+    )
+    naming = NamingProcess()
+    try:
+        service = subprocess.Popen(
+            [sys.executable, "-c", code, "--naming", naming.endpoint],
+            cwd=project,
+            env=env(),
+            stdout=subprocess.PIPE,
+            text=True,
+        )
+        assert service.stdout is not None
+        assert "my_server serves" in service.stdout.readline()
+        service.send_signal(signal.SIGINT)
+        service.wait(20)
+        assert "loaded: []" in service.stdout.read()
+    finally:
+        naming.stop()
+
+
 @pytest.mark.parametrize(
     ("name", "message"),
     [

@@ -574,3 +574,30 @@ def test_a_service_reads_its_parameters_without_lxml_or_a_validator(tmp_path: Pa
     assert result.returncode == 0, result.stderr
     assert "Device: /dev/ttyS0\nTtyParams:\n  Baudrate: 9600" in result.stdout
     assert result.stdout.strip().endswith("ValidationError")
+
+
+def test_the_run_time_half_loads_no_openssl_and_leaves_hashlib_whole() -> None:
+    """pydantic imports `secrets` for a comparison only: the parameter classes load without
+    hashlib's OpenSSL (3.4 MB of every service), and a later `import hashlib` or `hmac` still
+    gets OpenSSL's; pydantic's Secret types still compare."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, Test.Parameters\n"
+        "loaded = [m for m in ('_hashlib', 'hashlib', 'hmac') if m in sys.modules]\n"
+        "assert not loaded, loaded\n"
+        "import hashlib, hmac, pydantic, secrets\n"
+        "assert hashlib.sha256.__name__ == 'openssl_sha256', hashlib.sha256\n"
+        "assert hasattr(hashlib, 'pbkdf2_hmac') and '_hashlib' in sys.modules\n"
+        "assert hmac.new(b'k', b'm', 'sha256').hexdigest() == hashlib.sha256(\n"
+        "    bytes(b ^ 0x5C for b in b'k'.ljust(64, b'\\0'))\n"
+        "    + hashlib.sha256(bytes(b ^ 0x36 for b in b'k'.ljust(64, b'\\0')) + b'm').digest()\n"
+        ").hexdigest()\n"
+        "assert pydantic.SecretStr('a') == pydantic.SecretStr('a')\n"
+        "assert pydantic.SecretStr('a') != pydantic.SecretStr('b')\n"
+        "assert secrets.compare_digest(b'x', b'x') and len(secrets.token_hex(8)) == 16\n"
+    )
+    env = {"PYTHONPATH": f"{REPO}:{REPO / 'generated'}", "PATH": "/usr/bin:/bin"}
+    result = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr

@@ -32,6 +32,7 @@ from miro_gen.params.runtime.codecs import (
     Problems,
     Vector,
 )
+from miro_gen.params.runtime.lazy import load_secrets
 
 if TYPE_CHECKING:
     from lxml import etree  # imported where XML is made or parsed: a service without a
@@ -217,6 +218,9 @@ def read_into(target: Any, layout: Layout, elem: etree._Element, source: str | N
     if probs or new is FAIL:
         raise ParamsError(probs.items)
     return new
+
+
+load_secrets()  # before pydantic.types imports it: no OpenSSL for a comparison never made
 
 
 class Config(pydantic.BaseModel):
