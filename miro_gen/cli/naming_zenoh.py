@@ -63,9 +63,20 @@ def zenoh_naming(
         note += "; no log of owners: after a restart, names go to whoever binds first"
     lines = [f"naming service at {endpoint}{note}", *(f"event channel {n}" for n in ns.channel)]
     reactor.call_soon(lambda: print("\n".join(lines), flush=True))
+    announcer = None
+    if (
+        not ns.no_announce
+        and ns.multicast != 0
+        and not sockets.is_loopback(sockets.endpoint_host(endpoint))
+    ):  # (transport.naming.discovery: the record says where the router listens)
+        from miro_gen.transport.naming.discovery import Announcer
+
+        announcer = Announcer(endpoint, zenoh=service.locator)
     try:
         reactor.run()
     finally:
+        if announcer is not None:
+            announcer.close()
         service.close()
         reactor.close()
     return 0
