@@ -138,6 +138,8 @@ def naming_service(spec: LaunchSpec) -> ServiceSpec:
         argv.append("--zenoh")
     if n.insecure:
         argv.append("--insecure")
+    if n.per_robot:  # (miro naming refuses it without Zenoh and a key, saying so)
+        argv += ["--per-robot", ",".join(n.per_robot)]
     for channel in n.channels:
         argv += ["--channel", channel]
     address = spec.hosts.get(n.host or "") if n.host else None

@@ -17,7 +17,7 @@ from miro_cli import REPO
 
 from miro_gen.cli.launch import launch_main
 from miro_gen.launch.spec import LaunchError, read_launch_file
-from miro_gen.launch.supervisor import plan
+from miro_gen.launch.supervisor import naming_service, plan
 from miro_gen.testing import ServiceProcess
 
 
@@ -584,6 +584,28 @@ def test_a_file_on_zenoh_starts_the_router_and_gives_its_services_the_backbone(
     assert "naming --endpoint tcp://127.0.0.1:5998 --zenoh" in row, row
     plain = write(tmp_path, "plain.toml", '[services.a]\ncommand = "true"\n')
     assert read_launch_file(plain).services[0].transport is None  # the environment's, or zmq
+
+
+def test_the_zenoh_router_of_a_file_restricts_the_robots_it_names(tmp_path: Path) -> None:
+    """`per_robot` in [naming]: the router's access control per robot (docs/FLEET.md;
+    tests/transport/test_zenoh_acl.py shows it across namespaces)."""
+    path = write(
+        tmp_path,
+        "fleet.toml",
+        """
+        [launch]
+        transport = "zenoh"
+
+        [naming]
+        endpoint = "tcp://127.0.0.1:5997"
+        per_robot = ["robot1", "robot2"]
+
+        [services.a]
+        command = "true"
+        """,
+    )
+    argv = naming_service(read_launch_file(path)).argv
+    assert argv[argv.index("--per-robot") + 1] == "robot1,robot2"
 
 
 def test_the_manuals_examples_run_over_zenoh_from_a_launch_file(tmp_path: Path) -> None:
