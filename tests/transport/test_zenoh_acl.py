@@ -14,7 +14,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from loopback import service_env
+from loopback import free_port, run_miro, service_env
 from netns import Hosts, network
 from repo_paths import TESTS
 
@@ -117,3 +117,15 @@ def test_a_robot_cannot_publish_under_another_robots_domain(fleet: Hosts, tmp_pa
         domains.append(json.loads(line)["domain"])
     assert domains == ["robot2"] * 20
     fleet.kill([printer])
+
+
+def test_access_per_robot_needs_zenoh_and_a_key() -> None:
+    """Without certificates there is nothing to tell robots by: one line, status 2."""
+    endpoint = f"tcp://127.0.0.1:{free_port()}"
+    for extra in ([], ["--zenoh"]):
+        done = run_miro("naming", *extra, "--endpoint", endpoint, "--per-robot", "robot1")
+        assert done.returncode == 2, done.stderr
+        assert done.stderr.splitlines()[-1].endswith(
+            "--per-robot takes robots' names, and needs --zenoh and a key (mutual TLS: the "
+            "router tells robots by their certificates); give --keys FILE"
+        ), done.stderr
