@@ -76,16 +76,22 @@ class Hosts:
             ip("-n", ns, "link", "set", "eth0", "up")
             ip("-n", ns, "link", "set", "lo", "up")
 
-    def popen(self, host: str, *argv: str, stderr: Path | None = None) -> subprocess.Popen[str]:
-        """`argv` (run by this Python) in `host`'s namespace, from this checkout; its output
-        (stderr to the file `stderr`, else with stdout)."""
+    def popen(
+        self,
+        host: str,
+        *argv: str,
+        stderr: Path | None = None,
+        env: dict[str, str] | None = None,
+    ) -> subprocess.Popen[str]:
+        """`argv` (run by this Python) in `host`'s namespace, from this checkout, with `env`
+        (default the fleet's); its output (stderr to the file `stderr`, else with stdout)."""
         with stderr.open("w") if stderr is not None else contextlib.nullcontext() as err:
             proc = subprocess.Popen(
                 ["ip", "netns", "exec", self.ns(host), sys.executable, *argv],
                 stdout=subprocess.PIPE,
                 stderr=err if err is not None else subprocess.STDOUT,
                 text=True,
-                env=self.env,
+                env=self.env if env is None else env,
             )
         self.procs.append(proc)
         return proc

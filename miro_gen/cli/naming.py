@@ -170,6 +170,16 @@ def naming_main(argv: Sequence[str]) -> int:
         "(docs/FLEET.md)",
     )
     p.add_argument(
+        "--per-robot",
+        metavar="ROBOT,...",
+        action="append",
+        default=[],
+        help="with --zenoh and a key: the router lets each ROBOT's certificate (`miro keys new "
+        "ROBOT --ca FLEET`) declare, put and reply only under that robot's own keys, the "
+        "certificate of its own key everything, and any other nothing (Zenoh's access "
+        "control; docs/FLEET.md)",
+    )
+    p.add_argument(
         "--list-announced",
         action="store_true",
         help="list the naming services announced on this network, whether each answers and "
@@ -219,11 +229,17 @@ def naming_main(argv: Sequence[str]) -> int:
             )
     except UsageError as e:
         p.error(str(e))
+    robots = [r.strip() for given in ns.per_robot for r in given.split(",") if r.strip()]
+    if ns.per_robot and not (ns.zenoh and tls is not None and robots):
+        p.error(
+            "--per-robot takes robots' names, and needs --zenoh and a key (mutual TLS: the "
+            "router tells robots by their certificates); give --keys FILE"
+        )
     if ns.zenoh:
         from miro_gen.cli.naming_zenoh import zenoh_naming
 
         log_path = ns.log_file or default_path(endpoint)
-        return zenoh_naming(ns, endpoint, None if log_path == "none" else log_path, tls)
+        return zenoh_naming(ns, endpoint, None if log_path == "none" else log_path, tls, robots)
     policy = dataclasses.replace(policy, max_connections=ns.max_connections)
     if ns.channel and not ns.host and re.search(r"://(0\.0\.0\.0|\*):", endpoint):
         p.error(

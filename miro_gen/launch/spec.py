@@ -57,7 +57,8 @@ SECONDS_RANGES = {
 _LAUNCH_KEYS = {"context", "naming", "grace", "log_level", "colour", "transport", "fleet_events"}
 _RESTART_KEYS = {"restart", "restart_delay", "restart_delay_max", "restart_limit", "stable_after"}
 _NAMING_KEYS = {
-    "host", "endpoint", "channels", "announce", "insecure", "log_level", *_RESTART_KEYS
+    "host", "endpoint", "channels", "announce", "insecure", "per_robot", "log_level",
+    *_RESTART_KEYS,
 }  # fmt: skip
 _HOST_KEYS = {"address"}
 _SERVICE_KEYS = {
@@ -145,6 +146,7 @@ class NamingSpec:
     channels: list[str] = field(default_factory=list)
     announce: bool = True
     insecure: bool = False  # beyond loopback without a key (Zenoh's router: docs/FLEET.md)
+    per_robot: list[str] = field(default_factory=list)  # Zenoh: each robot only its own keys
     restart: RestartPolicy = field(default_factory=lambda: RestartPolicy("always", limit=None))
     log_level: int | None = None
 
@@ -423,6 +425,7 @@ def _naming(r: _Reader, table: dict[str, Any], spec: LaunchSpec) -> NamingSpec:
     )
     naming.host = _host(r, table, spec, "naming")
     naming.channels = r.strings(table, "channels", "naming")
+    naming.per_robot = r.strings(table, "per_robot", "naming")
     announce = r.typed(table, "announce", bool, "true or false", "naming")
     if announce is not None:
         naming.announce = announce

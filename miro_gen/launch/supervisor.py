@@ -107,14 +107,8 @@ def plan(spec: LaunchSpec, host: str | None = None) -> Part:
                 f'{naming.host} is: it is not announced; give [launch] naming = "tcp://'
                 f'ADDRESS:PORT", or [hosts.{naming.host}] address'
             )
-        elif backbone(spec) == "zenoh":
-            raise PlanError(
-                f"the services of {host} cannot find the Zenoh router on {naming.host}: it is "
-                f'not announced (no multicast DNS on Zenoh); give [launch] naming = "tcp://'
-                f'ADDRESS:PORT", or [hosts.{naming.host}] address'
-            )
         else:
-            discover = True  # the one the naming host announces (multicast DNS)
+            discover = True  # what the naming host announces (mDNS; on Zenoh, its router)
     for s in chosen:
         for dep in s.after:
             if dep in others:
@@ -144,6 +138,8 @@ def naming_service(spec: LaunchSpec) -> ServiceSpec:
         argv.append("--zenoh")
     if n.insecure:
         argv.append("--insecure")
+    if n.per_robot:  # (miro naming refuses it without Zenoh and a key, saying so)
+        argv += ["--per-robot", ",".join(n.per_robot)]
     for channel in n.channels:
         argv += ["--channel", channel]
     address = spec.hosts.get(n.host or "") if n.host else None
@@ -262,7 +258,7 @@ class Supervisor:
 
         while not self.stopping.is_set():
             try:
-                found = browse(FIND_TIMEOUT, first=True)
+                found = browse(FIND_TIMEOUT, first=True, backbone=backbone(self.spec))
             except DiscoveryOff as e:  # nothing to find: the file must name its naming service
                 self.console.note(f"cannot look for the naming service: {e}")
                 return

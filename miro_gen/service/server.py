@@ -101,14 +101,11 @@ class Client:
         self.options, self.argv = _take_options(argv)
         self.zenoh: Any = None  # the Zenoh session (--transport zenoh, transport.zenoh)
         zenoh = self.options.transport == "zenoh"
-        if (
-            not zenoh
-            and not self.options.naming_given
-            and os.environ.get("MIRO_DISCOVERY", "1") != "0"
-        ):
+        if not self.options.naming_given and os.environ.get("MIRO_DISCOVERY", "1") != "0":
             from miro_gen.transport.naming.discovery import naming_for  # the manual's -m 1
 
-            self.options.naming = naming_for(self.options.naming)
+            # (on Zenoh: the announced router of `miro naming --zenoh`)
+            self.options.naming = naming_for(self.options.naming, "zenoh" if zenoh else "zmq")
         self.context = context if context is not None else zmq.Context.instance()
         self._configure_sockets(None)
         # (a Server's adapter serves the local objects passed as arguments)

@@ -17,6 +17,7 @@ from miro_cli import REPO
 
 from miro_gen.cli.launch import launch_main
 from miro_gen.launch.spec import LaunchError, read_launch_file
+from miro_gen.launch.supervisor import naming_service, plan
 from miro_gen.testing import ServiceProcess
 
 
@@ -585,6 +586,28 @@ def test_a_file_on_zenoh_starts_the_router_and_gives_its_services_the_backbone(
     assert read_launch_file(plain).services[0].transport is None  # the environment's, or zmq
 
 
+def test_the_zenoh_router_of_a_file_restricts_the_robots_it_names(tmp_path: Path) -> None:
+    """`per_robot` in [naming]: the router's access control per robot (docs/FLEET.md;
+    tests/transport/test_zenoh_acl.py shows it across namespaces)."""
+    path = write(
+        tmp_path,
+        "fleet.toml",
+        """
+        [launch]
+        transport = "zenoh"
+
+        [naming]
+        endpoint = "tcp://127.0.0.1:5997"
+        per_robot = ["robot1", "robot2"]
+
+        [services.a]
+        command = "true"
+        """,
+    )
+    argv = naming_service(read_launch_file(path)).argv
+    assert argv[argv.index("--per-robot") + 1] == "robot1,robot2"
+
+
 def test_the_manuals_examples_run_over_zenoh_from_a_launch_file(tmp_path: Path) -> None:
     """The demo's four services with `transport = "zenoh"`: `miro naming --zenoh` is started,
     the services bind and find each other through its router (a ZeroMQ process could not), and
@@ -625,9 +648,10 @@ def test_the_manuals_examples_run_over_zenoh_from_a_launch_file(tmp_path: Path) 
     assert any("Zenoh router" in line for line in proc.lines), proc.lines
 
 
-def test_a_zenoh_router_on_another_host_must_be_named_not_discovered(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
+def test_a_zenoh_router_on_another_host_is_found_by_its_announcement(tmp_path: Path) -> None:
+    """As a ZeroMQ naming service: the router of `miro naming --zenoh` is announced (multicast
+    DNS, tests/transport/test_discovery_zenoh.py), so a host that is not told where it is looks
+    for it."""
     path = write(
         tmp_path,
         "robot.toml",
@@ -647,7 +671,5 @@ def test_a_zenoh_router_on_another_host_must_be_named_not_discovered(
         host = "robot"
         """,
     )
-    assert launch_main([str(path), "--check", "--host", "robot"]) == 2
-    err = capsys.readouterr().err
-    assert err.startswith(f"{path}: error: the services of robot cannot find the Zenoh router")
-    assert len(err.splitlines()) == 1
+    part = plan(read_launch_file(path), "robot")
+    assert part.discover and part.naming_url is None

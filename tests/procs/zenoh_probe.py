@@ -7,7 +7,8 @@
 `--insecure` anywhere: the probe's session is in the clear beyond loopback (its key unused).
 
 `rogue` declares a queryable on the key of the session that serves NAME and answers every
-query there with a wrong value; it prints READY and runs until killed.
+query there with a wrong value (saying `HEARD` on stderr); it prints READY and runs until
+killed.
 """
 
 from __future__ import annotations
@@ -53,6 +54,8 @@ def main() -> None:
             request = frames.decode_request(query.attachment.to_bytes())
             header = frames.reply_header(request.request_id, 0)
             query.reply(query.key_expr, wrong, attachment=header)
+            sys.stderr.write("HEARD\n")  # (one short write: the test counts the calls heard)
+            sys.stderr.flush()
 
         zid = keys.zid_of(entry.endpoint)
         assert zid is not None

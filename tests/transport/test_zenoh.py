@@ -27,7 +27,7 @@ zenoh = pytest.importorskip("zenoh")
 from miro_gen.transport.rpc import frames  # noqa: E402
 from miro_gen.transport.zenoh import keys  # noqa: E402
 from miro_gen.transport.zenoh.adapter import DEFAULT_WORKERS  # noqa: E402
-from miro_gen.transport.zenoh.session import config, locator  # noqa: E402
+from miro_gen.transport.zenoh.session import config, identity, locator  # noqa: E402
 
 
 @given(st.text())
@@ -106,7 +106,7 @@ def test_a_second_session_on_the_owners_key_answers_no_call(naming: NamingProces
         )
         heard.set()
 
-    queryable = rogue.declare_queryable(keys.call_key(str(owner.server.zenoh.zid())), answer)
+    queryable = rogue.declare_queryable(keys.call_key(identity(owner.server.zenoh)), answer)
     client = Client(["t", "--transport", "zenoh", "--naming", naming.endpoint])
     try:
         example = client.resolve_name("robot1/ExampleA", Miro.Example, wait=10)
@@ -338,8 +338,9 @@ def test_a_name_bound_once_its_holder_let_it_go_vanishes_with_its_server() -> No
         return {e.name: e.endpoint for e in client.naming.entries("shared/")}.get("shared/Retried")
 
     def tokens() -> set[str]:
-        replies = client.zenoh.liveliness().get(keys.name_token("*", "shared/Retried"))
-        return {str(r.ok.key_expr).split("/")[2] for r in replies if r.ok is not None}
+        replies = client.zenoh.liveliness().get(keys.name_token("*/*", "shared/Retried"))
+        found = (keys.name_of_token(str(r.ok.key_expr)) for r in replies if r.ok is not None)
+        return {f[0] for f in found if f is not None}
 
     try:
         first = spawn("robot1")

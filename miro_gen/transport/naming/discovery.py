@@ -3,11 +3,15 @@ multicast DNS service discovery (DNS-SD over mDNS, the `zeroconf` package).
 
 `miro naming` announces itself as a `_miro-naming._tcp` service (the instance named after its
 host, its addresses and port, and its endpoint in the TXT record) unless told not to
-(`--no-announce`, `-m 0`). A process whose naming service was not given (no `--naming`, no
-`-ORBInitRef`, no $MIRO_NAMING) and finds none answering at the default address looks for an
-announced one (`naming_for`). `diagnose()` says what is visible on this network and, for
-each, whether it answers and why not (no route, nothing listening, packets dropped, another
-network), for `miro doctor`.
+(`--no-announce`, `-m 0`). `miro naming --zenoh` announces itself the same way, with one TXT
+key more: `zenoh`, the Zenoh locator its router listens on (`tcp/HOST:PORT`, or `tls/...` with
+mutual TLS), which tells the two backbones' naming services apart: one service type, one
+record per naming service, whichever its backbone. A process whose naming service was not
+given (no `--naming`, no `-ORBInitRef`, no $MIRO_NAMING) and finds none answering at the
+default address looks for an announced one of its own backbone (`naming_for`): a ZeroMQ
+process skips Zenoh routers, a Zenoh session ZeroMQ naming services. `diagnose()` says what
+is visible on this network and, for each, whether it answers and why not (no route, nothing
+listening, packets dropped, another network), for `miro doctor`.
 
 `MIRO_DISCOVERY=0` turns multicast DNS off in a process: it neither looks for naming services
 nor announces one (the tests run so: nothing leaves loopback but inside namespaces they make).
@@ -30,6 +34,7 @@ from miro_gen import log
 SERVICE_TYPE = "_miro-naming._tcp.local."
 BROWSE_TIMEOUT = 3.0  # seconds `miro doctor` looks for announced naming services
 FIND_TIMEOUT = 1.5  # seconds a process without a naming service looks for an announced one
+ZENOH_KEY = "zenoh"  # the TXT key of a Zenoh router's locator (`miro naming --zenoh`)
 SETTLE = 0.3  # seconds to wait for more answers after the first
 PROBE_TIMEOUT = 0.5  # seconds a TCP connection to a naming service may take to open
 _log = log.logger("MIRO")
@@ -58,6 +63,12 @@ class Announced:
     addresses: list[str]
     endpoint: str  # the endpoint it says it serves on (may be 0.0.0.0: every interface)
     interfaces: list[str] = field(default_factory=list)  # local ones that share a network
+    zenoh: str = ""  # the Zenoh router's locator ("": a ZeroMQ naming service)
+
+    @property
+    def backbone(self) -> str:
+        """The backbone of the processes that use it: `zenoh` or `zmq`."""
+        return "zenoh" if self.zenoh else "zmq"
 
     def url(self) -> str:
         """The endpoint to use from here: an address of it on a network of this machine's
@@ -114,16 +125,18 @@ def _own_ips() -> list[str]:
 
 
 class Announcer:
-    """Announces a naming service serving on `bound` (`tcp://HOST:PORT`) until `close()`.
+    """Announces a naming service serving on `bound` (`tcp://HOST:PORT`) until `close()`;
+    with `zenoh`, the locator of the Zenoh router that serves there (`miro naming --zenoh`).
     Registration takes a second or two of probing, done in a thread of its own."""
 
-    def __init__(self, bound: str) -> None:
+    def __init__(self, bound: str, zenoh: str = "") -> None:
         host, port = bound.removeprefix("tcp://").rsplit(":", 1)
         self.addresses = _announce_addresses(host)
         self.port = int(port)
         self.hostname = socket.gethostname().split(".")[0]
         self.name = f"{self.hostname} {self.port}.{SERVICE_TYPE}"
         self.endpoint = bound
+        self.zenoh = zenoh
         self._zc: Any = None
         self._info: Any = None
         self._lock = threading.Lock()
@@ -137,12 +150,15 @@ class Announcer:
         try:
             from zeroconf import IPVersion, ServiceInfo, Zeroconf
 
+            properties = {"endpoint": self.endpoint, "host": self.hostname, "version": "1"}
+            if self.zenoh:
+                properties[ZENOH_KEY] = self.zenoh
             info = ServiceInfo(
                 SERVICE_TYPE,
                 self.name,
                 addresses=[socket.inet_aton(a) for a in self.addresses],
                 port=self.port,
-                properties={"endpoint": self.endpoint, "host": self.hostname, "version": "1"},
+                properties=properties,
                 server=f"{self.hostname}.local.",
             )
             zc = Zeroconf(ip_version=IPVersion.V4Only)
@@ -166,10 +182,13 @@ class Announcer:
             zc.close()
 
 
-def browse(timeout: float = BROWSE_TIMEOUT, first: bool = False) -> list[Announced]:
+def browse(
+    timeout: float = BROWSE_TIMEOUT, first: bool = False, backbone: str | None = None
+) -> list[Announced]:
     """The naming services announced on this machine's networks, waiting up to `timeout`
-    seconds (with `first`, only until one is seen, and a moment more for others).
-    DiscoveryOff with MIRO_DISCOVERY=0."""
+    seconds (with `first`, only until one is seen, and a moment more for others); with
+    `backbone` (`zmq`, `zenoh`), only those of that backbone. DiscoveryOff with
+    MIRO_DISCOVERY=0."""
     if not enabled():
         raise DiscoveryOff
     from zeroconf import IPVersion, ServiceBrowser, ServiceStateChange, Zeroconf
@@ -189,14 +208,18 @@ def browse(timeout: float = BROWSE_TIMEOUT, first: bool = False) -> list[Announc
             for k, v in (info.properties or {}).items()
         }
         addresses = list(info.parsed_addresses(IPVersion.V4Only))
-        found[name] = Announced(
+        announced = Announced(
             name=name.removesuffix("." + SERVICE_TYPE),
             host=props.get("host") or (info.server or "").removesuffix(".local."),
             port=int(info.port or 0),
             addresses=addresses,
             endpoint=props.get("endpoint", ""),
             interfaces=[i for i in (_local_network(a) for a in addresses) if i],
+            zenoh=props.get(ZENOH_KEY, ""),
         )
+        if backbone is not None and announced.backbone != backbone:
+            return
+        found[name] = announced
         seen.set()
 
     browser = ServiceBrowser(zc, SERVICE_TYPE, handlers=[changed])
@@ -231,13 +254,15 @@ def answers(url: str, timeout: float = PROBE_TIMEOUT) -> str:
         return e.strerror or str(e)
 
 
-def naming_for(default: str) -> str:
-    """The naming service a process should use when none was given: `default` when something
-    answers there, else an announced one (with a notice saying which), else `default`."""
+def naming_for(default: str, backbone: str = "zmq") -> str:
+    """The naming service a process of `backbone` (`zmq`, or `zenoh`: the naming service is
+    where the router is) should use when none was given: `default` when something answers
+    there, else an announced one of that backbone (with a notice saying which), else
+    `default`."""
     if not enabled() or not answers(default, timeout=0.2):
         return default
     try:
-        found = browse(FIND_TIMEOUT, first=True)
+        found = browse(FIND_TIMEOUT, first=True, backbone=backbone)
     except Exception as e:  # no multicast at all: the default it is, and its error later
         _log.debug("cannot look for announced naming services: %s", e)
         return default
@@ -247,8 +272,14 @@ def naming_for(default: str) -> str:
     url = chosen.url()
     others = ", ".join(a.name for a in found[1:])
     also = f" (others: {others}; give --naming to choose)" if others else ""
+    router = f" (Zenoh router {chosen.zenoh})" if chosen.zenoh else ""
     _log.notice(
-        "no naming service at %s; using %s, announced by %s%s", default, url, chosen.host, also
+        "no naming service at %s; using %s%s, announced by %s%s",
+        default,
+        url,
+        router,
+        chosen.host,
+        also,
     )
     return url
 
@@ -275,6 +306,8 @@ def diagnose(default: str, timeout: float = BROWSE_TIMEOUT) -> list[str]:
         state = answers(url)
         where = ", ".join(a.addresses) or "no address"
         head = f"announced: {a.name} on {a.host} ({where}), port {a.port}"
+        if a.zenoh:
+            head += f" (Zenoh router {a.zenoh}, for --transport zenoh)"
         if not state:
             lines.append(f"{head}: answers at {url}")
         elif not a.interfaces:

@@ -35,7 +35,7 @@ from miro_gen.transport.rpc import frames
 from miro_gen.transport.rpc.caller import Caller, serving
 from miro_gen.transport.rpc.objects import ObjectTable
 from miro_gen.transport.zenoh import keys
-from miro_gen.transport.zenoh.session import direct, track, untrack
+from miro_gen.transport.zenoh.session import direct, identity, track, untrack
 
 _log = logger("MIRO")
 _peer_warnings = PeerWarnings(_log)
@@ -59,7 +59,7 @@ class ZenohAdapter(ObjectTable):
         super().__init__()  # the object table
         self.session = session
         self.invoker = invoker
-        self.zid = str(session.zid())
+        self.zid = identity(session)  # <owner>/<zid>: its keys (transport.zenoh.keys)
         self.endpoint = keys.endpoint(self.zid)
         self._lock = threading.Lock()
         self._identify = identify_callers

@@ -55,7 +55,7 @@ class ZenohInvoker:
         self.adapter = adapter
         self._ids = itertools.count(1)
         self._tails: dict[tuple[bytes, str], bytes] = {}
-        self._routes: dict[str, tuple[str, str]] = {}  # endpoint: (session id, call key)
+        self._routes: dict[str, tuple[str, str]] = {}  # endpoint: (identity, call key)
         self._alive: set[str] = set()
         self._closed = False
         self._lock = threading.Lock()
@@ -87,12 +87,13 @@ class ZenohInvoker:
         return False
 
     def _target(self, endpoint: str) -> str:
-        """The session id serving `endpoint`: the router's for the naming registry."""
+        """The identity (transport.zenoh.keys) serving `endpoint`: the router's session (no
+        owner) for the naming registry."""
         if endpoint == keys.NAMING_ENDPOINT:
             routers = self.session.info.routers_zid()
             if not routers:
                 raise TRANSIENT("no Zenoh router (the naming service) is connected")
-            router = str(routers[0])
+            router = keys.identity("", str(routers[0]))
             self._alive.add(router)  # connected to it: up
             return router
         zid = keys.zid_of(endpoint)
@@ -156,9 +157,10 @@ class ZenohInvoker:
         raise TIMEOUT(f"{operation}: {why} ({ref.endpoint})", completed=CompletionStatus.MAYBE)
 
     def _reply(self, reply: Any, zid: str, request_id: int) -> Reply | None:
-        """The reply to `request_id` that `reply` is, if the session `zid` sent it."""
+        """The reply to `request_id` that `reply` is, if the session of the identity `zid`
+        sent it."""
         replier = reply.replier_id
-        if replier is None or str(replier.zid) != zid:
+        if replier is None or str(replier.zid) != keys.zid_part(zid):
             self.foreign_replies += 1
             _peer_warnings.warning(
                 "dropped a reply from %s for an object of %s", replier, zid, key="foreign reply"

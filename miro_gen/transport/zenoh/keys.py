@@ -1,15 +1,22 @@
 """The key expressions of the Zenoh backbone: one owner of their layout.
 
-    miro/call/<zid>              the queryable of one process's objects (its session id)
-    miro/alive/<zid>             liveliness: that process is up
-    miro/name/<zid>/<name>       liveliness: a name it keeps bound (the registry drops the
-                                 name when the token goes: its process died or was cut off)
+    miro/call/<owner>/<zid>      the queryable of one process's objects (its session id)
+    miro/alive/<owner>/<zid>     liveliness: that process is up
+    miro/name/<owner>/<zid>/<name>   liveliness: a name it keeps bound (the registry drops
+                                 the name when the token goes: its process died or was cut off)
     miro/ev/<channel>/<domain>/<type>   the events of one channel, domain and type
     miro/sub/<channel>/<prefix>/<keep>/<zid>/<n>   liveliness: a consumer's subscription (its
                                  prefix, transport.events.consumer.subscription_prefix, in hex),
                                  which suppliers count as ZeroMQ's XPUB counts subscriptions;
                                  <keep> is `all` for a keep-all consumer (its suppliers then
                                  block rather than drop), `last` for any other
+
+A process's *identity* is `<owner>/<zid>`: the common name of its TLS certificate (the robot
+or fleet its key names, `miro keys`; `%` without TLS, and for the router's own session) and
+its session id. The owner chunk is what the router's access control matches a certificate's
+keys by (transport.zenoh.access: a robot's certificate may declare and reply only under its
+own owner chunk, and put events only under its own domain); references carry the identity
+(`zenoh/<owner>/<zid>`).
 
 Names, channels, domains and types become single chunks: `%`, `/`, `*`, `$`, `?`, `#`, `@` are
 percent-escaped (Zenoh forbids the others in a chunk, and one that starts with `@` matches no
@@ -47,50 +54,75 @@ def unescape(chunk: str) -> str:
     return unquote(chunk) if "%" in chunk else chunk
 
 
-def endpoint(zid: str) -> str:
-    """The endpoint references to a process's objects carry."""
-    return ENDPOINT_SCHEME + zid
+def identity(owner: str, zid: str) -> str:
+    """A process's identity: `<owner>/<zid>` (`owner` its certificate's common name, "" for
+    none)."""
+    return f"{escape(owner)}/{zid}"
+
+
+def _identity_of(owner: str, zid: str) -> str | None:
+    """`owner/zid` when both are chunks an identity may have, else None."""
+    if not owner or _SPECIAL.difference("%").intersection(owner) or not zid.isalnum():
+        return None
+    return f"{owner}/{zid}"
+
+
+def zid_part(ident: str) -> str:
+    """The session id of an identity."""
+    return ident.rsplit("/", 1)[-1]
+
+
+def owner_part(ident: str) -> str:
+    """The owner (a certificate's common name, "" for none) of an identity."""
+    return unescape(ident.split("/", 1)[0])
+
+
+def endpoint(ident: str) -> str:
+    """The endpoint references to a process's objects carry (`ident`: its identity)."""
+    return ENDPOINT_SCHEME + ident
 
 
 def zid_of(endpoint_text: str) -> str | None:
-    """The session id an endpoint names (None: not a Zenoh endpoint)."""
+    """The identity (`<owner>/<zid>`) an endpoint names (None: not a Zenoh endpoint)."""
     if not endpoint_text.startswith(ENDPOINT_SCHEME):
         return None
-    zid = endpoint_text[len(ENDPOINT_SCHEME) :]
-    return zid if zid and zid.isalnum() else None
+    parts = endpoint_text[len(ENDPOINT_SCHEME) :].split("/")
+    return _identity_of(*parts) if len(parts) == 2 else None
 
 
-def call_key(zid: str) -> str:
-    return f"{PREFIX}/call/{zid}"
+def call_key(ident: str) -> str:
+    return f"{PREFIX}/call/{ident}"
 
 
-def alive_key(zid: str) -> str:
-    return f"{PREFIX}/alive/{zid}"
+def alive_key(ident: str) -> str:
+    return f"{PREFIX}/alive/{ident}"
 
 
-ALIVE_ALL: Final = f"{PREFIX}/alive/*"
+ALIVE_ALL: Final = f"{PREFIX}/alive/*/*"
 
 
-def name_token(zid: str, name: str) -> str:
-    return f"{PREFIX}/name/{zid}/{escape(name)}"
+def name_token(ident: str, name: str) -> str:
+    return f"{PREFIX}/name/{ident}/{escape(name)}"
 
 
-NAME_TOKENS: Final = f"{PREFIX}/name/*/*"
+NAME_TOKENS: Final = f"{PREFIX}/name/*/*/*"
 
 
 def name_of_token(key: str) -> tuple[str, str] | None:
-    """(zid, name) of a name token's key; None for another key."""
+    """(identity, name) of a name token's key; None for another key."""
     parts = key.split("/")
-    if len(parts) != 4 or parts[0] != PREFIX or parts[1] != "name":
+    if len(parts) != 5 or parts[0] != PREFIX or parts[1] != "name":
         return None
-    return parts[2], unescape(parts[3])
+    ident = _identity_of(parts[2], parts[3])
+    return None if ident is None else (ident, unescape(parts[4]))
 
 
 def zid_of_alive(key: str) -> str | None:
+    """The identity of a process's liveliness token's key; None for another key."""
     parts = key.split("/")
-    if len(parts) != 3 or parts[0] != PREFIX or parts[1] != "alive":
+    if len(parts) != 4 or parts[0] != PREFIX or parts[1] != "alive":
         return None
-    return parts[2]
+    return _identity_of(parts[2], parts[3])
 
 
 def event_key(channel: str, topic_frame: bytes) -> str:

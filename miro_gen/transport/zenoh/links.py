@@ -47,7 +47,7 @@ from miro_gen.log import PeerWarnings, logger
 from miro_gen.transport.events.frames import FrameError
 from miro_gen.transport.reactor import Reactor
 from miro_gen.transport.zenoh import fleet, keys
-from miro_gen.transport.zenoh.session import direct, track, untrack
+from miro_gen.transport.zenoh.session import direct, identity, track, untrack
 
 _log = logger("MIRO")
 _peer_warnings = PeerWarnings(_log)
@@ -67,7 +67,7 @@ class ZenohChannels:
     def __init__(self, session: Any, reactor: Reactor, shared: fleet.Shared | None = None) -> None:
         self.session = session
         self.reactor = reactor
-        self.endpoint = keys.endpoint(str(session.zid()))
+        self.endpoint = keys.endpoint(identity(session))
         self.shared = fleet.from_environment() if shared is None else shared
 
     def publishing(

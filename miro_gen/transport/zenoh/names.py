@@ -20,6 +20,7 @@ import zenoh
 
 from miro_gen.transport.naming.leases import Leases
 from miro_gen.transport.zenoh import keys
+from miro_gen.transport.zenoh.session import identity
 
 
 class TokenedNames:
@@ -31,7 +32,7 @@ class TokenedNames:
     def __init__(self, leases: Leases, session: Any) -> None:
         self.leases = leases
         self.session = session
-        self.zid = str(session.zid())
+        self.zid = identity(session)
         self._tokens: dict[str, Any] = {}
         self._lock = threading.Lock()
         self._stopped = False

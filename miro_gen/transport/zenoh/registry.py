@@ -15,7 +15,9 @@ its owner as any lapsed name is. The token's callback only hands the key to the 
 
 from __future__ import annotations
 
+import json
 import time
+from collections.abc import Sequence
 from typing import Any
 
 import MiroNaming
@@ -36,9 +38,18 @@ from miro_gen.transport.naming.table import Table
 from miro_gen.transport.reactor import Reactor
 from miro_gen.transport.tlsfiles import TlsFiles
 from miro_gen.transport.zenoh import keys
+from miro_gen.transport.zenoh.access import access_control
 from miro_gen.transport.zenoh.adapter import ZenohAdapter
 from miro_gen.transport.zenoh.invoker import ZenohInvoker
-from miro_gen.transport.zenoh.session import config, direct, locator, shared_memory, track, untrack
+from miro_gen.transport.zenoh.session import (
+    config,
+    direct,
+    identity,
+    locator,
+    shared_memory,
+    track,
+    untrack,
+)
 
 _log = logger("MIRO")
 
@@ -57,13 +68,18 @@ class ZenohNaming:
         hold: float = DEFAULT_HOLD,
         log_path: str | None = None,
         tls: TlsFiles | None = None,
+        robots: Sequence[str] = (),
     ) -> None:
         self.reactor = reactor
         self.locator = locator(naming, tls)  # tls/...: only sessions with a key of its CA
         conf = config("router", listen=self.locator, tls=tls)
+        if robots:  # each robot's certificate only its own keys (transport.zenoh.access)
+            if tls is None:
+                raise ValueError("access control per robot needs TLS: no certificates without")
+            conf.insert_json5("access_control", json.dumps(access_control(tls.name, robots)))
         self.shared_memory = shared_memory(conf)
         self.session: Any = zenoh.open(conf)
-        self.zid = str(self.session.zid())
+        self.zid = identity(self.session)  # %/<zid>: the router has no owner
         self.endpoint = keys.endpoint(self.zid)
         self.table = Table(quota, max_names, hold)
         self.log: OwnersLog | None = None
@@ -101,7 +117,9 @@ class ZenohNaming:
         if not self.registry.end_lease(name, keys.endpoint(zid)):
             return  # bound again since, by another process, or gone already
         self.ended += 1
-        _log.info("%s: its server's session %s is gone; its lease ends", name, zid[:8])
+        _log.info(
+            "%s: its server's session %s is gone; its lease ends", name, keys.zid_part(zid)[:8]
+        )
         self.registry.purge()
 
     def _purge(self, _: Any) -> None:

@@ -29,6 +29,7 @@ import zenoh
 from miro_gen.exceptions import TRANSIENT
 from miro_gen.log import logger
 from miro_gen.transport.tlsfiles import TlsFiles
+from miro_gen.transport.zenoh import keys
 from miro_gen.transport.zenoh.security import configure_tls, refused_hint, scheme
 
 _log = logger("MIRO")
@@ -89,6 +90,16 @@ def shared_memory(conf: Any) -> bool:
     return bool(json.loads(conf.get_json("transport/shared_memory/enabled")))
 
 
+_owners: dict[str, str] = {}  # session id -> its certificate's common name (open_client)
+
+
+def identity(session: Any) -> str:
+    """The identity of `session` in keys (transport.zenoh.keys): `<owner>/<zid>`, the owner
+    the common name of the certificate it was opened with (none: `%`)."""
+    zid = str(session.zid())
+    return keys.identity(_owners.get(zid, ""), zid)
+
+
 _callbacks: list[Any] = []  # subscribers and queryables whose callbacks are Python code
 _callbacks_lock = threading.Lock()
 
@@ -143,7 +154,7 @@ def open_client(naming: str, wait: float | None = 0.0, tls: TlsFiles | None = No
     said = False
     while True:
         try:
-            return zenoh.open(config("client", connect=target, tls=tls))
+            session = zenoh.open(config("client", connect=target, tls=tls))
         except zenoh.ZError as e:
             if deadline is not None and time.monotonic() >= deadline:
                 raise TRANSIENT(
@@ -158,3 +169,7 @@ def open_client(naming: str, wait: float | None = 0.0, tls: TlsFiles | None = No
                 say("waiting for the Zenoh router at %s%s", target, refused_hint(tls))
                 said = True
             time.sleep(OPEN_RETRY)
+            continue
+        if tls is not None:
+            _owners[str(session.zid())] = tls.name
+        return session
