@@ -25,10 +25,10 @@ No torn data, no slot reused under a reader:
   the event (the oldest goes first), counted in its `dropped`.
 
 A server's ring of replies (`Ring(..., lease=...)`) reserves each slot for the one caller the
-reply is for, until that caller says it has copied it (`Segment.copy` writes the slot's `done`)
-or the lease runs out with no live lane holding it: a caller that read later than that finds the
-generation changed and gets a clean error, never torn data. Such a ring never waits: when no
-slot is free the reply travels in its frame.
+reply is for, until that caller says it is done with it (`Segment.copy`, `Segment.give_back`
+write the slot's `done`) or the lease runs out with no live lane holding it: a caller that came
+later than that finds the generation changed and gets a clean error, never torn data. Such a
+ring never waits: when no slot is free the reply travels in its frame.
 
 The pool: `slots` slots (MIRO_SHM_SLOTS, default SLOTS) of up to `slot_size` bytes each (the
 largest message allowed); pages are committed as they are first written, so a ring of 1 MiB
@@ -413,6 +413,13 @@ class Segment:
             _Q.pack_into(self.mem, _SLOT_AT + d.slot * _SLOT.size + _DONE, d.write + 1)
         self.release(d, False)
         return data if ok else None
+
+    def give_back(self, d: Descriptor) -> None:
+        """Done with the reply `d` held in place (`hold`): its slot goes back to the writer."""
+        if self.closed:
+            return
+        _Q.pack_into(self.mem, _SLOT_AT + d.slot * _SLOT.size + _DONE, d.write + 1)
+        self.release(d, False)
 
     def supplier_alive(self) -> bool:
         """Whether the supplier still has its segment open (its process is alive)."""

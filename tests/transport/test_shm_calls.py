@@ -166,7 +166,7 @@ def test_an_exhausted_pool_falls_back_to_frames_and_returned_slots_are_reused(
         try:
             whole = Camera(MIB).image.serialize()
             for _, descriptor in held:  # read late, still whole; the slots go back
-                assert reader.body(descriptor, "getImage") == whole
+                assert reader.body(descriptor, "getImage", False) == whole
             assert zlib.crc32(stub.getImage().data) == crc(MIB)
             assert invoker.shared.read == 1
         finally:
@@ -188,10 +188,33 @@ def test_a_reply_read_after_its_lease_and_slot_were_taken_is_a_clean_error(
         (_, first), (_, second) = greedy.get_image(), greedy.get_image()
         assert first != second  # the same slot, written again
         with pytest.raises(COMM_FAILURE) as failure:
-            reader.body(first, "getImage")
+            reader.body(first, "getImage", False)
         assert failure.value.completed == CompletionStatus.YES
-        body = reader.body(second, "getImage")
+        body = reader.body(second, "getImage", False)
         assert body == Camera(MIB).image.serialize()
+    finally:
+        reader.close()
+        greedy.close()
+        server.kill()
+
+
+def test_a_reply_read_in_place_is_never_rewritten_while_its_thread_holds_it() -> None:
+    """Lease 0, two slots: the slot of a reply read in place (as a stub reads it) stays as it
+    was while later replies come, until the thread's next call gives it back."""
+    server = CameraProcess(MIB, MIRO_SHM_CALL_SLOTS="2", MIRO_SHM_LEASE="0")
+    greedy = GreedyCaller(server.endpoint)
+    reader = SharedReplies()
+    whole = Camera(MIB).image.serialize()
+    try:
+        first = shm.Descriptor(*shm.DESCRIPTOR.unpack(greedy.get_image()[1]))
+        view = reader.body(shm.DESCRIPTOR.pack(*first), "getImage", True)
+        assert isinstance(view, memoryview) and view.readonly and view == whole
+        later = [shm.Descriptor(*shm.DESCRIPTOR.unpack(greedy.get_image()[1])) for _ in range(3)]
+        assert {d.slot for d in later} == {1 - first.slot}  # never the held one
+        assert view == whole
+        reader.give_back()  # the thread's next call
+        after = shm.Descriptor(*shm.DESCRIPTOR.unpack(greedy.get_image()[1]))
+        assert after.slot == first.slot  # lowest first, free again
     finally:
         reader.close()
         greedy.close()

@@ -26,8 +26,9 @@ process that sends or receives such bodies keeps megabyte buffers in its heap
 (`transport.buffers`: glibc would return and re-fault them on every call).
 
 A connection to a server on this host announces in its routing id that it takes large replies
-in the server's shared memory (`rpc.shared`); such a reply's body is copied out of the slot
-once, as `bytes`, before `invoke` returns, and the slot goes back to the server at once.
+in the server's shared memory (`rpc.shared`). A generated stub decodes such a reply's body in
+place (the thread's lane holds the slot until its next call); any other caller gets it copied
+out of the slot once, and the slot goes back to the server at once.
 
 Sockets come from `transport.sockets` (limits, heartbeats, CURVE): a request larger than the
 maximum message size is MARSHAL before anything is sent, and a server that refuses the
@@ -48,8 +49,9 @@ from zmq.backend import Socket as _Socket
 
 from miro_gen.exceptions import COMM_FAILURE, MARSHAL, TIMEOUT, TRANSIENT, CompletionStatus
 from miro_gen.log import PeerWarnings, logger
+from miro_gen.runtime import views
 from miro_gen.runtime.cdr import ObjectRef
-from miro_gen.runtime.rpc import Reply, ReplyStatus, Servant
+from miro_gen.runtime.rpc import Reply, ReplyStatus, Servant, decoded_at_once
 from miro_gen.transport import sockets
 from miro_gen.transport.buffers import keep_large_buffers
 from miro_gen.transport.rpc import frames
@@ -185,6 +187,7 @@ class ZmqInvoker:
         timeout: float | None = None,
     ) -> Reply | None:
         endpoint = ref.endpoint
+        self.shared.give_back()  # the slot of this thread's last reply, decoded by now
         if self._closed:
             raise TRANSIENT("the invoker is closed")
         if not endpoint:
@@ -270,8 +273,11 @@ class ZmqInvoker:
                 if conn.rcvtimeo != CHECK_INTERVAL_MS:
                     conn.set_rcvtimeo(CHECK_INTERVAL_MS)
                 keep_large_buffers()
-                # a view of the copy: octet_views() decodes octets as views of it
-                return Reply(_OK, memoryview(self.shared.body(bytes(parts[1]), operation)))
+                # In place for a stub that decodes it at once (the slot held until this
+                # thread's next call); else a view of a copy (octet_views: views of that).
+                in_place = decoded_at_once() and not getattr(views.active, "on", False)
+                body = self.shared.body(bytes(parts[1]), operation, in_place)
+                return Reply(_OK, body if type(body) is memoryview else memoryview(body))
             reply = self._other_reply(conn, parts, request_id)
             if reply is not None:
                 if conn.rcvtimeo != CHECK_INTERVAL_MS:

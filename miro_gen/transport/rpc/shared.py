@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import os
 import threading
+import weakref
 from typing import Final
 
 from miro_gen.exceptions import COMM_FAILURE, CompletionStatus
@@ -98,33 +99,78 @@ class ReplyPool:
                 self._ring.close()
 
 
-class SharedReplies:
-    """A caller's mappings of its servers' pools (at most `shm.Segments.MAX`: then the oldest
-    is unmapped), unmapped once their server is gone. Thread-safe."""
+class _ThreadMaps:
+    """One thread's mappings of its servers' pools, each with a lane of its own, and the reply
+    slot it holds until its next call. Unmapped when the thread ends (its locks, and so its
+    holds, go with them)."""
 
     def __init__(self) -> None:
-        self._segments = shm.Segments(keep_all=False, replies=True)
+        self.segments = shm.Segments(keep_all=False, replies=True)
+        self.held: tuple[shm.Segment, shm.Descriptor] | None = None
+
+    def give_back(self) -> None:
+        held, self.held = self.held, None
+        if held is not None:
+            segment, d = held
+            segment.give_back(d)
+
+    def __del__(self) -> None:
+        self.give_back()
+        self.segments.close()
+
+
+class SharedReplies:
+    """A caller's mappings of its servers' pools, per thread (at most `shm.Segments.MAX` per
+    thread: then the oldest is unmapped), unmapped once their server is gone."""
+
+    def __init__(self) -> None:
+        self._local = threading.local()
+        self._maps: weakref.WeakSet[_ThreadMaps] = weakref.WeakSet()  # every thread's, to close
         self._lock = threading.Lock()
         self.read = 0  # replies read from shared memory
+        self.closed = False
 
-    def body(self, descriptor: bytes, operation: str) -> bytes:
-        """The reply body a descriptor names, copied out; COMM_FAILURE (completed YES: the
-        call ran) when it cannot be read: its server's memory could not be mapped, or the slot
-        was written again before it was read (a caller later than the lease)."""
+    def _mine(self) -> _ThreadMaps:
+        maps: _ThreadMaps | None = getattr(self._local, "maps", None)
+        if maps is None:
+            maps = self._local.maps = _ThreadMaps()
+            with self._lock:
+                self._maps.add(maps)
+        return maps
+
+    def give_back(self) -> None:
+        """Return the slot this thread's last reply was read in place from (its next call)."""
+        maps: _ThreadMaps | None = getattr(self._local, "maps", None)
+        if maps is not None and maps.held is not None:
+            maps.give_back()
+
+    def body(self, descriptor: bytes, operation: str, in_place: bool) -> bytes | memoryview:
+        """The reply body a descriptor names: `in_place`, a read-only view of the slot, which
+        this thread holds until its next call (`give_back`: a stub decodes the body first);
+        else copied out and the slot given back at once. COMM_FAILURE (completed YES: the call
+        ran) when it cannot be read: its server's memory could not be mapped, or the slot was
+        written again before it was read (a caller later than the lease)."""
         try:
             d = shm.Descriptor(*shm.DESCRIPTOR.unpack(descriptor))
         except Exception:
             raise COMM_FAILURE(
                 f"{operation}: a malformed shared-memory reply", completed=CompletionStatus.YES
             ) from None
-        with self._lock:
-            segment = self._segments.segment(d)
+        maps = self._mine()
+        maps.give_back()
+        segment = maps.segments.segment(d)
         if segment is None or not segment.valid(d):
             raise COMM_FAILURE(
                 f"{operation}: cannot map the server's shared memory for its reply",
                 completed=CompletionStatus.YES,
             )
-        data = segment.copy(d)
+        data: bytes | memoryview | None
+        if in_place and segment.lane >= 0:  # held by this thread's lane: never rewritten
+            data = segment.hold(d)
+            if data is not None:
+                maps.held = (segment, d)
+        else:  # no lane of its own: copied out, checked after the copy
+            data = segment.copy(d)
         if data is None:
             raise COMM_FAILURE(
                 f"{operation}: the reply in shared memory was overwritten before it was read "
@@ -135,10 +181,16 @@ class SharedReplies:
         return data
 
     def sweep(self) -> None:
-        """Unmap the pools of servers that are gone."""
-        with self._lock:
-            self._segments.sweep()
+        """Unmap this thread's mappings of pools whose servers are gone."""
+        maps: _ThreadMaps | None = getattr(self._local, "maps", None)
+        if maps is not None:
+            if maps.held is not None and not maps.held[0].supplier_alive():
+                maps.held = None
+            maps.segments.sweep()
 
     def close(self) -> None:
         with self._lock:
-            self._segments.close()
+            maps, self._maps = list(self._maps), weakref.WeakSet()
+        for m in maps:
+            m.held = None
+            m.segments.close()
