@@ -6,9 +6,12 @@ A caller that may map this host's segments (`shm.host_key`: same boot, PID names
 user) says so in its connection's routing id, which starts with `caller_marker()`; servers of
 older versions take it as any routing id. A server answers such a caller's ok replies of
 `shm.THRESHOLD` bytes or more with a descriptor of the slot it wrote the body into (reply flag
-`frames.SHARED`); the caller copies the body out once, returns the slot and checks the slot's
-generation, so that a late read is a clean error, never torn data. When every slot is taken,
-or the caller is not on this host, or is older, the reply travels in its frame as before.
+`frames.SHARED`). A generated stub's thread holds the slot in a lane of its own and decodes
+the body in place, and gives the slot back at its next call; any other caller copies the body
+out and gives the slot back at once. The slot's generation is checked after the hold (and after
+a copy), so that a read later than the lease is a clean error, never torn data. When every
+slot is taken, or the caller is not on this host, or is older, the reply travels in its frame
+as before.
 """
 
 from __future__ import annotations
@@ -23,7 +26,7 @@ from miro_gen.transport import shm
 from miro_gen.transport.local import is_local_address
 
 SLOTS: Final = 16  # slots of a server's pool, by default (MIRO_SHM_CALL_SLOTS)
-LEASE: Final = 5.0  # seconds a reply's slot waits for its caller to copy it (MIRO_SHM_LEASE)
+LEASE: Final = 5.0  # seconds a reply's slot waits for its caller to hold it (MIRO_SHM_LEASE)
 
 
 def caller_marker() -> bytes:
