@@ -12,6 +12,7 @@ import sys
 import threading
 import zlib
 from collections.abc import Iterator
+from typing import Any
 
 import Miro
 import pytest
@@ -22,7 +23,7 @@ from repo_paths import TESTS
 
 from miro_gen.exceptions import COMM_FAILURE, TRANSIENT, CompletionStatus
 from miro_gen.runtime.cdr import HEADER_LE, ObjectRef
-from miro_gen.transport import shm
+from miro_gen.transport import shm, sockets
 from miro_gen.transport.rpc import frames
 from miro_gen.transport.rpc.invoker import ZmqInvoker
 from miro_gen.transport.rpc.shared import SharedReplies, caller_marker
@@ -105,6 +106,23 @@ def test_replies_from_the_threshold_on_come_through_shared_memory_whole(
     finally:
         server.kill()
     assert dev_shm() == before  # a memfd: never a file
+
+
+def test_a_reply_over_the_callers_maximum_message_size_is_refused_as_in_a_frame() -> None:
+    """The caller's limit holds for replies in shared memory too: a server with a larger one
+    cannot hand it more than it would take in a frame."""
+    server = CameraProcess(2 * MIB)
+    context: zmq.Context[Any] = zmq.Context()
+    sockets.configure(context, sockets.SocketPolicy(max_message_size=MIB))
+    small = ZmqInvoker(context)
+    try:
+        with pytest.raises(COMM_FAILURE, match="more than the maximum message size"):
+            Miro.Camera(server.ref(), small).getImage()
+        assert small.shared.read == 0
+    finally:
+        small.close()
+        context.term()
+        server.kill()
 
 
 def test_a_caller_that_does_not_announce_itself_gets_frames(

@@ -276,7 +276,8 @@ class ZmqInvoker:
                 # In place for a stub that decodes it at once (the slot held until this
                 # thread's next call); else a view of a copy (octet_views: views of that).
                 in_place = decoded_at_once() and not getattr(views.active, "on", False)
-                body = self.shared.body(bytes(parts[1]), operation, in_place)
+                limit = sockets.policy(self.context).max_message_size  # as for a frame
+                body = self.shared.body(bytes(parts[1]), operation, in_place, limit)
                 return Reply(_OK, body if type(body) is memoryview else memoryview(body))
             reply = self._other_reply(conn, parts, request_id)
             if reply is not None:

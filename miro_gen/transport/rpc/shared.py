@@ -147,18 +147,27 @@ class SharedReplies:
         if maps is not None and maps.held is not None:
             maps.give_back()
 
-    def body(self, descriptor: bytes, operation: str, in_place: bool) -> bytes | memoryview:
+    def body(
+        self, descriptor: bytes, operation: str, in_place: bool, limit: int = 1 << 62
+    ) -> bytes | memoryview:
         """The reply body a descriptor names: `in_place`, a read-only view of the slot, which
         this thread holds until its next call (`give_back`: a stub decodes the body first);
         else copied out and the slot given back at once. COMM_FAILURE (completed YES: the call
         ran) when it cannot be read: its server's memory could not be mapped, or the slot was
-        written again before it was read (a caller later than the lease)."""
+        written again before it was read (a caller later than the lease), or it is larger
+        than `limit`, this caller's maximum message size, which no frame could pass either."""
         try:
             d = shm.Descriptor(*shm.DESCRIPTOR.unpack(descriptor))
         except Exception:
             raise COMM_FAILURE(
                 f"{operation}: a malformed shared-memory reply", completed=CompletionStatus.YES
             ) from None
+        if d.length > limit:
+            raise COMM_FAILURE(
+                f"{operation}: the reply is {d.length} bytes, more than the maximum message "
+                f"size ({limit}; --max-message-size)",
+                completed=CompletionStatus.YES,
+            )
         maps = self._mine()
         maps.give_back()
         segment = maps.segments.segment(d)
