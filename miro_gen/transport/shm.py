@@ -69,6 +69,11 @@ _GEN, _WRITE, _LEN, _DONE = 0, 8, 16, 24  # done: write + 1 once its one reader 
 _CLAIMED, _KEEP_ALL, _ACKED, _HOLD = 0, 8, 16, 24
 _FLOCK = struct.Struct("hhqqi4x")  # struct flock (Linux): type, whence, start, len, pid
 
+# Taken and released between a reader's hold and its check of the slot's generation: a lock's
+# atomic instruction orders the store before the load (x86 may reorder them otherwise), so a
+# writer that finds no hold has its new generation seen by the check.
+_FENCE = threading.Lock()
+
 # The descriptor: supplier pid, its fd of the segment, segment id, slot, generation, write
 # index, payload length.
 DESCRIPTOR: Final = struct.Struct("<IIQIQQQ")
@@ -367,6 +372,8 @@ class Segment:
         if self.closed:
             return None
         _Q.pack_into(self._lane_mem, self._lane_base + _HOLD, d.write + 1)
+        with _FENCE:  # a locked instruction: the hold is visible before the generation is read
+            pass
         if not self.current(d):
             _Q.pack_into(self._lane_mem, self._lane_base + _HOLD, 0)
             return None
