@@ -20,7 +20,8 @@ get(), for comparison only: the time to the reply's arrival, from a Python calle
 
 With `--sizes`, large replies instead (bench/large_replies.py): Camera::getImage() returning an
 image of each size against a raw pyzmq server sending the same bytes, at least `--seconds` per
-run, five interleaved runs (target, issue 29: 1 MiB within 1.1x of raw pyzmq).
+run, five interleaved runs (target, issue 29: 1 MiB within 1.1x of raw pyzmq). Our replies
+of 64 KiB or more come through the server's shared memory (MIRO_SHM=0: in frames).
 """
 
 from __future__ import annotations

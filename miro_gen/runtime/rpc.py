@@ -52,6 +52,16 @@ class ReplyStatus(enum.IntEnum):
 _OK = ReplyStatus.OK
 
 
+_decoding = threading.local()  # `now`: a stub's call, whose reply is decoded at once
+
+
+def decoded_at_once() -> bool:
+    """Whether the reply of the call this thread is invoking is decoded by a generated stub
+    before the thread invokes anything again: a transport may then give its body as a view
+    of memory that it reuses at the thread's next call (`transport.rpc.shared`)."""
+    return bool(getattr(_decoding, "now", False))
+
+
 class Reply(NamedTuple):
     """What a call returns: a status, a CDR body, and for exceptions their repository id. A
     transport may give a large body as a read-only view over the frame it received (decoding
@@ -159,17 +169,25 @@ class Stub:
     def _call(
         self, operation: str, body: bytes, declared: tuple[type[UserException], ...] = ()
     ) -> bytes | memoryview:
-        """Invoke and return the reply body; raise what the server raised."""
+        """Invoke and return the reply body; raise what the server raised. The generated stub
+        decodes the body before its thread invokes anything again (`decoded_at_once`)."""
+        _decoding.now = True
         try:
             reply = self._invoker.invoke(self._ref, operation, body, timeout=self._timeout)
         except (TRANSIENT, OBJECT_NOT_EXIST) as exc:
             reply = self._again(exc, operation, body)
+        finally:
+            _decoding.now = False
         if reply is None:
             raise MARSHAL(f"no reply to {operation}", completed=CompletionStatus.MAYBE)
         if reply.status is _OK:
             return reply.body
         if reply.status == ReplyStatus.SYSTEM_EXCEPTION and self._undelivered(reply):
-            reply = self._invoker.invoke(self._ref, operation, body, timeout=self._timeout)
+            _decoding.now = True
+            try:
+                reply = self._invoker.invoke(self._ref, operation, body, timeout=self._timeout)
+            finally:
+                _decoding.now = False
             if reply is None:  # pragma: no cover - only oneway calls have no reply
                 raise MARSHAL(f"no reply to {operation}", completed=CompletionStatus.MAYBE)
             if reply.status is _OK:

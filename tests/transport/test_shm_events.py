@@ -1,4 +1,4 @@
-"""Large events through shared memory between processes of one host (transport.events.shm):
+"""Large events through shared memory between processes of one host (transport.shm):
 real supplier and consumer processes on a channel hosted by `miro naming --channel`. Every
 image carries the CRC-32 of its data, so a payload read while it was rewritten is seen."""
 
@@ -17,7 +17,8 @@ from loopback import NamingProcess, Recorder, eventually, service_env
 from miro_cli import REPO
 
 from miro_gen import EventChannelFactory, Server, StructuredPushSupplier
-from miro_gen.transport.events import StructuredEvent, shm
+from miro_gen.transport import shm
+from miro_gen.transport.events import StructuredEvent
 
 pytestmark = pytest.mark.skipif(not shm.available(), reason="shared memory needs Linux memfd")
 

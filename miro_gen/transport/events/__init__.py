@@ -17,7 +17,7 @@ one ZeroMQ message per event; at low rates that is
 one event per frame, as fast as a single message; an event of LARGE_EVENT bytes or more travels
 alone, copied once into its frame and decoded in place from the consumer's; between processes of
 one host it is written into a shared-memory ring instead and only a descriptor travels
-(transport.events.shm). Slow consumers never
+(transport.shm). Slow consumers never
 block suppliers: the supplier's queue and ZeroMQ's are bounded (in bytes: transport.sockets), what
 overflows is dropped and counted (`StructuredPushSupplier.dropped`), and the sequence numbers make
 the drops visible (`StructuredPushConsumer.missed`). A consumer keeps the events waiting for its

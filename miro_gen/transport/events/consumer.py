@@ -15,7 +15,8 @@ from miro_gen.log import PeerWarnings, logger
 from miro_gen.runtime import registry
 from miro_gen.runtime.datatypes import IdlType
 from miro_gen.runtime.views import octet_views
-from miro_gen.transport.events import offers, shm
+from miro_gen.transport import shm
+from miro_gen.transport.events import offers
 from miro_gen.transport.events.channels import EventChannel
 from miro_gen.transport.events.event import StructuredEvent
 from miro_gen.transport.events.frames import (
@@ -66,7 +67,7 @@ class StructuredPushConsumer:
     on the way (sequence gaps), `dropped` those this consumer skipped because its handler fell
     behind, `lag` how old (seconds since it was pushed) the last event delivered was.
 
-    Large events from suppliers on this host arrive through shared memory (transport.events.shm)
+    Large events from suppliers on this host arrive through shared memory (transport.shm)
     and are decoded from it: the payload is the same as over the network. With `zero_copy`,
     their sequences of octets (image data) are not copied but read-only memoryviews of the
     shared slot instead (`numpy.frombuffer` makes a read-only array of one): valid only while

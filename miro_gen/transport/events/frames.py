@@ -9,7 +9,7 @@ An event message is two ZeroMQ frames, a topic frame and a batch frame, little-e
     batch frame    offset  size  field
                    0       1     version (VERSION)
                    1       1     flags: 0, or SHM (its one event's payload is a descriptor
-                                 of a payload in shared memory: transport.events.shm)
+                                 of a payload in shared memory: transport.shm)
                    2       2     number of events n (at most MAX_EVENTS)
                    4       8     supplier id (random per supplier)
                    12      32    type hash of the payloads (SHA-256 of the data schema, raw)

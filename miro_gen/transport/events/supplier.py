@@ -15,8 +15,8 @@ from typing import Any
 from miro_gen import clock
 from miro_gen.log import logger
 from miro_gen.runtime.cdr import Encoder, encode_after
-from miro_gen.transport import sockets
-from miro_gen.transport.events import offers, shm
+from miro_gen.transport import shm, sockets
+from miro_gen.transport.events import offers
 from miro_gen.transport.events.channels import EventChannel
 from miro_gen.transport.events.frames import (
     BATCH_HEADER,
@@ -39,7 +39,8 @@ QUEUE_EVENTS = 100_000  # events a supplier holds for its reactor's next turn, a
 QUEUE_BYTES = 64 << 20  # and bytes
 # Events from this size on travel alone, in a frame put together with one copy and handed to
 # ZeroMQ without another (copy=False); consumers decode them from ZeroMQ's buffer, in place.
-LARGE_EVENT = 64 * 1024
+# Between processes of one host they take shared memory: transport.shm owns the size.
+LARGE_EVENT = shm.THRESHOLD
 # Events in one frame, at most. The count is 16 bits, and a high-water mark counts frames: HWM
 # frames must stay a bounded amount of memory. Yet frames must not be small: each send lets the
 # pushing thread take the GIL back for up to a switch interval, so a flush in many frames falls
@@ -63,7 +64,7 @@ class _Topic:
     """What a supplier keeps per type name: the topic frame, the sequence numbers, whether
     anyone subscribes (recomputed when the subscriptions change), the events not yet sent,
     whether the last event was large, whether its large events go through shared memory (all its
-    subscribers are on this host: transport.events.shm) and the ring they go through."""
+    subscribers are on this host: transport.shm) and the ring they go through."""
 
     __slots__ = (
         "frame",
@@ -84,7 +85,7 @@ class _Topic:
         self.frame = frame
         self.shm_frame = marker + frame
         self.shared = False
-        self.keep_all = 0  # keep-all consumers of this host (transport.events.shm)
+        self.keep_all = 0  # keep-all consumers of this host (transport.shm)
         self.ring: shm.Ring | None = None
         self.large = False
         self.seq = itertools.count()
@@ -129,7 +130,7 @@ class StructuredPushSupplier:
         self.max_frame = sockets.policy(self.reactor.context).max_message_size
         self._connected = False
         self._lost: set[bytes] = set()  # the subscriptions when the channel went away
-        # Large events through shared memory to consumers of this host (transport.events.shm):
+        # Large events through shared memory to consumers of this host (transport.shm):
         # not over a backbone without channel hosts, nor where the platform has no memfd.
         self._marker = shm.topic_marker() if shm.enabled() and channel.links is None else b""
         self._keep_all_marker = shm.keep_all_marker()

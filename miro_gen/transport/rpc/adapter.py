@@ -10,7 +10,9 @@ object gets OBJECT_NOT_EXIST, one for an operation the object does not have BAD_
 (before anything about it is kept: a peer must not grow this process's memory with made-up
 names); a request that waited for a free thread until its caller stopped waiting is not run.
 Requests waiting for a thread are bounded in number and bytes; a reply larger than the maximum
-message size becomes MARSHAL.
+message size becomes MARSHAL. An ok reply of `shm.THRESHOLD` bytes or more to a caller on this
+host that takes them goes through the adapter's pool of shared memory (`rpc.shared`) when a
+slot is free.
 """
 
 from __future__ import annotations
@@ -31,16 +33,18 @@ from miro_gen.log import PeerWarnings, logger
 from miro_gen.runtime.rpc import (
     Invoker,
     Reply,
+    ReplyStatus,
     Servant,
     is_nonblocking,
     system_exception_reply,
 )
-from miro_gen.transport import sockets
+from miro_gen.transport import shm, sockets
 from miro_gen.transport.reactor import Reactor
 from miro_gen.transport.rpc import frames
 from miro_gen.transport.rpc.caller import Caller, caller_of, serving
 from miro_gen.transport.rpc.dispatch import Dispatcher, Peer
 from miro_gen.transport.rpc.objects import ObjectTable
+from miro_gen.transport.rpc.shared import ReplyPool
 
 _log = logger("MIRO")
 _peer_warnings = PeerWarnings(_log)  # what peers send: rate-limited, with counts
@@ -80,6 +84,8 @@ class ObjectAdapter(ObjectTable):
         self.socket.setsockopt(zmq.RCVHWM, hwm)
         self.socket.setsockopt(zmq.SNDHWM, hwm)
         self.max_message_size = sockets.policy(reactor.context).max_message_size
+        # large replies to callers on this host (none mapped before the first)
+        self.pool = ReplyPool(self.max_message_size) if shm.enabled() else None
         self.socket.bind(bind)
         self.bound = self.socket.getsockopt_string(zmq.LAST_ENDPOINT)  # what it listens on
         self.also_bound = list(also_bind(self.bound)) if also_bind is not None else []
@@ -148,6 +154,8 @@ class ObjectAdapter(ObjectTable):
             self.socket.close(linger=0)
         else:
             self._dispatcher.close()
+        if self.pool is not None:  # callers that mapped it keep what they map
+            self.pool.close()
 
 
 class _Call:
@@ -207,6 +215,17 @@ class _Call:
                 completed=CompletionStatus.YES,
             )
             reply = system_exception_reply(too_large)
+        pool = self.adapter.pool
+        if (
+            pool is not None
+            and reply.status is ReplyStatus.OK
+            and len(reply.body) >= shm.THRESHOLD
+            and not req.oneway
+            and pool.takes(self.peer)
+        ):
+            descriptor = pool.put(bytes(reply.body))
+            if descriptor is not None:
+                return [self.peer, frames.shared_reply_header(req.request_id), descriptor]
         return _reply_frames(self.peer, req, reply)
 
     def refuse(self, why: str = "is overloaded") -> list[bytes] | None:

@@ -19,6 +19,7 @@ from miro_gen.runtime.rpc import ReplyStatus as Status
 VERSION: Final = 1
 ZERO_COPY_MIN: Final = 64 * 1024  # bytes of a body from which it is sent without a copy
 MAX_NAME: Final = 0xFFFF  # bytes of an object key, operation name or repository id
+SHARED: Final = 1  # reply flag: the body frame is a descriptor of the body in shared memory
 
 
 class Kind(enum.IntEnum):
@@ -53,11 +54,12 @@ class FrameError(ValueError):
 # version, kind, flags, reserved, timeout ms, request id | key length (then key, op length, op)
 _REQUEST: Final = Struct("<BBBBIQH")
 _REQUEST_PREFIX: Final = Struct("<BBBBIQ")  # the part that changes from call to call
-# version, kind, status, reserved, reserved, request id | repository id length (then the id)
+# version, kind, status, flags, reserved, request id | repository id length (then the id)
 _REPLY: Final = Struct("<BBBBIQH")
 _U16: Final = Struct("<H")
 _OK: Final = Status.OK
-_OK_REPLY: Final = bytes((VERSION, Kind.REPLY, Status.OK, 0))  # version, kind, status, reserved
+_OK_REPLY: Final = bytes((VERSION, Kind.REPLY, Status.OK, 0))  # version, kind, status, flags
+_SHARED_REPLY: Final = bytes((VERSION, Kind.REPLY, Status.OK, SHARED))
 _REQUEST_KIND: Final = int(Kind.REQUEST)
 _ONEWAY_KIND: Final = int(Kind.ONEWAY)
 
@@ -151,12 +153,23 @@ def reply_header(request_id: int, status: int, repo_id: str = "") -> bytes:
     return _REPLY.pack(VERSION, Kind.REPLY, status, 0, 0, request_id, len(repo)) + repo
 
 
-def ok_reply_id(frame: bytes | memoryview) -> int:
+def ok_reply_id(frame: bytes | memoryview, head: bytes = _OK_REPLY) -> int:
     """The request id of a reply that says ok and carries no repository id (the common case,
     checked with the least work); -1 for any other frame, which `decode_reply` then reads."""
-    if len(frame) == _REPLY.size and frame[:4] == _OK_REPLY and frame[16:] == b"\0\0":
+    if len(frame) == _REPLY.size and frame[:4] == head and frame[16:] == b"\0\0":
         return int.from_bytes(frame[8:16], "little")
     return -1
+
+
+def shared_reply_header(request_id: int) -> bytes:
+    """The header of an ok reply whose body frame is a descriptor (`transport.rpc.shared`),
+    sent only to callers that announced they take them."""
+    return _REPLY.pack(VERSION, Kind.REPLY, Status.OK, SHARED, 0, request_id, 0)
+
+
+def shared_reply_id(frame: bytes | memoryview) -> int:
+    """As `ok_reply_id`, for a reply whose body is in shared memory."""
+    return ok_reply_id(frame, _SHARED_REPLY)
 
 
 def decode_reply(frame: bytes | memoryview) -> Reply:

@@ -25,6 +25,11 @@ received frame (`frames.body_of`), so that the stub's decoding copies its octets
 process that sends or receives such bodies keeps megabyte buffers in its heap
 (`transport.buffers`: glibc would return and re-fault them on every call).
 
+A connection to a server on this host announces in its routing id that it takes large replies
+in the server's shared memory (`rpc.shared`). A generated stub decodes such a reply's body in
+place (the thread's lane holds the slot until its next call); any other caller gets it copied
+out of the slot once, and the slot goes back to the server at once.
+
 Sockets come from `transport.sockets` (limits, heartbeats, CURVE): a request larger than the
 maximum message size is MARSHAL before anything is sent, and a server that refuses the
 handshake (no key, another key, too many connections) is TRANSIENT at once.
@@ -44,11 +49,13 @@ from zmq.backend import Socket as _Socket
 
 from miro_gen.exceptions import COMM_FAILURE, MARSHAL, TIMEOUT, TRANSIENT, CompletionStatus
 from miro_gen.log import PeerWarnings, logger
+from miro_gen.runtime import views
 from miro_gen.runtime.cdr import ObjectRef
-from miro_gen.runtime.rpc import Reply, ReplyStatus, Servant
+from miro_gen.runtime.rpc import Reply, ReplyStatus, Servant, decoded_at_once
 from miro_gen.transport import sockets
 from miro_gen.transport.buffers import keep_large_buffers
 from miro_gen.transport.rpc import frames
+from miro_gen.transport.rpc.shared import SharedReplies, routing_id
 
 _log = logger("MIRO")
 _peer_warnings = PeerWarnings(_log)  # what peers send: rate-limited, with counts
@@ -90,6 +97,9 @@ class _Connection:
         self.endpoint = endpoint
         self.socket = sockets.connecting_socket(context, zmq.DEALER)
         s = self.socket
+        identity = routing_id(endpoint)  # large replies in shared memory, on this host
+        if identity is not None:
+            s.setsockopt(zmq.ROUTING_ID, identity)
         s.setsockopt(zmq.IMMEDIATE, 1)
         s.setsockopt(zmq.RECONNECT_IVL, -1)
         with contextlib.suppress(zmq.ZMQError):  # denied (no key, the cap): do not retry
@@ -163,6 +173,7 @@ class ZmqInvoker:
         self._all: set[_Connection] = set()
         self._lock = threading.Lock()
         self._closed = False
+        self.shared = SharedReplies()  # servers' pools of large replies, mapped
 
     # ---- Invoker protocol -----------------------------------------------------------------------
 
@@ -176,6 +187,7 @@ class ZmqInvoker:
         timeout: float | None = None,
     ) -> Reply | None:
         endpoint = ref.endpoint
+        self.shared.give_back()  # the slot of this thread's last reply, decoded by now
         if self._closed:
             raise TRANSIENT("the invoker is closed")
         if not endpoint:
@@ -257,6 +269,16 @@ class ZmqInvoker:
                 if conn.rcvtimeo != CHECK_INTERVAL_MS:
                     conn.set_rcvtimeo(CHECK_INTERVAL_MS)
                 return Reply(_OK, parts[1])  # the common case
+            if len(parts) == 2 and frames.shared_reply_id(parts[0]) == request_id:
+                if conn.rcvtimeo != CHECK_INTERVAL_MS:
+                    conn.set_rcvtimeo(CHECK_INTERVAL_MS)
+                keep_large_buffers()
+                # In place for a stub that decodes it at once (the slot held until this
+                # thread's next call); else a view of a copy (octet_views: views of that).
+                in_place = decoded_at_once() and not getattr(views.active, "on", False)
+                limit = sockets.policy(self.context).max_message_size  # as for a frame
+                body = self.shared.body(bytes(parts[1]), operation, in_place, limit)
+                return Reply(_OK, body if type(body) is memoryview else memoryview(body))
             reply = self._other_reply(conn, parts, request_id)
             if reply is not None:
                 if conn.rcvtimeo != CHECK_INTERVAL_MS:
@@ -324,6 +346,7 @@ class ZmqInvoker:
         with self._lock:
             self._all.discard(conn)
         conn.close()
+        self.shared.sweep()  # its server may be gone: unmap its pool of replies
 
     def close(self) -> None:
         """Close every socket (of every thread); calls after this fail with TRANSIENT."""
@@ -332,6 +355,7 @@ class ZmqInvoker:
             conns, self._all = self._all, set()
         for conn in conns:
             conn.close()
+        self.shared.close()
 
 
 def _sent(sock: zmq.Socket[Any], header: bytes, body: bytes) -> bool:

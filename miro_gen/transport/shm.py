@@ -1,6 +1,7 @@
-"""Large events through shared memory between processes of one host (docs/PROTOCOL.md, "Large
-events in shared memory"): a supplier's ring of slots in a memfd segment, and the small
-descriptor that travels through the event channel instead of the payload.
+"""Large payloads through shared memory between processes of one host: events (docs/PROTOCOL.md,
+"Large events in shared memory") and call replies ("Large replies in shared memory"). A writer's
+ring of slots in a memfd segment, and the small descriptor that travels over ZeroMQ instead of
+the payload; payloads of THRESHOLD bytes or more take it.
 
 A supplier writes an event's encoded payload into a slot of its ring for the event's type
 (`Ring.put`; one ring per supplier and type, so that a consumer's credits cover every write of
@@ -22,6 +23,12 @@ No torn data, no slot reused under a reader:
   `WAIT_KEEP_ALL` seconds, before it reuses a slot a keep-all consumer has not read);
 * a keep-last consumer that falls a ring behind finds its slot's generation changed and drops
   the event (the oldest goes first), counted in its `dropped`.
+
+A server's ring of replies (`Ring(..., lease=...)`) reserves each slot for the one caller the
+reply is for, until that caller says it is done with it (`Segment.copy`, `Segment.give_back`
+write the slot's `done`) or the lease runs out with no live lane holding it: a caller that came
+later than that finds the generation changed and gets a clean error, never torn data. Such a
+ring never waits: when no slot is free the reply travels in its frame.
 
 The pool: `slots` slots (MIRO_SHM_SLOTS, default SLOTS) of up to `slot_size` bytes each (the
 largest message allowed); pages are committed as they are first written, so a ring of 1 MiB
@@ -46,6 +53,7 @@ import time
 from typing import Final, NamedTuple, Protocol
 
 MAGIC: Final = b"MIROSHM1"
+THRESHOLD: Final = 64 * 1024  # bytes from which an event's or a reply's payload takes a ring
 SLOTS: Final = 16  # slots in a supplier's ring, by default (MIRO_SHM_SLOTS)
 LANES: Final = 64  # consumer processes that may map one segment at once
 WAIT_KEEP_ALL: Final = 1.0  # seconds a push waits for a keep-all consumer's credit, at most
@@ -53,13 +61,18 @@ DEFAULT: Final = "1"  # MIRO_SHM when unset
 
 # The segment: a header, the slots' headers, the lanes, then the slots' data (page-aligned).
 _HEAD = struct.Struct("<8sQIIQ")  # magic, segment id, slots, lanes, slot size
-_SLOT = struct.Struct("<QQQQ")  # generation (odd: being written), write index, length, spare
+_SLOT = struct.Struct("<QQQQ")  # generation (odd: being written), write index, length, done
 _LANE = struct.Struct("<QQQQ")  # claimed (1), keep-all (1), acked (writes read), hold (write+1)
 _Q = struct.Struct("<Q")
 _SLOT_AT = 64
-_GEN, _WRITE, _LEN = 0, 8, 16
+_GEN, _WRITE, _LEN, _DONE = 0, 8, 16, 24  # done: write + 1 once its one reader copied it
 _CLAIMED, _KEEP_ALL, _ACKED, _HOLD = 0, 8, 16, 24
 _FLOCK = struct.Struct("hhqqi4x")  # struct flock (Linux): type, whence, start, len, pid
+
+# Taken and released between a reader's hold and its check of the slot's generation: a lock's
+# atomic instruction orders the store before the load (x86 may reorder them otherwise), so a
+# writer that finds no hold has its new generation seen by the check.
+_FENCE = threading.Lock()
 
 # The descriptor: supplier pid, its fd of the segment, segment id, slot, generation, write
 # index, payload length.
@@ -125,11 +138,11 @@ def keep_all_marker() -> bytes:
     return b"\x02shm-" + key + b"\0" if key else b""
 
 
-def slot_count() -> int:
+def slot_count(variable: str = "MIRO_SHM_SLOTS", default: int = SLOTS) -> int:
     try:
-        return max(2, int(os.environ.get("MIRO_SHM_SLOTS", SLOTS)))
+        return max(2, int(os.environ.get(variable, default)))
     except ValueError:
-        return SLOTS
+        return default
 
 
 def _lock(fd: int, kind: int, start: int, cmd: int) -> int:
@@ -146,17 +159,28 @@ def _layout(slots: int, lanes: int) -> tuple[int, int]:
 
 
 class Ring:
-    """A supplier's ring (one per supplier, all its types): `put` writes a payload into a free
-    slot and returns its descriptor. Thread-safe."""
+    """A writer's ring: `put` writes a payload into a free slot and returns its descriptor.
+    Thread-safe. With a `lease` (seconds), each slot is for one reader, who returns it (`done`),
+    and slots are taken lowest first (the same few pages stay warm)."""
 
-    def __init__(self, slot_size: int, slots: int | None = None, lanes: int = LANES) -> None:
+    def __init__(
+        self,
+        slot_size: int,
+        slots: int | None = None,
+        lanes: int = LANES,
+        *,
+        lease: float | None = None,
+        name: str = "miro-events",
+    ) -> None:
         self.slots = slot_count() if slots is None else slots
+        self.lease = lease
+        self._written_at = [0.0] * self.slots
         self.lanes = lanes
         self.slot_size = -(-slot_size // mmap.PAGESIZE) * mmap.PAGESIZE
         self.segment_id = random.getrandbits(63)
         self._lanes_at, self._data_at = _layout(self.slots, lanes)
         size = self._data_at + self.slots * self.slot_size
-        self.fd = os.memfd_create("miro-events", os.MFD_CLOEXEC)
+        self.fd = os.memfd_create(name, os.MFD_CLOEXEC)
         os.ftruncate(self.fd, size)
         self._map = mmap.mmap(self.fd, size)
         self._mem = memoryview(self._map)
@@ -187,6 +211,8 @@ class Ring:
             w = self._writes
             self._writes += 1
             self._slot_write[slot] = w
+            if self.lease is not None:
+                self._written_at[slot] = time.monotonic()
             at = _SLOT_AT + slot * _SLOT.size
             mem = self._mem
             gen = _Q.unpack_from(mem, at + _GEN)[0] + 1  # odd: being written
@@ -210,10 +236,11 @@ class Ring:
         while True:
             blocked = False
             lanes = self._keep_all_lanes() if keep_all else 0
+            first = self._next if self.lease is None else 0
             for k in range(self.slots):
-                slot = (self._next + k) % self.slots
+                slot = (first + k) % self.slots
                 w = self._slot_write[slot]
-                state = self._reusable(w)
+                state = self._reusable(w) if self.lease is None else self._returned(slot, w)
                 if state == 0 and w >= 0 and lanes < keep_all:
                     state = 2  # a keep-all consumer has yet to map the ring: not past it
                 if state == 0:
@@ -257,6 +284,19 @@ class Ring:
                 return 1 if hold == w + 1 else 2
         return 0
 
+    def _returned(self, slot: int, w: int) -> int:
+        """For a ring with a lease: 0 when the slot last written with write `w` has been
+        copied by its reader, or its lease has run out and no live reader holds it; else 1."""
+        if w < 0:
+            return 0
+        done = _Q.unpack_from(self._mem, _SLOT_AT + slot * _SLOT.size + _DONE)[0]
+        if done == w + 1:
+            return 0
+        assert self.lease is not None
+        if time.monotonic() - self._written_at[slot] < self.lease:
+            return 1
+        return self._reusable(w)
+
     def _alive(self, base: int) -> bool:
         """Whether a process still holds the lane at `base` (its OFD lock)."""
         try:
@@ -277,8 +317,13 @@ class Ring:
 class Segment:
     """A consumer's mapping of a supplier's segment, and its lane in it."""
 
-    def __init__(self, pid: int, fd: int, segment_id: int, keep_all: bool, first: int) -> None:
+    def __init__(
+        self, pid: int, fd: int, segment_id: int, keep_all: bool, first: int, lane: bool = True
+    ) -> None:
+        """`lane`: a lane is needed (events); else, when every lane is taken, the mapping reads
+        without one (a reply's reader: its slot's lease and the seqlock are enough)."""
         self.pid = pid
+        self._need_lane = lane
         self.closed = False  # (events still queued may name it: they are then dropped)
         self.supplier_fd = fd
         self.segment_id = segment_id
@@ -314,8 +359,11 @@ class Segment:
                 continue  # another live process has it
             # Credits from the first write seen on: those before are not waited for.
             _LANE.pack_into(self.mem, base, 1, int(keep_all), self.acked, 0)
-            self._lane_base = base
+            self._lane_mem, self._lane_base = self.mem, base
             return lane
+        if not self._need_lane:  # holds go to memory of its own, which nobody reads
+            self._lane_mem, self._lane_base = memoryview(bytearray(_LANE.size)), 0
+            return -1
         raise OSError("every lane of the segment is taken")
 
     def hold(self, d: Descriptor) -> memoryview | None:
@@ -323,9 +371,11 @@ class Segment:
         slot has been written again since (the descriptor is stale), or the mapping is closed."""
         if self.closed:
             return None
-        _Q.pack_into(self.mem, self._lane_base + _HOLD, d.write + 1)
+        _Q.pack_into(self._lane_mem, self._lane_base + _HOLD, d.write + 1)
+        with _FENCE:  # a locked instruction: the hold is visible before the generation is read
+            pass
         if not self.current(d):
-            _Q.pack_into(self.mem, self._lane_base + _HOLD, 0)
+            _Q.pack_into(self._lane_mem, self._lane_base + _HOLD, 0)
             return None
         start = self._data_at + d.slot * self.slot_size
         return self._readonly[start : start + d.length]
@@ -346,14 +396,37 @@ class Segment:
         """Done with `d`: its slot may be reused (a keep-all consumer's credit with it)."""
         if self.closed:
             return
-        _Q.pack_into(self.mem, self._lane_base + _HOLD, 0)
+        _Q.pack_into(self._lane_mem, self._lane_base + _HOLD, 0)
         if keep_all:
             self.ack(d.write + 1)
 
     def ack(self, acked: int) -> None:
         if acked > self.acked and not self.closed:
             self.acked = acked
-            _Q.pack_into(self.mem, self._lane_base + _ACKED, acked)
+            _Q.pack_into(self._lane_mem, self._lane_base + _ACKED, acked)
+
+    def copy(self, d: Descriptor) -> bytes | None:
+        """The payload of `d` copied out, and its slot returned to the writer (a reply's one
+        reader); None when the slot was written again before or during the copy."""
+        view = self.hold(d)
+        if view is None:
+            return None
+        try:
+            data = view.tobytes()
+        finally:
+            view.release()
+        ok = self.current(d)
+        if ok:
+            _Q.pack_into(self.mem, _SLOT_AT + d.slot * _SLOT.size + _DONE, d.write + 1)
+        self.release(d, False)
+        return data if ok else None
+
+    def give_back(self, d: Descriptor) -> None:
+        """Done with the reply `d` held in place (`hold`): its slot goes back to the writer."""
+        if self.closed:
+            return
+        _Q.pack_into(self.mem, _SLOT_AT + d.slot * _SLOT.size + _DONE, d.write + 1)
+        self.release(d, False)
 
     def supplier_alive(self) -> bool:
         """Whether the supplier still has its segment open (its process is alive)."""
@@ -381,8 +454,11 @@ class Segments:
 
     MAX = 64
 
-    def __init__(self, keep_all: bool) -> None:
+    def __init__(self, keep_all: bool, replies: bool = False) -> None:
+        """`replies`: a caller's mappings of servers' pools, which need no lane and make room
+        for a new one by unmapping the oldest."""
         self.keep_all = keep_all
+        self.replies = replies
         self._by_id: dict[int, Segment] = {}
         self.refused = 0  # descriptors whose segment could not be mapped
 
@@ -392,9 +468,11 @@ class Segments:
             return seg
         self.sweep()
         if len(self._by_id) >= self.MAX:
-            return None
+            if not self.replies:
+                return None
+            self._by_id.pop(next(iter(self._by_id))).close()
         try:
-            seg = Segment(d.pid, d.fd, d.segment, self.keep_all, d.write)
+            seg = Segment(d.pid, d.fd, d.segment, self.keep_all, d.write, not self.replies)
         except (OSError, ValueError, struct.error):
             self.refused += 1
             return None
