@@ -64,8 +64,14 @@ class StructuredPushConsumer:
     Events wait for the handler in a queue kept as `depth` says (transport.events.queue): the
     newest 10 per topic by default, as ROS 2 keeps them; `latest_only` keeps the newest one;
     `depth=KEEP_ALL` keeps everything up to the queue's byte limit. `missed` counts events lost
-    on the way (sequence gaps), `dropped` those this consumer skipped because its handler fell
-    behind, `lag` how old (seconds since it was pushed) the last event delivered was.
+    on the way (sequence gaps; for a keep-all consumer also those beyond its queue's byte
+    limit), `dropped` those this consumer skipped because its handler fell behind, `lag` how
+    old (seconds since it was pushed) the last event delivered was.
+
+    A keep-all consumer on the host of its suppliers returns credits for every event it takes
+    off its socket (transport.events.credits), so that they never send more than the channel
+    queues for it: nothing is lost on the way while it reads at least every shm.WAIT_KEEP_ALL
+    seconds.
 
     Large events from suppliers on this host arrive through shared memory (transport.events.shm)
     and are decoded from it: the payload is the same as over the network. With `zero_copy`,

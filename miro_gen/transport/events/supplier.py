@@ -1,7 +1,8 @@
 """Suppliers of an event channel (Miro's StructuredPushSupplier): `push()` from any thread,
 events batched per reactor turn (or per EARLY_FLUSH_BYTES of a long one) into one frame per
 topic, large ones alone and copied once, nothing encoded while nobody subscribes, every queue
-bounded and what overflows counted.
+bounded and what overflows counted, frames held back (within a bound) for keep-all consumers
+of this host until they return credits (transport.events.credits).
 The overview is transport.events; the bytes are transport.events.frames.
 """
 
@@ -115,7 +116,13 @@ class StructuredPushSupplier:
     the reactor cannot keep up, `push()` drops the newest and counts them in `dropped`, as it
     does those ZeroMQ refuses at its high-water mark, those larger than the maximum message
     size, and those pushed for subscribers while the channel is gone (its host died; the
-    supplier finds it again when it is bound anew). Consumers see them as gaps."""
+    supplier finds it again when it is bound anew). Consumers see them as gaps.
+
+    Keep-all consumers of this host return credits (transport.events.credits): a topic's
+    frames go toward them only while each has fewer than `window` in flight; the rest wait in
+    the queue, at most shm.WAIT_KEEP_ALL seconds of blocked sending per consumer, and a `push()`
+    off the reactor thread that finds the queue full waits as long for room before it drops
+    (`waited` counts those that waited)."""
 
     def __init__(self, channel: EventChannel, domain_name: str | None = None) -> None:
         self.channel = channel
@@ -455,7 +462,8 @@ class StructuredPushSupplier:
                 last_hash, last = rest[-1]
                 if type(last) is not _Framed:  # later pushes join its last frame
                     t.last, t.last_hash = last, last_hash
-            self._flush_pending = True
+        # Tried again after RETRY on the reactor's clock, and by the next push's flush (which
+        # `_flush_pending` still lets it schedule: a log clock may be paused).
         if self._retry is None:
             self._retry = self.reactor.schedule_timer(RETRY, 0, self._retried)
 
