@@ -128,10 +128,13 @@ def test_a_stopped_keep_all_consumer_holds_its_supplier_back_once_and_not_a_keep
     assert (sent_, dropped) == (20000, 0)
     assert stalls == 1  # waited for the stopped consumer once, not per event or per frame
     # Every event reaches the keep-last consumer or is counted: received, skipped by its
-    # queue (`dropped`), or lost at its own queue in the channel (`missed`), as before.
-    eventually(lambda: sum(stats(keep_last)) == 20000, 60, lambda: str(stats(keep_last)))
+    # queue (`dropped`), or lost at its own queue in the channel (`missed`, as before: one
+    # more event shows what was lost at the end).
+    go(flooder, "PUSH")
+    assert sent(flooder)[:2] == [20001, 0]
+    eventually(lambda: sum(stats(keep_last)) == 20001, 60, lambda: str(stats(keep_last)))
     stopped.send_signal(signal.SIGCONT)
-    pushed = [20000]
+    pushed = [20001]
 
     def accounted() -> bool:
         go(flooder, "PUSH")  # one more: what came before it and never arrived shows as a gap
@@ -158,4 +161,6 @@ def test_a_killed_keep_all_consumer_does_not_hold_its_supplier_back(procs: Procs
     sent_, dropped, stalls, _ = sent(flooder)
     assert (sent_, dropped) == (50000, 0)
     assert stalls <= 1
-    eventually(lambda: sum(stats(keep_last)) == 50000, 60, lambda: str(stats(keep_last)))
+    go(flooder, "PUSH")  # one more: what the keep-last consumer lost at the end shows
+    assert sent(flooder)[:2] == [50001, 0]
+    eventually(lambda: sum(stats(keep_last)) == 50001, 60, lambda: str(stats(keep_last)))

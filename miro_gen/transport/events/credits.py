@@ -35,6 +35,11 @@ from miro_gen.transport.events import shm
 
 MAGIC: Final = b"MIROCRD1"
 ENTRIES: Final = 4096  # (supplier, type) pairs a consumer's table holds; later ones get none
+# Events of a topic in flight toward a consumer, at most (besides `window` frames): what the
+# consumer must parse before its credit comes back (a few tenths of a second on a loaded
+# machine), so that a live one that is merely busy returns it well within the bound. A frame
+# always may go while none is in flight.
+WINDOW_EVENTS: Final = 65_536
 # The table: a header, then the entries. `used` is written after the entry it counts.
 _HEAD = struct.Struct("<8sQII")  # magic, table id, entries, used
 _ENTRY = struct.Struct("<QQQQ")  # supplier id, type key, next sequence number due, spare
@@ -253,13 +258,15 @@ class KeepAllConsumers:
 class Flow:
     """The frames of one of a supplier's topics in flight toward its keep-all consumers (the
     reactor thread's): the last sequence number of each frame sent, oldest first, back to the
-    lowest credit; `room` tells whether one more may go."""
+    lowest credit; `room` tells whether one more may go (fewer than `window` frames and
+    `events` events in flight toward each)."""
 
-    __slots__ = ("blocked_since", "key", "sent", "stalls", "window")
+    __slots__ = ("blocked_since", "events", "key", "sent", "stalls", "window")
 
-    def __init__(self, key: int, window: int) -> None:
+    def __init__(self, key: int, window: int, events: int = WINDOW_EVENTS) -> None:
         self.key = key
         self.window = window
+        self.events = events
         self.sent: list[int] = []
         self.blocked_since: float | None = None
         self.stalls = 0  # times a consumer stopped being waited for (dead, stopped, too slow)
@@ -280,7 +287,8 @@ class Flow:
                 del r.stalled[key]
             if lowest is None or d < lowest:
                 lowest = d
-            if len(sent) - bisect_left(sent, d) >= self.window:
+            in_flight = len(sent) - bisect_left(sent, d)
+            if in_flight >= self.window or (in_flight and sent[-1] - d >= self.events):
                 behind.append((r, d))
         if lowest is None:
             sent.clear()

@@ -400,10 +400,12 @@ class StructuredPushSupplier:
         consumers' credits hold back (transport.events.credits), from the first frame not sent.
         `queued`: (events, bytes) counted down by what is sent."""
         flow = t.flow if t.credited else None
+        if flow is not None and not self._room(t, flow):
+            return runs  # (a retry costs nothing while the credits have not come)
         frame = t.frame
         for i, (type_hash, events) in enumerate(runs):
             if type(events) is _Framed:
-                if flow is not None and not self._room(t, flow):
+                if flow is not None and i and not self._room(t, flow):
                     return runs[i:]
                 self._send_body(events[-1] if len(events) > 1 else frame, events[0], 1)
                 if flow is not None:
@@ -414,7 +416,7 @@ class StructuredPushSupplier:
             total = sum(map(len, events))
             if len(events) <= MAX_BATCH_EVENTS and total <= MAX_BATCH_BYTES:
                 if flow is not None:
-                    if not self._room(t, flow):
+                    if i and not self._room(t, flow):
                         return runs[i:]
                     flow.sending(EVENT.unpack_from(events[-1])[0])
                 queued[0] -= len(events)
@@ -427,7 +429,7 @@ class StructuredPushSupplier:
                     j - start == MAX_BATCH_EVENTS or size + len(packed) > MAX_BATCH_BYTES
                 ):
                     if flow is not None:
-                        if not self._room(t, flow):
+                        if (i or start) and not self._room(t, flow):
                             return [(type_hash, events[start:]), *runs[i + 1 :]]
                         flow.sending(EVENT.unpack_from(events[j - 1])[0])
                     queued[0] -= j - start
@@ -436,7 +438,7 @@ class StructuredPushSupplier:
                     start, size = j, 0
                 size += len(packed)
             if flow is not None:
-                if not self._room(t, flow):
+                if (i or start) and not self._room(t, flow):
                     return [(type_hash, events[start:]), *runs[i + 1 :]]
                 flow.sending(EVENT.unpack_from(events[-1])[0])
             queued[0] -= len(events) - start
