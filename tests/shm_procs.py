@@ -10,12 +10,16 @@ real processes on one host, so that large events take shared memory.
         event (ok: its checksum holds); `STATS` on stdin prints `STATS received missed
         dropped torn segments`.
 
-    python tests/shm_procs.py flood NAMING CHANNEL COUNT [RATE]
-        waits for a subscriber, pushes COUNT small events (Miro::TimeIDL), RATE a second
-        (default: flat out); prints
-        `SENT sent dropped`, then waits for its stdin to close.
-    python tests/shm_procs.py count NAMING CHANNEL
-        a keep-all consumer of them; `STATS` prints `STATS received missed dropped`.
+    python tests/shm_procs.py flood NAMING CHANNEL COUNT [RATE [KEEP_ALL]]
+        waits for a subscriber (and for KEEP_ALL keep-all consumers that return credits, then
+        pushes the first event, prints `PUSHING` and waits for `GO` on stdin), pushes COUNT
+        small events (Miro::TimeIDL), RATE a second (default:
+        flat out); prints `SENT sent dropped stalls waited` (stalls: times it stopped waiting
+        for a keep-all consumer; waited: pushes that waited for room), then waits for its
+        stdin to close; `PUSH` on stdin pushes one more and prints `SENT ...` again.
+    python tests/shm_procs.py count NAMING CHANNEL [DEPTH]
+        a consumer of them, keep-all by default; `STATS` prints `STATS received missed
+        dropped`.
 
 Each image's data is its number repeated, and its time's usec field is the CRC-32 of the data:
 a payload read while it was rewritten (torn) fails the check.
@@ -100,27 +104,43 @@ def consume(naming: str, channel_name: str, depth: int, delay: float, zero_copy:
     server.shutdown()
 
 
-def flood(naming: str, channel_name: str, count: int, rate: float) -> None:
+def flood(naming: str, channel_name: str, count: int, rate: float, keep_all: int) -> None:
     server = Server(["flooder", "--naming", naming, "-MNC", "s"])
     threading.Thread(target=server.run, daemon=True).start()
     supplier = StructuredPushSupplier(server.resolve_channel(channel_name))
     while not supplier.has_subscribers("Tick"):
         time.sleep(0.01)
+    if keep_all:
+        while len(supplier._topics["Tick"].credited) < keep_all:
+            time.sleep(0.01)
+            supplier.has_subscribers("Tick")
+        time.sleep(0.3)
+        supplier.push("Tick", Miro.TimeIDL(0, 0))
+        print("PUSHING", flush=True)
+        while sys.stdin.readline().strip() != "GO":
+            pass
     time.sleep(0.3)
     start = time.monotonic()
-    for n in range(count):
+    for n in range(1 if keep_all else 0, count):
         supplier.push("Tick", Miro.TimeIDL(n, 0))
         if rate and n % 20 == 19:  # paced: many small frames, not a few large ones
             time.sleep(max(0.0, start + n / rate - time.monotonic()))
     time.sleep(1.0)
-    print("SENT", supplier.sent, supplier.dropped, flush=True)
-    sys.stdin.read()
+    flow = supplier._topics["Tick"].flow
+    stalls = 0 if flow is None else flow.stalls
+    print("SENT", supplier.sent, supplier.dropped, stalls, supplier.waited, flush=True)
+    for line in sys.stdin:
+        if line.strip() == "PUSH":  # one more: a consumer sees what it missed before it
+            supplier.push("Tick", Miro.TimeIDL(count, 0))
+            count += 1
+            time.sleep(0.5)
+            print("SENT", supplier.sent, supplier.dropped, flush=True)
     server.shutdown()
 
 
-def count(naming: str, channel_name: str) -> None:
+def count(naming: str, channel_name: str, depth: int) -> None:
     server = Server(["counter", "--naming", naming, "-MNC", "c"])
-    c = StructuredPushConsumer(server.resolve_channel(channel_name), depth=0)
+    c = StructuredPushConsumer(server.resolve_channel(channel_name), depth=depth)
     c.set_subscriptions([("s", "Tick")])
     threading.Thread(target=server.run, daemon=True).start()
     print("READY", flush=True)
@@ -135,9 +155,10 @@ if __name__ == "__main__":
     rest = sys.argv[4:]
     os.environ.setdefault("MIRO_LOG_LEVEL", "warning")
     if role == "flood":
-        flood(naming, channel_name, int(rest[0]), float(rest[1]) if len(rest) > 1 else 0.0)
+        rate = float(rest[1]) if len(rest) > 1 else 0.0
+        flood(naming, channel_name, int(rest[0]), rate, int(rest[2]) if len(rest) > 2 else 0)
     elif role == "count":
-        count(naming, channel_name)
+        count(naming, channel_name, int(rest[0]) if rest else 0)
     elif role == "supply":
         pace = float(rest[2]) if len(rest) > 2 else 0.0
         supply(naming, channel_name, int(rest[0]), int(rest[1]), pace)

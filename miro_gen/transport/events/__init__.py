@@ -22,7 +22,9 @@ block suppliers: the supplier's queue and ZeroMQ's are bounded (in bytes: transp
 overflows is dropped and counted (`StructuredPushSupplier.dropped`), and the sequence numbers make
 the drops visible (`StructuredPushConsumer.missed`). A consumer keeps the events waiting for its
 handler as its quality of service says (keep-last depth, latest-only: transport.events.queue), so a
-slow one gets recent events and counts what it skipped (`dropped`, `lag`). Suppliers and consumers
+slow one gets recent events and counts what it skipped (`dropped`, `lag`); a keep-all one on the
+host of its suppliers returns credits, which hold their frames back within a bound instead of
+letting the channel drop them (transport.events.credits). Suppliers and consumers
 find their channel again when its host restarts elsewhere (transport.events.channel_link).
 
 This is the events part's face: the names services import, each loaded from its module on

@@ -16,7 +16,7 @@ from miro_gen.runtime import registry
 from miro_gen.runtime.datatypes import IdlType
 from miro_gen.runtime.views import octet_views
 from miro_gen.transport import shm
-from miro_gen.transport.events import offers
+from miro_gen.transport.events import credits, offers
 from miro_gen.transport.events.channels import EventChannel
 from miro_gen.transport.events.event import StructuredEvent
 from miro_gen.transport.events.frames import (
@@ -25,6 +25,7 @@ from miro_gen.transport.events.frames import (
     EVENT_HEADER,
     SHM,
     batch_flags,
+    next_due,
     read_batch_head,
     split_topic,
     topic,
@@ -64,8 +65,14 @@ class StructuredPushConsumer:
     Events wait for the handler in a queue kept as `depth` says (transport.events.queue): the
     newest 10 per topic by default, as ROS 2 keeps them; `latest_only` keeps the newest one;
     `depth=KEEP_ALL` keeps everything up to the queue's byte limit. `missed` counts events lost
-    on the way (sequence gaps), `dropped` those this consumer skipped because its handler fell
-    behind, `lag` how old (seconds since it was pushed) the last event delivered was.
+    on the way (sequence gaps; for a keep-all consumer also those beyond its queue's byte
+    limit), `dropped` those this consumer skipped because its handler fell behind, `lag` how
+    old (seconds since it was pushed) the last event delivered was.
+
+    A keep-all consumer on the host of its suppliers returns credits for every event it takes
+    off its socket (transport.events.credits), so that they never send more than the channel
+    queues for it: nothing is lost on the way while it reads at least every shm.WAIT_KEEP_ALL
+    seconds.
 
     Large events from suppliers on this host arrive through shared memory (transport.shm)
     and are decoded from it: the payload is the same as over the network. With `zero_copy`,
@@ -89,6 +96,15 @@ class StructuredPushConsumer:
         self._keep_all = depth == KEEP_ALL and not latest_only
         self._marker = shm.topic_marker() if shm.enabled() and channel.links is None else b""
         self._segments = shm.Segments(self._keep_all)
+        # A keep-all consumer returns credits for every event to suppliers of its host
+        # (transport.events.credits), so that they never have more in flight than the
+        # channel's queue for it holds.
+        self._credits: credits.CreditTable | None = None
+        if self._keep_all and self._marker and credits.credit_marker():
+            try:
+                self._credits = credits.CreditTable()
+            except OSError as e:
+                _log.warning("keep-all consumer without credits (no memfd): %s", e)
         self._sweeper: int | None = None
         self.torn = 0  # shared-memory events rewritten while read (dropped, counted in dropped)
         self._filters: list[tuple[str, str]] = []
@@ -111,13 +127,15 @@ class StructuredPushConsumer:
 
     @property
     def missed(self) -> int:
-        """Events lost between their suppliers and this consumer (sequence gaps)."""
-        return self._gaps.missed
+        """Events lost between their suppliers and this consumer (sequence gaps); for a
+        keep-all consumer also those its queue could not hold (its byte bound): it keeps all."""
+        return self._gaps.missed + (self.queue.overflowed if self._keep_all else 0)
 
     @property
     def dropped(self) -> int:
-        """Events received but skipped: the handler fell behind (depth, latest-only)."""
-        return self.queue.dropped
+        """Events received but skipped: the handler fell behind (depth, latest-only), or, from
+        shared memory, a keep-last consumer lapped or a payload torn."""
+        return self.queue.dropped - (self.queue.overflowed if self._keep_all else 0)
 
     def set_subscriptions(self, subscriptions: Iterable[tuple[str, str]]) -> None:
         """Receive the events of these (domain, type) pairs, `*` for any; replaces the last."""
@@ -131,16 +149,21 @@ class StructuredPushConsumer:
         markers = [marker] if marker else []
         if marker and self._keep_all:
             markers.append(shm.keep_all_marker())
+        table, credit_marker = self._credits, credits.credit_marker()
 
         def apply() -> None:
             for p in self._prefixes - prefixes:
                 self.link.unsubscribe(p)
                 for m in markers:
                     self.link.unsubscribe(m + p)
+                if table is not None:
+                    self.link.unsubscribe(table.subscription(credit_marker, p))
             for p in prefixes - self._prefixes:
                 self.link.subscribe(p)
                 for m in markers:
                     self.link.subscribe(m + p)
+                if table is not None:  # last: suppliers take the topic's subscriptions first
+                    self.link.subscribe(table.subscription(credit_marker, p))
             self._segments.close()  # lanes only in the rings of what it still subscribes to
             self._prefixes = prefixes
             self._filters = subs
@@ -295,11 +318,15 @@ class StructuredPushConsumer:
         parse (then none of its events count, and the sequence numbers stay as they were)."""
         domain, type_name, wanted = self._topic(head)
         if not wanted:
+            if self._credits is not None and type_name:  # subscribed to all, filtered here
+                self._credit_frame(body, type_name)
             return
         count, supplier, raw_hash = read_batch_head(body)
         held = self._held and raw_hash in self._held_hashes  # after those already waiting
         cls = None if held else self._class(raw_hash, domain, type_name)
         if cls is None and self._hold((head, body), raw_hash, len(body)):
+            if self._credits is not None:  # it waits here, off the channel's queue
+                self._credit_frame(body, type_name)
             return
         if held:
             cls = self._class(raw_hash, domain, type_name)
@@ -361,11 +388,19 @@ class StructuredPushConsumer:
         # Only a frame that parses to its end moves the sequence numbers.
         if expected is not None and expected != first:
             self._gaps.advance(supplier, type_name, expected, missed)
+            if self._credits is not None:  # the frame has left the channel's queue
+                self._credits.credit(supplier, type_name, expected)
         if cls is None:
             self.undecodable += count
         elif waiting:
             self.queue.dropped += keep_from
             self.queue.add(topic_key, waiting, total)
+
+    def _credit_frame(self, body: memoryview, type_name: str) -> None:
+        """Return the credit of a frame taken off the socket but not parsed into the queue."""
+        found = next_due(body)
+        if found is not None and self._credits is not None:
+            self._credits.credit(found[0], type_name, found[1])
 
     def _hold(self, frame: tuple[bytes, memoryview], raw_hash: bytes, size: int) -> bool:
         """Keep a frame whose type is not known yet until the generated packages on the path
@@ -401,6 +436,8 @@ class StructuredPushConsumer:
         if self._sweeper is not None:
             self.reactor.cancel_timer(self._sweeper)
         self.reactor.call_soon(self._segments.close)
+        if self._credits is not None:
+            self.reactor.call_soon(self._credits.close)
 
 
 class _Shared:

@@ -123,6 +123,20 @@ def parse_batch(domain: str, type_name: str, body: bytes) -> list[RawEvent]:
     return out
 
 
+def next_due(body: bytes | memoryview) -> tuple[int, int] | None:
+    """(supplier id, the sequence number after its last event) of a batch frame, walking over
+    the payloads; None for one without events or that does not parse."""
+    try:
+        count, supplier, _ = read_batch_head(body)
+        at, seq = BATCH_HEADER, -1
+        for _ in range(count):
+            seq, _, _, n = EVENT.unpack_from(body, at)
+            at += EVENT_HEADER + n
+    except (StructError, FrameError):
+        return None
+    return None if seq < 0 or at > len(body) else (supplier, seq + 1)
+
+
 # The layouts of frames whose events all have one payload size, by (count, size): a frame of n
 # such events is unpacked by one Struct call instead of a Python step per event.
 _UNIFORM: dict[tuple[int, int], Struct] = {}

@@ -7,7 +7,8 @@ per topic (domain, type) the newest `depth` events waiting (default 10), never s
 events one supplier pushed in one turn (they arrive together in one frame); `latest_only`
 keeps only the newest one per topic; `KEEP_ALL` keeps everything. Whatever the setting, the
 queue holds at most `max_bytes` of payloads (the oldest go first). What is evicted is counted in
-`dropped`; payloads are decoded only when delivered.
+`dropped` (and what the byte bound evicted in `overflowed` too: a keep-all consumer counts it as
+lost, in `missed`); payloads are decoded only when delivered.
 """
 
 from __future__ import annotations
@@ -45,6 +46,7 @@ class EventQueue:
         self.latest_only = latest_only
         self.max_bytes = max_bytes
         self.dropped = 0  # events evicted before delivery
+        self.overflowed = 0  # of which by the byte bound
         self.bytes = 0
         self._live = 0
         self._order: deque[Waiting] = deque()
@@ -137,6 +139,7 @@ class EventQueue:
         w = self.pop()
         if w is not None:
             self.dropped += 1
+            self.overflowed += 1
 
     def clear(self) -> None:
         self.dropped += self._live

@@ -1,7 +1,8 @@
 """Suppliers of an event channel (Miro's StructuredPushSupplier): `push()` from any thread,
 events batched per reactor turn (or per EARLY_FLUSH_BYTES of a long one) into one frame per
 topic, large ones alone and copied once, nothing encoded while nobody subscribes, every queue
-bounded and what overflows counted.
+bounded and what overflows counted, frames held back (within a bound) for keep-all consumers
+of this host until they return credits (transport.events.credits).
 The overview is transport.events; the bytes are transport.events.frames.
 """
 
@@ -10,14 +11,15 @@ from __future__ import annotations
 import itertools
 import random
 import threading
+import time
 from typing import Any
 
 from miro_gen import clock
 from miro_gen.log import logger
 from miro_gen.runtime.cdr import Encoder, encode_after
 from miro_gen.transport import shm, sockets
-from miro_gen.transport.events import offers
-from miro_gen.transport.events.channels import EventChannel
+from miro_gen.transport.events import credits, offers
+from miro_gen.transport.events.channels import PROXY_HWM, EventChannel
 from miro_gen.transport.events.frames import (
     BATCH_HEADER,
     EVENT,
@@ -26,6 +28,7 @@ from miro_gen.transport.events.frames import (
     LENGTH_AT,
     SHM,
     batch_head,
+    split_topic,
     topic,
 )
 from miro_gen.transport.events.links import PublishingLink
@@ -53,6 +56,7 @@ MAX_BATCH_BYTES = 256 * 1024
 # and the consumers wait for it, then it for them. Sent early, their work overlaps its own;
 # on a loaded machine (every thread waits for a core) that overlap is most of the throughput.
 EARLY_FLUSH_BYTES = 32 * 1024
+RETRY = 0.001  # seconds before a flush held back by keep-all consumers' credits tries again
 
 
 class _Framed(list[bytes]):
@@ -67,6 +71,8 @@ class _Topic:
     subscribers are on this host: transport.shm) and the ring they go through."""
 
     __slots__ = (
+        "credited",
+        "flow",
         "frame",
         "generation",
         "keep_all",
@@ -83,6 +89,10 @@ class _Topic:
 
     def __init__(self, frame: bytes, marker: bytes) -> None:
         self.frame = frame
+        # Keep-all consumers of this host that return credits (transport.events.credits), and
+        # the frames in flight toward them.
+        self.credited: list[credits.CreditReader] = []
+        self.flow: credits.Flow | None = None
         self.shm_frame = marker + frame
         self.shared = False
         self.keep_all = 0  # keep-all consumers of this host (transport.shm)
@@ -107,7 +117,13 @@ class StructuredPushSupplier:
     the reactor cannot keep up, `push()` drops the newest and counts them in `dropped`, as it
     does those ZeroMQ refuses at its high-water mark, those larger than the maximum message
     size, and those pushed for subscribers while the channel is gone (its host died; the
-    supplier finds it again when it is bound anew). Consumers see them as gaps."""
+    supplier finds it again when it is bound anew). Consumers see them as gaps.
+
+    Keep-all consumers of this host return credits (transport.events.credits): a topic's
+    frames go toward them only while each has fewer than `window` in flight; the rest wait in
+    the queue, at most shm.WAIT_KEEP_ALL seconds of blocked sending per consumer, and a `push()`
+    off the reactor thread that finds the queue full waits as long for room before it drops
+    (`waited` counts those that waited)."""
 
     def __init__(self, channel: EventChannel, domain_name: str | None = None) -> None:
         self.channel = channel
@@ -135,6 +151,14 @@ class StructuredPushSupplier:
         self._marker = shm.topic_marker() if shm.enabled() and channel.links is None else b""
         self._keep_all_marker = shm.keep_all_marker()
         self._rings_lock = threading.Lock()
+        # Keep-all consumers of this host return credits for every event (transport.events
+        # .credits): at most `window` frames of a topic in flight toward each, half what the
+        # channel queues for it (libzmq credits its reader every half high-water mark).
+        self._keep_all = credits.KeepAllConsumers(credits.credit_marker() if self._marker else b"")
+        self.window = max(2, min(PROXY_HWM, sockets.queue_limit(self.reactor.context)) // 2)
+        self._retry: int | None = None
+        self.waited = 0  # pushes that waited for room, held back by keep-all consumers
+        self._waited_out = False  # a push waited the bound in vain: none waits until room is made
         # A turn's events leave in a burst of frames (100,000 small events: about 140, sent as
         # they fill EARLY_FLUSH_BYTES), which the link must hold until the channel reads them
         # (on this very reactor, when this process hosts the channel): room for a full queue
@@ -172,6 +196,11 @@ class StructuredPushSupplier:
                 t.keep_all = sum(
                     n for p, n in subs if p.startswith(marker) and keep_all.startswith(p)
                 )
+            readers = self._keep_all.matching(t.frame) if self._keep_all.marker else []
+            if readers and t.flow is None:
+                key = credits.type_key(split_topic(t.frame)[1])
+                t.flow = credits.Flow(key, self.window)
+            t.credited = readers
             t.generation = generation  # a change meanwhile bumped _generation: recomputed next
         return t.subscribed
 
@@ -228,6 +257,9 @@ class StructuredPushSupplier:
         if shared is None and (size if framed else size + BATCH_HEADER) > self.max_frame:
             self._refuse_large(type_name, size)
             return True
+        full = self._queued >= QUEUE_EVENTS or self._queued_bytes + size > QUEUE_BYTES
+        if full and t.credited and not self._waited_out:
+            self._wait_for_room(size)
         with self._lock:
             if self._queued >= QUEUE_EVENTS or self._queued_bytes + size > QUEUE_BYTES:
                 self.dropped += 1
@@ -251,7 +283,7 @@ class StructuredPushSupplier:
             if self._flush_pending and not early:
                 return True
             scheduled, self._flush_pending = self._flush_pending, True
-        if early and self.reactor.in_reactor_thread():
+        if early and self._retry is None and self.reactor.in_reactor_thread():
             self._flush()  # a long turn of pushes: send what it has so far (see EARLY_FLUSH_BYTES)
         elif not scheduled:
             self.reactor.call_soon(self._flush)
@@ -326,34 +358,121 @@ class StructuredPushSupplier:
             raw = self._raw_hashes[type_hash] = bytes.fromhex(type_hash)
         return batch_head(count, self.supplier_id, raw, flags)
 
+    def _wait_for_room(self, size: int) -> None:
+        """Backpressure from keep-all consumers: wait, off the reactor thread, at most
+        shm.WAIT_KEEP_ALL seconds for the queue to take an event of `size` bytes."""
+        if self.reactor.in_reactor_thread():
+            return  # a keep-all consumer of this very process could not read meanwhile
+        self.waited += 1
+        deadline = time.monotonic() + shm.WAIT_KEEP_ALL
+        pause = 0.0002
+        while self._queued >= QUEUE_EVENTS or self._queued_bytes + size > QUEUE_BYTES:
+            if time.monotonic() >= deadline or self.reactor.closed:
+                self._waited_out = True
+                return
+            time.sleep(pause)
+            pause = min(pause * 2, 0.005)
+
     def _flush(self) -> None:
         with self._lock:
             topics, self._dirty = self._dirty, []
             queues = []
             for t in topics:
-                queues.append((t.frame, t.pending))
+                queues.append((t, t.pending))
                 t.pending, t.last, t.last_hash = [], [], ""
+            queued = [self._queued, self._queued_bytes]  # less what is sent: what is held back
+            before = self._queued
             self._queued = self._queued_bytes = 0
             self._flush_pending = False
-        for frame, runs in queues:
-            for type_hash, events in runs:
-                if type(events) is _Framed:
-                    self._send_body(events[-1] if len(events) > 1 else frame, events[0], 1)
+        held: list[tuple[_Topic, list[tuple[str, list[bytes]]]]] = []
+        for t, runs in queues:
+            rest = self._send_runs(t, runs, queued)
+            if rest:
+                held.append((t, rest))
+        if queued[0] < before:
+            self._waited_out = False  # room made: pushes may wait again
+        if held:
+            self._hold_back(held, queued[0], queued[1])
+
+    def _send_runs(
+        self, t: _Topic, runs: list[tuple[str, list[bytes]]], queued: list[int]
+    ) -> list[Any]:
+        """Send a topic's runs of events, in frames within the limits; what its keep-all
+        consumers' credits hold back (transport.events.credits), from the first frame not sent.
+        `queued`: (events, bytes) counted down by what is sent."""
+        flow = t.flow if t.credited else None
+        if flow is not None and not self._room(t, flow):
+            return runs  # (a retry costs nothing while the credits have not come)
+        frame = t.frame
+        for i, (type_hash, events) in enumerate(runs):
+            if type(events) is _Framed:
+                if flow is not None and i and not self._room(t, flow):
+                    return runs[i:]
+                self._send_body(events[-1] if len(events) > 1 else frame, events[0], 1)
+                if flow is not None:
+                    flow.sending(EVENT.unpack_from(events[0], BATCH_HEADER)[0])
+                queued[0] -= 1
+                queued[1] -= len(events[0])
+                continue
+            total = sum(map(len, events))
+            if len(events) <= MAX_BATCH_EVENTS and total <= MAX_BATCH_BYTES:
+                if flow is not None:
+                    if i and not self._room(t, flow):
+                        return runs[i:]
+                    flow.sending(EVENT.unpack_from(events[-1])[0])
+                queued[0] -= len(events)
+                queued[1] -= total
+                self._send(frame, type_hash, events)
+                continue
+            start, size = 0, 0
+            for j, packed in enumerate(events):  # a busy turn: several frames, within the limits
+                if j > start and (
+                    j - start == MAX_BATCH_EVENTS or size + len(packed) > MAX_BATCH_BYTES
+                ):
+                    if flow is not None:
+                        if (i or start) and not self._room(t, flow):
+                            return [(type_hash, events[start:]), *runs[i + 1 :]]
+                        flow.sending(EVENT.unpack_from(events[j - 1])[0])
+                    queued[0] -= j - start
+                    queued[1] -= size
+                    self._send(frame, type_hash, events[start:j])
+                    start, size = j, 0
+                size += len(packed)
+            if flow is not None:
+                if (i or start) and not self._room(t, flow):
+                    return [(type_hash, events[start:]), *runs[i + 1 :]]
+                flow.sending(EVENT.unpack_from(events[-1])[0])
+            queued[0] -= len(events) - start
+            queued[1] -= size
+            self._send(frame, type_hash, events[start:])
+        return []
+
+    def _room(self, t: _Topic, flow: credits.Flow) -> bool:
+        return flow.room(t.credited, self.supplier_id, time.monotonic(), shm.WAIT_KEEP_ALL)
+
+    def _hold_back(self, held: list[tuple[_Topic, list[Any]]], events: int, size: int) -> None:
+        """Put `events` (`size` bytes) whose frames credits held back in front of those pushed
+        since, and try again shortly (reactor thread)."""
+        with self._lock:
+            self._queued += events
+            self._queued_bytes += size
+            for t, rest in held:
+                if t.pending:  # (it is in _dirty already)
+                    t.pending[:0] = rest
                     continue
-                if len(events) <= MAX_BATCH_EVENTS and sum(map(len, events)) <= MAX_BATCH_BYTES:
-                    self._send(frame, type_hash, events)
-                    continue
-                batch: list[bytes] = []
-                size = 0
-                for packed in events:  # a busy turn: several frames, within the limits
-                    if batch and (
-                        len(batch) == MAX_BATCH_EVENTS or size + len(packed) > MAX_BATCH_BYTES
-                    ):
-                        self._send(frame, type_hash, batch)
-                        batch, size = [], 0
-                    batch.append(packed)
-                    size += len(packed)
-                self._send(frame, type_hash, batch)
+                t.pending = rest
+                self._dirty.append(t)
+                last_hash, last = rest[-1]
+                if type(last) is not _Framed:  # later pushes join its last frame
+                    t.last, t.last_hash = last, last_hash
+        # Tried again after RETRY on the reactor's clock, and by the next push's flush (which
+        # `_flush_pending` still lets it schedule: a log clock may be paused).
+        if self._retry is None:
+            self._retry = self.reactor.schedule_timer(RETRY, 0, self._retried)
+
+    def _retried(self, _: object) -> None:
+        self._retry = None
+        self._flush()
 
     def _send(self, frame: bytes, type_hash: str, packed: list[bytes]) -> None:
         """One frame of the events `packed`."""
@@ -401,6 +520,8 @@ class StructuredPushSupplier:
         connection's notice, so that `_lost` still holds what it ended."""
         subs = self._subscriptions
         for subscribed, whole in changes:
+            if self._keep_all.marker and self._keep_all.change(subscribed, whole):
+                continue  # a keep-all consumer's credits (transport.events.credits)
             prefix = whole[:MAX_PREFIX]  # a longer prefix matches no fewer topics
             if prefix not in subs and len(subs) >= MAX_SUBSCRIPTIONS:
                 prefix = b""  # too many to track: send every topic (the channel filters)
@@ -413,6 +534,9 @@ class StructuredPushSupplier:
 
     def close(self) -> None:
         self.link.close()
+        if self._retry is not None:
+            self.reactor.cancel_timer(self._retry)
+        self.reactor.call_soon(self._keep_all.close)
         for t in list(self._topics.values()):
             if t.ring is not None:
                 t.ring.close()

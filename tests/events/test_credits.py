@@ -1,0 +1,111 @@
+"""Keep-all consumers' credits (transport.events.credits): the table a consumer writes and its
+suppliers read, the announcing subscription, and the window of frames a supplier keeps in
+flight, with its bound (counted: the clock is passed in)."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import pytest
+
+from miro_gen.transport import shm
+from miro_gen.transport.events import credits
+
+pytestmark = pytest.mark.skipif(not shm.available(), reason="credits need Linux memfd")
+
+MARKER = credits.credit_marker()
+
+
+@pytest.fixture
+def table() -> Iterator[credits.CreditTable]:
+    t = credits.CreditTable(entries=4)
+    yield t
+    t.close()
+
+
+def reader_of(table: credits.CreditTable, prefix: bytes = b"s\0") -> credits.CreditReader:
+    found = credits.parse_subscription(MARKER, table.subscription(MARKER, prefix))
+    assert found is not None and found[1] == prefix
+    return credits.CreditReader(*found[0])
+
+
+def test_a_supplier_reads_the_credits_its_consumer_writes(table: credits.CreditTable) -> None:
+    r = reader_of(table)
+    key = credits.type_key("Tick")
+    assert r.due(7, key) is None  # nothing from supplier 7 yet
+    table.credit(7, "Tick", 10)
+    table.credit(8, "Tick", 3)
+    assert (r.due(7, key), r.due(8, key), r.due(7, credits.type_key("Tock"))) == (10, 3, None)
+    table.credit(7, "Tick", 2**64)  # a spoofed number past the last: kept within 64 bits
+    assert r.due(7, key) == 2**64 - 1
+    for s in range(9, 20):  # a full table gives no more entries, and raises nothing
+        table.credit(s, "Tick", 1)
+    assert r.due(10, key) == 1 and r.due(11, key) is None  # four entries
+    assert r.alive()
+    r.close()
+
+
+def test_subscriptions_that_are_not_credits_are_not_taken_for_them() -> None:
+    assert credits.parse_subscription(MARKER, b"s\0Tick\0") is None
+    assert credits.parse_subscription(MARKER, MARKER + b"short") is None
+    assert credits.parse_subscription(b"", b"anything") is None
+    suppliers = credits.KeepAllConsumers(MARKER)
+    assert not suppliers.change(True, b"s\0Tick\0")
+    # a table that is not there (a lie, or a consumer gone): refused, not raised
+    ghost = MARKER + credits.ANNOUNCE.pack(2**31, 3, 42) + b"s\0"
+    assert suppliers.change(True, ghost) and suppliers.refused == 1
+    assert suppliers.matching(b"s\0Tick\0") == []
+
+
+def test_the_window_holds_frames_back_until_credits_return(table: credits.CreditTable) -> None:
+    suppliers = credits.KeepAllConsumers(MARKER)
+    assert suppliers.change(True, table.subscription(MARKER, b"s\0"))
+    readers = suppliers.matching(b"s\0Tick\0")
+    assert len(readers) == 1 and suppliers.matching(b"t\0Tick\0") == []
+    flow = credits.Flow(credits.type_key("Tick"), window=3)
+    for seq in range(3):  # three frames of one event each
+        assert flow.room(readers, 7, 0.0, 1.0)
+        flow.sending(seq)
+    assert not flow.room(readers, 7, 0.1, 1.0)  # three in flight, none read
+    table.credit(7, "Tick", 2)  # frames 0 and 1 read
+    assert flow.room(readers, 7, 0.2, 1.0)
+    assert flow.sent == [2]  # what every consumer has read is forgotten
+    assert flow.stalls == 0
+    suppliers.change(False, table.subscription(MARKER, b"s\0"))
+    assert suppliers.matching(b"s\0Tick\0") == []
+    suppliers.close()
+
+
+def test_a_silent_consumer_is_waited_for_once_then_not_until_it_reads_again(
+    table: credits.CreditTable,
+) -> None:
+    r = reader_of(table)
+    flow = credits.Flow(credits.type_key("Tick"), window=2)
+    for seq in range(2):
+        assert flow.room([r], 7, 0.0, 1.0)
+        flow.sending(seq)
+    assert not flow.room([r], 7, 0.0, 1.0)
+    assert not flow.room([r], 7, 0.9, 1.0)  # still within the bound
+    assert flow.room([r], 7, 1.0, 1.0)  # the bound waited: sent on without it
+    for seq in range(2, 50):  # and not waited for again, frame after frame
+        assert flow.room([r], 7, 1.0, 1.0)
+        flow.sending(seq)
+    assert flow.stalls == 1
+    table.credit(7, "Tick", 50)  # it reads again: waited for again, with its credits
+    assert flow.room([r], 7, 2.0, 1.0)
+    flow.sending(50)
+    flow.sending(51)
+    assert not flow.room([r], 7, 2.0, 1.0)
+    r.close()
+
+
+def test_a_consumer_whose_table_is_gone_is_not_waited_for() -> None:
+    t = credits.CreditTable()
+    r = reader_of(t)
+    flow = credits.Flow(credits.type_key("Tick"), window=1)
+    flow.sending(0)
+    t.close()  # the consumer's process has no fd of it any more, as after kill -9
+    assert not r.alive()
+    assert flow.room([r], 7, 0.0, 1.0)  # at once, not after the bound
+    assert flow.stalls == 1
+    r.close()
