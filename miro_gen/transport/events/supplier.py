@@ -106,9 +106,15 @@ class StructuredPushSupplier:
     the reactor cannot keep up, `push()` drops the newest and counts them in `dropped`, as it
     does those ZeroMQ refuses at its high-water mark, those larger than the maximum message
     size, and those pushed for subscribers while the channel is gone (its host died; the
-    supplier finds it again when it is bound anew). Consumers see them as gaps."""
+    supplier finds it again when it is bound anew). Consumers see them as gaps.
 
-    def __init__(self, channel: EventChannel, domain_name: str | None = None) -> None:
+    `direct`: a link that sends on the caller's thread (transport.events.links), for a
+    subclass that sends a frame at once (`_send_frame` from any thread: the log player's
+    replay, eventlog.replay); `push()` still waits for the reactor's turn."""
+
+    def __init__(
+        self, channel: EventChannel, domain_name: str | None = None, *, direct: bool = False
+    ) -> None:
         self.channel = channel
         self.domain_name = channel.domain_name if domain_name is None else domain_name
         self.reactor = channel.reactor
@@ -140,8 +146,10 @@ class StructuredPushSupplier:
         # of them (QUEUE_BYTES), more only when the supplier's own events are larger.
         burst = QUEUE_BYTES // EARLY_FLUSH_BYTES
         self.link: PublishingLink = channel.publishing(
-            self._connection_changed, self._subscriptions_changed, HWM, burst
+            self._connection_changed, self._subscriptions_changed, HWM, burst, direct=direct
         )
+        if direct:  # sends may come before the reactor's turn says so (in-process: up at once)
+            self._connected = self.link.connected
 
     def _topic(self, type_name: str) -> _Topic:
         t = self._topics.get(type_name)
