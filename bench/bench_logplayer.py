@@ -411,6 +411,7 @@ def replay_ours(
     """`miro log play` of the span into a StructuredPushConsumer process (or, with `tap`, a
     bare SUB on the channel: the player's own timing); deviations, events, peak RSS (kB).
     `env`: whose miro_gen (`tree_env`) the processes run."""
+    unbound(naming, "robot1/EventChannel")  # the last run's player's: a tap would find it
     if tap:
         consumer = subprocess.Popen(
             [*PYTHON, "-c", RAW_TAP, naming], stdout=subprocess.PIPE, text=True, env=env
@@ -451,6 +452,26 @@ def replay_ours(
         return T0 + (2 * seq + (domain == "robot2")) * 1_000_000
 
     return deviations(records, log_time), len(records), peak[0]
+
+
+def unbound(naming: str, name: str, seconds: float = 30.0) -> None:
+    """Wait until nobody binds `name` (a player that ended unbinds its channels)."""
+    import MiroNaming
+
+    from miro_gen.service.server import Client
+
+    client = Client(["bench", "--naming", naming])
+    try:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            try:
+                client.naming.resolve(name)
+            except MiroNaming.NotFound:
+                return
+            time.sleep(0.05)
+        raise RuntimeError(f"{name} is still bound after {seconds:g} s")
+    finally:
+        client.close()
 
 
 def replay_raw(
