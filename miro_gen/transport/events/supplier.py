@@ -148,8 +148,8 @@ class StructuredPushSupplier:
         self.link: PublishingLink = channel.publishing(
             self._connection_changed, self._subscriptions_changed, HWM, burst, direct=direct
         )
-        if direct:  # sends may come before the reactor's turn says so (in-process: up at once)
-            self._connected = self.link.connected
+        if direct and channel.links is None:  # sends may come before the reactor's turn
+            self._connected = self.link.connected  # says so (in-process: up at once)
 
     def _topic(self, type_name: str) -> _Topic:
         t = self._topics.get(type_name)
