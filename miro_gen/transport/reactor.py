@@ -42,8 +42,6 @@ _log = logger("MIRO")
 Source = Any
 # The lock of a shared socket (`Reactor.register_shared`): a `threading.Lock`.
 LockLike = contextlib.AbstractContextManager[object]
-
-
 TimerHandler = Callable[[Any], object]
 
 
