@@ -23,6 +23,10 @@ against its baseline in the same run, five interleaved repeats, medians with the
    (a consumer as services have them), against a bare pyzmq publisher replaying the same
    events on a `time.sleep` loop to a bare SUB: how far each arrival strays from its recorded
    offset (arrival minus log time, against the median of that), p99. Target: within 2 ms.
+   Beside it the same bare publisher through an XSUB/XPUB proxy thread of its process (what
+   a channel that the player hosts adds to that path).
+   With `--before DIR` (a copy of the code before a change), that tree's player too, its runs
+   interleaved with this tree's in each repeat.
 4. Memory: the resident memory of `miro log play` (the runs above, and 300 s of the log at
    x32) and of the window (`miro log player`, offscreen) while playing the file, sampled every
    50 ms; beside it a process iterating 4 s of events with the `mcap` library. Target: under
@@ -51,8 +55,17 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT / "generated"), str(ROOT)]
-ENV = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT / "generated"), str(ROOT)]))
-MIRO = [sys.executable, "-m", "miro_gen.cli.main"]
+
+
+def tree_env(root: Path) -> dict[str, str]:
+    """The environment of processes that run the miro_gen of the source tree `root` (with
+    `python -P`: not the one of the folder they start in)."""
+    return dict(os.environ, PYTHONPATH=os.pathsep.join([str(root / "generated"), str(root)]))
+
+
+ENV = tree_env(ROOT)
+PYTHON = [sys.executable, "-P"]
+MIRO = [*PYTHON, "-m", "miro_gen.cli.main"]
 T0 = 1_700_000_000_000_000_000
 GIB = 1 << 30
 
@@ -127,7 +140,7 @@ for r in got:
 """
 
 RAW_PUB = """
-import sys, time, zmq
+import sys, threading, time, zmq
 from mcap.reader import make_reader
 path, start, end, endpoint = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
 with open(path, "rb") as f:
@@ -135,7 +148,14 @@ with open(path, "rb") as f:
               for _, ch, m in make_reader(f).iter_messages(starting_at=start, ending_before=end)]
 ctx = zmq.Context()
 s = ctx.socket(zmq.PUB)
-s.bind(endpoint)
+if sys.argv[5:] == ["proxy"]:  # through an XSUB/XPUB proxy thread, as a hosted channel's
+    xsub, xpub = ctx.socket(zmq.XSUB), ctx.socket(zmq.XPUB)
+    xsub.bind("inproc://channel")
+    xpub.bind(endpoint)
+    threading.Thread(target=zmq.proxy, args=(xsub, xpub), daemon=True).start()
+    s.connect("inproc://channel")
+else:
+    s.bind(endpoint)
 time.sleep(1.0)  # the SUB connects (slow joiner)
 first = events[0][0]
 wall = time.monotonic()
@@ -248,7 +268,7 @@ def bench_open(path: Path, repeats: int) -> dict[str, list[float]]:
             assert info_main([str(path)]) == 0
 
     def mcap_process() -> None:
-        subprocess.run([sys.executable, "-c", MCAP_SUMMARY, str(path)], check=True, env=ENV)
+        subprocess.run([*PYTHON, "-c", MCAP_SUMMARY, str(path)], check=True, env=ENV)
 
     def info_process() -> None:
         command = [*MIRO, "log", "info", str(path)]
@@ -286,11 +306,13 @@ def alternated(cases: dict[str, Callable[[], object]], seconds: float = 2.0) -> 
 # ---- 2. seeks ------------------------------------------------------------------------------------
 
 
-def start_consumer(naming: str, ready: bool = True) -> subprocess.Popen[str]:
+def start_consumer(
+    naming: str, ready: bool = True, env: dict[str, str] = ENV
+) -> subprocess.Popen[str]:
     """The consumer process; with `ready`, once it has subscribed (its channel must be bound:
     it waits for it)."""
     c = subprocess.Popen(
-        [sys.executable, "-c", CONSUMER, naming], stdout=subprocess.PIPE, text=True, env=ENV
+        [*PYTHON, "-c", CONSUMER, naming], stdout=subprocess.PIPE, text=True, env=env
     )
     if ready:
         assert c.stdout is not None and c.stdout.readline().strip() == "READY"
@@ -384,16 +406,18 @@ def deviations(
 
 
 def replay_ours(
-    path: Path, naming: str, start_s: float, seconds: float, tap: bool
+    path: Path, naming: str, start_s: float, seconds: float, tap: bool, env: dict[str, str] = ENV
 ) -> tuple[list[float], int, int]:
     """`miro log play` of the span into a StructuredPushConsumer process (or, with `tap`, a
-    bare SUB on the channel: the player's own timing); deviations, events, peak RSS (kB)."""
+    bare SUB on the channel: the player's own timing); deviations, events, peak RSS (kB).
+    `env`: whose miro_gen (`tree_env`) the processes run."""
+    unbound(naming, "robot1/EventChannel")  # the last run's player's: a tap would find it
     if tap:
         consumer = subprocess.Popen(
-            [sys.executable, "-c", RAW_TAP, naming], stdout=subprocess.PIPE, text=True, env=ENV
+            [*PYTHON, "-c", RAW_TAP, naming], stdout=subprocess.PIPE, text=True, env=env
         )
     else:
-        consumer = start_consumer(naming, ready=False)  # the player binds the channel
+        consumer = start_consumer(naming, ready=False, env=env)  # the player binds the channel
     player = subprocess.Popen(
         [
             *MIRO,
@@ -413,7 +437,7 @@ def replay_ours(
         ],
         stderr=subprocess.PIPE,
         text=True,
-        env=ENV,
+        env=env,
     )
     peak = [0]
     stop = threading.Event()
@@ -430,16 +454,41 @@ def replay_ours(
     return deviations(records, log_time), len(records), peak[0]
 
 
-def replay_raw(path: Path, start_s: float, seconds: float) -> tuple[list[float], int]:
+def unbound(naming: str, name: str, seconds: float = 30.0) -> None:
+    """Wait until nobody binds `name` (a player that ended unbinds its channels)."""
+    import MiroNaming
+
+    from miro_gen.service.server import Client
+
+    client = Client(["bench", "--naming", naming])
+    try:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            try:
+                client.naming.resolve(name)
+            except MiroNaming.NotFound:
+                return
+            time.sleep(0.05)
+        raise RuntimeError(f"{name} is still bound after {seconds:g} s")
+    finally:
+        client.close()
+
+
+def replay_raw(
+    path: Path, start_s: float, seconds: float, proxy: bool = False
+) -> tuple[list[float], int]:
+    """A bare pyzmq publisher on a sleep loop into a bare SUB (with `proxy`, through an
+    XSUB/XPUB proxy thread in the publisher's process: the channel's hop alone)."""
     endpoint = f"tcp://127.0.0.1:{free_port()}"
     sub = subprocess.Popen(
-        [sys.executable, "-c", RAW_SUB, endpoint], stdout=subprocess.PIPE, text=True, env=ENV
+        [*PYTHON, "-c", RAW_SUB, endpoint], stdout=subprocess.PIPE, text=True, env=ENV
     )
     assert sub.stdout is not None and sub.stdout.readline().strip() == "READY"
     start = T0 + int(start_s * 1e9)
     end = start + int(seconds * 1e9)
     subprocess.run(
-        [sys.executable, "-c", RAW_PUB, str(path), str(start), str(end), endpoint],
+        [*PYTHON, "-c", RAW_PUB, str(path), str(start), str(end), endpoint]
+        + (["proxy"] if proxy else []),
         check=True,
         capture_output=True,
         env=ENV,
@@ -536,6 +585,12 @@ def main() -> int:
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--seconds", type=float, default=4.0, help="replayed per timing run")
     ap.add_argument(
+        "--before",
+        type=Path,
+        help="a source tree of the code before a change (`git archive COMMIT | tar -x -C DIR`):"
+        " its player's replay rows too, interleaved with this tree's in each repeat",
+    )
+    ap.add_argument(
         "--parts",
         type=lambda text: text.split(","),
         default=["open", "seek", "replay", "memory"],
@@ -603,27 +658,50 @@ def run(path: Path, args: argparse.Namespace) -> int:
             print("   |arrival - log time - their median|, p99, median (min-max) of the runs")
             rng = random.Random(2028)
             span_s = args.events / 1000
-            p99: dict[str, list[float]] = {"structured": [], "tap": [], "raw": []}
-            counts = []
+            p99: dict[str, list[float]] = {"structured": [], "tap": [], "raw": [], "proxy": []}
+            trees = [("", ENV)]
+            if args.before is not None:
+                trees.append(("before: ", tree_env(args.before.resolve())))
+                p99 |= {"before: structured": [], "before: tap": []}
+            counts: dict[str, list[int]] = {name: [] for name in p99}
+            loads = []
             for _ in range(args.repeats):
+                loads.append(os.getloadavg()[0])
                 start_s = rng.uniform(0, max(0.0, span_s - args.seconds - 1))
-                for tap in (False, True):
-                    dev, n, peak = replay_ours(path, naming_endpoint, start_s, args.seconds, tap)
-                    p99["tap" if tap else "structured"].append(percentile(dev, 0.99))
-                    peaks.append(peak)
-                    counts.append(n)
-                rdev, _ = replay_raw(path, start_s, args.seconds)
-                p99["raw"].append(percentile(rdev, 0.99))
-            for name, label in (
+                for which, env in trees:
+                    for tap in (False, True):
+                        dev, n, peak = replay_ours(
+                            path, naming_endpoint, start_s, args.seconds, tap, env
+                        )
+                        row = which + ("tap" if tap else "structured")
+                        p99[row].append(percentile(dev, 0.99))
+                        counts[row].append(n)
+                        if not which:
+                            peaks.append(peak)
+                for row, proxy in (("raw", False), ("proxy", True)):
+                    rdev, n = replay_raw(path, start_s, args.seconds, proxy)
+                    p99[row].append(percentile(rdev, 0.99))
+                    counts[row].append(n)
+            rows = [
                 ("tap", "miro log play, bare SUB"),
                 ("structured", "miro log play, consumer"),
                 ("raw", "bare pyzmq + sleep, SUB"),
-            ):
+                ("proxy", "bare pyzmq, via a proxy"),
+            ]
+            if args.before is not None:
+                rows[2:2] = [
+                    ("before: tap", "before: bare SUB"),
+                    ("before: structured", "before: consumer"),
+                ]
+            for name, label in rows:
                 ratio = statistics.median(p99[name]) / statistics.median(p99["raw"])
-                print(f"  {label:26} p99 {spread(p99[name], 1.0, ' ms')}  {ratio:.2f}x")
-            print(f"  ({min(counts)}-{max(counts)} events a run)")
+                got = f"{min(counts[name])}-{max(counts[name])}"
+                print(
+                    f"  {label:26} p99 {spread(p99[name], 1.0, ' ms')}  {ratio:.2f}x  {got} events"
+                )
             failed |= statistics.median(p99["tap"]) > 2.0
-            print(f"  load average {os.getloadavg()[0]:.2f}")
+            loads.append(os.getloadavg()[0])
+            print(f"  load average {min(loads):.2f} to {max(loads):.2f} (at each repeat's start)")
 
         if "memory" in args.parts:
             print("\n4. resident memory while playing (MB, peak)")

@@ -4,8 +4,12 @@ A player must publish each logged event as its original supplier did: same domai
 type hash, sequence number and source stamp, the CDR payload untouched. `ReplaySupplier` is a
 `StructuredPushSupplier` (its socket, its connection to the channel, its `push()` for the
 player's own events) with `push_encoded()` for those. Like `push()`, it may be called from any
-thread: the events wait for the reactor's next turn and leave in one frame per run of events of
-one topic, type hash and supplier.
+thread. Each event is due at a moment (the player's clock), so `push_encoded()` sends it at
+once, on the calling thread, through a direct link (transport.events.links): a turn of the
+reactor would be a hand-off to another thread, which wakes up when the scheduler and the
+interpreter's lock let it (a bare publisher makes no such hand-off). Over a backbone whose
+links are not direct (Zenoh), the events wait for the reactor's next turn instead and leave
+in one frame per run of events of one topic, type hash and supplier.
 """
 
 from __future__ import annotations
@@ -38,7 +42,8 @@ class ReplaySupplier(StructuredPushSupplier):
     """Publishes pre-encoded events into `channel` (and, with `push()`, its own)."""
 
     def __init__(self, channel: EventChannel, domain_name: str | None = None) -> None:
-        super().__init__(channel, domain_name)
+        super().__init__(channel, domain_name, direct=True)
+        self.direct = getattr(self.link, "direct", False)
         self._pending: list[_Encoded] = []
         self._pending_lock = threading.Lock()
         self._scheduled = False
@@ -56,14 +61,18 @@ class ReplaySupplier(StructuredPushSupplier):
         publish_ns: int,
         data: bytes,
     ) -> None:
-        """Queue one event as it was recorded: `data` is its CDR payload."""
+        """Send (or queue) one event as it was recorded: `data` is its CDR payload."""
         event = _Encoded(domain, type_name, type_hash, supplier, seq, stamp_ns, publish_ns, data)
+        if self.direct:
+            with self._pending_lock:  # one sender at a time: the counts stay right
+                self._send_encoded([event])
+            return
         with self._pending_lock:
             self._pending.append(event)
             schedule = not self._scheduled
             self._scheduled = True
         if schedule:
-            self.reactor.call_soon(self._send_encoded)
+            self.reactor.call_soon(self._send_pending)
 
     def has_subscribers_for(self, domain: str, type_name: str) -> bool:
         """Whether a consumer of the channel subscribes to events of `type_name` from
@@ -71,10 +80,13 @@ class ReplaySupplier(StructuredPushSupplier):
         frame = topic(domain, type_name)
         return any(frame.startswith(p) for p in list(self._subscriptions))
 
-    def _send_encoded(self) -> None:
+    def _send_pending(self) -> None:
         with self._pending_lock:
             pending, self._pending = self._pending, []
             self._scheduled = False
+        self._send_encoded(pending)
+
+    def _send_encoded(self, pending: list[_Encoded]) -> None:
         run: list[_Encoded] = []
         size = 0
         for e in pending:

@@ -5,6 +5,11 @@ a socket or descriptor becomes readable and its handler runs; a timer expires an
 runs. Handlers must not block (servants run on the server's own threads, never here).
 Other threads hand work to the reactor with `call_soon`, which wakes it through a socket pair;
 a ZeroMQ socket must only be used by the thread that owns it, so this is how they reach it.
+One exception, for a sender that cannot wait for a turn (a log player's events, due to the
+tenth of a millisecond): a *shared* socket (`register_shared`) is used by whichever thread
+holds its lock, the reactor among them. ZeroMQ allows a socket to pass between threads behind
+a full memory barrier, which the lock is; the reactor never touches it without the lock (it
+polls the socket's ZMQ_FD, not the socket), and closes it under the lock.
 
 A handler that raises is logged (category MIRO) and the reactor goes on: one bad handler must
 not stop a service.
@@ -35,6 +40,8 @@ _log = logger("MIRO")
 
 # What can be registered: a ZeroMQ socket, a file descriptor, or an object with fileno().
 Source = Any
+# The lock of a shared socket (`Reactor.register_shared`): a `threading.Lock`.
+LockLike = contextlib.AbstractContextManager[object]
 TimerHandler = Callable[[Any], object]
 
 
@@ -62,6 +69,7 @@ class Reactor:
         self._timer_time = self.clock.timer_time
         self._poller = zmq.Poller()
         self._handlers: dict[Any, Callable[[], object]] = {}
+        self._shared: dict[zmq.Socket[Any], tuple[int, LockLike]] = {}  # socket: its FD, lock
         self._timers: list[_Timer] = []
         self._timer_by_id: dict[int, _Timer] = {}
         self._ids = itertools.count(1)
@@ -87,8 +95,25 @@ class Reactor:
         self._handlers[key] = handler
         self._poller.register(key, zmq.POLLIN)
 
+    def register_shared(
+        self, socket: zmq.Socket[Any], lock: LockLike, handler: Callable[[], object]
+    ) -> None:
+        """Call `handler()` whenever `socket`, which other threads use too (each holding
+        `lock`), may have input: its ZMQ_FD signals. That descriptor signals once for any
+        number of messages and is reset by whichever thread uses the socket next, so whoever
+        uses it must look at ZMQ_EVENTS after each use (under the lock) and hand input it
+        finds to the reactor (`call_soon(handler)`). The handler takes the lock itself.
+        `close()` closes the socket under the lock. Call from the reactor thread, or before
+        `run()`."""
+        with lock:
+            fd = int(socket.getsockopt(zmq.FD))
+        self._shared[socket] = (fd, lock)
+        self._handlers[fd] = handler
+        self._poller.register(fd, zmq.POLLIN)
+
     def unregister(self, source: Source) -> None:
-        key = _key(source)
+        shared = self._shared.pop(source, None) if isinstance(source, zmq.Socket) else None
+        key = _key(source) if shared is None else shared[0]
         if self._handlers.pop(key, None) is not None:
             self._poller.unregister(key)
 
@@ -197,11 +222,19 @@ class Reactor:
         if not self._closed:
             self._closed = True
             sockets = [k for k in self._handlers if isinstance(k, zmq.Socket) and not k.closed]
+            shared = list(self._shared.items())
+            for s, (_, lock) in shared:  # under their lock: other threads may use them
+                with lock, contextlib.suppress(zmq.ZMQError):
+                    s.disable_monitor()
             for s in sockets:  # first stop the monitors: libzmq blocks on a closed one's events
                 with contextlib.suppress(zmq.ZMQError):
                     s.disable_monitor()
             for s in sockets:
                 s.close(0)
+            for s, (_, lock) in shared:
+                with lock:
+                    s.close(0)
+            self._shared.clear()
             self._handlers.clear()
             self._wake_r.close()
             self._wake_w.close()

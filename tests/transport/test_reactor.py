@@ -238,3 +238,61 @@ def test_a_signal_delivered_to_another_thread_still_stops_the_main_threads_react
         signal.signal(signal.SIGUSR1, old)
         r.close()
         r.context.term()
+
+
+def test_a_shared_socket_is_read_by_whoever_holds_its_lock_and_closed_by_the_reactor() -> None:
+    """`register_shared`: another thread uses the socket too (under the lock), taking its
+    descriptor's signal; what it leaves waiting it hands to the reactor. Every message is read
+    once, by one of them; `close()` closes the socket (else the context's end would hang)."""
+    r = Reactor(zmq.Context())
+    pull = r.context.socket(zmq.PULL)
+    pull.bind("inproc://shared")
+    push = r.context.socket(zmq.PUSH)
+    push.connect("inproc://shared")
+    lock = threading.Lock()
+    got: dict[str, list[bytes]] = {"reactor": [], "other": []}
+
+    def drain(who: str) -> bool:
+        """Read what waits (under the lock); whether more came meanwhile."""
+        with lock:
+            while True:
+                try:
+                    got[who].append(pull.recv(zmq.NOBLOCK))
+                except zmq.Again:
+                    break
+            return bool(int(pull.getsockopt(zmq.EVENTS)) & zmq.POLLIN)
+
+    r.register_shared(pull, lock, lambda: drain("reactor"))
+    thread = r.run_in_thread()
+    stop = threading.Event()
+
+    def other() -> None:
+        while not stop.is_set():
+            if drain("other"):
+                r.call_soon(drain, "reactor")
+            time.sleep(0.0005)
+
+    reader = threading.Thread(target=other)
+    reader.start()
+    sent = [b"%d" % i for i in range(5000)]
+    for i, msg in enumerate(sent):
+        push.send(msg)
+        if i % 500 == 0:
+            time.sleep(0.01)
+    stop.set()
+    reader.join(10)
+    push.send(b"last")  # nobody but the reactor reads now
+    deadline = time.monotonic() + 30
+    while len(got["reactor"]) + len(got["other"]) < len(sent) + 1 and time.monotonic() < deadline:
+        time.sleep(0.01)
+    r.stop()
+    thread.join(5)
+    r.close()
+    assert pull.closed
+    push.close(0)
+    r.context.term()
+    assert sorted(got["reactor"] + got["other"], key=lambda m: int(m) if m.isdigit() else -1) == [
+        b"last",
+        *sent,
+    ]
+    assert got["reactor"][-1] == b"last" and got["other"]

@@ -21,7 +21,7 @@ import zmq
 
 from miro_gen.log import logger
 from miro_gen.transport import sockets
-from miro_gen.transport.reactor import Reactor
+from miro_gen.transport.reactor import LockLike, Reactor
 
 _log = logger("MIRO")
 
@@ -33,7 +33,8 @@ _EVENTS = zmq.EVENT_HANDSHAKE_SUCCEEDED | zmq.EVENT_DISCONNECTED
 class ChannelLink:
     """Connects `socket` to `endpoint` and keeps it connected to wherever `resolve()` (None: the
     endpoint is fixed) says the channel is; `on_change(connected)` runs on the reactor thread
-    whenever the connection comes up or goes down."""
+    whenever the connection comes up or goes down. A socket that other threads use too (a
+    shared one, `Reactor.register_shared`) is moved and closed under its `lock`."""
 
     def __init__(
         self,
@@ -42,9 +43,11 @@ class ChannelLink:
         endpoint: str,
         resolve: Callable[[], str] | None,
         on_change: Callable[[bool], object],
+        lock: LockLike | None = None,
     ) -> None:
         self.reactor = reactor
         self.socket = socket
+        self.lock: LockLike = contextlib.nullcontext() if lock is None else lock
         self.endpoint = endpoint
         self.resolve = resolve
         self.on_change = on_change
@@ -78,24 +81,26 @@ class ChannelLink:
         """Connect the socket to `endpoint` instead (reactor thread)."""
         if self.closed or self.connected or endpoint == self.endpoint:
             return
-        with contextlib.suppress(zmq.ZMQError):
-            self.socket.disconnect(self.endpoint)
+        with self.lock:
+            with contextlib.suppress(zmq.ZMQError):
+                self.socket.disconnect(self.endpoint)
+            self.socket.connect(endpoint)
         _log.notice("event channel moved from %s to %s", self.endpoint, endpoint)
         self.endpoint = endpoint
         self.moves += 1
-        self.socket.connect(endpoint)
 
     def close_socket(self) -> None:
         """Stop watching and close the socket, on the reactor thread (from any thread)."""
 
         def close() -> None:
-            self.closed = True
             self.reactor.unregister(self._monitor)
-            with contextlib.suppress(zmq.ZMQError):
-                self.socket.disable_monitor()
-            self._monitor.close(0)
-            self.reactor.unregister(self.socket)
-            self.socket.close(0)
+            with self.lock:
+                self.closed = True
+                with contextlib.suppress(zmq.ZMQError):
+                    self.socket.disable_monitor()
+                self._monitor.close(0)
+                self.reactor.unregister(self.socket)
+                self.socket.close(0)
 
         self.reactor.call_soon(close)
 

@@ -96,9 +96,12 @@ class EventChannel:
         on_subscriptions: Callable[[list[tuple[bool, bytes]]], object],
         hwm: int,
         burst: int,
+        *,
+        direct: bool = False,
     ) -> PublishingLink:
         """A supplier's link to this channel (transport.events.links), found again when the
-        channel moves (when it has a name to be looked up by)."""
+        channel moves (when it has a name to be looked up by). `direct`: one that sends on
+        the caller's thread (over ZeroMQ; a backbone without channel hosts ignores it)."""
         if self.links is not None:
             return self.links.publishing(self.name, on_connection, on_subscriptions, hwm, burst)
         context = self.reactor.context
@@ -111,6 +114,7 @@ class EventChannel:
             on_subscriptions,
             hwm,
             burst,
+            direct=direct,
         )
 
     def subscribing(

@@ -12,10 +12,19 @@ Over ZeroMQ a link is a socket made by transport.sockets and kept connected to t
 proxy wherever the channel moves (`ChannelLink`): the supplier's an XPUB socket (the proxy
 forwards subscriptions to it), the consumer's a SUB socket. Their queues hold at most `hwm`
 frames per peer, fewer when the largest message allowed is large (`sockets.queue_limit`).
+
+A supplier's link is used on the reactor thread, which owns its socket. A *direct* one
+(`direct=True`, a log player's: its events are due to the tenth of a millisecond, and a turn
+of the reactor is a hand-off between threads that costs more) is sent from the thread that
+calls `send`, the caller's own thread, without waiting for the reactor: its socket is shared
+(`Reactor.register_shared`), used by one thread at a time under the link's lock; the reactor
+still reads the subscriptions and watches the connection, and the callbacks still run there.
 """
 
 from __future__ import annotations
 
+import contextlib
+import threading
 from collections.abc import Callable
 from typing import Any, Protocol
 
@@ -42,7 +51,8 @@ class PublishingLink(Protocol):
 
     def send(self, topic: bytes, body: bytes, copy: bool) -> bool:
         """Send a topic and a batch frame without blocking (`copy`: False for a large body,
-        which the link may then keep instead of copying); False when it cannot be sent now."""
+        which the link may then keep instead of copying); False when it cannot be sent now.
+        On the reactor thread, or from any thread for a direct link."""
         ...
 
     def close(self) -> None: ...
@@ -76,7 +86,8 @@ class ZmqPublishing:
     `find`, None for fixed endpoints). `on_connection(up)` and `on_subscriptions(changes)`,
     each change (subscribed, prefix), run on the reactor thread; a lost connection's
     unsubscriptions come after its `on_connection(False)`. At most `hwm` frames wait for the
-    proxy, at least `burst` (a turn's events, however large the messages allowed)."""
+    proxy, at least `burst` (a turn's events, however large the messages allowed). `direct`:
+    `send` may be called from any thread, and sends at once (the module's doc)."""
 
     def __init__(
         self,
@@ -87,6 +98,8 @@ class ZmqPublishing:
         on_subscriptions: Callable[[list[tuple[bool, bytes]]], object],
         hwm: int,
         burst: int,
+        *,
+        direct: bool = False,
     ) -> None:
         context = reactor.context
         self.socket = sockets.connecting_socket(context, zmq.XPUB)
@@ -99,8 +112,16 @@ class ZmqPublishing:
         # what is pushed meanwhile is counted as dropped, not sent into the void.
         self.socket.setsockopt(zmq.IMMEDIATE, 1)
         self._on_subscriptions = on_subscriptions
-        self.link = ChannelLink(reactor, self.socket, endpoint, find, on_connection)
-        reactor.call_soon(reactor.register, self.socket, self._readable)
+        self.reactor = reactor
+        self.direct = direct
+        self.lock = threading.Lock()  # used only by a direct link's (shared) socket
+        self.link = ChannelLink(
+            reactor, self.socket, endpoint, find, on_connection, self.lock if direct else None
+        )
+        if direct:
+            reactor.call_soon(reactor.register_shared, self.socket, self.lock, self._readable)
+        else:
+            reactor.call_soon(reactor.register, self.socket, self._readable)
 
     @property
     def connected(self) -> bool:
@@ -111,24 +132,50 @@ class ZmqPublishing:
         return self.link.moves
 
     def send(self, topic: bytes, body: bytes, copy: bool) -> bool:
+        if self.direct:
+            return self._send_direct(topic, body, copy)
         try:
             self.socket.send_multipart([topic, body], _NOBLOCK, copy=copy)
         except zmq.Again:
             return False
         return True
 
+    def _send_direct(self, topic: bytes, body: bytes, copy: bool) -> bool:
+        """`send` of a direct link, on the caller's thread. The send may have taken the signal
+        of subscriptions that came meanwhile (Reactor.register_shared): if they wait, the
+        reactor reads them."""
+        with self.lock:
+            if self.link.closed:
+                return False
+            try:
+                self.socket.send_multipart([topic, body], _NOBLOCK, copy=copy)
+                sent = True
+            except zmq.Again:
+                sent = False
+            except zmq.ZMQError:  # the context is ending: nobody to send to any more
+                return False
+            waiting = int(self.socket.getsockopt(zmq.EVENTS)) & zmq.POLLIN
+        if waiting:
+            self.reactor.call_soon(self._readable)
+        return sent
+
     def _readable(self) -> None:
         # A lost connection's subscriptions end with unsubscriptions that ZeroMQ queues after
         # its monitor event: read that event first, so that the supplier hears of it first.
         self.link.read_events()
         changes = []
-        while True:
-            try:
-                msg = self.socket.recv(_NOBLOCK)
-            except zmq.Again:
-                break
-            if msg:
-                changes.append((msg[0] == 1, msg[1:]))
+        with self.lock if self.direct else contextlib.nullcontext():
+            if self.link.closed or self.socket.closed:
+                return
+            while True:
+                try:
+                    msg = self.socket.recv(_NOBLOCK)
+                except zmq.Again:
+                    break
+                if msg:
+                    changes.append((msg[0] == 1, msg[1:]))
+            if self.direct:  # every command read, so that its ZMQ_FD stops signalling
+                self.socket.getsockopt(zmq.EVENTS)
         if changes:
             self._on_subscriptions(changes)
 

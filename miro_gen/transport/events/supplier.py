@@ -123,9 +123,15 @@ class StructuredPushSupplier:
     frames go toward them only while each has fewer than `window` in flight; the rest wait in
     the queue, at most shm.WAIT_KEEP_ALL seconds of blocked sending per consumer, and a `push()`
     off the reactor thread that finds the queue full waits as long for room before it drops
-    (`waited` counts those that waited)."""
+    (`waited` counts those that waited).
 
-    def __init__(self, channel: EventChannel, domain_name: str | None = None) -> None:
+    `direct`: a link that sends on the caller's thread (transport.events.links), for a
+    subclass that sends a frame at once (`_send_frame` from any thread: the log player's
+    replay, eventlog.replay); `push()` still waits for the reactor's turn."""
+
+    def __init__(
+        self, channel: EventChannel, domain_name: str | None = None, *, direct: bool = False
+    ) -> None:
         self.channel = channel
         self.domain_name = channel.domain_name if domain_name is None else domain_name
         self.reactor = channel.reactor
@@ -165,8 +171,10 @@ class StructuredPushSupplier:
         # of them (QUEUE_BYTES), more only when the supplier's own events are larger.
         burst = QUEUE_BYTES // EARLY_FLUSH_BYTES
         self.link: PublishingLink = channel.publishing(
-            self._connection_changed, self._subscriptions_changed, HWM, burst
+            self._connection_changed, self._subscriptions_changed, HWM, burst, direct=direct
         )
+        if direct and channel.links is None:  # sends may come before the reactor's turn
+            self._connected = self.link.connected  # says so (in-process: up at once)
 
     def _topic(self, type_name: str) -> _Topic:
         t = self._topics.get(type_name)
