@@ -42,7 +42,6 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import functools
-import hashlib
 import mmap
 import os
 import random
@@ -119,8 +118,9 @@ def host_key() -> bytes:
         pidns = os.stat("/proc/self/ns/pid").st_ino
     except OSError:
         return b""
-    digest = hashlib.sha256(b"%s:%d:%d" % (boot, pidns, os.getuid())).hexdigest()[:16]
-    return digest.encode()
+    # The values themselves, not a digest of them: hashlib would load OpenSSL into every
+    # process that calls (3.4 MB; issue 30), and none of the three is a secret.
+    return b"%s-%x-%x" % (boot.replace(b"-", b"")[:16], pidns, os.getuid())
 
 
 def topic_marker() -> bytes:
@@ -143,6 +143,17 @@ def slot_count(variable: str = "MIRO_SHM_SLOTS", default: int = SLOTS) -> int:
         return max(2, int(os.environ.get(variable, default)))
     except ValueError:
         return default
+
+
+def holds_open(pid: int, their_fd: int, fd: int) -> bool:
+    """Whether process `pid` still has, as its descriptor `their_fd`, the file this process
+    has open as `fd` (a segment or table it made and we mapped): False once it is gone."""
+    try:
+        info = os.stat(f"/proc/{pid}/fd/{their_fd}")
+    except OSError:
+        return False
+    mine = os.fstat(fd)
+    return (info.st_dev, info.st_ino) == (mine.st_dev, mine.st_ino)
 
 
 def _lock(fd: int, kind: int, start: int, cmd: int) -> int:
@@ -430,12 +441,7 @@ class Segment:
 
     def supplier_alive(self) -> bool:
         """Whether the supplier still has its segment open (its process is alive)."""
-        try:
-            info = os.stat(f"/proc/{self.pid}/fd/{self.supplier_fd}")
-        except OSError:
-            return False
-        mine = os.fstat(self.fd)
-        return (info.st_dev, info.st_ino) == (mine.st_dev, mine.st_ino)
+        return holds_open(self.pid, self.supplier_fd, self.fd)
 
     def close(self) -> None:
         self.closed = True

@@ -168,12 +168,7 @@ class CreditReader:
 
     def alive(self) -> bool:
         """Whether the consumer still has its table open (its process is alive)."""
-        try:
-            info = os.stat(f"/proc/{self.pid}/fd/{self.consumer_fd}")
-        except OSError:
-            return False
-        mine = os.fstat(self.fd)
-        return (info.st_dev, info.st_ino) == (mine.st_dev, mine.st_ino)
+        return shm.holds_open(self.pid, self.consumer_fd, self.fd)
 
     def close(self) -> None:
         self.closed = True
