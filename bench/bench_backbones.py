@@ -37,6 +37,7 @@ import sys
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT / "generated"), str(ROOT), str(ROOT / "tests")]
@@ -180,6 +181,44 @@ def raw_typed_events(
 
 def spread(values: list[float]) -> str:
     return f"{statistics.median(values):10.1f} ({min(values):.1f}-{max(values):.1f})"
+
+
+def compare_pair(
+    kinds: tuple[str, str],
+    names: dict[str, str],
+    stubs: dict[str, Any],
+    events: dict[str, Any],
+    args: argparse.Namespace,
+    shm: str,
+    label: str,
+) -> None:
+    """Calls' p50 and events/s of two set-ups of the Zenoh backbone (`kinds`: the baseline,
+    then the one measured against it), interleaved in each of `args.runs` repeats, printed with
+    their ratio (`label`: "other/base")."""
+    base, other = kinds
+    calls: dict[str, list[float]] = {k: [] for k in kinds}
+    rates: dict[str, list[float]] = {k: [] for k in kinds}
+    call_ratio, rate_ratio = [], []
+    for run in range(args.runs):
+        for kind in kinds if run % 2 == 0 else kinds[::-1]:
+            calls[kind].append(p50(time_calls(stubs[kind].getData, args.calls)) * 1e6)
+            sup_server, _, supplier, consumer = events[kind]
+            rates[kind].append(ours_events(supplier, consumer, sup_server, args.events))
+        call_ratio.append(calls[other][-1] / calls[base][-1])
+        rate_ratio.append(rates[other][-1] / rates[base][-1])
+    load = os.getloadavg()
+    print(f"load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}; {args.runs} runs; "
+          f"Zenoh shared memory {shm} (messages here are under 3 KiB)")  # fmt: skip
+    print("call getData() p50 via the router, us (median, min-max)")
+    for kind, values in calls.items():
+        print(f"  {names[kind]:42} {spread(values)}  shm {shm}")
+    print(f"  ratio {label} p50: {statistics.median(call_ratio):.2f} "
+          f"(runs {', '.join(f'{r:.2f}' for r in call_ratio)})")  # fmt: skip
+    print("events/s via the router (median, min-max)")
+    for kind, values in rates.items():
+        print(f"  {names[kind]:42} {spread(values)}  shm {shm}")
+    print(f"  ratio {label} events/s: {statistics.median(rate_ratio):.2f} "
+          f"(runs {', '.join(f'{r:.2f}' for r in rate_ratio)})")  # fmt: skip
 
 
 def main() -> int:

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import statistics
 import subprocess
 import sys
 import tempfile
@@ -31,7 +30,7 @@ sys.path[:0] = [str(ROOT / "generated"), str(ROOT), str(ROOT / "tests"), str(ROO
 os.environ.setdefault("MIRO_DISCOVERY", "0")
 
 import Miro  # noqa: E402
-from bench_backbones import Counter, ours_events, p50, spread, start, time_calls  # noqa: E402
+from bench_backbones import Counter, compare_pair, start  # noqa: E402
 from loopback import free_port, service_env  # noqa: E402
 
 from miro_gen import Client, EventChannelFactory, Server, StructuredPushSupplier  # noqa: E402
@@ -92,34 +91,11 @@ def main() -> int:
         time.sleep(1.0)
         for _ in range(300):  # warm up
             stubs["tls"].getData(), stubs["acl"].getData()
-        calls: dict[str, list[float]] = {"tls": [], "acl": []}
-        rates: dict[str, list[float]] = {"tls": [], "acl": []}
-        call_ratio, rate_ratio = [], []
-        for run in range(args.runs):
-            order = kinds if run % 2 == 0 else kinds[::-1]
-            for kind in order:
-                calls[kind].append(p50(time_calls(stubs[kind].getData, args.calls)) * 1e6)
-                sup_server, _, supplier, consumer = events[kind]
-                rates[kind].append(ours_events(supplier, consumer, sup_server, args.events))
-            call_ratio.append(calls["acl"][-1] / calls["tls"][-1])
-            rate_ratio.append(rates["acl"][-1] / rates["tls"][-1])
-        load = os.getloadavg()
-        print(f"load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}; {args.runs} runs; "
-              f"Zenoh shared memory {shm} (messages here are under 3 KiB)")  # fmt: skip
         names = {
             "tls": "miro-gen over Zenoh, mutual TLS",
             "acl": "mutual TLS, access control per robot",
         }
-        print("call getData() p50 via the router, us (median, min-max)")
-        for kind, values in calls.items():
-            print(f"  {names[kind]:42} {spread(values)}  shm {shm}")
-        print(f"  ratio acl/tls p50: {statistics.median(call_ratio):.2f} "
-              f"(runs {', '.join(f'{r:.2f}' for r in call_ratio)})")  # fmt: skip
-        print("events/s via the router (median, min-max)")
-        for kind, values in rates.items():
-            print(f"  {names[kind]:42} {spread(values)}  shm {shm}")
-        print(f"  ratio acl/tls events/s: {statistics.median(rate_ratio):.2f} "
-              f"(runs {', '.join(f'{r:.2f}' for r in rate_ratio)})")  # fmt: skip
+        compare_pair(kinds, names, stubs, events, args, shm, "acl/tls")
         for sup_server, con_server, _, _ in events.values():
             sup_server.shutdown()
             con_server.shutdown()
