@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 import sys
 import time
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -98,7 +99,8 @@ def main(argv: list[str] | None = None) -> int:
     filter_ = GpsToPosition(channel, StructuredPushSupplier(channel))
     filter_.set_subscriptions([(args.domain, "Gps")])
     server.reactor().schedule_timer(1 / args.rate, 1 / args.rate, filter_)
-    print(f"gps_position: Gps events in, Position events out at {args.rate:g} Hz", flush=True)
+    ready = f"gps_position: Gps events in, Position events out at {args.rate:g} Hz"
+    server.reactor().call_soon(partial(print, flush=True), ready)  # once it runs
     server.run()
     print(f"gps_position: {filter_.published} positions published", flush=True)
     return 0

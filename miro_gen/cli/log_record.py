@@ -25,7 +25,8 @@ def record_main(argv: Sequence[str]) -> int:
     p = argparse.ArgumentParser(
         prog=prog,
         description="Record the events of a channel into an MCAP file, a channel per "
-        "DOMAIN/TYPE topic, until Ctrl-C (or SIGTERM), which finishes the file. " + COMMON,
+        "DOMAIN/TYPE topic, until Ctrl-C (or SIGTERM), --count or --duration, which finishes "
+        "the file. " + COMMON,
     )
     p.add_argument(
         "-o",
@@ -36,6 +37,16 @@ def record_main(argv: Sequence[str]) -> int:
     )
     p.add_argument("-f", "--force", action="store_true", help="overwrite FILE if it exists")
     p.add_argument("--channel", default="EventChannel", metavar="NAME", help="default EventChannel")
+    p.add_argument(
+        "-n", "--count", type=_positive_int, default=0, metavar="N", help="stop after N events"
+    )
+    p.add_argument(
+        "--duration",
+        type=_positive_seconds,
+        default=0.0,
+        metavar="S",
+        help="stop S seconds after recording starts",
+    )
     p.add_argument(
         "topics",
         nargs="*",
@@ -48,7 +59,10 @@ def record_main(argv: Sequence[str]) -> int:
     if ns.output is not None and os.path.exists(ns.output) and not ns.force:
         p.error(f"{ns.output} exists (use --force to overwrite it)")
     if ns.ros2:
-        return record_ros2(prog, ns.output or default_output("ros2"), ns.topics)
+        if ns.count:
+            p.error("--count is for Miro channels; with --ros2 use --duration or Ctrl-C")
+        output = ns.output or default_output("ros2")
+        return record_ros2(prog, output, ns.topics, duration=ns.duration)
     from miro_gen.eventlog.progress import StatusLine
     from miro_gen.eventlog.recorder import Recorder
     from miro_gen.eventlog.writer import LogWriter
@@ -71,7 +85,7 @@ def record_main(argv: Sequence[str]) -> int:
         status.done(f"{ns.output}: 0 events (stopped before {ns.channel} was bound)")
         return 130
     subs = ns.topics or [("*", "*")]
-    recorder = Recorder(server, channel, subs, writer, status)
+    recorder = Recorder(server, channel, subs, writer, status, count=ns.count, duration=ns.duration)
     shown = " ".join(f"{d}/{t}" for d, t in subs)
     print(f"recording {shown} from {channel.name} into {ns.output}", file=sys.stderr)
     recorder.run()
@@ -101,6 +115,26 @@ def record_main(argv: Sequence[str]) -> int:
         f"{time.monotonic() - recorder.started:.1f} s"
     )
     return 0
+
+
+def _positive_int(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n <= 0:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a positive whole number")
+    return n
+
+
+def _positive_seconds(text: str) -> float:
+    try:
+        s = float(text)
+    except ValueError:
+        s = 0.0
+    if not s > 0 or s == float("inf"):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a positive number of seconds")
+    return s
 
 
 def default_output(context: str) -> str:

@@ -62,9 +62,11 @@ def ros2_missing(prog: str) -> bool:
     return False
 
 
-def record_ros2(prog: str, output: str, topics: list[tuple[str, str]]) -> int:
+def record_ros2(
+    prog: str, output: str, topics: list[tuple[str, str]], *, duration: float = 0.0
+) -> int:
     """Record the ROS 2 topics named (all when none) into the rosbag2 MCAP file `output`,
-    until a signal."""
+    until a signal, or for `duration` seconds when that is given."""
     if ros2_missing(prog):
         return 1
     from miro_gen.eventlog.progress import StatusLine, human_bytes
@@ -90,7 +92,8 @@ def record_ros2(prog: str, output: str, topics: list[tuple[str, str]]) -> int:
             recorder = BagRecorder(node, writer, wanted)
             shown = " ".join(wanted) or "every ROS 2 topic"
             print(f"recording {shown} into {output} (rosbag2)", file=sys.stderr)
-            while not stop.is_set():
+            ends = started + duration if duration > 0 else float("inf")
+            while not stop.is_set() and time.monotonic() < ends:
                 recorder.poll()
                 for topic, why in recorder.skipped.items():
                     if topic not in told:
@@ -100,7 +103,7 @@ def record_ros2(prog: str, output: str, topics: list[tuple[str, str]]) -> int:
                     f"recording {output}: {len(recorder.recording)} topics, "
                     f"{writer.messages} messages, {human_bytes(writer.size())}"
                 )
-                stop.wait(TICK)
+                stop.wait(min(TICK, max(0.0, ends - time.monotonic())))
             node.context.dispatcher.drain()  # what arrived and was not written yet
     finally:
         writer.finish()

@@ -2,8 +2,8 @@
 
 Everything happens on the recorder's reactor thread: a raw tap hands over each frame's events,
 the writer appends them to the current chunk, and a timer closes chunks that are a second old
-and refreshes the progress line. The reactor stops on SIGINT, SIGTERM or SIGHUP, and the file
-is then finished whatever the way out.
+and refreshes the progress line. The reactor stops on SIGINT, SIGTERM or SIGHUP, after `count`
+events or `duration` seconds when given, and the file is then finished whatever the way out.
 """
 
 from __future__ import annotations
@@ -34,8 +34,12 @@ class Recorder:
         subscriptions: Sequence[tuple[str, str]],
         writer: LogWriter,
         status: StatusLine,
+        *,
+        count: int = 0,
+        duration: float = 0.0,
     ) -> None:
         self.server = server
+        self.count = count  # events to record, then stop (0: no limit)
         self.writer = writer
         self.status = status
         self.started = time.monotonic()
@@ -43,10 +47,24 @@ class Recorder:
         self.rate = 0.0
         registry.discover()  # now, not on the first event: that would delay it
         self.tap = RawEventTap(channel, subscriptions, self._write, skip=[CLOCK_TYPE])
-        server.reactor().schedule_timer(TICK, TICK, self._tick)
+        reactor = server.reactor()
+        reactor.schedule_timer(TICK, TICK, self._tick)
+        if duration > 0:
+            reactor.schedule_timer(duration, 0, lambda _=None: self._stop())
 
     def _write(self, events: list[RawEvent], received_ns: int) -> None:
+        if self.count:
+            left = self.count - self.writer.messages
+            if left <= 0:
+                return  # the last frame's remainder, after the count was reached
+            if len(events) >= left:
+                self.writer.write(events[:left], received_ns)
+                self._stop()
+                return
         self.writer.write(events, received_ns)
+
+    def _stop(self) -> None:
+        self.server.shutdown()
 
     def _tick(self, _: object = None) -> None:
         self.writer.tick()
@@ -67,7 +85,8 @@ class Recorder:
         )
 
     def run(self) -> None:
-        """Record until a signal (or `server.shutdown()`); the file is finished after."""
+        """Record until a signal, the count or the duration (or `server.shutdown()`); the
+        file is finished after."""
         old = signal.signal(signal.SIGHUP, lambda *_: self.server.shutdown())
         try:
             self.server.run()

@@ -167,6 +167,31 @@ def test_a_recording_without_a_file_name_is_named_after_its_context_and_time(
     assert len(readable(path)) == 5
 
 
+def test_count_and_duration_end_a_recording_by_themselves(naming: str, tmp_path: Path) -> None:
+    """`--count N` keeps exactly the first N events and finishes the file; `--duration S`
+    finishes it after S seconds, events or none (rosbag's --duration, rostopic's -n)."""
+    counted = tmp_path / "counted.mcap"
+    rec = start_recorder(naming, counted, "robot4/ExampleEvent", "--count", "7")
+    supply(naming, 20, 5, context="robot4")
+    _, err = rec.communicate(timeout=20)
+    assert rec.returncode == 0, err
+    assert f"{counted}: 7 events in" in err
+    with open(counted, "rb") as f:
+        messages = [m for _, _, m in make_reader(f).iter_messages()]  # finished: indexed
+    assert [Miro.ExampleEventIDL.deserialize(m.data) for m in messages] == [
+        event(n) for n in range(7)
+    ]
+    timed = tmp_path / "timed.mcap"
+    rec = start_recorder(naming, timed, "robot5/ExampleEvent", "--duration", "0.3")
+    _, err = rec.communicate(timeout=20)
+    assert rec.returncode == 0, err
+    assert f"{timed}: 0 events in" in err
+    with open(timed, "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None and summary.statistics is not None
+    assert summary.statistics.message_count == 0
+
+
 def test_damaged_files_are_errors_not_tracebacks(recorded: Path, tmp_path: Path) -> None:
     cut = tmp_path / "cut.mcap"
     data = recorded.read_bytes()
@@ -220,6 +245,9 @@ def test_usage_errors(tmp_path: Path) -> None:
         (("log", "record", "-o", "y.mcap", "a/"), "is not DOMAIN/TYPE"),
         (("log", "play", "x.mcap", "--rate", "0"), "--rate must be more than 0"),
         (("log", "record", "-o", "y.mcap", "--naming"), "--naming needs a value"),
+        (("log", "record", "-o", "y.mcap", "--count", "0"), "'0' is not a positive whole"),
+        (("log", "record", "-o", "y.mcap", "--duration", "soon"), "'soon' is not a positive"),
+        (("log", "record", "-o", "y.mcap", "--ros2", "-n", "3"), "--count is for Miro"),
     ):
         result = run_miro(*args)
         assert result.returncode == 2, (args, result.stderr)

@@ -147,6 +147,20 @@ def test_miro_log_record_ros2_then_info_and_echo(
     ]
 
 
+def test_miro_log_record_ros2_duration_finishes_the_bag_by_itself(
+    ros_types: Path, domain: int, tmp_path: Path
+) -> None:
+    out = tmp_path / "quiet.mcap"
+    rec = subprocess.run(
+        [sys.executable, "-m", "miro_gen.cli.main", "log", "record", "--ros2", "/nobody",
+         "--duration", "0.5", "-o", str(out)],
+        env=_env(ros_types), capture_output=True, text=True, timeout=60,
+    )  # fmt: skip
+    assert rec.returncode == 0, rec.stderr
+    assert f"{out}: 0 messages in" in rec.stderr
+    assert _rosbags(out) == []
+
+
 def test_rosbags_written_bag_plays_through_miro_log_play_to_rclpy(
     ros_types: Path, domain: int, tmp_path: Path
 ) -> None:

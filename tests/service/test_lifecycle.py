@@ -103,6 +103,11 @@ def test_a_server_started_before_its_naming_service_waits_for_it(script: str) ->
         eventually(lambda: _bound(client, f"early/_services/{service}"), 60)
         if script == "exampleA.py":
             assert _bound(client, "early/ExampleA")
+        # Its names are bound before it runs; a Ctrl-C in between ends it with 130 (as it
+        # should): the signal goes once it says it runs.
+        assert server.stdout is not None
+        ready = server.stdout.readline()
+        assert ready.startswith(("ExampleA is ready", "gps_position: Gps events in")), ready
         server.send_signal(signal.SIGINT)
         _, err = server.communicate(timeout=60)
         assert server.returncode == 0, err
