@@ -45,7 +45,6 @@ import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT / "generated"), str(ROOT)]
@@ -53,6 +52,7 @@ sys.path[:0] = [str(ROOT / "generated"), str(ROOT)]
 import events_large  # noqa: E402 - beside this file
 import Miro  # noqa: E402
 import zmq  # noqa: E402
+from raw_peers import free_port, zenoh_config  # noqa: E402 - beside this file
 
 TARGET = 0.5
 TOPIC = b"bench\0ExampleEvent\0"
@@ -174,15 +174,6 @@ def ours_supplier(naming: str) -> None:
         time.sleep(0.01)
     serve_commands(send, send_stamped, on_timer, lambda: supplier.dropped)
     server.shutdown()
-
-
-def zenoh_config(listen: str | None, connect: str | None) -> Any:
-    conf = zenoh.Config()
-    conf.insert_json5("mode", '"peer"')
-    conf.insert_json5("scouting/multicast/enabled", "false")
-    conf.insert_json5("listen/endpoints", f'["{listen}"]' if listen else "[]")
-    conf.insert_json5("connect/endpoints", f'["{connect}"]' if connect else "[]")
-    return conf
 
 
 def zenoh_supplier(port: str) -> None:
@@ -467,14 +458,6 @@ class ZenohBench(Bench):
         super().close()
         self.sub.undeclare()
         self.session.close()
-
-
-def free_port() -> int:
-    import socket
-
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def measure(make: Callable[[], Bench], count: int) -> tuple[list[Result], list[Latency]]:

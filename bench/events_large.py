@@ -34,6 +34,7 @@ sys.path[:0] = [str(ROOT / "generated"), str(ROOT)]
 
 import Miro  # noqa: E402
 import zmq  # noqa: E402
+from raw_peers import free_port, zenoh_config  # noqa: E402 - beside this file
 
 SIZES = (1 << 20, 6 << 20)
 TOPIC = b"bench\0Image\0"
@@ -210,8 +211,6 @@ def ours_consumer(naming: str, channel: str, types: str = "Image", views: str = 
 
 
 def _zenoh_config(listen: str | None, connect: str | None, shm: str) -> Any:
-    from bench_events import zenoh_config
-
     conf = zenoh_config(listen, connect)
     conf.insert_json5("transport/shared_memory/enabled", "true" if shm == "on" else "false")
     return conf
@@ -308,8 +307,6 @@ def frames_per_second(
 
 
 def naming_service(*options: str) -> tuple[subprocess.Popen[str], str]:
-    from bench_events import free_port
-
     endpoint = f"tcp://127.0.0.1:{free_port()}"
     proc = subprocess.Popen(
         [sys.executable, "-m", "miro_gen.cli.main", "naming", "--endpoint", endpoint, *options],
@@ -325,8 +322,6 @@ class Setup:
     """One transport with its supplier and `consumers` consumer processes, kept for all runs."""
 
     def __init__(self, name: str, consumers: int) -> None:
-        from bench_events import free_port
-
         self.name = name
         self.stop: Callable[[], object] = lambda: None
         if name.startswith("raw"):
