@@ -126,7 +126,7 @@ class Leases:
                     self._registry.renew_as(self.owner, [], self.lease_ms)
                 break
             except TRANSIENT as e:
-                if self._over_tcp_instead():
+                if e.minor != REFUSED_MINOR and self._over_tcp_instead():
                     continue
                 waited = time.monotonic() - start
                 if e.minor == REFUSED_MINOR or (

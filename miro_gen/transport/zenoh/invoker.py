@@ -13,6 +13,13 @@ the reply header in its attachment. The outcomes are the ZeroMQ invoker's:
   the same key (both get the query, since calls go to every match), but only the session
   that the reference names answers for its objects (`Reply.replier_id`).
 
+A call to the naming registry (the router's own session, which answers every request it gets)
+that ends without a reply, from a session with a certificate, says that the router's access control
+(`miro naming --per-robot`) may deny this certificate that key: Zenoh drops what its access
+control denies without a word (transport.zenoh.access). Such a TIMEOUT carries the minor code
+of a refused connection, so that the naming client says it as such, and a server stops
+waiting for its naming service.
+
 The liveliness of servers is kept by a subscriber whose callback only adds and removes ids in
 a set; a server not yet seen is asked for once (`liveliness().get`), from the calling thread.
 """
@@ -31,9 +38,10 @@ from miro_gen.log import PeerWarnings, logger
 from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.runtime.rpc import Reply, ReplyStatus, Servant
 from miro_gen.transport.rpc import frames
-from miro_gen.transport.rpc.invoker import LocalServants
+from miro_gen.transport.rpc.invoker import REFUSED_MINOR, LocalServants
 from miro_gen.transport.zenoh import keys
-from miro_gen.transport.zenoh.session import direct, track, untrack
+from miro_gen.transport.zenoh.access import denied_hint
+from miro_gen.transport.zenoh.session import direct, identity, track, untrack
 
 _log = logger("MIRO")
 _peer_warnings = PeerWarnings(_log)
@@ -53,6 +61,7 @@ class ZenohInvoker:
     def __init__(self, session: Any, adapter: LocalServants | None = None) -> None:
         self.session = session
         self.adapter = adapter
+        self.owner = keys.owner_part(identity(session))  # its certificate's name ("": none)
         self._ids = itertools.count(1)
         self._tails: dict[tuple[bytes, str], bytes] = {}
         self._routes: dict[str, tuple[str, str]] = {}  # endpoint: (identity, call key)
@@ -89,7 +98,7 @@ class ZenohInvoker:
     def _target(self, endpoint: str) -> str:
         """The identity (transport.zenoh.keys) serving `endpoint`: the router's session (no
         owner) for the naming registry."""
-        if endpoint == keys.NAMING_ENDPOINT:
+        if keys.is_naming(endpoint):
             routers = self.session.info.routers_zid()
             if not routers:
                 raise TRANSIENT("no Zenoh router (the naming service) is connected")
@@ -121,7 +130,7 @@ class ZenohInvoker:
         route = self._routes.get(ref.endpoint)
         if route is None:
             zid = self._target(ref.endpoint)
-            route = (zid, keys.call_key(zid))
+            route = (zid, keys.route_key(ref.endpoint, zid))
             if _cacheable(ref.endpoint):
                 if len(self._routes) >= 4096:
                     self._routes.clear()
@@ -153,6 +162,13 @@ class ZenohInvoker:
             if found is not None:
                 return found
         late = wait and time.monotonic() - start >= wait
+        if self.owner and not _cacheable(ref.endpoint):  # the router itself did not answer
+            raise TIMEOUT(
+                f"{operation}: no reply from the naming service ({ref.endpoint}); "
+                f"{denied_hint(self.owner, key)}",
+                REFUSED_MINOR,
+                CompletionStatus.MAYBE,
+            )
         why = "no reply in time" if late else "its process went away"
         raise TIMEOUT(f"{operation}: {why} ({ref.endpoint})", completed=CompletionStatus.MAYBE)
 
@@ -198,7 +214,7 @@ class ZenohInvoker:
 def _cacheable(endpoint: str) -> bool:
     """Whether the session an endpoint names stays the same: not the naming service's, which
     is whichever router this session is connected to now."""
-    return endpoint != keys.NAMING_ENDPOINT
+    return not keys.is_naming(endpoint)
 
 
 def _ignore(_reply: Any) -> None:
