@@ -14,13 +14,18 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 from loopback import service_env
 from netns import Hosts, network
 from repo_paths import TESTS
 
 from miro_gen.transport.tlsfiles import base_of
 
-pytest.importorskip("zenoh")
+zenoh = pytest.importorskip("zenoh")
+
+from miro_gen.transport.zenoh import keys  # noqa: E402
+from miro_gen.transport.zenoh.access import access_control  # noqa: E402
 
 ADDRESSES = {
     "base": "10.86.0.1",
@@ -36,6 +41,37 @@ BINDER = str(PROCS / "zenoh_binder.py")
 QUOTA = 3  # names per principal
 ROBOTS = ("robot1", "robot2", "robot3", "robot4")  # the certificates --per-robot lists
 STRANGER = "robot5"  # a certificate of the fleet's CA that --per-robot does not list
+
+
+@given(st.text(min_size=1), st.text(min_size=1))
+def test_a_registry_key_is_reached_only_by_its_owners_rule(owner: str, other: str) -> None:
+    """What the router's rules rely on, checked with Zenoh's own key expressions: a robot's
+    registry key is a valid key that `**` (a robot's rule for querying anything) does not
+    include, the router's queryable does, and another owner's rule does not."""
+    key = keys.registry_key(owner)
+    assert keys.registry_owner(key) == owner
+    endpoint = keys.naming_endpoint(owner)
+    assert keys.is_naming(endpoint) and keys.route_key(endpoint, "%/0") == key
+    assert not zenoh.KeyExpr("**").includes(zenoh.KeyExpr(key))
+    assert zenoh.KeyExpr(keys.REGISTRY_KEYS).includes(zenoh.KeyExpr(key))
+    if other != owner:
+        assert not zenoh.KeyExpr(keys.registry_key(other)).includes(zenoh.KeyExpr(key))
+
+
+def test_only_a_robots_own_registry_key_is_allowed_to_it() -> None:
+    acl = access_control("fleet", ["robot1", "robot2"])
+    asks = {
+        r["id"]: r["key_exprs"]
+        for r in acl["rules"]
+        if "query" in r["messages"] and "ingress" in r["flows"]
+    }
+    assert asks["r1-bind"] == ["miro/@registry/robot2"]
+    assert "miro/@registry/*" in asks["fleet"]
+    assert not [k for rule, ks in asks.items() if rule.startswith("r0") for k in ks
+                if "@registry" in k and k != "miro/@registry/robot1"]  # fmt: skip
+    for endpoint in ("zenoh/naming@", "zenoh/naming@%", "zenoh/naming@a/b", "zenoh/naming@*"):
+        assert not keys.is_naming(endpoint)
+    assert keys.naming_endpoint("") == keys.NAMING_ENDPOINT
 
 
 def robot_env(hosts: Hosts, robot: str) -> dict[str, str]:

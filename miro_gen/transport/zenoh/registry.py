@@ -18,7 +18,7 @@ every caller is the principal `zenoh` (unverified), on either key.
 Denials: what the router's access control drops, it logs only at Rust's trace level, and
 zenoh-python cannot route Zenoh's log into Python's: `RUST_LOG` (e.g.
 `zenoh::net::routing::interceptor::access_control=trace`) prints it on this process's
-stderr. The registry's own refusals are warnings in the log.
+standard output (Zenoh writes it there). The registry's own refusals are warnings in the log.
 
 Liveliness: each name a server keeps has a token (transport.zenoh.names). When a token goes
 (its server's process died, or its link was cut and the router's lease ran out), the name's
@@ -85,7 +85,7 @@ class ZenohNaming:
     ) -> None:
         self.reactor = reactor
         self.locator = locator(naming, tls)  # tls/...: only sessions with a key of its CA
-        # RUST_LOG: Zenoh's own log, on stderr (its access control's denials: above)
+        # RUST_LOG: Zenoh's own log, on stdout (its access control's denials: above)
         zenoh.try_init_log_from_env()  # type: ignore[no-untyped-call]
         conf = config("router", listen=self.locator, tls=tls)
         self.per_robot: PerRobot | None = None
