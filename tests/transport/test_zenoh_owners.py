@@ -188,3 +188,24 @@ def test_a_denied_certificate_is_told_why(fleet: Hosts) -> None:
     assert f"may deny the certificate {STRANGER} the key miro/@registry/{STRANGER}" in lines[-1], (
         served.stderr
     )
+
+
+def test_a_robot_started_before_its_router_waits_and_binds(fleet: Hosts, tmp_path: Path) -> None:
+    """Silence from a router that is still starting is not taken for a denial: robot1's server,
+    started first, binds once a second router (with access per robot) is up."""
+    naming = f"tcp://{ADDRESSES['base']}:2810"
+    server = fleet.popen(
+        "robot1", str(PROCS / "named_example.py"), "--transport", "zenoh", "--naming", naming,
+        "-MNC", "robot1", "Early", stderr=tmp_path / "early.err", env=robot_env(fleet, "robot1"),
+    )  # fmt: skip
+    router = fleet.popen(
+        "base", "-m", "miro_gen.cli.main", "naming", "--zenoh", "--endpoint", naming,
+        "--log-file", "none", "--per-robot", "robot1", stderr=tmp_path / "router.err",
+    )  # fmt: skip
+    assert server.stdout is not None
+    assert server.stdout.readline().strip() == "READY", (tmp_path / "early.err").read_text()
+    probe = fleet.run(
+        "base", BINDER, naming, "resolve", "robot1/Early", env=fleet.env
+    )  # fmt: skip
+    assert probe.stdout.startswith("ENTRY robot1/Early zenoh/robot1/"), probe.stderr
+    fleet.kill([server, router])

@@ -14,7 +14,8 @@ the reply header in its attachment. The outcomes are the ZeroMQ invoker's:
   that the reference names answers for its objects (`Reply.replier_id`).
 
 A call to the naming registry (the router's own session, which answers every request it gets)
-that ends without a reply, from a session with a certificate, says that the router's access control
+that ends without a reply, from a session with a certificate that does not see the router's
+liveliness token either (`_unseen`), says that the router's access control
 (`miro naming --per-robot`) may deny this certificate that key: Zenoh drops what its access
 control denies without a word (transport.zenoh.access). Such a TIMEOUT carries the minor code
 of a refused connection, so that the naming client says it as such, and a server stops
@@ -47,6 +48,7 @@ _log = logger("MIRO")
 _peer_warnings = PeerWarnings(_log)
 
 CONNECT_TIMEOUT = 2.0  # seconds to learn whether a server not seen before is up
+UNSEEN_AFTER = 1.0  # seconds a silent router stays unseen before its access control is blamed
 NO_LIMIT = 365 * 86400.0  # a call without a timeout: Zenoh's queries need one
 MAX_BODY = 1 << 30  # bytes of a request (a Zenoh message has no smaller limit of ours)
 _ALL = zenoh.QueryTarget.ALL
@@ -94,6 +96,21 @@ class ZenohInvoker:
                 self._alive.add(zid)
                 return True
         return False
+
+    def _unseen(self, router: str) -> bool:
+        """Whether the router `router`, connected and silent to a naming request, stays unseen
+        (its process's liveliness token) for a moment: its access control denies this session
+        (an allowed session sees its token from the router's start, before its registry
+        answers; a router still starting is seen within the moment, and is waited for)."""
+        deadline = time.monotonic() + UNSEEN_AFTER
+        while self.session.info.routers_zid():
+            for reply in self.session.liveliness().get(keys.alive_key(router), timeout=0.5):
+                if reply.ok is not None:
+                    return False
+            if time.monotonic() >= deadline:
+                return True
+            time.sleep(0.1)
+        return False  # gone: not a denial
 
     def _target(self, endpoint: str) -> str:
         """The identity (transport.zenoh.keys) serving `endpoint`: the router's session (no
@@ -162,7 +179,7 @@ class ZenohInvoker:
             if found is not None:
                 return found
         late = wait and time.monotonic() - start >= wait
-        if self.owner and not _cacheable(ref.endpoint):  # the router itself did not answer
+        if self.owner and not _cacheable(ref.endpoint) and self._unseen(zid):
             raise TIMEOUT(
                 f"{operation}: no reply from the naming service ({ref.endpoint}); "
                 f"{denied_hint(self.owner, key)}",

@@ -95,19 +95,19 @@ class ZenohNaming:
             conf.insert_json5("access_control", json.dumps(access_control(tls.name, robots)))
             self.per_robot = PerRobot(tls.name, robots)
         self.shared_memory = shared_memory(conf)
-        self.session: Any = zenoh.open(conf)
-        self.zid = identity(self.session)  # %/<zid>: the router has no owner
-        self.endpoint = keys.endpoint(self.zid)
         self.table = Table(quota, max_names, hold)
         self.log: OwnersLog | None = None
         self.restored = Restored()
-        if log_path is not None:
+        if log_path is not None:  # (before the router listens: it serves the registry at once)
             self.log = OwnersLog(log_path, self.table)
             self.restored = self.log.restore(time.monotonic(), DEFAULT_LEASE)
         per_robot = self.per_robot
         self.registry = Registry(
             self.table, self.log, admit=None if per_robot is None else per_robot.refusal
         )
+        self.session: Any = zenoh.open(conf)
+        self.zid = identity(self.session)  # %/<zid>: the router has no owner
+        self.endpoint = keys.endpoint(self.zid)
         self.invoker = ZenohInvoker(self.session)
         self.adapter = ZenohAdapter(
             self.session,
