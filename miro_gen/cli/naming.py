@@ -175,9 +175,9 @@ def naming_main(argv: Sequence[str]) -> int:
         action="append",
         default=[],
         help="with --zenoh and a key: the router lets each ROBOT's certificate (`miro keys new "
-        "ROBOT --ca FLEET`) declare, put and reply only under that robot's own keys, the "
-        "certificate of its own key everything, and any other nothing (Zenoh's access "
-        "control; docs/FLEET.md)",
+        "ROBOT --ca FLEET`) declare, put and reply only under that robot's own keys and bind "
+        "names only in its context (ROBOT/...), the certificate of its own key everything, "
+        "and any other nothing (Zenoh's access control; docs/FLEET.md)",
     )
     p.add_argument(
         "--list-announced",

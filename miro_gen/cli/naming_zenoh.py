@@ -72,8 +72,8 @@ def zenoh_naming(
         )
         if robots:
             note += (
-                f"; access per robot: {', '.join(robots)} only their own keys, {tls.name} "
-                "everything, any other certificate nothing"
+                f"; access per robot: {', '.join(robots)} only their own keys, and names "
+                f"in their own contexts, {tls.name} everything, any other certificate nothing"
             )
     elif ns.insecure and not sockets.is_loopback(sockets.endpoint_host(endpoint)):
         note += "; --insecure: in the clear, open to anyone who can reach it"

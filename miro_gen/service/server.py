@@ -111,6 +111,7 @@ class Client:
         # (a Server's adapter serves the local objects passed as arguments)
         self._zmq_invoker: ZmqInvoker | ZenohInvoker
         naming_endpoint = self.options.naming
+        owner_endpoint = None  # where this process binds names (the naming client's default)
         if zenoh:  # calls over queryables, names in the registry beside the router
             try:
                 from miro_gen.transport.zenoh import keys, session
@@ -125,6 +126,7 @@ class Client:
             )
             self._zmq_invoker = ZenohInvoker(self.zenoh)
             naming_endpoint = keys.NAMING_ENDPOINT
+            owner_endpoint = keys.naming_endpoint(keys.owner_part(session.identity(self.zenoh)))
         else:
             self._zmq_invoker = ZmqInvoker(self.context)
         self.invoker: CallClient = self._zmq_invoker
@@ -132,7 +134,9 @@ class Client:
         self.naming: Naming = (
             self.corba.naming
             if self.corba is not None and self.corba.naming is not None
-            else NamingClient(self.invoker, naming_endpoint, self.options.naming_context)
+            else NamingClient(
+                self.invoker, naming_endpoint, self.options.naming_context, owner_endpoint
+            )
         )
 
     def _router_wait(self) -> float | None:

@@ -61,15 +61,21 @@ actionable(MiroNaming.AlreadyBound, lambda e: f"AlreadyBound: {e.name}")
 
 class NamingClient:
     """Binds and resolves names for a process whose naming context is `context` (a `Naming`,
-    service.backbone)."""
+    service.backbone); `owner_endpoint`: where it binds, when its backbone says (the Zenoh
+    registry's key of this process's certificate)."""
 
-    def __init__(self, invoker: Invoker, endpoint: str, context: str) -> None:
+    def __init__(
+        self, invoker: Invoker, endpoint: str, context: str, owner_endpoint: str | None = None
+    ) -> None:
         self.context = context
         self.endpoint = endpoint
         self.ref = ObjectRef(MiroNaming.Registry._repo_id, endpoint, NAMING_KEY)
-        # Where this process binds: the Unix socket of a naming service on this machine
-        # (where it can tell who calls), else the endpoint itself.
-        self.owner_endpoint = local_naming_socket(endpoint) or endpoint
+        # Where this process binds: where its backbone says (`owner_fixed`: only there), else
+        # the Unix socket of a naming service on this machine (where it can tell who calls;
+        # over TCP when that socket does not answer, transport.naming.leases), else the
+        # endpoint itself.
+        self.owner_endpoint = owner_endpoint or local_naming_socket(endpoint) or endpoint
+        self.owner_fixed = owner_endpoint is not None
         self.registry = self.registry_stub(invoker, 5.0)
         # Called before a look-up until one has been made: a server waits there for a naming
         # service that does not answer yet (transport.naming.leases).

@@ -149,7 +149,7 @@ class Leases:
         """The naming service's local socket did not answer: whether its TCP endpoint does
         (its machine's, seen from another network namespace, such as a container's), so that
         this server binds over TCP from now on. BAD_OPERATION: it speaks another version."""
-        if self.naming.owner_endpoint == self.naming.endpoint:
+        if self.naming.owner_fixed or self.naming.owner_endpoint == self.naming.endpoint:
             return False
         try:
             with naming_errors(self.naming.endpoint, "bind names"):

@@ -9,13 +9,16 @@ it says it is. A process on this machine that asks over TCP cannot be told from 
 user's, so where the Unix socket exists, its calls that need an owner are refused
 (NO_PERMISSION) and it is told to come through the socket; reading (`resolve`, `list_page`)
 is open to everyone. The table's rules are in `transport.naming.table`, the log that keeps
-owners across restarts in `transport.naming.owners_log`; docs/SECURITY.md says why.
+owners across restarts in `transport.naming.owners_log`; docs/SECURITY.md says why. A backbone
+may add its own rule of who binds what (`admit`: the Zenoh backbone's access control per
+robot, transport.zenoh.access).
 """
 
 from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable
 from typing import Any
 
 import MiroNaming
@@ -52,7 +55,8 @@ class Registry(MiroNaming__POA.Registry):
     """The naming service's servant. Its operations are quick and run on the reactor thread,
     in the order requests arrive (ZeroMQ takes them from every connection in turn): a flood
     from one peer cannot hold back another server's renewal behind a queue of workers.
-    `local_socket`: this machine's processes must bind through the Unix socket."""
+    `local_socket`: this machine's processes must bind through the Unix socket. `admit`: why
+    a caller may not bind, unbind or renew a name (None for a renewal's), or None when it may."""
 
     def __init__(
         self,
@@ -61,8 +65,10 @@ class Registry(MiroNaming__POA.Registry):
         *,
         local_socket: str | None = None,
         page_bytes: int = MAX_PAGE_BYTES,
+        admit: Callable[[caller.Caller, str | None], str | None] | None = None,
     ) -> None:
         self.table = table
+        self.admit = admit
         self.log = log
         self.local_socket = local_socket
         self.page_bytes = page_bytes
@@ -75,7 +81,7 @@ class Registry(MiroNaming__POA.Registry):
     def bind_as(
         self, binding: MiroNaming.Entry, who: MiroNaming.Owner, lease_ms: int, take_over: bool
     ) -> None:
-        holder = self._holder(who)
+        holder = self._holder(who, check_name(binding.name))
         name = check_entry(binding, holder)
         with self._lock:
             try:
@@ -108,7 +114,7 @@ class Registry(MiroNaming__POA.Registry):
     @nonblocking
     def unbind_as(self, name: str, who: MiroNaming.Owner) -> None:
         check_name(name)
-        holder = self._holder(who)
+        holder = self._holder(who, name)
         with self._lock:
             if not self.table.unbind(name, holder):
                 raise MiroNaming.NotFound(name=name)  # not an entry of this owner
@@ -171,8 +177,9 @@ class Registry(MiroNaming__POA.Registry):
 
     # ---- internals ----------------------------------------------------------------------------
 
-    def _holder(self, who: MiroNaming.Owner) -> Holder:
-        """The owner of a call: the caller's principal, and the service and run it says."""
+    def _holder(self, who: MiroNaming.Owner, name: str | None = None) -> Holder:
+        """The owner of a call about `name` (None: a renewal): the caller's principal, and the
+        service and run it says."""
         c = caller.current()
         if c is None:  # not through an adapter that identifies callers: a defect
             raise NO_PERMISSION("the naming service cannot tell who calls")
@@ -182,6 +189,11 @@ class Registry(MiroNaming__POA.Registry):
                 "processes on the naming service's machine bind through its local socket "
                 f"({self.local_socket}), where it can tell who they are: an older miro-gen?"
             )
+        if self.admit is not None:
+            why = self.admit(c, name)
+            if why is not None:
+                self._refuse("%s for %s: %s", name or "a renewal", c.principal[:100], why)
+                raise NO_PERMISSION(why)
         return Holder(c.principal, who.service, who.run)
 
     def _freed(self, name: str) -> None:

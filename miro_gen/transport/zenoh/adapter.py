@@ -15,7 +15,9 @@ for an unknown object gets OBJECT_NOT_EXIST, one for an operation the object lac
 BAD_OPERATION, one that waited until its caller stopped waiting is not run, and once the
 server drains, new requests are TRANSIENT (completed NO). With `identify_callers`, servants
 learn who calls (`transport.rpc.caller.current()`): over Zenoh that is the principal
-`zenoh`, not verified (docs/FLEET.md says what that means for names).
+`zenoh`, not verified, unless `caller_of` tells it from the key a query came on (the
+registry's keys per owner, which the router's access control lets only that owner ask:
+transport.zenoh.access; `serve_also` declares them).
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ import contextlib
 import queue
 import threading
 import time
+from collections.abc import Callable
 from typing import Any
 
 import zenoh
@@ -55,6 +58,7 @@ class ZenohAdapter(ObjectTable):
         workers: int = DEFAULT_WORKERS,
         *,
         identify_callers: bool = False,
+        caller_of: Callable[[str], Caller | None] | None = None,
     ) -> None:
         super().__init__()  # the object table
         self.session = session
@@ -63,6 +67,8 @@ class ZenohAdapter(ObjectTable):
         self.endpoint = keys.endpoint(self.zid)
         self._lock = threading.Lock()
         self._identify = identify_callers
+        self._caller_of = caller_of  # a query's key -> its caller (None: `zenoh`)
+        self._also: list[Any] = []  # queryables on further keys (serve_also)
         self._queries: queue.SimpleQueue[Any] = queue.SimpleQueue()
         self._quick: dict[tuple[type, str], bool] = {}  # (servant class, operation): @nonblocking
         self._running = 0
@@ -175,7 +181,8 @@ class ZenohAdapter(ObjectTable):
             return  # its caller gave up: not run
         body = query.payload.to_bytes()
         if self._identify:
-            with serving(_CALLER):
+            who = None if self._caller_of is None else self._caller_of(str(query.key_expr))
+            with serving(who or _CALLER):
                 reply = servant._invoke(req.operation, body, self.invoker)
         else:
             reply = servant._invoke(req.operation, body, self.invoker)
@@ -187,6 +194,10 @@ class ZenohAdapter(ObjectTable):
             return
         header = frames.reply_header(req.request_id, reply.status, reply.repo_id)
         query.reply(query.key_expr, reply.body, attachment=header)
+
+    def serve_also(self, key_expr: str) -> None:
+        """Serve this process's objects on the keys of `key_expr` too."""
+        self._also.append(track(self.session.declare_queryable(key_expr, direct(self._arrived))))
 
     # ---- the end --------------------------------------------------------------------------------
 
@@ -210,6 +221,8 @@ class ZenohAdapter(ObjectTable):
                 return
             self._closed = True
         untrack(self._queryable)
+        for queryable in self._also:
+            untrack(queryable)
         with contextlib.suppress(zenoh.ZError):  # the session is closed already
             self._token.undeclare()
         for _ in self._threads:

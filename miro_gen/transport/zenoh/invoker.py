@@ -13,6 +13,14 @@ the reply header in its attachment. The outcomes are the ZeroMQ invoker's:
   the same key (both get the query, since calls go to every match), but only the session
   that the reference names answers for its objects (`Reply.replier_id`).
 
+A call to the naming registry (the router's own session, which answers every request it gets)
+that ends without a reply, from a session with a certificate that does not see the router's
+liveliness token either (`_unseen`), says that the router's access control
+(`miro naming --per-robot`) may deny this certificate that key: Zenoh drops what its access
+control denies without a word (transport.zenoh.access). Such a TIMEOUT carries the minor code
+of a refused connection, so that the naming client says it as such, and a server stops
+waiting for its naming service.
+
 The liveliness of servers is kept by a subscriber whose callback only adds and removes ids in
 a set; a server not yet seen is asked for once (`liveliness().get`), from the calling thread.
 """
@@ -31,14 +39,16 @@ from miro_gen.log import PeerWarnings, logger
 from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.runtime.rpc import Reply, ReplyStatus, Servant
 from miro_gen.transport.rpc import frames
-from miro_gen.transport.rpc.invoker import LocalServants
+from miro_gen.transport.rpc.invoker import REFUSED_MINOR, LocalServants
 from miro_gen.transport.zenoh import keys
-from miro_gen.transport.zenoh.session import direct, track, untrack
+from miro_gen.transport.zenoh.access import denied_hint
+from miro_gen.transport.zenoh.session import direct, identity, track, untrack
 
 _log = logger("MIRO")
 _peer_warnings = PeerWarnings(_log)
 
 CONNECT_TIMEOUT = 2.0  # seconds to learn whether a server not seen before is up
+UNSEEN_AFTER = 1.0  # seconds a silent router stays unseen before its access control is blamed
 NO_LIMIT = 365 * 86400.0  # a call without a timeout: Zenoh's queries need one
 MAX_BODY = 1 << 30  # bytes of a request (a Zenoh message has no smaller limit of ours)
 _ALL = zenoh.QueryTarget.ALL
@@ -53,6 +63,7 @@ class ZenohInvoker:
     def __init__(self, session: Any, adapter: LocalServants | None = None) -> None:
         self.session = session
         self.adapter = adapter
+        self.owner = keys.owner_part(identity(session))  # its certificate's name ("": none)
         self._ids = itertools.count(1)
         self._tails: dict[tuple[bytes, str], bytes] = {}
         self._routes: dict[str, tuple[str, str]] = {}  # endpoint: (identity, call key)
@@ -86,10 +97,25 @@ class ZenohInvoker:
                 return True
         return False
 
+    def _unseen(self, router: str) -> bool:
+        """Whether the router `router`, connected and silent to a naming request, stays unseen
+        (its process's liveliness token) for a moment: its access control denies this session
+        (an allowed session sees its token from the router's start, before its registry
+        answers; a router still starting is seen within the moment, and is waited for)."""
+        deadline = time.monotonic() + UNSEEN_AFTER
+        while self.session.info.routers_zid():
+            for reply in self.session.liveliness().get(keys.alive_key(router), timeout=0.5):
+                if reply.ok is not None:
+                    return False
+            if time.monotonic() >= deadline:
+                return True
+            time.sleep(0.1)
+        return False  # gone: not a denial
+
     def _target(self, endpoint: str) -> str:
         """The identity (transport.zenoh.keys) serving `endpoint`: the router's session (no
         owner) for the naming registry."""
-        if endpoint == keys.NAMING_ENDPOINT:
+        if keys.is_naming(endpoint):
             routers = self.session.info.routers_zid()
             if not routers:
                 raise TRANSIENT("no Zenoh router (the naming service) is connected")
@@ -121,7 +147,7 @@ class ZenohInvoker:
         route = self._routes.get(ref.endpoint)
         if route is None:
             zid = self._target(ref.endpoint)
-            route = (zid, keys.call_key(zid))
+            route = (zid, keys.route_key(ref.endpoint, zid))
             if _cacheable(ref.endpoint):
                 if len(self._routes) >= 4096:
                     self._routes.clear()
@@ -153,6 +179,13 @@ class ZenohInvoker:
             if found is not None:
                 return found
         late = wait and time.monotonic() - start >= wait
+        if self.owner and not _cacheable(ref.endpoint) and self._unseen(zid):
+            raise TIMEOUT(
+                f"{operation}: no reply from the naming service ({ref.endpoint}); "
+                f"{denied_hint(self.owner, key)}",
+                REFUSED_MINOR,
+                CompletionStatus.MAYBE,
+            )
         why = "no reply in time" if late else "its process went away"
         raise TIMEOUT(f"{operation}: {why} ({ref.endpoint})", completed=CompletionStatus.MAYBE)
 
@@ -198,7 +231,7 @@ class ZenohInvoker:
 def _cacheable(endpoint: str) -> bool:
     """Whether the session an endpoint names stays the same: not the naming service's, which
     is whichever router this session is connected to now."""
-    return endpoint != keys.NAMING_ENDPOINT
+    return not keys.is_naming(endpoint)
 
 
 def _ignore(_reply: Any) -> None:

@@ -1,6 +1,9 @@
 """The key expressions of the Zenoh backbone: one owner of their layout.
 
     miro/call/<owner>/<zid>      the queryable of one process's objects (its session id)
+    miro/@registry/<owner>       the naming registry's binding operations asked by the
+                                 sessions of one certificate (`<owner>`: its common name);
+                                 the router's session answers for every owner (`REGISTRY_KEYS`)
     miro/alive/<owner>/<zid>     liveliness: that process is up
     miro/name/<owner>/<zid>/<name>   liveliness: a name it keeps bound (the registry drops
                                  the name when the token goes: its process died or was cut off)
@@ -18,6 +21,15 @@ keys by (transport.zenoh.access: a robot's certificate may declare and reply onl
 own owner chunk, and put events only under its own domain); references carry the identity
 (`zenoh/<owner>/<zid>`).
 
+The registry's keys per owner start with the verbatim chunk `@registry`, which no wildcard
+matches (not even `**`): a rule of the router's access control that lets a robot query `**`
+does not let it query another robot's registry key, so the router's `miro/@registry/ROBOT`
+is asked only by ROBOT's certificate (and the fleet's) under `--per-robot`, and the registry
+takes the owner chunk of the key a binding operation came on as its caller
+(transport.zenoh.registry). Processes reach it at the endpoint `zenoh/naming@<owner>`
+(`naming_endpoint`); `zenoh/naming`, the router's call key, serves the registry too, to
+everyone (look-ups, listings; binds as well without `--per-robot`).
+
 Names, channels, domains and types become single chunks: `%`, `/`, `*`, `$`, `?`, `#`, `@` are
 percent-escaped (Zenoh forbids the others in a chunk, and one that starts with `@` matches no
 wildcard; rmw_zenoh escapes `/` too), and an empty
@@ -34,6 +46,8 @@ from miro_gen.transport.events.frames import FrameError, topic
 PREFIX: Final = "miro"
 ENDPOINT_SCHEME: Final = "zenoh/"  # an object reference's endpoint: zenoh/<zid>
 NAMING_ENDPOINT: Final = "zenoh/naming"  # the naming registry: the router's session
+_OWNED_NAMING: Final = NAMING_ENDPOINT + "@"  # zenoh/naming@<owner>: its key per owner
+REGISTRY_KEYS: Final = f"{PREFIX}/@registry/*"  # the registry's queryable of every owner
 _ESCAPED: Final = {c: f"%{ord(c):02X}" for c in "%/*$?#@"}  # (`@`: Zenoh's verbatim chunks)
 _SPECIAL: Final = frozenset(_ESCAPED)
 
@@ -92,6 +106,49 @@ def zid_of(endpoint_text: str) -> str | None:
 
 def call_key(ident: str) -> str:
     return f"{PREFIX}/call/{ident}"
+
+
+def naming_endpoint(owner: str) -> str:
+    """The endpoint a process whose certificate's common name is `owner` binds its names at:
+    the registry's key of that owner (`zenoh/naming@<owner>`); without a certificate (`""`)
+    the registry's open endpoint, `zenoh/naming`."""
+    return f"{_OWNED_NAMING}{escape(owner)}" if owner else NAMING_ENDPOINT
+
+
+def is_naming(endpoint_text: str) -> bool:
+    """Whether an endpoint is the naming registry's (the router's session): `zenoh/naming`,
+    or one of its keys per owner (an owner chunk as `escape` makes them)."""
+    if endpoint_text == NAMING_ENDPOINT:
+        return True
+    owner = endpoint_text[len(_OWNED_NAMING) :]
+    return (
+        endpoint_text.startswith(_OWNED_NAMING)
+        and bool(owner)
+        and owner != "%"
+        and _SPECIAL.difference("%").isdisjoint(owner)
+    )
+
+
+def registry_key(owner: str) -> str:
+    """The registry's key for the binding operations of `owner`'s certificate."""
+    return f"{PREFIX}/@registry/{escape(owner)}"
+
+
+def registry_owner(key: str) -> str | None:
+    """The owner (a certificate's common name) of a registry key; None for another key."""
+    parts = key.split("/")
+    if len(parts) != 3 or parts[0] != PREFIX or parts[1] != "@registry" or parts[2] == "%":
+        return None
+    return unescape(parts[2])
+
+
+def route_key(endpoint_text: str, ident: str) -> str:
+    """The key a call to an object at `endpoint_text` goes to, `ident` the identity of the
+    session serving it: the registry's key of an owner (`is_naming` said it is one), or that
+    session's call key."""
+    if endpoint_text.startswith(_OWNED_NAMING):
+        return f"{PREFIX}/@registry/{endpoint_text[len(_OWNED_NAMING) :]}"
+    return call_key(ident)
 
 
 def alive_key(ident: str) -> str:

@@ -5,7 +5,20 @@ service; every other process is its client (transport.zenoh.session). Beside the
 serves the naming registry (transport.naming.service's `Registry` over the table of
 transport.naming.table: owners, leases, quotas, kept names) as an object on its own session's
 call key, which clients reach at the endpoint `zenoh/naming` (the router they are connected
-to: no other session can answer for it, transport.zenoh.invoker).
+to: no other session can answer for it, transport.zenoh.invoker), and on the registry's keys
+per owner (`miro/@registry/<owner>`, transport.zenoh.keys), where processes with a certificate
+bind their names.
+
+Who binds: with access control per robot (`robots`), the router lets only ROBOT's certificate
+(and the fleet's) ask on `miro/@registry/ROBOT`, so the registry takes a binding operation that
+came there as ROBOT's (`cert:ROBOT`: owners, quotas) and lets it bind only in ROBOT's context
+(transport.zenoh.access.PerRobot); binding operations on the open key are refused. Without it
+every caller is the principal `zenoh` (unverified), on either key.
+
+Denials: what the router's access control drops, it logs only at Rust's trace level, and
+zenoh-python cannot route Zenoh's log into Python's: `RUST_LOG` (e.g.
+`zenoh::net::routing::interceptor::access_control=trace`) prints it on this process's
+standard output (Zenoh writes it there). The registry's own refusals are warnings in the log.
 
 Liveliness: each name a server keeps has a token (transport.zenoh.names). When a token goes
 (its server's process died, or its link was cut and the router's lease ran out), the name's
@@ -38,7 +51,7 @@ from miro_gen.transport.naming.table import Table
 from miro_gen.transport.reactor import Reactor
 from miro_gen.transport.tlsfiles import TlsFiles
 from miro_gen.transport.zenoh import keys
-from miro_gen.transport.zenoh.access import access_control
+from miro_gen.transport.zenoh.access import PerRobot, access_control
 from miro_gen.transport.zenoh.adapter import ZenohAdapter
 from miro_gen.transport.zenoh.invoker import ZenohInvoker
 from miro_gen.transport.zenoh.session import (
@@ -72,26 +85,39 @@ class ZenohNaming:
     ) -> None:
         self.reactor = reactor
         self.locator = locator(naming, tls)  # tls/...: only sessions with a key of its CA
+        # RUST_LOG: Zenoh's own log, on stdout (its access control's denials: above)
+        zenoh.try_init_log_from_env()  # type: ignore[no-untyped-call]
         conf = config("router", listen=self.locator, tls=tls)
+        self.per_robot: PerRobot | None = None
         if robots:  # each robot's certificate only its own keys (transport.zenoh.access)
             if tls is None:
                 raise ValueError("access control per robot needs TLS: no certificates without")
             conf.insert_json5("access_control", json.dumps(access_control(tls.name, robots)))
+            self.per_robot = PerRobot(tls.name, robots)
         self.shared_memory = shared_memory(conf)
-        self.session: Any = zenoh.open(conf)
-        self.zid = identity(self.session)  # %/<zid>: the router has no owner
-        self.endpoint = keys.endpoint(self.zid)
         self.table = Table(quota, max_names, hold)
         self.log: OwnersLog | None = None
         self.restored = Restored()
-        if log_path is not None:
+        if log_path is not None:  # (before the router listens: it serves the registry at once)
             self.log = OwnersLog(log_path, self.table)
             self.restored = self.log.restore(time.monotonic(), DEFAULT_LEASE)
-        self.registry = Registry(self.table, self.log)
+        per_robot = self.per_robot
+        self.registry = Registry(
+            self.table, self.log, admit=None if per_robot is None else per_robot.refusal
+        )
+        self.session: Any = zenoh.open(conf)
+        self.zid = identity(self.session)  # %/<zid>: the router has no owner
+        self.endpoint = keys.endpoint(self.zid)
         self.invoker = ZenohInvoker(self.session)
-        self.adapter = ZenohAdapter(self.session, self.invoker, identify_callers=True)
+        self.adapter = ZenohAdapter(
+            self.session,
+            self.invoker,
+            identify_callers=True,
+            caller_of=None if per_robot is None else per_robot.caller,
+        )
         self.invoker.adapter = self.adapter
         self.adapter.activate(self.registry, NAMING_KEY)
+        self.adapter.serve_also(keys.REGISTRY_KEYS)
         self.ended = 0  # names whose tokens went: their leases ended then
         self._tokens: Any = track(
             self.session.liveliness().declare_subscriber(
