@@ -30,6 +30,7 @@ from miro_gen.exceptions import (
     CompletionStatus,
 )
 from miro_gen.log import PeerWarnings, logger
+from miro_gen.runtime.cdr import Encoder
 from miro_gen.runtime.rpc import (
     Invoker,
     Reply,
@@ -202,31 +203,40 @@ class _Call:
 
     def run(self) -> list[bytes] | None:
         req = self.request
+        servant, invoker = self.servant, self.adapter.invoker
         if self.caller is None:
-            reply = self.servant._invoke(req.operation, self.body, self.adapter.invoker)
+            result = servant._result(req.operation, self.body, invoker)
         else:  # a servant that asks who calls (transport.rpc.caller.current)
             with serving(self.caller):
-                reply = self.servant._invoke(req.operation, self.body, self.adapter.invoker)
+                result = servant._result(req.operation, self.body, invoker)
+        if isinstance(result, Reply):  # an exception
+            return self._framed(result, len(result.body))
+        size = result.size if isinstance(result, Encoder) else len(result)
+        pool = self.adapter.pool
+        if (
+            pool is not None
+            and shm.THRESHOLD <= size <= self.adapter.max_message_size
+            and not req.oneway
+            and pool.takes(self.peer)
+        ):  # the encoder's parts copied straight into a slot: never joined into one body
+            descriptor = pool.put(result)
+            if descriptor is not None:
+                return [self.peer, frames.shared_reply_header(req.request_id), descriptor]
+        body = result.value() if isinstance(result, Encoder) else result
+        return self._framed(Reply(ReplyStatus.OK, body), size)
+
+    def _framed(self, reply: Reply, size: int) -> list[bytes] | None:
+        """The frames of `reply` (of `size` bytes), or of MARSHAL when it is larger than the
+        maximum message size."""
         limit = self.adapter.max_message_size
-        if len(reply.body) > limit:
+        if size > limit:
             too_large = MARSHAL(
-                f"the reply to {req.operation} is {len(reply.body)} bytes, more than the "
+                f"the reply to {self.request.operation} is {size} bytes, more than the "
                 f"maximum message size ({limit}; --max-message-size)",
                 completed=CompletionStatus.YES,
             )
             reply = system_exception_reply(too_large)
-        pool = self.adapter.pool
-        if (
-            pool is not None
-            and reply.status is ReplyStatus.OK
-            and len(reply.body) >= shm.THRESHOLD
-            and not req.oneway
-            and pool.takes(self.peer)
-        ):
-            descriptor = pool.put(bytes(reply.body))
-            if descriptor is not None:
-                return [self.peer, frames.shared_reply_header(req.request_id), descriptor]
-        return _reply_frames(self.peer, req, reply)
+        return _reply_frames(self.peer, self.request, reply)
 
     def refuse(self, why: str = "is overloaded") -> list[bytes] | None:
         busy = TRANSIENT(f"{self.adapter.endpoint} {why}", completed=CompletionStatus.NO)

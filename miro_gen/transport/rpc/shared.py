@@ -78,9 +78,10 @@ class ReplyPool:
         """Whether the caller with routing id `peer` may take replies in this pool."""
         return bool(self._marker) and peer.startswith(self._marker)
 
-    def put(self, body: bytes) -> bytes | None:
-        """`body` written into a free slot: the descriptor's bytes; None when no slot is free
-        (or the pool is closed, or the body too large for a slot)."""
+    def put(self, body: bytes | shm.Encoded) -> bytes | None:
+        """`body` (bytes, or an encoder's value, its parts copied straight in: never joined
+        first) written into a free slot: the descriptor's bytes; None when no slot is free (or
+        the pool is closed, or the body too large for a slot)."""
         ring = self._ring
         if ring is None:
             with self._lock:
