@@ -6,8 +6,9 @@ bodies in shared memory (tests/transport/test_shm_requests.py).
 Prints `READY <endpoint> <pid>` once it serves under the key `Body`, then serves until killed.
 Its operations take any body (raw bytes, no CDR: the transport's view of a call) and answer
 with a CDR body holding the body's CRC-32 and length (two ulongs): `crc` at once, `slow_crc`
-after 300 ms (a call its caller may be killed in the middle of). `stats` answers how many
-request bodies it read from callers' shared memory and how many it could not read.
+after 300 ms (a call its caller may be killed in the middle of); `size` answers 0 and the
+length only (bench/large_requests.py). `stats` answers how many request bodies it read from
+callers' shared memory and how many it could not read.
 """
 
 from __future__ import annotations
@@ -46,6 +47,10 @@ def _slow_crc(servant: Any, body: bytes, invoker: Invoker) -> bytes:
     return answer(body)
 
 
+def _size(servant: Any, body: bytes, invoker: Invoker) -> bytes:
+    return HEADER_LE + PAIR.pack(0, len(body))
+
+
 def _stats(servant: Any, body: bytes, invoker: Invoker) -> bytes:
     requests = servant.adapter.requests  # None with shared memory off
     counts = (requests.read, requests.refused) if requests is not None else (0, 0)
@@ -54,7 +59,12 @@ def _stats(servant: Any, body: bytes, invoker: Invoker) -> bytes:
 
 class Body(Servant):
     _repo_id = "IDL:Test/Body:1.0"
-    _dispatch: dict[str, Dispatcher] = {"crc": _crc, "slow_crc": _slow_crc, "stats": _stats}
+    _dispatch: dict[str, Dispatcher] = {
+        "crc": _crc,
+        "slow_crc": _slow_crc,
+        "size": _size,
+        "stats": _stats,
+    }
 
     def __init__(self, adapter: ObjectAdapter) -> None:
         self.adapter = adapter
