@@ -123,7 +123,7 @@ class Registry(_rpc.Servant):
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_bind_as(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_bind_as(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         try:
             _e, _off = _cdr.body_header(_data)
             _f0, _off = _m_MiroNaming_MiroNaming_idl._dec_Entry(_data, _off, _e)
@@ -139,14 +139,14 @@ class Registry(_rpc.Servant):
             raise _cdr.marshal_error("MiroNaming::Registry::bind_as", _x) from None
         self.bind_as(binding, who, lease_ms, take_over)
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def resolve(self, name: str) -> _m_MiroNaming_MiroNaming_idl.Entry:
         """The entry bound to a full name."""
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_resolve(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_resolve(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         try:
             _e, _off = _cdr.body_header(_data)
             _f0, _off = _cdr.get_string(
@@ -168,14 +168,14 @@ class Registry(_rpc.Servant):
                 raise _cdr.nested_error("MiroNaming::Registry::resolve result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("MiroNaming::Registry::resolve", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def unbind_as(self, name: str, who: _m_MiroNaming_MiroNaming_idl.Owner) -> None:
         """Remove a name that this run of `who` holds (NotFound otherwise); it is free then."""
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_unbind_as(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_unbind_as(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         try:
             _e, _off = _cdr.body_header(_data)
             _f0, _off = _cdr.get_string(
@@ -192,7 +192,7 @@ class Registry(_rpc.Servant):
             raise _cdr.marshal_error("MiroNaming::Registry::unbind_as", _x) from None
         self.unbind_as(name, who)
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def list_page(
@@ -206,7 +206,7 @@ class Registry(_rpc.Servant):
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_list_page(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_list_page(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         try:
             _e, _off = _cdr.body_header(_data)
             _f0, _off = _cdr.get_string(
@@ -240,7 +240,7 @@ class Registry(_rpc.Servant):
                 raise _cdr.nested_error("MiroNaming::Registry::list_page result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("MiroNaming::Registry::list_page", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def renew_as(
@@ -257,7 +257,7 @@ class Registry(_rpc.Servant):
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_renew_as(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_renew_as(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         try:
             _e, _off = _cdr.body_header(_data)
             _f1, _off = _m_MiroNaming_MiroNaming_idl._dec_Owner(_data, _off, _e)
@@ -300,7 +300,7 @@ class Registry(_rpc.Servant):
                 )
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("MiroNaming::Registry::renew_as", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     _dispatch = _rpc.merge_dispatch(
         {

@@ -121,7 +121,7 @@ class Service(_rpc.Servant):
         """The process, its objects, events and parameter objects."""
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_describe(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_describe(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         _r = self.describe()
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
@@ -131,14 +131,14 @@ class Service(_rpc.Servant):
                 raise _cdr.nested_error("MiroService::Service::describe result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("MiroService::Service::describe", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def interface_schema(self, repo_id: str) -> str:
         """The interface schema (self-contained IDL) of an interface this process serves."""
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_interface_schema(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_interface_schema(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         try:
             _e, _off = _cdr.body_header(_data)
             _f0, _off = _cdr.get_string(
@@ -162,14 +162,14 @@ class Service(_rpc.Servant):
             )
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("MiroService::Service::interface_schema", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def type_schema(self, type_hash: str) -> str:
         """The data schema of a type this process knows, by its type hash."""
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_type_schema(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_type_schema(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         try:
             _e, _off = _cdr.body_header(_data)
             _f0, _off = _cdr.get_string(
@@ -193,7 +193,7 @@ class Service(_rpc.Servant):
             )
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("MiroService::Service::type_schema", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def get_parameters(self, section: str, category: str) -> str:
@@ -202,7 +202,7 @@ class Service(_rpc.Servant):
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_get_parameters(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_get_parameters(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         try:
             _e, _off = _cdr.body_header(_data)
             _f0, _off = _cdr.get_string(
@@ -234,7 +234,7 @@ class Service(_rpc.Servant):
             )
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("MiroService::Service::get_parameters", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def set_parameters(self, section: str, category: str, element: str) -> str:
@@ -243,7 +243,7 @@ class Service(_rpc.Servant):
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_set_parameters(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_set_parameters(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         try:
             _e, _off = _cdr.body_header(_data)
             _f0, _off = _cdr.get_string(
@@ -283,14 +283,14 @@ class Service(_rpc.Servant):
             )
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("MiroService::Service::set_parameters", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def dump_parameters(self) -> str:
         """Every parameter set, as a run-time document that -MiroConfigFile reads back."""
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_dump_parameters(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_dump_parameters(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         _r = self.dump_parameters()
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
@@ -302,7 +302,7 @@ class Service(_rpc.Servant):
             )
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("MiroService::Service::dump_parameters", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     _dispatch = _rpc.merge_dispatch(
         {

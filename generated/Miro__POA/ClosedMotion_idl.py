@@ -72,7 +72,7 @@ class ClosedMotion(_rpc.Servant):
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_rotateToPosition(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_rotateToPosition(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         try:
             _e, _off = _cdr.body_header(_data)
             _off += (4 - _off) & 7
@@ -83,7 +83,7 @@ class ClosedMotion(_rpc.Servant):
             raise _cdr.marshal_error("Miro::ClosedMotion::rotateToPosition", _x) from None
         self.rotateToPosition(angle)
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def rotateRelative(self, angle: float) -> None:
@@ -97,7 +97,7 @@ class ClosedMotion(_rpc.Servant):
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_rotateRelative(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_rotateRelative(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         try:
             _e, _off = _cdr.body_header(_data)
             _off += (4 - _off) & 7
@@ -108,7 +108,7 @@ class ClosedMotion(_rpc.Servant):
             raise _cdr.marshal_error("Miro::ClosedMotion::rotateRelative", _x) from None
         self.rotateRelative(angle)
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def translateRelative(self, distance: int) -> None:
@@ -122,7 +122,7 @@ class ClosedMotion(_rpc.Servant):
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_translateRelative(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_translateRelative(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         try:
             _e, _off = _cdr.body_header(_data)
             _off += (4 - _off) & 3
@@ -133,7 +133,7 @@ class ClosedMotion(_rpc.Servant):
             raise _cdr.marshal_error("Miro::ClosedMotion::translateRelative", _x) from None
         self.translateRelative(distance)
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     _dispatch = _rpc.merge_dispatch(
         {

@@ -98,7 +98,7 @@ class DifferentialMotion(_m_Miro__POA_Motion_idl.Motion):
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_setLRVelocity(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_setLRVelocity(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         try:
             _e, _off = _cdr.body_header(_data)
             _off += (4 - _off) & 3
@@ -110,7 +110,7 @@ class DifferentialMotion(_m_Miro__POA_Motion_idl.Motion):
             raise _cdr.marshal_error("Miro::DifferentialMotion::setLRVelocity", _x) from None
         self.setLRVelocity(left, right)
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def getMinMaxLRVelocity(self) -> tuple[int, int, int, int]:
@@ -123,7 +123,7 @@ class DifferentialMotion(_m_Miro__POA_Motion_idl.Motion):
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_getMinMaxLRVelocity(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_getMinMaxLRVelocity(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         _results = self.getMinMaxLRVelocity()
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
@@ -151,7 +151,7 @@ class DifferentialMotion(_m_Miro__POA_Motion_idl.Motion):
                 ) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::DifferentialMotion::getMinMaxLRVelocity", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def getTargetLRVelocity(self) -> tuple[int, int]:
@@ -165,7 +165,7 @@ class DifferentialMotion(_m_Miro__POA_Motion_idl.Motion):
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_getTargetLRVelocity(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_getTargetLRVelocity(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         _results = self.getTargetLRVelocity()
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
@@ -181,7 +181,7 @@ class DifferentialMotion(_m_Miro__POA_Motion_idl.Motion):
                 ) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::DifferentialMotion::getTargetLRVelocity", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     _dispatch = _rpc.merge_dispatch(
         _m_Miro__POA_Motion_idl.Motion._dispatch,

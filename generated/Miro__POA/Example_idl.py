@@ -48,7 +48,7 @@ class Example(_rpc.Servant):
         """Set the two values the server keeps."""
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_setData(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_setData(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         try:
             _e, _off = _cdr.body_header(_data)
             _off += (4 - _off) & 7
@@ -60,14 +60,14 @@ class Example(_rpc.Servant):
             raise _cdr.marshal_error("Miro::Example::setData", _x) from None
         self.setData(a, b)
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def getData(self) -> _m_Miro_Example_idl.ExampleStructIDL:
         """Return the values the server keeps."""
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_getData(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_getData(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         _r = self.getData()
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
@@ -77,7 +77,7 @@ class Example(_rpc.Servant):
                 raise _cdr.nested_error("Miro::Example::getData result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Example::getData", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     _dispatch = _rpc.merge_dispatch(
         {

@@ -104,7 +104,7 @@ class Gps(_rpc.Servant):
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_getData(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_getData(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         _r = self.getData()
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
@@ -114,7 +114,7 @@ class Gps(_rpc.Servant):
                 raise _cdr.nested_error("Miro::Gps::getData result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Gps::getData", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def getWaitData(self) -> _m_Miro_Gps_idl.GpsDataIDL:
@@ -125,7 +125,7 @@ class Gps(_rpc.Servant):
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_getWaitData(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_getWaitData(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         _r = self.getWaitData()
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
@@ -135,7 +135,7 @@ class Gps(_rpc.Servant):
                 raise _cdr.nested_error("Miro::Gps::getWaitData result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Gps::getWaitData", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     _dispatch = _rpc.merge_dispatch(
         {

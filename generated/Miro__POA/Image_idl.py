@@ -82,7 +82,7 @@ class Camera(_rpc.Servant):
         """The size and layout of the images the camera delivers."""
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_getFormat(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_getFormat(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         _r = self.getFormat()
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
@@ -92,14 +92,14 @@ class Camera(_rpc.Servant):
                 raise _cdr.nested_error("Miro::Camera::getFormat result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Camera::getFormat", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def getImage(self) -> _m_Miro_Image_idl.ImageEventIDL:
         """Return the latest image (an empty one before the first)."""
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_getImage(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_getImage(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         _r = self.getImage()
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
@@ -109,7 +109,7 @@ class Camera(_rpc.Servant):
                 raise _cdr.nested_error("Miro::Camera::getImage result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Camera::getImage", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def getWaitImage(self) -> _m_Miro_Image_idl.ImageEventIDL:
@@ -119,7 +119,7 @@ class Camera(_rpc.Servant):
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_getWaitImage(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_getWaitImage(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         _r = self.getWaitImage()
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
@@ -129,7 +129,7 @@ class Camera(_rpc.Servant):
                 raise _cdr.nested_error("Miro::Camera::getWaitImage result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Camera::getWaitImage", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     _dispatch = _rpc.merge_dispatch(
         {

@@ -84,10 +84,10 @@ class Motion(_rpc.Servant):
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_limp(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_limp(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         self.limp()
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def setVelocity(self, velocity: _m_Miro_Velocity_idl.VelocityIDL) -> None:
@@ -101,7 +101,7 @@ class Motion(_rpc.Servant):
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_setVelocity(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_setVelocity(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         try:
             _e, _off = _cdr.body_header(_data)
             _f0, _off = _m_Miro_Velocity_idl._dec_VelocityIDL(_data, _off, _e)
@@ -110,7 +110,7 @@ class Motion(_rpc.Servant):
             raise _cdr.marshal_error("Miro::Motion::setVelocity", _x) from None
         self.setVelocity(velocity)
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def getMinMaxVelocity(self) -> tuple[int, int, float, float]:
@@ -129,7 +129,7 @@ class Motion(_rpc.Servant):
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_getMinMaxVelocity(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_getMinMaxVelocity(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         _results = self.getMinMaxVelocity()
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
@@ -154,7 +154,7 @@ class Motion(_rpc.Servant):
                 ) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Motion::getMinMaxVelocity", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def getTargetVelocity(self) -> _m_Miro_Velocity_idl.VelocityIDL:
@@ -167,7 +167,7 @@ class Motion(_rpc.Servant):
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_getTargetVelocity(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_getTargetVelocity(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         _r = self.getTargetVelocity()
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
@@ -177,7 +177,7 @@ class Motion(_rpc.Servant):
                 raise _cdr.nested_error("Miro::Motion::getTargetVelocity result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Motion::getTargetVelocity", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     _dispatch = _rpc.merge_dispatch(
         {

@@ -104,7 +104,7 @@ class Odometry(_rpc.Servant):
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_setPosition(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_setPosition(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         try:
             _e, _off = _cdr.body_header(_data)
             _f0, _off = _m_Miro_Position_idl._dec_PositionIDL(_data, _off, _e)
@@ -113,7 +113,7 @@ class Odometry(_rpc.Servant):
             raise _cdr.marshal_error("Miro::Odometry::setPosition", _x) from None
         self.setPosition(position)
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def updatePosition(self, deltaPosition: _m_Miro_Position_idl.PositionIDL) -> None:
@@ -127,7 +127,7 @@ class Odometry(_rpc.Servant):
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_updatePosition(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_updatePosition(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         try:
             _e, _off = _cdr.body_header(_data)
             _f0, _off = _m_Miro_Position_idl._dec_PositionIDL(_data, _off, _e)
@@ -136,14 +136,14 @@ class Odometry(_rpc.Servant):
             raise _cdr.marshal_error("Miro::Odometry::updatePosition", _x) from None
         self.updatePosition(deltaPosition)
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def getPosition(self) -> _m_Miro_Position_idl.PositionIDL:
         """Return the latest pose of the robot (mm, rad)."""
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_getPosition(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_getPosition(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         _r = self.getPosition()
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
@@ -153,7 +153,7 @@ class Odometry(_rpc.Servant):
                 raise _cdr.nested_error("Miro::Odometry::getPosition result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Odometry::getPosition", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def getWaitPosition(self) -> _m_Miro_Position_idl.PositionIDL:
@@ -163,7 +163,7 @@ class Odometry(_rpc.Servant):
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_getWaitPosition(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_getWaitPosition(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         _r = self.getWaitPosition()
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
@@ -173,7 +173,7 @@ class Odometry(_rpc.Servant):
                 raise _cdr.nested_error("Miro::Odometry::getWaitPosition result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Odometry::getWaitPosition", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def getRawPosition(self) -> _m_Miro_Position_idl.PositionIDL:
@@ -186,7 +186,7 @@ class Odometry(_rpc.Servant):
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_getRawPosition(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_getRawPosition(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         _r = self.getRawPosition()
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
@@ -196,7 +196,7 @@ class Odometry(_rpc.Servant):
                 raise _cdr.nested_error("Miro::Odometry::getRawPosition result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Odometry::getRawPosition", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def getWaitRawPosition(self) -> _m_Miro_Position_idl.PositionIDL:
@@ -206,7 +206,7 @@ class Odometry(_rpc.Servant):
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_getWaitRawPosition(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_getWaitRawPosition(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         _r = self.getWaitRawPosition()
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
@@ -216,14 +216,14 @@ class Odometry(_rpc.Servant):
                 raise _cdr.nested_error("Miro::Odometry::getWaitRawPosition result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Odometry::getWaitRawPosition", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def getVelocity(self) -> _m_Miro_Velocity_idl.VelocityIDL:
         """Return the latest measured velocity (mm/s, rad/s)."""
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_getVelocity(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_getVelocity(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         _r = self.getVelocity()
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
@@ -233,7 +233,7 @@ class Odometry(_rpc.Servant):
                 raise _cdr.nested_error("Miro::Odometry::getVelocity result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Odometry::getVelocity", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def getWaitVelocity(self) -> _m_Miro_Velocity_idl.VelocityIDL:
@@ -243,7 +243,7 @@ class Odometry(_rpc.Servant):
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_getWaitVelocity(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_getWaitVelocity(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         _r = self.getWaitVelocity()
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
@@ -253,14 +253,14 @@ class Odometry(_rpc.Servant):
                 raise _cdr.nested_error("Miro::Odometry::getWaitVelocity result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Odometry::getWaitVelocity", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def getStatus(self) -> _m_Miro_MotionStatus_idl.MotionStatusIDL:
         """Return the latest complete report: time stamp, pose and velocity."""
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_getStatus(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_getStatus(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         _r = self.getStatus()
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
@@ -270,7 +270,7 @@ class Odometry(_rpc.Servant):
                 raise _cdr.nested_error("Miro::Odometry::getStatus result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Odometry::getStatus", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def getWaitStatus(self) -> _m_Miro_MotionStatus_idl.MotionStatusIDL:
@@ -280,7 +280,7 @@ class Odometry(_rpc.Servant):
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_getWaitStatus(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_getWaitStatus(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         _r = self.getWaitStatus()
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
@@ -290,7 +290,7 @@ class Odometry(_rpc.Servant):
                 raise _cdr.nested_error("Miro::Odometry::getWaitStatus result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Odometry::getWaitStatus", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     _dispatch = _rpc.merge_dispatch(
         {

@@ -93,7 +93,7 @@ class Range3dSensor(_rpc.Servant):
         """Return the properties and mounting of the sensor."""
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_getDescription(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_getDescription(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         _r = self.getDescription()
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
@@ -103,14 +103,14 @@ class Range3dSensor(_rpc.Servant):
                 raise _cdr.nested_error("Miro::Range3dSensor::getDescription result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Range3dSensor::getDescription", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def getScan(self) -> _m_Miro_Range3dSensor_idl.Range3dScanEventIDL:
         """Return the latest scan."""
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_getScan(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_getScan(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         _r = self.getScan()
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
@@ -120,7 +120,7 @@ class Range3dSensor(_rpc.Servant):
                 raise _cdr.nested_error("Miro::Range3dSensor::getScan result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Range3dSensor::getScan", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def getWaitScan(self) -> _m_Miro_Range3dSensor_idl.Range3dScanEventIDL:
@@ -130,7 +130,7 @@ class Range3dSensor(_rpc.Servant):
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_getWaitScan(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_getWaitScan(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         _r = self.getWaitScan()
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
@@ -140,7 +140,7 @@ class Range3dSensor(_rpc.Servant):
                 raise _cdr.nested_error("Miro::Range3dSensor::getWaitScan result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Range3dSensor::getWaitScan", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     _dispatch = _rpc.merge_dispatch(
         {

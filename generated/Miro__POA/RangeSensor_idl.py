@@ -129,7 +129,7 @@ class RangeSensor(_rpc.Servant):
         """Return the layout of the sensor: its groups, positions and ranges."""
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_getScanDescription(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_getScanDescription(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         _r = self.getScanDescription()
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
@@ -139,14 +139,14 @@ class RangeSensor(_rpc.Servant):
                 raise _cdr.nested_error("Miro::RangeSensor::getScanDescription result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::RangeSensor::getScanDescription", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def getFullScan(self) -> _m_Miro_RangeEvent_idl.RangeScanEventIDL:
         """Return the latest readings of all groups."""
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_getFullScan(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_getFullScan(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         _r = self.getFullScan()
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
@@ -156,7 +156,7 @@ class RangeSensor(_rpc.Servant):
                 raise _cdr.nested_error("Miro::RangeSensor::getFullScan result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::RangeSensor::getFullScan", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def getWaitFullScan(self) -> _m_Miro_RangeEvent_idl.RangeScanEventIDL:
@@ -166,7 +166,7 @@ class RangeSensor(_rpc.Servant):
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_getWaitFullScan(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_getWaitFullScan(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         _r = self.getWaitFullScan()
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
@@ -176,7 +176,7 @@ class RangeSensor(_rpc.Servant):
                 raise _cdr.nested_error("Miro::RangeSensor::getWaitFullScan result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::RangeSensor::getWaitFullScan", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def getGroup(self, id: int) -> _m_Miro_RangeEvent_idl.RangeGroupEventIDL:
@@ -188,7 +188,7 @@ class RangeSensor(_rpc.Servant):
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_getGroup(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_getGroup(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         try:
             _e, _off = _cdr.body_header(_data)
             _off += (4 - _off) & 3
@@ -206,7 +206,7 @@ class RangeSensor(_rpc.Servant):
                 raise _cdr.nested_error("Miro::RangeSensor::getGroup result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::RangeSensor::getGroup", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def getWaitGroup(self, id: int) -> _m_Miro_RangeEvent_idl.RangeGroupEventIDL:
@@ -220,7 +220,7 @@ class RangeSensor(_rpc.Servant):
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_getWaitGroup(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_getWaitGroup(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         try:
             _e, _off = _cdr.body_header(_data)
             _off += (4 - _off) & 3
@@ -238,7 +238,7 @@ class RangeSensor(_rpc.Servant):
                 raise _cdr.nested_error("Miro::RangeSensor::getWaitGroup result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::RangeSensor::getWaitGroup", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     _dispatch = _rpc.merge_dispatch(
         {

@@ -54,7 +54,7 @@ class Stall(_rpc.Servant):
         """Return TRUE when the drive is stalled."""
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_isStalled(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_isStalled(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         _r = self.isStalled()
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
@@ -67,7 +67,7 @@ class Stall(_rpc.Servant):
                 ) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::Stall::isStalled", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def unstall(self) -> None:
@@ -77,10 +77,10 @@ class Stall(_rpc.Servant):
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_unstall(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_unstall(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         self.unstall()
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     _dispatch = _rpc.merge_dispatch(
         {

@@ -88,10 +88,10 @@ class SynchroMotion(_m_Miro__POA_Motion_idl.Motion):
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_rotateLimp(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_rotateLimp(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         self.rotateLimp()
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def rotate(self, velocity: float) -> None:
@@ -106,7 +106,7 @@ class SynchroMotion(_m_Miro__POA_Motion_idl.Motion):
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_rotate(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_rotate(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         try:
             _e, _off = _cdr.body_header(_data)
             _off += (4 - _off) & 7
@@ -117,7 +117,7 @@ class SynchroMotion(_m_Miro__POA_Motion_idl.Motion):
             raise _cdr.marshal_error("Miro::SynchroMotion::rotate", _x) from None
         self.rotate(velocity)
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def translateLimp(self) -> None:
@@ -127,10 +127,10 @@ class SynchroMotion(_m_Miro__POA_Motion_idl.Motion):
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_translateLimp(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_translateLimp(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         self.translateLimp()
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def translate(self, velocity: int) -> None:
@@ -145,7 +145,7 @@ class SynchroMotion(_m_Miro__POA_Motion_idl.Motion):
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_translate(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_translate(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         try:
             _e, _off = _cdr.body_header(_data)
             _off += (4 - _off) & 3
@@ -156,7 +156,7 @@ class SynchroMotion(_m_Miro__POA_Motion_idl.Motion):
             raise _cdr.marshal_error("Miro::SynchroMotion::translate", _x) from None
         self.translate(velocity)
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     _dispatch = _rpc.merge_dispatch(
         _m_Miro__POA_Motion_idl.Motion._dispatch,

@@ -46,7 +46,7 @@ class myExample(_rpc.Servant):
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_getString(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_getString(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         _r = self.getString()
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
@@ -56,7 +56,7 @@ class myExample(_rpc.Servant):
                 raise _cdr.nested_error("Miro::myExample::getString result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Miro::myExample::getString", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     _dispatch = _rpc.merge_dispatch(
         {

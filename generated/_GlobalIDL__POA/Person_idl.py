@@ -69,7 +69,7 @@ class Person(_rpc.Servant):
         """
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_setTraits(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_setTraits(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         try:
             _e, _off = _cdr.body_header(_data)
             _off += (4 - _off) & 3
@@ -83,14 +83,14 @@ class Person(_rpc.Servant):
             raise _cdr.marshal_error("Person::setTraits", _x) from None
         self.setTraits(height, waist, hair, age)
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def getHeight(self) -> float:
         """Return the height in metres."""
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_getHeight(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_getHeight(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         _r = self.getHeight()
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
@@ -104,14 +104,14 @@ class Person(_rpc.Servant):
                 ) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Person::getHeight", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def getWaist(self) -> float:
         """Return the waist circumference in metres."""
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_getWaist(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_getWaist(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         _r = self.getWaist()
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
@@ -125,14 +125,14 @@ class Person(_rpc.Servant):
                 ) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Person::getWaist", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def getHair(self) -> str:
         """Return the hair colour code."""
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_getHair(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_getHair(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         _r = self.getHair()
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
@@ -145,14 +145,14 @@ class Person(_rpc.Servant):
                 ) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Person::getHair", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def getAge(self) -> int:
         """Return the age in whole years."""
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_getAge(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_getAge(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         _r = self.getAge()
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
@@ -166,14 +166,14 @@ class Person(_rpc.Servant):
                 ) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Person::getAge", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     @_abc.abstractmethod
     def getTraits(self) -> _m__GlobalIDL_Person_idl.PersonTraitsIDL:
         """Return all traits at once."""
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_getTraits(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_getTraits(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         _r = self.getTraits()
         _buf = _cdr.Encoder(_cdr.HEADER_LE)
         try:
@@ -183,7 +183,7 @@ class Person(_rpc.Servant):
                 raise _cdr.nested_error("Person::getTraits result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("Person::getTraits", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     _dispatch = _rpc.merge_dispatch(
         {

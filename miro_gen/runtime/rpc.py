@@ -31,6 +31,7 @@ from miro_gen.exceptions import (
 )
 from miro_gen.runtime.cdr import (
     HEADER_LE,
+    Encoder,
     ObjectRef,
     get_string,
     header_endianness,
@@ -285,7 +286,10 @@ def to_ref(value: Any, invoker: Invoker) -> Any:
 
 # ---- skeletons ---------------------------------------------------------------------------------
 
-Dispatcher = Callable[[Any, bytes, "Invoker"], bytes]
+# A skeleton's function for one operation: the request body in, the reply body out, as the
+# encoder it was written to (its large payloads set aside, not yet joined: `Encoder.value()`),
+# or as bytes (hand-written tables).
+Dispatcher = Callable[[Any, bytes, "Invoker"], "bytes | Encoder"]
 
 
 F = TypeVar("F", bound=Callable[..., Any])
@@ -320,13 +324,22 @@ class Servant(ABC):  # noqa: B024 - generated subclasses declare the abstract me
 
     def _invoke(self, operation: str, body: bytes, invoker: Invoker) -> Reply:
         """Run one request: a reply, whatever the implementation did or raised."""
+        result = self._result(operation, body, invoker)
+        if isinstance(result, Reply):
+            return result
+        return Reply(ReplyStatus.OK, result.value() if isinstance(result, Encoder) else result)
+
+    def _result(self, operation: str, body: bytes, invoker: Invoker) -> Reply | Encoder | bytes:
+        """Run one request: an ok result as the skeleton gave it (its encoder, whose parts a
+        transport may copy straight into shared memory, never joined into one body), or a
+        reply: an exception, whatever the implementation did or raised."""
         handler = self._dispatch.get(operation)
         if handler is None:
             return system_exception_reply(
                 BAD_OPERATION(f"{self._repo_id} has no operation '{operation}'")
             )
         try:
-            return Reply(ReplyStatus.OK, handler(self, body, invoker))
+            return handler(self, body, invoker)
         except UserException as exc:
             return _user_exception_reply(operation, exc)
         except SystemException as exc:

@@ -156,6 +156,19 @@ def holds_open(pid: int, their_fd: int, fd: int) -> bool:
     return (info.st_dev, info.st_ino) == (mine.st_dev, mine.st_ino)
 
 
+def unmap(fd: int, mapping: mmap.mmap, *views: memoryview) -> None:
+    """Let a mapping go: release its `views`, unmap it and close `fd`, its file, each step
+    whatever the one before did (a view still exported keeps the mapping until it goes). The
+    one way segments and credit tables (`events.credits`) are closed."""
+    for view in views:
+        with contextlib.suppress(Exception):
+            view.release()
+    with contextlib.suppress(Exception):
+        mapping.close()
+    with contextlib.suppress(OSError):
+        os.close(fd)
+
+
 def _lock(fd: int, kind: int, start: int, cmd: int) -> int:
     """An OFD lock request of one byte at `start`; the lock type the kernel answers."""
     answer = fcntl.fcntl(fd, cmd, _FLOCK.pack(kind, os.SEEK_SET, start, 1, 0))
@@ -320,9 +333,7 @@ class Ring:
             if self.closed:
                 return
             self.closed = True
-            self._mem.release()
-            self._map.close()
-            os.close(self.fd)
+            unmap(self.fd, self._map, self._mem)
 
 
 class Segment:
@@ -445,14 +456,7 @@ class Segment:
 
     def close(self) -> None:
         self.closed = True
-        with contextlib.suppress(Exception):
-            self._readonly.release()
-        with contextlib.suppress(Exception):
-            self.mem.release()
-        with contextlib.suppress(Exception):
-            self._map.close()
-        with contextlib.suppress(OSError):
-            os.close(self.fd)
+        unmap(self.fd, self._map, self._readonly, self.mem)
 
 
 class Segments:

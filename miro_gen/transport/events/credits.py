@@ -22,7 +22,6 @@ away with the last process that has it open. This module owns its bytes; no sock
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
 import mmap
 import os
@@ -113,12 +112,7 @@ class CreditTable:
         if self.closed:
             return
         self.closed = True
-        with contextlib.suppress(Exception):
-            self._mem.release()
-        with contextlib.suppress(Exception):
-            self._map.close()
-        with contextlib.suppress(OSError):
-            os.close(self.fd)
+        shm.unmap(self.fd, self._map, self._mem)
 
 
 class CreditReader:
@@ -172,12 +166,7 @@ class CreditReader:
 
     def close(self) -> None:
         self.closed = True
-        with contextlib.suppress(Exception):
-            self._mem.release()
-        with contextlib.suppress(Exception):
-            self._map.close()
-        with contextlib.suppress(OSError):
-            os.close(self.fd)
+        shm.unmap(self.fd, self._map, self._mem)
 
 
 def parse_subscription(marker: bytes, whole: bytes) -> tuple[tuple[int, int, int], bytes] | None:

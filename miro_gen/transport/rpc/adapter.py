@@ -12,7 +12,8 @@ names); a request that waited for a free thread until its caller stopped waiting
 Requests waiting for a thread are bounded in number and bytes; a reply larger than the maximum
 message size becomes MARSHAL. An ok reply of `shm.THRESHOLD` bytes or more to a caller on this
 host that takes them goes through the adapter's pool of shared memory (`rpc.shared`) when a
-slot is free.
+slot is free, the skeleton's encoder copied straight in; a caller's request body in its own
+pool is copied out as it is received (a MARSHAL, completed NO, when it cannot be read).
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from miro_gen.exceptions import (
     CompletionStatus,
 )
 from miro_gen.log import PeerWarnings, logger
+from miro_gen.runtime.cdr import Encoder
 from miro_gen.runtime.rpc import (
     Invoker,
     Reply,
@@ -44,7 +46,7 @@ from miro_gen.transport.rpc import frames
 from miro_gen.transport.rpc.caller import Caller, caller_of, serving
 from miro_gen.transport.rpc.dispatch import Dispatcher, Peer
 from miro_gen.transport.rpc.objects import ObjectTable
-from miro_gen.transport.rpc.shared import ReplyPool
+from miro_gen.transport.rpc.shared import ReplyPool, SharedRequests, server_marker, unreadable
 
 _log = logger("MIRO")
 _peer_warnings = PeerWarnings(_log)  # what peers send: rate-limited, with counts
@@ -84,8 +86,13 @@ class ObjectAdapter(ObjectTable):
         self.socket.setsockopt(zmq.RCVHWM, hwm)
         self.socket.setsockopt(zmq.SNDHWM, hwm)
         self.max_message_size = sockets.policy(reactor.context).max_message_size
-        # large replies to callers on this host (none mapped before the first)
+        # large replies to callers on this host (none mapped before the first), and large
+        # requests from them, in their pools: it says so in its routing id, which each caller
+        # learns in the connection's handshake
         self.pool = ReplyPool(self.max_message_size) if shm.enabled() else None
+        self.requests = SharedRequests() if self.pool is not None else None
+        if self.requests is not None:
+            self.socket.setsockopt(zmq.ROUTING_ID, server_marker())
         self.socket.bind(bind)
         self.bound = self.socket.getsockopt_string(zmq.LAST_ENDPOINT)  # what it listens on
         self.also_bound = list(also_bind(self.bound)) if also_bind is not None else []
@@ -126,6 +133,13 @@ class ObjectAdapter(ObjectTable):
         except frames.FrameError as e:
             _peer_warnings.warning("dropped a request: %s", e)
             return None
+        if req.shared:  # the body is in the caller's pool: copied out now, its slot back
+            data = self._shared_body(routing, body)
+            if data is None:
+                return _reply_frames(
+                    routing, req, system_exception_reply(unreadable(req.operation))
+                )
+            body = data
         servant = self.servant(req.key)
         if servant is None:
             missing = OBJECT_NOT_EXIST(f"no object with key {req.key!r} at {self.endpoint}")
@@ -143,6 +157,13 @@ class ObjectAdapter(ObjectTable):
         caller = None if peer is None else caller_of(*peer)
         return _Call(self, servant, routing, req, body, kind, quick, caller)
 
+    def _shared_body(self, routing: bytes, descriptor: bytes) -> bytes | None:
+        """A request body in the shared memory of the caller `routing`; None when it cannot be
+        read (never part of one: the generation is checked after the copy)."""
+        if self.requests is None or self.pool is None or not self.pool.takes(routing):
+            return None  # not a caller of this host, or shared memory is off here
+        return self.requests.body(descriptor, self.max_message_size)
+
     def drain(self, timeout: float) -> bool:
         """Refuse new requests (TRANSIENT, completed NO) and wait up to `timeout` seconds for
         the calls being served to finish and be answered; whether they all were."""
@@ -156,6 +177,8 @@ class ObjectAdapter(ObjectTable):
             self._dispatcher.close()
         if self.pool is not None:  # callers that mapped it keep what they map
             self.pool.close()
+        if self.requests is not None:
+            self.requests.close()
 
 
 class _Call:
@@ -202,31 +225,42 @@ class _Call:
 
     def run(self) -> list[bytes] | None:
         req = self.request
+        servant, invoker = self.servant, self.adapter.invoker
         if self.caller is None:
-            reply = self.servant._invoke(req.operation, self.body, self.adapter.invoker)
+            result = servant._result(req.operation, self.body, invoker)
         else:  # a servant that asks who calls (transport.rpc.caller.current)
             with serving(self.caller):
-                reply = self.servant._invoke(req.operation, self.body, self.adapter.invoker)
+                result = servant._result(req.operation, self.body, invoker)
+        if isinstance(result, Reply):  # an exception
+            return self._framed(result, len(result.body))
+        size = result.size if isinstance(result, Encoder) else len(result)
+        pool = self.adapter.pool
+        if (
+            pool is not None
+            and shm.THRESHOLD <= size <= self.adapter.max_message_size
+            and not req.oneway
+            and pool.takes(self.peer)
+        ):  # the encoder's parts copied straight into a slot: never joined into one body
+            if not isinstance(result, Encoder) and type(result) is not bytes:
+                result = bytes(result)  # a hand-written table's bytearray or view
+            descriptor = pool.put(result)
+            if descriptor is not None:
+                return [self.peer, frames.shared_reply_header(req.request_id), descriptor]
+        body = result.value() if isinstance(result, Encoder) else result
+        return self._framed(Reply(ReplyStatus.OK, body), size)
+
+    def _framed(self, reply: Reply, size: int) -> list[bytes] | None:
+        """The frames of `reply` (of `size` bytes), or of MARSHAL when it is larger than the
+        maximum message size."""
         limit = self.adapter.max_message_size
-        if len(reply.body) > limit:
+        if size > limit:
             too_large = MARSHAL(
-                f"the reply to {req.operation} is {len(reply.body)} bytes, more than the "
+                f"the reply to {self.request.operation} is {size} bytes, more than the "
                 f"maximum message size ({limit}; --max-message-size)",
                 completed=CompletionStatus.YES,
             )
             reply = system_exception_reply(too_large)
-        pool = self.adapter.pool
-        if (
-            pool is not None
-            and reply.status is ReplyStatus.OK
-            and len(reply.body) >= shm.THRESHOLD
-            and not req.oneway
-            and pool.takes(self.peer)
-        ):
-            descriptor = pool.put(bytes(reply.body))
-            if descriptor is not None:
-                return [self.peer, frames.shared_reply_header(req.request_id), descriptor]
-        return _reply_frames(self.peer, req, reply)
+        return _reply_frames(self.peer, self.request, reply)
 
     def refuse(self, why: str = "is overloaded") -> list[bytes] | None:
         busy = TRANSIENT(f"{self.adapter.endpoint} {why}", completed=CompletionStatus.NO)

@@ -19,7 +19,9 @@ from miro_gen.runtime.rpc import ReplyStatus as Status
 VERSION: Final = 1
 ZERO_COPY_MIN: Final = 64 * 1024  # bytes of a body from which it is sent without a copy
 MAX_NAME: Final = 0xFFFF  # bytes of an object key, operation name or repository id
-SHARED: Final = 1  # reply flag: the body frame is a descriptor of the body in shared memory
+SHARED: Final = (
+    1  # request or reply flag: the body frame is a descriptor of the body in shared memory
+)
 
 
 class Kind(enum.IntEnum):
@@ -70,6 +72,7 @@ class Request(NamedTuple):
     operation: str
     timeout_ms: int = 0  # how long the caller waits (0: no limit); late requests are skipped
     oneway: bool = False
+    shared: bool = False  # the body frame is a descriptor of the body in the caller's pool
 
 
 class Reply(NamedTuple):
@@ -79,7 +82,8 @@ class Reply(NamedTuple):
 
 
 def encode_request(r: Request) -> bytes:
-    return request_header(request_tail(r.key, r.operation), r.request_id, r.timeout_ms, r.oneway)
+    tail = request_tail(r.key, r.operation)
+    return request_header(tail, r.request_id, r.timeout_ms, r.oneway, r.shared)
 
 
 def request_tail(key: bytes, operation: str) -> bytes:
@@ -91,15 +95,18 @@ def request_tail(key: bytes, operation: str) -> bytes:
     return _U16.pack(len(key)) + key + _U16.pack(len(op)) + op
 
 
-def request_header(tail: bytes, request_id: int, timeout_ms: int, oneway: bool = False) -> bytes:
+def request_header(
+    tail: bytes, request_id: int, timeout_ms: int, oneway: bool = False, shared: bool = False
+) -> bytes:
     """A request header: `encode_request` with the tail built beforehand."""
     kind = _ONEWAY_KIND if oneway else _REQUEST_KIND
-    return _REQUEST_PREFIX.pack(VERSION, kind, 0, 0, timeout_ms, request_id) + tail
+    flags = SHARED if shared else 0
+    return _REQUEST_PREFIX.pack(VERSION, kind, flags, 0, timeout_ms, request_id) + tail
 
 
 def decode_request(frame: bytes) -> Request:
     try:
-        version, kind, _, _, timeout_ms, request_id = _REQUEST_PREFIX.unpack_from(frame)
+        version, kind, flags, _, timeout_ms, request_id = _REQUEST_PREFIX.unpack_from(frame)
         if version != VERSION:
             _check_version(version)
         if kind != _REQUEST_KIND and kind != _ONEWAY_KIND:
@@ -110,7 +117,8 @@ def decode_request(frame: bytes) -> Request:
             target = _target(tail)
     except (StructError, UnicodeDecodeError) as e:
         raise FrameError(f"malformed request header: {e}") from None
-    return Request(request_id, target[0], target[1], timeout_ms, kind == _ONEWAY_KIND)
+    oneway = kind == _ONEWAY_KIND
+    return Request(request_id, target[0], target[1], timeout_ms, oneway, bool(flags & SHARED))
 
 
 _targets: dict[bytes, tuple[bytes, str]] = {}  # request tails seen, decoded (a few per object)

@@ -28,7 +28,11 @@ process that sends or receives such bodies keeps megabyte buffers in its heap
 A connection to a server on this host announces in its routing id that it takes large replies
 in the server's shared memory (`rpc.shared`). A generated stub decodes such a reply's body in
 place (the thread's lane holds the slot until its next call); any other caller gets it copied
-out of the slot once, and the slot goes back to the server at once.
+out of the slot once, and the slot goes back to the server at once. A server that takes large
+request bodies in its callers' shared memory says so in its own routing id, which a connection
+learns with its first reply: from then on a request body of `shm.THRESHOLD` bytes or more goes
+into this invoker's pool and a descriptor of it in the frame (in frames when no slot is free,
+or again in frames when the server answers it could not read it).
 
 Sockets come from `transport.sockets` (limits, heartbeats, CURVE): a request larger than the
 maximum message size is MARSHAL before anything is sent, and a server that refuses the
@@ -52,10 +56,16 @@ from miro_gen.log import PeerWarnings, logger
 from miro_gen.runtime import views
 from miro_gen.runtime.cdr import ObjectRef
 from miro_gen.runtime.rpc import Reply, ReplyStatus, Servant, decoded_at_once
-from miro_gen.transport import sockets
+from miro_gen.transport import shm, sockets
 from miro_gen.transport.buffers import keep_large_buffers
 from miro_gen.transport.rpc import frames
-from miro_gen.transport.rpc.shared import SharedReplies, routing_id
+from miro_gen.transport.rpc.shared import (
+    ReplyPool,
+    SharedReplies,
+    is_unreadable,
+    routing_id,
+    takes_requests,
+)
 
 _log = logger("MIRO")
 _peer_warnings = PeerWarnings(_log)  # what peers send: rate-limited, with counts
@@ -100,6 +110,9 @@ class _Connection:
         identity = routing_id(endpoint)  # large replies in shared memory, on this host
         if identity is not None:
             s.setsockopt(zmq.ROUTING_ID, identity)
+        # Whether the server takes large request bodies in this caller's pool: not known
+        # before its first reply (its routing id, from the handshake); never off this host.
+        self.takes_requests: bool | None = None if identity is not None else False
         s.setsockopt(zmq.IMMEDIATE, 1)
         s.setsockopt(zmq.RECONNECT_IVL, -1)
         with contextlib.suppress(zmq.ZMQError):  # denied (no key, the cap): do not retry
@@ -174,6 +187,7 @@ class ZmqInvoker:
         self._lock = threading.Lock()
         self._closed = False
         self.shared = SharedReplies()  # servers' pools of large replies, mapped
+        self.requests: ReplyPool | None = None  # this caller's pool of large requests, once used
 
     # ---- Invoker protocol -----------------------------------------------------------------------
 
@@ -211,14 +225,25 @@ class ZmqInvoker:
         if tail is None:
             tail = self._tail(ref.key, operation)
         request_id = next(self._ids)
-        header = frames.request_header(tail, request_id, int(wait * 1000), oneway)
-        if not _sent(conn.socket, header, body):
+        descriptor = None
+        if conn.takes_requests and not oneway and len(body) >= shm.THRESHOLD:
+            descriptor = self._put_request(body, limit)  # None: no free slot, in frames
+        if descriptor is not None:
+            header = frames.request_header(tail, request_id, int(wait * 1000), False, True)
+            sent = _sent(conn.socket, header, descriptor)
+        else:
+            header = frames.request_header(tail, request_id, int(wait * 1000), oneway)
+            sent = _sent(conn.socket, header, body)
+        if not sent:
             # Nothing was sent: the connection was lost since the last call (its server was
             # stopped or killed). Once more on a fresh connection, which finds a server
-            # restarted at the same endpoint, or fails as a refused one does.
+            # restarted at the same endpoint, or fails as a refused one does; in frames (the
+            # server there may not take shared memory; a slot written goes back at its lease).
             self._drop(conn)
             conn = self._connection(endpoint)
             self._connect(conn, operation, start + wait if wait else start + CONNECT_TIMEOUT)
+            header = frames.request_header(tail, request_id, int(wait * 1000), oneway)
+            descriptor = None
             if not _sent(conn.socket, header, body):
                 self._drop(conn)
                 raise TRANSIENT(f"cannot send {operation} to {endpoint}")
@@ -226,7 +251,24 @@ class ZmqInvoker:
             return None
         if wait and wait * 1000 < conn.rcvtimeo:
             conn.set_rcvtimeo(int(wait * 1000) + 1)
-        return self._await(conn, request_id, operation, start + wait if wait else float("inf"))
+        reply = self._await(conn, request_id, operation, start + wait if wait else float("inf"))
+        if descriptor is not None and is_unreadable(reply):
+            # The server could not read the body in this caller's pool (nothing ran): in
+            # frames from now on, this call again first.
+            conn.takes_requests = False
+            return self.invoke(ref, operation, body, timeout=timeout)
+        return reply
+
+    def _put_request(self, body: bytes, limit: int) -> bytes | None:
+        """`body` written into a free slot of this caller's pool (mapped at its first large
+        request): the descriptor to send instead; None when no slot is free."""
+        pool = self.requests
+        if pool is None:
+            with self._lock:
+                pool = self.requests
+                if pool is None:
+                    pool = self.requests = ReplyPool(limit, name="miro-requests")
+        return pool.put(body if type(body) is bytes else bytes(body))  # (any buffer, by hand)
 
     def _connect(self, conn: _Connection, operation: str, deadline: float) -> None:
         """Wait for the connection's handshake until `deadline` (or the connect timeout);
@@ -256,6 +298,8 @@ class ZmqInvoker:
         while True:
             try:
                 frame = _recv(sock, 0, False)
+                if conn.takes_requests is None:  # the server's routing id, from the handshake
+                    conn.takes_requests = _takes_requests(frame)
                 parts: list[bytes | memoryview] = [frame.bytes]
                 while frame.more:
                     frame = _recv(sock, _NOBLOCK, False)
@@ -301,7 +345,10 @@ class ZmqInvoker:
                 f"{operation}: no reply from {conn.endpoint} in time",
                 completed=CompletionStatus.MAYBE,
             )
-        conn.set_rcvtimeo(min(CHECK_INTERVAL_MS, int(left * 1000) + 1))
+        # (a call without a time limit has an infinite deadline: no int of that)
+        conn.set_rcvtimeo(
+            CHECK_INTERVAL_MS if left * 1000 >= CHECK_INTERVAL_MS else int(left * 1000) + 1
+        )
 
     def _other_reply(
         self, conn: _Connection, parts: list[bytes | memoryview], request_id: int
@@ -356,6 +403,16 @@ class ZmqInvoker:
         for conn in conns:
             conn.close()
         self.shared.close()
+        if self.requests is not None:
+            self.requests.close()
+
+
+def _takes_requests(frame: zmq.Frame) -> bool:
+    """Whether the server a frame came from takes large request bodies in shared memory."""
+    try:
+        return takes_requests(str(frame.get("Identity")))
+    except zmq.ZMQError:  # no routing id: a server of an older version
+        return False
 
 
 def _sent(sock: zmq.Socket[Any], header: bytes, body: bytes) -> bool:

@@ -1,6 +1,8 @@
-"""Large replies through shared memory to callers on the server's host (docs/PROTOCOL.md,
-"Large replies in shared memory"): a server's pool of reply slots (`ReplyPool`) and a caller's
-mappings of its servers' pools (`SharedReplies`), over the rings of `transport.shm`.
+"""Large call bodies through shared memory between a caller and a server on one host
+(docs/PROTOCOL.md, "Large replies in shared memory", "Large requests in shared memory"): a
+pool of slots (`ReplyPool`: a server's for its replies, a caller's for its requests), a
+caller's mappings of its servers' pools (`SharedReplies`) and a server's of its callers'
+(`SharedRequests`), over the rings of `transport.shm`.
 
 A caller that may map this host's segments (`shm.host_key`: same boot, PID namespace and
 user) says so in its connection's routing id, which starts with `caller_marker()`; servers of
@@ -17,16 +19,25 @@ as before.
 from __future__ import annotations
 
 import os
+import struct
 import threading
+import time
 import weakref
 from typing import Final
 
-from miro_gen.exceptions import COMM_FAILURE, CompletionStatus
+from miro_gen.exceptions import COMM_FAILURE, MARSHAL, CompletionStatus
+from miro_gen.runtime.cdr import header_endianness, pair
+from miro_gen.runtime.rpc import Reply, ReplyStatus
 from miro_gen.transport import shm
 from miro_gen.transport.local import is_local_address
 
-SLOTS: Final = 16  # slots of a server's pool, by default (MIRO_SHM_CALL_SLOTS)
+SLOTS: Final = 16  # slots of a server's or a caller's pool, by default (MIRO_SHM_CALL_SLOTS)
 LEASE: Final = 5.0  # seconds a reply's slot waits for its caller to hold it (MIRO_SHM_LEASE)
+# The minor code of the MARSHAL (completed NO) a server answers a request with whose body it
+# could not read in its caller's shared memory: the caller sends it again in frames.
+UNREADABLE_MINOR: Final = 0x4D470002
+SWEEP_EVERY: Final = 1.0  # seconds between a server's looks for callers gone (their pools)
+_SYSTEM_BODY = pair("II")  # a system exception's minor code and completion status
 
 
 def caller_marker() -> bytes:
@@ -34,6 +45,22 @@ def caller_marker() -> bytes:
     memory (empty where it may not)."""
     key = shm.host_key()
     return b"\x03shm-" + key + b"\0" if key and shm.enabled() else b""
+
+
+def server_marker() -> bytes:
+    """A server's own routing id when it takes large request bodies in its callers' shared
+    memory (empty where it may not): ZeroMQ hands it to every caller in the connection's
+    handshake (its `Identity` property), so a caller learns it from its first reply. Text
+    without NUL, as such a property is read back."""
+    key = shm.host_key()
+    return b"miro-shm-requests-" + key if key and shm.enabled() else b""
+
+
+def takes_requests(identity: str) -> bool:
+    """Whether a server whose connection says `identity` (its routing id) takes large request
+    bodies in this caller's shared memory."""
+    marker = server_marker()
+    return bool(marker) and identity.encode("utf-8", "replace") == marker
 
 
 def routing_id(endpoint: str) -> bytes | None:
@@ -62,10 +89,13 @@ def lease() -> float:
 
 
 class ReplyPool:
-    """A server's slots for large replies to callers on its host, `slots` (MIRO_SHM_CALL_SLOTS)
-    of up to `slot_size` bytes (the largest message), mapped when the first such reply is due."""
+    """A server's slots for large replies to callers on its host, or a caller's for its large
+    requests (`name` "miro-requests"), `slots` (MIRO_SHM_CALL_SLOTS) of up to `slot_size` bytes
+    (the largest message), mapped when the first such body is due. Each slot is for the one
+    reader its descriptor goes to, until it gives the slot back or its lease runs out."""
 
-    def __init__(self, slot_size: int) -> None:
+    def __init__(self, slot_size: int, name: str = "miro-calls") -> None:
+        self.name = name
         self.slot_size = slot_size
         self.slots = shm.slot_count("MIRO_SHM_CALL_SLOTS", SLOTS)
         self._marker = caller_marker()
@@ -78,16 +108,17 @@ class ReplyPool:
         """Whether the caller with routing id `peer` may take replies in this pool."""
         return bool(self._marker) and peer.startswith(self._marker)
 
-    def put(self, body: bytes) -> bytes | None:
-        """`body` written into a free slot: the descriptor's bytes; None when no slot is free
-        (or the pool is closed, or the body too large for a slot)."""
+    def put(self, body: bytes | shm.Encoded) -> bytes | None:
+        """`body` (bytes, or an encoder's value, its parts copied straight in: never joined
+        first) written into a free slot: the descriptor's bytes; None when no slot is free (or
+        the pool is closed, or the body too large for a slot)."""
         ring = self._ring
         if ring is None:
             with self._lock:
                 ring = self._ring
                 if ring is None:
                     ring = self._ring = shm.Ring(
-                        self.slot_size, self.slots, lease=lease(), name="miro-calls"
+                        self.slot_size, self.slots, lease=lease(), name=self.name
                     )
         d = ring.put(body, wait=0.0)
         if d is None:
@@ -206,3 +237,67 @@ class SharedReplies:
         for m in maps:
             m.held = None
             m.segments.close()
+
+
+def unreadable(operation: str) -> MARSHAL:
+    """What a server answers a request whose body it cannot read in its caller's shared
+    memory: the call did not run."""
+    return MARSHAL(
+        f"{operation}: cannot read the request body in the caller's shared memory",
+        UNREADABLE_MINOR,
+        CompletionStatus.NO,
+    )
+
+
+def is_unreadable(reply: Reply) -> bool:
+    """Whether `reply` is a server's `unreadable` (then the request is sent again in frames)."""
+    if reply.status != ReplyStatus.SYSTEM_EXCEPTION or reply.repo_id != MARSHAL._repo_id:
+        return False
+    try:
+        minor, completed = _SYSTEM_BODY[header_endianness(reply.body)].unpack_from(reply.body, 4)
+    except Exception:
+        return False
+    return bool(minor == UNREADABLE_MINOR and completed == CompletionStatus.NO)
+
+
+class SharedRequests:
+    """A server's mappings of its callers' pools (at most `shm.Segments.MAX`: then the oldest
+    is unmapped), from which the thread that receives a request copies its body out at once,
+    giving the slot back; those of callers that are gone are unmapped at the first request
+    `SWEEP_EVERY` seconds after the last look."""
+
+    def __init__(self) -> None:
+        self._segments = shm.Segments(keep_all=False, replies=True)
+        self._lock = threading.Lock()
+        self._swept = time.monotonic()
+        self.read = 0  # request bodies read from callers' shared memory
+        self.refused = 0  # descriptors that could not be read (the caller told: unreadable)
+
+    def body(self, descriptor: bytes, limit: int) -> bytes | None:
+        """The request body `descriptor` names, copied out, its generation checked after the
+        copy; None when it cannot be read whole: a malformed descriptor, more than `limit`
+        bytes (the maximum message size), a caller's memory that cannot be mapped (it is gone,
+        or not on this host after all), or a slot written again since (read after its lease)."""
+        try:
+            d = shm.Descriptor(*shm.DESCRIPTOR.unpack(descriptor))
+        except struct.error:
+            d = None
+        data = None
+        if d is not None and d.length <= limit:
+            with self._lock:
+                now = time.monotonic()
+                if now - self._swept >= SWEEP_EVERY:
+                    self._swept = now
+                    self._segments.sweep()
+                segment = self._segments.segment(d)
+                if segment is not None and segment.valid(d):
+                    data = segment.copy(d)
+        if data is None:
+            self.refused += 1
+        else:
+            self.read += 1
+        return data
+
+    def close(self) -> None:
+        with self._lock:
+            self._segments.close()

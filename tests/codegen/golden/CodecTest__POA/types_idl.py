@@ -60,7 +60,7 @@ class Holder(_rpc.Servant):
         """CodecTest::Holder::get"""
         raise NotImplementedError  # a servant's super() call: NO_IMPLEMENT for the client
 
-    def _op_get(self, _data: bytes, _inv: _rpc.Invoker) -> bytes:
+    def _op_get(self, _data: bytes, _inv: _rpc.Invoker) -> _cdr.Encoder:
         try:
             _e, _off = _cdr.body_header(_data)
             _off += (4 - _off) & 3
@@ -78,7 +78,7 @@ class Holder(_rpc.Servant):
                 raise _cdr.nested_error("CodecTest::Holder::get result", _x) from None
         except _cdr.ResultErrors as _x:
             raise _cdr.result_error("CodecTest::Holder::get", _x) from None
-        return _buf.value()
+        return _buf  # joined by the transport, or copied part by part into shared memory
 
     _dispatch = _rpc.merge_dispatch(
         {
