@@ -100,8 +100,12 @@ class ZenohAdapter(ObjectTable):
 
     def _start_reader(self) -> None:
         """One more reader thread (with the lock held)."""
-        self._readers += 1
-        threading.Thread(target=self._read, name="miro-zenoh-call", daemon=True).start()
+        try:
+            threading.Thread(target=self._read, name="miro-zenoh-call", daemon=True).start()
+        except RuntimeError as e:  # the interpreter is exiting: the readers there are do
+            _log.debug("no more reader threads: %s", e)
+        else:
+            self._readers += 1
 
     def _read(self) -> None:
         """A reader: take queries from Zenoh's channel and serve them, until the queryable
