@@ -117,7 +117,7 @@ class ZenohAdapter(ObjectTable):
             except zenoh.ZError:  # undeclared: no more queries
                 return
             self._serve(query, time.monotonic())
-            del query  # finalizes the query unless it waits for a slot
+            del query
 
     def _serve(self, query: Any, received: float) -> None:
         """Answer what needs no servant, run a `@nonblocking` operation, and any other in a
@@ -148,8 +148,8 @@ class ZenohAdapter(ObjectTable):
         except Exception:
             _log.exception("serving a call failed")
         finally:
-            del query
             if not handed:
+                query.drop()  # its caller hears that no more replies come
                 self._done()
 
     def _in_slot(self, call: _Call | None) -> None:
@@ -164,7 +164,8 @@ class ZenohAdapter(ObjectTable):
             except Exception:
                 _log.exception("serving a call failed")
             finally:
-                del query, call  # finalizes the query: its caller hears that no more come
+                query.drop()  # now, not when the last reference goes: its caller hears the end
+                del query, call
                 self._done()
             with self._lock:
                 if self._waiting:
