@@ -5,13 +5,13 @@ run on loopback.
 
 Calls: a generated stub's getData() to a server in another process, p50 of the round trip, (1)
 over the Zenoh backbone (`--transport zenoh`, through the router in `miro naming --zenoh`), and
-the same to a servant whose getData is marked `@nonblocking` (the server runs it on Zenoh's
-thread instead of handing it to a worker thread, as raw Zenoh's callback replies), (2) a raw
-Zenoh get() to a queryable in another process through the same router, replying the same bytes
-(its callback replies at once, as plain Zenoh code does), and (3) over the ZeroMQ backbone
-(`miro naming`, direct connection). Events: ExampleEvents pushed by a supplier and counted by a
-keep-all consumer of another session (both in this process, so both sides share one interpreter,
-as the raw pairs do): events/s over the Zenoh backbone; raw Zenoh put/subscribe through the same
+the same to a servant whose getData is marked `@nonblocking` (run without taking one of the
+server's slots), (2) a raw Zenoh get() to a queryable in another process through the same
+router, replying the same bytes (its callback replies at once, as plain Zenoh code does), and
+(3) over the ZeroMQ backbone (`miro naming`, direct connection); the four rows' calls are taken
+in turns, one of each. Events: ExampleEvents pushed by a supplier and counted by a keep-all
+consumer of another session (both in this process, so both sides share one interpreter, as the
+raw pairs do): events/s over the Zenoh backbone; raw Zenoh put/subscribe through the same
 router, one put per event, of the event's CDR bytes encoded once beforehand and not decoded
 ("bytes"), or encoded for each put and decoded in the subscriber's callback with the same
 generated code ("typed": what a Zenoh user needs to get the event a consumer's handler gets; the
@@ -115,6 +115,21 @@ def time_calls(call: object, n: int) -> list[float]:
         t = clock()
         call()  # type: ignore[operator]
         out.append(clock() - t)
+    return out
+
+
+def time_interleaved(calls: list[Any], n: int) -> list[list[float]]:
+    """Round trips of each of `calls`, `n` each, taken in turns (one call of each, the order
+    reversed every other turn), so that a change of the machine's load hits every row alike:
+    one row measured after the other moved their ratio by 0.3 between repeats."""
+    clock = time.perf_counter
+    out: list[list[float]] = [[] for _ in calls]
+    pairs = list(zip(calls, out, strict=True))
+    for i in range(n):
+        for call, times in pairs if i % 2 else pairs[::-1]:
+            t = clock()
+            call()
+            times.append(clock() - t)
     return out
 
 
@@ -305,10 +320,8 @@ def main() -> int:
         }
         call_ratio, quick_ratio, event_ratio, typed_ratio = [], [], [], []
         for _ in range(args.runs):
-            a = p50(time_calls(z_stub.getData, args.calls))
-            q = p50(time_calls(q_stub.getData, args.calls))
-            b = p50(time_calls(raw_get, args.calls))
-            c = p50(time_calls(m_stub.getData, args.calls))
+            a, q, b, c = map(p50, time_interleaved(
+                [z_stub.getData, q_stub.getData, raw_get, m_stub.getData], args.calls))  # fmt: skip
             rows["ours-zenoh"].append(a * 1e6)
             rows["ours-quick"].append(q * 1e6)
             rows["raw-zenoh"].append(b * 1e6)

@@ -146,9 +146,9 @@ class _QuickBusy(_Busy):
 def test_a_nonblocking_method_is_answered_while_every_worker_blocks(
     naming: NamingProcess,
 ) -> None:
-    """An operation marked @nonblocking runs on Zenoh's thread, as over ZeroMQ on the thread
-    that received it: it is answered while every worker of the server is held by a servant
-    that blocks, where an unmarked one waits for a worker (its caller gives up)."""
+    """An operation marked @nonblocking runs on the thread that read it, as over ZeroMQ: it is
+    answered while every worker slot of the server is held by a servant that blocks, where an
+    unmarked one waits for a slot (its caller gives up)."""
     release = threading.Event()
     plain, quick = _Busy(release), _QuickBusy(release)
     server = RunningServer(naming.endpoint, "busy", "--transport", "zenoh")
