@@ -25,6 +25,8 @@ kept for the event list (`EventHistory`), and the last of each topic in `latest`
 from __future__ import annotations
 
 import contextlib
+import gc
+import sys
 import threading
 import time
 from collections import deque
@@ -44,6 +46,7 @@ MAX_WAIT = 0.1  # seconds the play thread sleeps at most (its clock ticks, a clo
 # the same machine may want.
 SPIN = 0.0002
 DEFAULT_HISTORY = 100
+SWITCH_INTERVAL = 0.0001  # seconds a thread holds the interpreter before another may take it
 RATES = (1 / 16, 1 / 8, 1 / 4, 1 / 2, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0)  # the speed dial's steps
 SKIP = 1 / 20  # of the cut's length: how far a skip (shift+arrow) seeks
 MAX_HISTORY = 100_000
@@ -143,6 +146,18 @@ class EventHistory:
             rows = list(self._rows)
         excluded = self.files.excluded
         return [e for e in rows if e.name not in excluded] if excluded else rows
+
+
+def pace_process() -> None:
+    """Make this process fit to send events on time (`miro log play`, the window), once its
+    long-lived objects are made: the interpreter handed between threads within 0.1 ms (not
+    Python's default 5 ms), and those objects frozen out of the garbage collector. A full
+    collection otherwise walks every object of the program, 10 to 20 ms with the interpreter
+    held on whichever thread set it off (the one reading ahead, mostly), and the play thread
+    waits that long (bench/trace_replay.py); frozen, it walks what was made since."""
+    sys.setswitchinterval(SWITCH_INTERVAL)
+    gc.collect()
+    gc.freeze()
 
 
 def _spin(seconds: float) -> None:
