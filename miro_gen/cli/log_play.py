@@ -250,9 +250,11 @@ def _run(p: argparse.ArgumentParser, prog: str, argv: Sequence[str], ns: Any, fi
         span = max(1, end - start)
         at = player.log_now() - start
         state = " paused (space: resume, s: step)" if player.paused else ""
+        pace = player.pace()  # a keep-all consumer holds it back: the rate it really plays at
+        rate = f"x{player.rate:g}" if pace is None else f"x{pace:.2g} (held back, x{player.rate:g})"
         status.update(
             f"{bar(at / span)} {at / 1e9:8.2f}/{span / 1e9:.2f} s  {player.sent} events  "
-            f"x{player.rate:g}{state}"
+            f"{rate}{state}"
         )
 
     quit_now = threading.Event()
