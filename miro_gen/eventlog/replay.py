@@ -13,9 +13,10 @@ in one frame per run of events of one topic, type hash and supplier.
 
 Keep-all consumers of this host return credits (transport.events.credits), and the replay
 honours them as suppliers do, through the same `TopicCredits` (one per replayed topic and
-recorded supplier): before a direct send, the calling thread (the player's) waits until the
-frame may go, at most shm.WAIT_KEEP_ALL seconds for a consumer that returns none (dead,
-stopped), which is then not waited for until it returns a credit again. So a keep-all
+recorded supplier, sharing one window: the channel's queue toward a consumer holds all their
+frames): before a direct send, the calling thread (the player's) waits until the frame may
+go, at most shm.WAIT_KEEP_ALL seconds for a consumer that returns none (dead, stopped), which
+is then not waited for until it returns a credit again. So a keep-all
 consumer receives every replayed event, in order, at any rate: the player's clock waits for
 it instead (eventlog.player). Keep-last consumers are not waited for.
 """
@@ -152,6 +153,11 @@ class ReplaySupplier(StructuredPushSupplier):
         credits = self._credits.get(key)
         if credits is None:
             credits = self._credits[key] = TopicCredits(frame, first.type_name, self.window)
+            # The channel's queue toward a consumer holds every topic's frames: its window is
+            # shared by the topics replayed (a log of many robots and types), not each's own.
+            share = max(1, self.window // len(self._credits))
+            for c in self._credits.values():
+                c.flow.window = share
         credits.update(self._keep_all, self._generation)
         return credits if credits.readers else None
 

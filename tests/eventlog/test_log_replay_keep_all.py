@@ -29,7 +29,7 @@ from miro_gen.transport.events.frames import topic
 
 pytestmark = pytest.mark.skipif(not shm.available(), reason="credits need Linux memfd")
 
-N = 4000  # events of robotA, 1 ms apart: 4 s of log, an eighth of a second at x32
+N = 4000  # events of robotA and robotB in turn, 1 ms apart: 4 s of log, 1/8 s at x32
 DELAY = "0.0003"  # s a slow consumer takes per event: 1.2 s for them all, ten times x32's pace
 
 
@@ -60,7 +60,7 @@ def spinner() -> Iterator[None]:
 
 
 class Counter:
-    """tests/procs/replay_counter.py on robotA's channel."""
+    """tests/procs/replay_counter.py on robotA's channel (robotB's too: the same)."""
 
     def __init__(self, naming: str, depth: int, delay: str = DELAY) -> None:
         self.proc = subprocess.Popen(
@@ -94,15 +94,16 @@ class Counter:
 
 @pytest.fixture
 def log(tmp_path: Path) -> Path:
-    return write_log(
-        tmp_path / "robotA.mcap", [("robotA", n, n) for n in range(N)], chunk_every=500
-    )
+    """Two robots in turn, 1 ms apart: two topics share the channel's queue toward a consumer."""
+    events = [("robotB" if n % 2 else "robotA", n // 2, n) for n in range(N)]
+    return write_log(tmp_path / "robots.mcap", events, chunk_every=500)
 
 
 def player_of(server: Server, log: Path, rate: float = 32.0) -> tuple[Routes, Player]:
-    """A player of `log` at `rate` into robotA/EventChannel, which it hosts."""
-    routes = Routes(server)
-    assert routes.connect(["robotA"]) == []
+    """A player of `log` at `rate` into one channel it hosts, bound as robotA/EventChannel
+    and robotB/EventChannel."""
+    routes = Routes(server, mode="unified")
+    assert routes.connect(["robotA", "robotB"]) == []
     files = FileSet()
     files.add(str(log))
     return routes, Player(files, routes.send, rate=rate)
@@ -112,7 +113,7 @@ def play(routes: Routes, player: Player, keep_all: int) -> None:
     """Play once a consumer subscribes, and `keep_all` keep-all consumers credit the topic."""
     supplier = routes.routes["robotA"].supplier
     frame = topic("robotA", "ExampleEvent")
-    eventually(lambda: routes.subscribed("robotA", "ExampleEvent"), 30)
+    eventually(lambda: routes.subscribed("robotB", "ExampleEvent"), 30)
     eventually(lambda: len(supplier._keep_all.matching(frame)) >= keep_all, 30)
     player.start()
     player.play()
