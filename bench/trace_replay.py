@@ -123,7 +123,19 @@ def trace_once(
         time.sleep(0.02)
     time.sleep(0.5)
     if freeze:
+        gc.collect()
+        started = time.perf_counter()
+        gc.collect()  # a full collection as the player's process had them (nothing to free)
+        before = time.perf_counter() - started
         pace_process()  # what `miro log play` does before it plays
+        started = time.perf_counter()
+        gc.collect()
+        after = time.perf_counter() - started
+        print(
+            f"  a full collection: {before * 1e3:.1f} ms before pace_process, "
+            f"{after * 1e3:.2f} ms after ({len(gc.get_objects())} objects tracked, "
+            f"{gc.get_freeze_count()} frozen)"
+        )
     else:  # what it did before
         gc.unfreeze()
         sys.setswitchinterval(SWITCH_INTERVAL)
