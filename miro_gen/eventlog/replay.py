@@ -16,9 +16,9 @@ honours them as suppliers do, through the same `TopicCredits` (one per replayed 
 recorded supplier, sharing one window: the channel's queue toward a consumer holds all their
 frames): before a direct send, the calling thread (the player's) waits until the frame may
 go, at most shm.WAIT_KEEP_ALL seconds for a consumer that returns none (dead, stopped), which
-is then not waited for until it returns a credit again. So a keep-all
-consumer receives every replayed event, in order, at any rate: the player's clock waits for
-it instead (eventlog.player). Keep-last consumers are not waited for.
+is then not waited for until it returns a credit again. So a keep-all consumer receives every
+replayed event, in order, at any rate: the player's clock waits for it instead
+(eventlog.player). Keep-last consumers are not waited for.
 """
 
 from __future__ import annotations
