@@ -52,7 +52,10 @@ MAX_WAIT = 0.1  # seconds the play thread sleeps at most (its clock ticks, a clo
 # the same machine may want.
 SPIN = 0.0002
 DEFAULT_HISTORY = 100
-HELD = 0.05  # seconds an event may leave after it was due before the clock waits for it
+# Seconds an event may leave after it was due before the clock waits for it. Shorter holds (a
+# keep-all consumer not scheduled for a while) are caught up, as a live supplier's queue would
+# be, so that the rest of the replay keeps its place in time; longer ones are not pretended away.
+HELD = 0.2
 HELD_SHOWN = 1.0  # seconds `held` stays true after the clock last waited
 SWITCH_INTERVAL = 0.0001  # seconds a thread holds the interpreter before another may take it
 RATES = (1 / 16, 1 / 8, 1 / 4, 1 / 2, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0)  # the speed dial's steps
