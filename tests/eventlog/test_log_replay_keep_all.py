@@ -195,7 +195,7 @@ def test_the_clock_waits_for_a_send_that_holds_the_player(tmp_path: Path) -> Non
     def send(event: Event) -> None:
         sent.append(event.message.sequence)
         if event.message.sequence == 5:
-            time.sleep(0.5)  # ten times HELD: held back, however loaded the machine
+            time.sleep(0.5)  # over twice HELD: held back, however loaded the machine
 
     player = Player(files, send)
     try:
