@@ -31,7 +31,6 @@ for a second, and `pace()` the log seconds played per second meanwhile.
 from __future__ import annotations
 
 import contextlib
-import gc
 import sys
 import threading
 import time
@@ -160,15 +159,11 @@ class EventHistory:
 
 
 def pace_process() -> None:
-    """Make this process fit to send events on time (`miro log play`, the window), once its
-    long-lived objects are made: the interpreter handed between threads within 0.1 ms (not
-    Python's default 5 ms), and those objects frozen out of the garbage collector. A full
-    collection otherwise walks every object of the program, 10 to 20 ms with the interpreter
-    held on whichever thread set it off (the one reading ahead, mostly), and the play thread
-    waits that long (bench/trace_replay.py); frozen, it walks what was made since."""
+    """Make this process fit to send events on time (`miro log play`, the window): the
+    interpreter handed between threads within 0.1 ms, not Python's default 5 ms. (Freezing the
+    long-lived objects out of the garbage collector, against its rare full collections of 10
+    to 20 ms, made replays later, not earlier, in 10 of 12 paired runs: bench/README.md.)"""
     sys.setswitchinterval(SWITCH_INTERVAL)
-    gc.collect()
-    gc.freeze()
 
 
 def _spin(seconds: float) -> None:
