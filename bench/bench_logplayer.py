@@ -31,6 +31,9 @@ against its baseline in the same run, five interleaved repeats, medians with the
    x32) and of the window (`miro log player`, offscreen) while playing the file, sampled every
    50 ms; beside it a process iterating 4 s of events with the `mcap` library. Target: under
    200 MB.
+5. Lossless (`--parts lossless`): 10 s of the log (10,001 events) at x32 into a keep-all
+   StructuredPushConsumer process, with `--before` that tree's player too: how many arrive.
+   Target: all of them.
 """
 
 from __future__ import annotations
@@ -406,11 +409,17 @@ def deviations(
 
 
 def replay_ours(
-    path: Path, naming: str, start_s: float, seconds: float, tap: bool, env: dict[str, str] = ENV
+    path: Path,
+    naming: str,
+    start_s: float,
+    seconds: float,
+    tap: bool,
+    env: dict[str, str] = ENV,
+    rate: float = 1.0,
 ) -> tuple[list[float], int, int]:
-    """`miro log play` of the span into a StructuredPushConsumer process (or, with `tap`, a
-    bare SUB on the channel: the player's own timing); deviations, events, peak RSS (kB).
-    `env`: whose miro_gen (`tree_env`) the processes run."""
+    """`miro log play` of the span at `rate` into a keep-all StructuredPushConsumer process
+    (or, with `tap`, a bare SUB on the channel: the player's own timing); deviations, events,
+    peak RSS (kB). `env`: whose miro_gen (`tree_env`) the processes run."""
     unbound(naming, "robot1/EventChannel")  # the last run's player's: a tap would find it
     if tap:
         consumer = subprocess.Popen(
@@ -433,6 +442,8 @@ def replay_ours(
             f"{start_s:.3f}",
             "--end",
             f"{start_s + seconds:.3f}",
+            "--rate",
+            f"{rate:g}",
             "--wait-subscribed",
         ],
         stderr=subprocess.PIPE,
@@ -443,7 +454,7 @@ def replay_ours(
     stop = threading.Event()
     sampler = threading.Thread(target=rss_sampler, args=(player.pid, peak, stop), daemon=True)
     sampler.start()
-    _, err = player.communicate(timeout=seconds + 120)
+    _, err = player.communicate(timeout=seconds / rate + 120)
     stop.set()
     assert player.returncode == 0, err
     records = consumer_records(consumer)
@@ -594,7 +605,7 @@ def main() -> int:
         "--parts",
         type=lambda text: text.split(","),
         default=["open", "seek", "replay", "memory"],
-        help="which figures, comma-separated (default open,seek,replay,memory)",
+        help="which figures, comma-separated (default open,seek,replay,memory; also lossless)",
     )
     args = ap.parse_args()
     folder = tempfile.mkdtemp(prefix="miro-bench-player-")
@@ -616,6 +627,14 @@ def main() -> int:
     finally:
         if args.file is None:
             shutil.rmtree(folder, ignore_errors=True)
+
+
+def trees_of(args: argparse.Namespace) -> list[tuple[str, dict[str, str]]]:
+    """This tree's environment, and with --before the tree before's ("before: ")."""
+    trees = [("", ENV)]
+    if args.before is not None:
+        trees.append(("before: ", tree_env(args.before.resolve())))
+    return trees
 
 
 def run(path: Path, args: argparse.Namespace) -> int:
@@ -659,9 +678,8 @@ def run(path: Path, args: argparse.Namespace) -> int:
             rng = random.Random(2028)
             span_s = args.events / 1000
             p99: dict[str, list[float]] = {"structured": [], "tap": [], "raw": [], "proxy": []}
-            trees = [("", ENV)]
+            trees = trees_of(args)
             if args.before is not None:
-                trees.append(("before: ", tree_env(args.before.resolve())))
                 p99 |= {"before: structured": [], "before: tap": []}
             counts: dict[str, list[int]] = {name: [] for name in p99}
             loads = []
@@ -700,6 +718,24 @@ def run(path: Path, args: argparse.Namespace) -> int:
                     f"  {label:26} p99 {spread(p99[name], 1.0, ' ms')}  {ratio:.2f}x  {got} events"
                 )
             failed |= statistics.median(p99["tap"]) > 2.0
+            loads.append(os.getloadavg()[0])
+            print(f"  load average {min(loads):.2f} to {max(loads):.2f} (at each repeat's start)")
+
+        if "lossless" in args.parts:
+            print("\n5. lossless at x32: 10 s of the log (10,001 events) into a keep-all consumer")
+            got: dict[str, list[int]] = {}
+            loads = []
+            for _ in range(args.repeats):
+                loads.append(os.getloadavg()[0])
+                start_s = random.uniform(0, max(0.0, args.events / 1000 - 11))
+                for which, env in trees_of(args):
+                    _, n, _ = replay_ours(
+                        path, naming_endpoint, start_s, 10.0, False, env, rate=32.0
+                    )
+                    got.setdefault(which or "this tree", []).append(n)
+            for which, counts in got.items():
+                print(f"  {which:24} received {', '.join(map(str, counts))} of 10001")
+            failed |= any(n != 10_001 for n in got["this tree"])
             loads.append(os.getloadavg()[0])
             print(f"  load average {min(loads):.2f} to {max(loads):.2f} (at each repeat's start)")
 

@@ -111,7 +111,7 @@ def flood(naming: str, channel_name: str, count: int, rate: float, keep_all: int
     while not supplier.has_subscribers("Tick"):
         time.sleep(0.01)
     if keep_all:
-        while len(supplier._topics["Tick"].credited) < keep_all:
+        while len(getattr(supplier._topics["Tick"].credits, "readers", [])) < keep_all:
             time.sleep(0.01)
             supplier.has_subscribers("Tick")
         time.sleep(0.3)
@@ -126,8 +126,8 @@ def flood(naming: str, channel_name: str, count: int, rate: float, keep_all: int
         if rate and n % 20 == 19:  # paced: many small frames, not a few large ones
             time.sleep(max(0.0, start + n / rate - time.monotonic()))
     time.sleep(1.0)
-    flow = supplier._topics["Tick"].flow
-    stalls = 0 if flow is None else flow.stalls
+    credits = supplier._topics["Tick"].credits
+    stalls = 0 if credits is None else credits.flow.stalls
     print("SENT", supplier.sent, supplier.dropped, stalls, supplier.waited, flush=True)
     for line in sys.stdin:
         if line.strip() == "PUSH":  # one more: a consumer sees what it missed before it

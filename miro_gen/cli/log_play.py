@@ -14,7 +14,6 @@ from typing import Any
 from miro_gen.cli.eventargs import COMMON, make_server, split_common, topic_arg
 from miro_gen.foxglove import DEFAULT_PORT as FOXGLOVE_PORT
 
-SWITCH_INTERVAL = 0.0001  # seconds a thread holds the interpreter before another may take it
 KEYS = (
     "On a terminal: space pauses and resumes, s (or right) sends the next event, p (or left) "
     "the one before, shift+left/right (or [ and ]) seek a 20th of the log, + and - change the "
@@ -195,14 +194,11 @@ def _run(p: argparse.ArgumentParser, prog: str, argv: Sequence[str], ns: Any, fi
     import threading
 
     from miro_gen.eventlog.keys import key_presses
-    from miro_gen.eventlog.player import Player
+    from miro_gen.eventlog.player import Player, pace_process
     from miro_gen.eventlog.progress import StatusLine, bar
     from miro_gen.eventlog.routes import ClockPublisher, Routes
     from miro_gen.exceptions import SystemException
 
-    # Hand the interpreter between the player's thread, the reactor's and the one reading
-    # ahead within 0.1 ms, not Python's default 5 ms: a replayed event must leave on time.
-    sys.setswitchinterval(SWITCH_INTERVAL)
     server = make_server(p, prog, argv)
     routes = Routes(server, ns.channel, channel_mode(ns))
     try:
@@ -254,9 +250,11 @@ def _run(p: argparse.ArgumentParser, prog: str, argv: Sequence[str], ns: Any, fi
         span = max(1, end - start)
         at = player.log_now() - start
         state = " paused (space: resume, s: step)" if player.paused else ""
+        pace = player.pace()  # a keep-all consumer holds it back: the rate it really plays at
+        rate = f"x{player.rate:g}" if pace is None else f"x{pace:.2g} (held back, x{player.rate:g})"
         status.update(
             f"{bar(at / span)} {at / 1e9:8.2f}/{span / 1e9:.2f} s  {player.sent} events  "
-            f"x{player.rate:g}{state}"
+            f"{rate}{state}"
         )
 
     quit_now = threading.Event()
@@ -297,6 +295,7 @@ def _run(p: argparse.ArgumentParser, prog: str, argv: Sequence[str], ns: Any, fi
             print(f"{prog}: waiting for a consumer of every topic", file=sys.stderr)
             while not quit_now.is_set() and not all(routes.subscribed(*t) for t in topics):
                 quit_now.wait(0.02)
+        pace_process()  # a replayed event must leave on time
         player.start()
         player.play()
         with key_presses(on_key):

@@ -9,7 +9,6 @@ from collections.abc import Sequence
 
 from miro_gen.cli.eventargs import COMMON, make_server, split_common
 from miro_gen.cli.log_play import (
-    SWITCH_INTERVAL,
     add_channel_options,
     add_selection_options,
     apply_selection,
@@ -54,13 +53,12 @@ def player_main(argv: Sequence[str]) -> int:
         print(f"{prog}: {problem}", file=sys.stderr)
         return 1
     from miro_gen.eventlog.fileset import FileSet
-    from miro_gen.eventlog.player import Player
+    from miro_gen.eventlog.player import Player, pace_process
     from miro_gen.eventlog.routes import ClockPublisher, Routes
     from miro_gen.exceptions import SystemException
     from miro_gen.qt.bridge import QtEventBridge
     from miro_gen.qt.logplayer import LogPlayerWindow
 
-    sys.setswitchinterval(SWITCH_INTERVAL)  # replayed events leave on time (miro log play)
     app = application("miro log player")
     server = make_server(p, prog, argv)
     routes = Routes(server, ns.channel, channel_mode(ns))
@@ -75,6 +73,7 @@ def player_main(argv: Sequence[str]) -> int:
     window = LogPlayerWindow(player, routes)
     bridge = QtEventBridge(server, window=window)
     bridge.start()
+    pace_process()  # replayed events leave on time (miro log play)
     player.start()
     window.resize(1280, 800)
     window.show()

@@ -20,11 +20,18 @@ The clock is handed to `publish_clock` whenever it changes (and every CLOCK_PERI
 `epoch` that counts its jumps (seeks, steps back, loops), so that processes started with
 `--clock log` follow the replayed time (miro_gen.clock). The last `history` events sent are
 kept for the event list (`EventHistory`), and the last of each topic in `latest`.
+
+`send` may hold the thread: a keep-all consumer of the host that has not returned its credits
+(eventlog.replay). Then the clock waits for the events, not they for it: once an event leaves
+more than HELD s of wall time after it was due, the clock is set back to its log time (and
+published), so that the clock and the position shown say where the replay is; `held` says so
+for a second, and `pace()` the log seconds played per second meanwhile.
 """
 
 from __future__ import annotations
 
 import contextlib
+import sys
 import threading
 import time
 from collections import deque
@@ -44,6 +51,12 @@ MAX_WAIT = 0.1  # seconds the play thread sleeps at most (its clock ticks, a clo
 # the same machine may want.
 SPIN = 0.0002
 DEFAULT_HISTORY = 100
+# Seconds an event may leave after it was due before the clock waits for it. Shorter holds (a
+# keep-all consumer not scheduled for a while) are caught up, as a live supplier's queue would
+# be, so that the rest of the replay keeps its place in time; longer ones are not pretended away.
+HELD = 0.2
+HELD_SHOWN = 1.0  # seconds `held` stays true after the clock last waited
+SWITCH_INTERVAL = 0.0001  # seconds a thread holds the interpreter before another may take it
 RATES = (1 / 16, 1 / 8, 1 / 4, 1 / 2, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0)  # the speed dial's steps
 SKIP = 1 / 20  # of the cut's length: how far a skip (shift+arrow) seeks
 MAX_HISTORY = 100_000
@@ -145,6 +158,14 @@ class EventHistory:
         return [e for e in rows if e.name not in excluded] if excluded else rows
 
 
+def pace_process() -> None:
+    """Make this process fit to send events on time (`miro log play`, the window): the
+    interpreter handed between threads within 0.1 ms, not Python's default 5 ms. (Freezing the
+    long-lived objects out of the garbage collector, against its rare full collections of 10
+    to 20 ms, made replays later, not earlier, in 10 of 12 paired runs: bench/README.md.)"""
+    sys.setswitchinterval(SWITCH_INTERVAL)
+
+
 def _spin(seconds: float) -> None:
     """Return after `seconds` (a fraction of a millisecond), without sleeping."""
     until = time.monotonic() + seconds
@@ -199,6 +220,9 @@ class Player:
         self._anchor_wall = time.monotonic()
         self._clock_sent = 0.0
         self._thread: threading.Thread | None = None
+        self.held_back = 0  # times the clock waited for a send (eventlog.replay's credits)
+        self._held_at = -HELD_SHOWN
+        self._paces: deque[tuple[float, int]] = deque(maxlen=64)  # (wall, log) while held
         files.listeners.append(self._files_changed)
 
     # ---- state ----------------------------------------------------------------------------------
@@ -222,6 +246,25 @@ class Player:
     @property
     def position(self) -> Key:
         return self._pos
+
+    @property
+    def held(self) -> bool:
+        """Whether sending held the clock back within the last HELD_SHOWN seconds (a keep-all
+        consumer slower than the rate): it plays slower than `rate` then (`pace`)."""
+        return time.monotonic() - self._held_at < HELD_SHOWN
+
+    def pace(self) -> float | None:
+        """While `held`: the log seconds played per second over the last second or so (what the
+        rate really is); None otherwise."""
+        if not self.held:
+            return None
+        with self._cond:
+            now = time.monotonic()
+            marks = [m for m in self._paces if now - m[0] <= HELD_SHOWN]
+            log_now = self._now()
+        if not marks or now - marks[0][0] < 0.05:
+            return None
+        return max(0.0, (log_now - marks[0][1]) / 1e9 / (now - marks[0][0]))
 
     def log_now(self) -> int:
         """The log clock now, ns."""
@@ -472,8 +515,24 @@ class Player:
         self.sent += 1
         self.latest[event.name] = event
         self.history.append(event)
-        if self._clock_sent == 0.0:
+        held = self._hold(event)
+        if held or self._clock_sent == 0.0:
             self._publish()
+
+    def _hold(self, event: Event) -> bool:
+        """If `event` left more than HELD s late (the send held the thread): the clock waits
+        for it (set back to its log time); whether it did."""
+        with self._cond:
+            if not self._playing or self._now() - event.log_time <= HELD * self._rate * 1e9:
+                return False
+            self._rebase(event.log_time)
+            now = time.monotonic()
+            if now - self._held_at >= HELD_SHOWN:
+                self._paces.clear()
+            self._held_at = now
+            self._paces.append((now, event.log_time))
+            self.held_back += 1
+            return True
 
     def _step_back(self) -> bool:
         """If a step back is the next command: send the event before the one last sent, the

@@ -10,6 +10,15 @@ reactor would be a hand-off to another thread, which wakes up when the scheduler
 interpreter's lock let it (a bare publisher makes no such hand-off). Over a backbone whose
 links are not direct (Zenoh), the events wait for the reactor's next turn instead and leave
 in one frame per run of events of one topic, type hash and supplier.
+
+Keep-all consumers of this host return credits (transport.events.credits), and the replay
+honours them as suppliers do, through the same `TopicCredits` (one per replayed topic and
+recorded supplier, sharing one window: the channel's queue toward a consumer holds all their
+frames): before a direct send, the calling thread (the player's) waits until the frame may
+go, at most shm.WAIT_KEEP_ALL seconds for a consumer that returns none (dead, stopped), which
+is then not waited for until it returns a credit again. So a keep-all consumer receives every
+replayed event, in order, at any rate: the player's clock waits for it instead
+(eventlog.player). Keep-last consumers are not waited for.
 """
 
 from __future__ import annotations
@@ -18,6 +27,7 @@ import threading
 from typing import NamedTuple
 
 from miro_gen.transport.events import MAX_BATCH_BYTES, EventChannel, StructuredPushSupplier
+from miro_gen.transport.events.credits import FREE, GAVE_UP, TopicCredits
 from miro_gen.transport.events.frames import (
     BATCH_HEADER,
     EVENT_HEADER,
@@ -49,6 +59,12 @@ class ReplaySupplier(StructuredPushSupplier):
         self._scheduled = False
         self.replayed = 0
         self.replay_dropped = 0
+        # Keep-all consumers' credits by (topic frame, recorded supplier id), the events that
+        # waited for one, and those sent after giving a consumer up (dead, or silent for
+        # shm.WAIT_KEEP_ALL s): those may be lost to it.
+        self._credits: dict[tuple[bytes, int], TopicCredits] = {}
+        self.replay_waited = 0
+        self.replay_unwaited = 0
 
     def push_encoded(
         self,
@@ -108,12 +124,42 @@ class ReplaySupplier(StructuredPushSupplier):
 
     def _send_run(self, run: list[_Encoded]) -> None:
         first = run[0]
+        frame = topic(first.domain, first.type_name)
         body = pack_batch(
             first.supplier,
             first.type_hash,
             [(e.seq, e.stamp_ns, e.publish_ns, e.data) for e in run],
         )
-        if self._send_frame(topic(first.domain, first.type_name), body):
+        credits = self._credited(frame, first)
+        if credits is not None:
+            waited = credits.wait_for_room(first.supplier, self._closing)
+            if waited == GAVE_UP:
+                self.replay_unwaited += len(run)
+            elif waited != FREE:
+                self.replay_waited += len(run)
+        if self._send_frame(frame, body):
             self.replayed += len(run)
+            if credits is not None:
+                credits.sending(first.seq, run[-1].seq)
         else:  # at the high-water mark: dropped, as a live supplier's would be
             self.replay_dropped += len(run)
+
+    def _credited(self, frame: bytes, first: _Encoded) -> TopicCredits | None:
+        """The credits of the keep-all consumers of this host that take `frame`, when the
+        calling thread may wait for them (a direct send, not on the reactor thread)."""
+        if not (self.direct and self._keep_all.marker) or self.reactor.in_reactor_thread():
+            return None
+        key = (frame, first.supplier)
+        credits = self._credits.get(key)
+        if credits is None:
+            credits = self._credits[key] = TopicCredits(frame, first.type_name, self.window)
+            # The channel's queue toward a consumer holds every topic's frames: its window is
+            # shared by the topics replayed (a log of many robots and types), not each's own.
+            share = max(1, self.window // len(self._credits))
+            for c in self._credits.values():
+                c.flow.window = share
+        credits.update(self._keep_all, self._generation)
+        return credits if credits.readers else None
+
+    def _closing(self) -> bool:
+        return bool(self.reactor.closed) or not self._connected

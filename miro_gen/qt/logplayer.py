@@ -305,8 +305,8 @@ class LogPlayerWindow(QMainWindow):
             self.warn(f"{where}: {p.error}" if where else str(p.error))
 
     def _show_rate(self) -> None:
-        rate = self.player.rate
-        self.speed_label.setText(f"x{rate:g}")
+        rate, pace = self.player.rate, self.player.pace()  # pace: held back by a consumer
+        self.speed_label.setText(f"x{rate:g}" if pace is None else f"x{pace:.2g} (held back)")
         index = min(range(len(RATES)), key=lambda i: abs(RATES[i] - rate))
         if self.dial.value() != index and not self.dial.isSliderDown():
             self._updating = True

@@ -27,7 +27,9 @@ import mmap
 import os
 import random
 import struct
+import time
 from bisect import bisect_left
+from collections.abc import Callable
 from typing import Final
 
 from miro_gen.transport import shm
@@ -146,19 +148,22 @@ class CreditReader:
         it has had none of them yet."""
         if self.closed:
             return None
-        at = self._found.get((supplier, key))
-        if at is None:
-            used = min(_U32.unpack_from(self._mem, _USED_AT)[0], self.entries)
-            mem = self._mem
-            for i in range(self._seen, used):
-                base = _ENTRY_AT + i * _ENTRY.size
-                s, k = struct.unpack_from("<QQ", mem, base)
-                self._found[(s, k)] = base
-            self._seen = max(self._seen, used)
+        try:  # (closed meanwhile by the reactor thread, when a replay's thread asks: None)
             at = self._found.get((supplier, key))
             if at is None:
-                return None
-        return int(_Q.unpack_from(self._mem, at + _DUE_AT)[0])
+                used = min(_U32.unpack_from(self._mem, _USED_AT)[0], self.entries)
+                mem = self._mem
+                for i in range(self._seen, used):
+                    base = _ENTRY_AT + i * _ENTRY.size
+                    s, k = struct.unpack_from("<QQ", mem, base)
+                    self._found[(s, k)] = base
+                self._seen = max(self._seen, used)
+                at = self._found.get((supplier, key))
+                if at is None:
+                    return None
+            return int(_Q.unpack_from(self._mem, at + _DUE_AT)[0])
+        except ValueError:
+            return None
 
     def alive(self) -> bool:
         """Whether the consumer still has its table open (its process is alive)."""
@@ -262,6 +267,8 @@ class Flow:
         lowest: int | None = None
         behind: list[tuple[CreditReader, int]] = []
         for r in readers:
+            if r.closed:  # its consumer unsubscribed (a list from before: a replay's thread)
+                continue
             due = r.due(supplier, key)
             d = -1 if due is None else due  # none read yet: every frame sent is in flight
             stalled = r.stalled.get(key)
@@ -295,3 +302,63 @@ class Flow:
 
     def sending(self, last_seq: int) -> None:
         self.sent.append(last_seq)
+
+
+FREE, WAITED, GAVE_UP = range(3)  # what `TopicCredits.wait_for_room` found
+
+
+class TopicCredits:
+    """The one answer to "may a frame of this topic go now?" for one topic frame: the keep-all
+    consumers whose tables credit it (`readers`, found again whenever the supplier's
+    subscriptions change: `update`) and its frames in flight toward them (`flow`). A supplier
+    asks `room` on its reactor thread and holds frames back meanwhile; the log player's replay
+    waits on its own thread (`wait_for_room`). Both within shm.WAIT_KEEP_ALL seconds of blocked
+    sending per consumer (`Flow.room`)."""
+
+    __slots__ = ("flow", "frame", "generation", "readers")
+
+    def __init__(self, frame: bytes, type_name: str, window: int) -> None:
+        self.frame = frame
+        self.flow = Flow(type_key(type_name), window)
+        self.readers: list[CreditReader] = []
+        self.generation = -1  # of the supplier's subscriptions that `readers` reflects
+
+    def update(self, consumers: KeepAllConsumers, generation: int) -> None:
+        """Find the topic's keep-all consumers again (the subscriptions changed)."""
+        if generation != self.generation:
+            self.readers = consumers.matching(self.frame) if consumers.marker else []
+            self.generation = generation
+
+    def room(self, supplier: int, wait: float = shm.WAIT_KEEP_ALL) -> bool:
+        """Whether a frame of `supplier`'s events of this topic may go now (`Flow.room`)."""
+        readers = self.readers
+        return not readers or self.flow.room(readers, supplier, time.monotonic(), wait)
+
+    def sending(self, first_seq: int, last_seq: int) -> None:
+        """A frame of events `first_seq` to `last_seq` goes. Numbers that go back (a replay
+        that seeks back or loops) start the count of frames in flight anew."""
+        if not self.readers:
+            return
+        sent = self.flow.sent
+        if sent and first_seq <= sent[-1]:
+            sent.clear()
+        self.flow.sending(last_seq)
+
+    def wait_for_room(
+        self, supplier: int, closed: Callable[[], bool], wait: float = shm.WAIT_KEEP_ALL
+    ) -> int:
+        """Block the calling thread (never a reactor's) until a frame may go: FREE when it
+        could at once, WAITED when a credit came, GAVE_UP when a consumer stopped being waited
+        for (dead, or `wait` seconds without a credit) or `closed()`."""
+        stalls = self.flow.stalls
+        pause = 0.0001
+        waited = False
+        while not self.room(supplier, wait):
+            if closed():
+                return GAVE_UP
+            waited = True
+            time.sleep(pause)
+            pause = min(pause * 2, 0.002)
+        if self.flow.stalls != stalls:
+            return GAVE_UP
+        return WAITED if waited else FREE

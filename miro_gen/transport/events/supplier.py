@@ -71,8 +71,7 @@ class _Topic:
     subscribers are on this host: transport.shm) and the ring they go through."""
 
     __slots__ = (
-        "credited",
-        "flow",
+        "credits",
         "frame",
         "generation",
         "keep_all",
@@ -91,8 +90,7 @@ class _Topic:
         self.frame = frame
         # Keep-all consumers of this host that return credits (transport.events.credits), and
         # the frames in flight toward them.
-        self.credited: list[credits.CreditReader] = []
-        self.flow: credits.Flow | None = None
+        self.credits: credits.TopicCredits | None = None
         self.shm_frame = marker + frame
         self.shared = False
         self.keep_all = 0  # keep-all consumers of this host (transport.shm)
@@ -204,11 +202,11 @@ class StructuredPushSupplier:
                 t.keep_all = sum(
                     n for p, n in subs if p.startswith(marker) and keep_all.startswith(p)
                 )
-            readers = self._keep_all.matching(t.frame) if self._keep_all.marker else []
-            if readers and t.flow is None:
-                key = credits.type_key(split_topic(t.frame)[1])
-                t.flow = credits.Flow(key, self.window)
-            t.credited = readers
+            if self._keep_all.marker:
+                if t.credits is None:
+                    type_name = split_topic(t.frame)[1]
+                    t.credits = credits.TopicCredits(t.frame, type_name, self.window)
+                t.credits.update(self._keep_all, generation)
             t.generation = generation  # a change meanwhile bumped _generation: recomputed next
         return t.subscribed
 
@@ -266,7 +264,7 @@ class StructuredPushSupplier:
             self._refuse_large(type_name, size)
             return True
         full = self._queued >= QUEUE_EVENTS or self._queued_bytes + size > QUEUE_BYTES
-        if full and t.credited and not self._waited_out:
+        if full and t.credits and t.credits.readers and not self._waited_out:
             self._wait_for_room(size)
         with self._lock:
             if self._queued >= QUEUE_EVENTS or self._queued_bytes + size > QUEUE_BYTES:
@@ -408,13 +406,13 @@ class StructuredPushSupplier:
         """Send a topic's runs of events, in frames within the limits; what its keep-all
         consumers' credits hold back (transport.events.credits), from the first frame not sent.
         `queued`: (events, bytes) counted down by what is sent."""
-        flow = t.flow if t.credited else None
-        if flow is not None and not self._room(t, flow):
+        flow = t.credits.flow if t.credits and t.credits.readers else None
+        if flow is not None and not self._room(t):
             return runs  # (a retry costs nothing while the credits have not come)
         frame = t.frame
         for i, (type_hash, events) in enumerate(runs):
             if type(events) is _Framed:
-                if flow is not None and i and not self._room(t, flow):
+                if flow is not None and i and not self._room(t):
                     return runs[i:]
                 self._send_body(events[-1] if len(events) > 1 else frame, events[0], 1)
                 if flow is not None:
@@ -425,7 +423,7 @@ class StructuredPushSupplier:
             total = sum(map(len, events))
             if len(events) <= MAX_BATCH_EVENTS and total <= MAX_BATCH_BYTES:
                 if flow is not None:
-                    if i and not self._room(t, flow):
+                    if i and not self._room(t):
                         return runs[i:]
                     flow.sending(EVENT.unpack_from(events[-1])[0])
                 queued[0] -= len(events)
@@ -438,7 +436,7 @@ class StructuredPushSupplier:
                     j - start == MAX_BATCH_EVENTS or size + len(packed) > MAX_BATCH_BYTES
                 ):
                     if flow is not None:
-                        if (i or start) and not self._room(t, flow):
+                        if (i or start) and not self._room(t):
                             return [(type_hash, events[start:]), *runs[i + 1 :]]
                         flow.sending(EVENT.unpack_from(events[j - 1])[0])
                     queued[0] -= j - start
@@ -447,7 +445,7 @@ class StructuredPushSupplier:
                     start, size = j, 0
                 size += len(packed)
             if flow is not None:
-                if (i or start) and not self._room(t, flow):
+                if (i or start) and not self._room(t):
                     return [(type_hash, events[start:]), *runs[i + 1 :]]
                 flow.sending(EVENT.unpack_from(events[-1])[0])
             queued[0] -= len(events) - start
@@ -455,8 +453,8 @@ class StructuredPushSupplier:
             self._send(frame, type_hash, events[start:])
         return []
 
-    def _room(self, t: _Topic, flow: credits.Flow) -> bool:
-        return flow.room(t.credited, self.supplier_id, time.monotonic(), shm.WAIT_KEEP_ALL)
+    def _room(self, t: _Topic) -> bool:
+        return t.credits is None or t.credits.room(self.supplier_id)
 
     def _hold_back(self, held: list[tuple[_Topic, list[Any]]], events: int, size: int) -> None:
         """Put `events` (`size` bytes) whose frames credits held back in front of those pushed
