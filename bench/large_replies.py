@@ -93,7 +93,7 @@ class Raw:
         self.context.term()
 
 
-def _run(clients: dict[str, Any], seconds: float) -> dict[str, list[float]]:
+def run_interleaved(clients: dict[str, Any], seconds: float) -> dict[str, list[float]]:
     """One run: interleaved blocks of calls per client until `seconds` have passed."""
     samples: dict[str, list[float]] = {name: [] for name in clients}
     clock = time.perf_counter
@@ -130,7 +130,7 @@ def measure(sizes: list[int], runs: int, seconds: float) -> None:
             for client in clients.values():
                 for _ in range(20):
                     client.call()
-            results = [_run(clients, seconds) for _ in range(runs)]
+            results = [run_interleaved(clients, seconds) for _ in range(runs)]
         finally:
             for client in clients.values():
                 client.close()

@@ -19,7 +19,6 @@ import random
 import statistics
 import subprocess
 import sys
-import time
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +26,8 @@ import zmq
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT / "generated"), str(ROOT)]
+
+from large_replies import run_interleaved  # noqa: E402 - beside this file
 
 from miro_gen.runtime.cdr import ObjectRef  # noqa: E402
 from miro_gen.transport.rpc.invoker import ZmqInvoker  # noqa: E402
@@ -86,24 +87,6 @@ def _start(args: list[str]) -> tuple[subprocess.Popen[str], str]:
     return proc, proc.stdout.readline().split()[1 if "body_server" in args[1] else 0]
 
 
-def _run(clients: dict[str, Any], seconds: float) -> dict[str, list[float]]:
-    samples: dict[str, list[float]] = {name: [] for name in clients}
-    clock = time.perf_counter
-    t = clock()
-    for client in clients.values():
-        client.call()
-    block = max(5, int(0.05 / max((clock() - t) / len(clients), 1e-6)))
-    start = clock()
-    while clock() - start < seconds:
-        for name, client in clients.items():
-            out, call = samples[name], client.call
-            for _ in range(block):
-                t = clock()
-                call()
-                out.append(clock() - t)
-    return samples
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--sizes", default="65536,1048576,8000000")
@@ -126,7 +109,7 @@ def main() -> None:
             for client in clients.values():
                 for _ in range(20):
                     client.call()
-            results = [_run(clients, args.seconds) for _ in range(args.runs)]
+            results = [run_interleaved(clients, args.seconds) for _ in range(args.runs)]
         finally:
             for client in clients.values():
                 client.close()
