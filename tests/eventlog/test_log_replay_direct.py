@@ -8,14 +8,12 @@ and a link closed while a thread sends ends the sending without an error, every 
 from __future__ import annotations
 
 import threading
-from collections.abc import Iterator
 from pathlib import Path
 
 import Miro
-import pytest
 import zmq
 from eventlog_helpers import T0, read_events, write_log
-from loopback import NamingProcess, Recorder, eventually
+from loopback import Recorder, eventually
 from qt_procs import ServiceProcess
 
 from miro_gen import Server
@@ -26,23 +24,6 @@ from miro_gen.eventlog.routes import Routes
 from miro_gen.transport.events import EventChannelFactory
 
 N = 400  # events, 1 ms apart: 0.4 s at 1x
-
-
-@pytest.fixture
-def naming() -> Iterator[str]:
-    process = NamingProcess()
-    yield process.endpoint
-    process.stop()
-
-
-@pytest.fixture
-def server(naming: str) -> Iterator[Server]:
-    s = Server(["replay-test", "--naming", naming, "-MNC", "player"], context=zmq.Context())
-    thread = threading.Thread(target=s.run, daemon=True)
-    thread.start()
-    yield s
-    s.shutdown()
-    thread.join(10)
 
 
 def test_replayed_events_reach_a_consumer_process_while_the_reactor_is_held(

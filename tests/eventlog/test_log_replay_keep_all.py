@@ -10,15 +10,13 @@ from __future__ import annotations
 import signal
 import subprocess
 import sys
-import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-import zmq
 from eventlog_helpers import PROCS, write_log
-from loopback import NamingProcess, eventually, service_env
+from loopback import eventually, service_env
 
 from miro_gen import Server
 from miro_gen.eventlog.fileset import Event, FileSet
@@ -31,23 +29,6 @@ pytestmark = pytest.mark.skipif(not shm.available(), reason="credits need Linux 
 
 N = 4000  # events of robotA and robotB in turn, 1 ms apart: 4 s of log, 1/8 s at x32
 DELAY = "0.0003"  # s a slow consumer takes per event: 1.2 s for them all, ten times x32's pace
-
-
-@pytest.fixture
-def naming() -> Iterator[str]:
-    process = NamingProcess()
-    yield process.endpoint
-    process.stop()
-
-
-@pytest.fixture
-def server(naming: str) -> Iterator[Server]:
-    s = Server(["replay-test", "--naming", naming, "-MNC", "player"], context=zmq.Context())
-    thread = threading.Thread(target=s.run, daemon=True)
-    thread.start()
-    yield s
-    s.shutdown()
-    thread.join(10)
 
 
 @pytest.fixture
