@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import threading
 import time
 from collections.abc import Callable
@@ -12,8 +13,11 @@ import zmq
 from loopback import Recorder, RunningServer, eventually
 
 from miro_gen import (
+    KEEP_ALL,
     EventChannelFactory,
     Server,
+    StructuredEvent,
+    StructuredPushConsumer,
     StructuredPushSupplier,
 )
 
@@ -384,3 +388,43 @@ def test_a_consumer_finds_a_type_its_program_never_imported(
     assert lines == ["search in miro-type-discovery"] + [
         f"ExampleEventIDL {n} {n}" for n in range(3)
     ]
+
+
+def test_a_delivered_event_is_not_kept_while_the_rest_of_its_turn_is_delivered(
+    servers: Callable[[str], Server],
+) -> None:
+    """A consumer delivering a backlog keeps no reference to the events already delivered:
+    with camera images, a turn that held them all until its end kept a decoded megabyte alive
+    per event (and freed them all at once, to be faulted in again: issue 29's regression)."""
+    host = servers("r")
+    channel = EventChannelFactory(host).create_channel("Backlog")
+    supplier = StructuredPushSupplier(channel)
+    gate = threading.Event()
+    holding = threading.Event()
+    previous: list[StructuredEvent] = []  # the last event delivered, held only here
+    others: list[int] = []  # per delivery: how many others held the one before
+
+    class Checking(StructuredPushConsumer):
+        def push_structured_event(self, event: StructuredEvent) -> None:
+            if not gate.is_set():  # the first waits: the rest queue up behind it
+                holding.set()
+                gate.wait(60)
+            if previous:
+                held = [r for r in gc.get_referrers(previous[0]) if r is not previous]
+                others.append(len(held))
+            previous[:] = [event]
+
+    consumer = Checking(servers("c").resolve_channel("r/Backlog"), depth=KEEP_ALL)
+    consumer.set_subscriptions([("*", "*")])
+    eventually(lambda: supplier.has_subscribers("ExampleEvent"))
+    total = 200
+    try:
+        supplier.push("ExampleEvent", event(0))
+        eventually(holding.is_set, 30)
+        for n in range(1, total):
+            supplier.push("ExampleEvent", event(n))
+    finally:
+        gate.set()
+    eventually(lambda: len(others) == total - 1, 30)
+    assert consumer.missed == 0
+    assert others == [0] * (total - 1)

@@ -206,12 +206,18 @@ class StructuredPushConsumer:
     def _deliver(self) -> None:
         deliver, queue, reactor = self.push_structured_event, self.queue, self.reactor
         taken = queue.take(TURN_EVENTS)  # a turn's worth at once, not one call per event
+        # Newest first, each popped as it is delivered: the turn keeps no delivered event (and
+        # so no decoded payload) alive until its end, as a loop over `taken` would; with large
+        # payloads those are megabytes each, freed all at once and faulted in again next turn.
+        taken.reverse()
+        pop = taken.pop
         n = 0
-        for i, w in enumerate(taken):
+        while taken:
             if reactor.stopping:
-                queue.put_back(taken[i:])
+                taken.reverse()
+                queue.put_back(taken)
                 break
-            _, event, cls, _ = w
+            _, event, cls, _ = pop()
             shared = event.payload if type(event.payload) is _Shared else None
             if shared is not None:
                 if not self._decode_shared(event, cls, shared):
