@@ -112,6 +112,21 @@ def run_interleaved(clients: dict[str, Any], seconds: float) -> dict[str, list[f
     return samples
 
 
+def print_rows(
+    results: list[dict[str, list[float]]], base: str, size: int, name_width: int, spread_width: int
+) -> None:
+    """One line per client: the median of its runs' p50 (us), and of their ratios to `base`'s
+    p50 of the same run, with the ratios' spread."""
+    for name in results[0]:
+        p50s = [statistics.median(r[name]) for r in results]
+        ratios = [statistics.median(r[name]) / statistics.median(r[base]) for r in results]
+        spread = f"{min(ratios):.2f}-{max(ratios):.2f}"
+        print(
+            f"{name:{name_width}} {size:9d} {statistics.median(p50s) * 1e6:9.1f} "
+            f"{statistics.median(ratios):6.2f} {spread:>{spread_width}}"
+        )
+
+
 def measure(sizes: list[int], runs: int, seconds: float) -> None:
     print(f"load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
     print(f"{'reply (median of runs)':34} {'size':>9} {'p50 us':>9} {'ratio':>6} {'runs':>22}")
@@ -140,15 +155,7 @@ def measure(sizes: list[int], runs: int, seconds: float) -> None:
         ours = clients["getImage() stub"]
         shared = ours.invoker.shared.read
         print(f"{size} B: {shared} of our replies through shared memory (MIRO_SHM={shm_env()})")
-        base = "raw pyzmq (bytes)"
-        for name in clients:
-            p50s = [statistics.median(r[name]) for r in results]
-            ratios = [statistics.median(r[name]) / statistics.median(r[base]) for r in results]
-            spread = f"{min(ratios):.2f}-{max(ratios):.2f}"
-            print(
-                f"{name:34} {size:9d} {statistics.median(p50s) * 1e6:9.1f} "
-                f"{statistics.median(ratios):6.2f} {spread:>22}"
-            )
+        print_rows(results, "raw pyzmq (bytes)", size, 34, 22)
         better = [  # the target's ratio: ours to the faster raw row of the same run
             statistics.median(r["getImage() stub"])
             / min(statistics.median(r[raw_row]) for raw_row in RAW_ROWS)

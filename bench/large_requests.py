@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 import os
 import random
-import statistics
 import subprocess
 import sys
 from pathlib import Path
@@ -27,7 +26,7 @@ import zmq
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT / "generated"), str(ROOT)]
 
-from large_replies import run_interleaved  # noqa: E402 - beside this file
+from large_replies import print_rows, run_interleaved  # noqa: E402 - beside this file
 
 from miro_gen.runtime.cdr import ObjectRef  # noqa: E402
 from miro_gen.transport.rpc.invoker import ZmqInvoker  # noqa: E402
@@ -118,15 +117,7 @@ def main() -> None:
                 proc.wait()
         pool = clients["ours, shared memory"].invoker.requests
         print(f"{size} B: {pool.shared if pool else 0} of the shared row's bodies in shared memory")
-        base = "raw pyzmq (copy=False)"
-        for name in clients:
-            p50s = [statistics.median(r[name]) for r in results]
-            ratios = [statistics.median(r[name]) / statistics.median(r[base]) for r in results]
-            spread = f"{min(ratios):.2f}-{max(ratios):.2f}"
-            print(
-                f"{name:30} {size:9d} {statistics.median(p50s) * 1e6:9.1f} "
-                f"{statistics.median(ratios):6.2f} {spread:>12}"
-            )
+        print_rows(results, "raw pyzmq (copy=False)", size, 30, 12)
     print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
 
 
