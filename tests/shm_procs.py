@@ -104,10 +104,22 @@ def consume(naming: str, channel_name: str, depth: int, delay: float, zero_copy:
     server.shutdown()
 
 
-def flood(naming: str, channel_name: str, count: int, rate: float, keep_all: int) -> None:
+# The event types of a flood of several topics, in turn (all Miro::TimeIDL).
+TYPES = ("Tick", "Tock", "Tack", "Tuck")
+
+
+def flood(
+    naming: str, channel_name: str, count: int, rate: float, keep_all: int, topics: int = 1
+) -> None:
     server = Server(["flooder", "--naming", naming, "-MNC", "s"])
     threading.Thread(target=server.run, daemon=True).start()
     supplier = StructuredPushSupplier(server.resolve_channel(channel_name))
+    types = TYPES[:topics]
+    for t in types if topics > 1 else ():  # each topic's keep-all consumer known
+        while not supplier.has_subscribers(t) or not getattr(
+            supplier._topics[t].credits, "readers", None
+        ):
+            time.sleep(0.01)
     while not supplier.has_subscribers("Tick"):
         time.sleep(0.01)
     if keep_all:
@@ -122,7 +134,7 @@ def flood(naming: str, channel_name: str, count: int, rate: float, keep_all: int
     time.sleep(0.3)
     start = time.monotonic()
     for n in range(1 if keep_all else 0, count):
-        supplier.push("Tick", Miro.TimeIDL(n, 0))
+        supplier.push(types[n % topics], Miro.TimeIDL(n, 0))
         if rate and n % 20 == 19:  # paced: many small frames, not a few large ones
             time.sleep(max(0.0, start + n / rate - time.monotonic()))
     time.sleep(1.0)
@@ -138,10 +150,10 @@ def flood(naming: str, channel_name: str, count: int, rate: float, keep_all: int
     server.shutdown()
 
 
-def count(naming: str, channel_name: str, depth: int) -> None:
+def count(naming: str, channel_name: str, depth: int, topics: int = 1) -> None:
     server = Server(["counter", "--naming", naming, "-MNC", "c"])
     c = StructuredPushConsumer(server.resolve_channel(channel_name), depth=depth)
-    c.set_subscriptions([("s", "Tick")])
+    c.set_subscriptions([("s", t) for t in TYPES[:topics]])
     threading.Thread(target=server.run, daemon=True).start()
     print("READY", flush=True)
     for line in sys.stdin:
@@ -156,9 +168,13 @@ if __name__ == "__main__":
     os.environ.setdefault("MIRO_LOG_LEVEL", "warning")
     if role == "flood":
         rate = float(rest[1]) if len(rest) > 1 else 0.0
-        flood(naming, channel_name, int(rest[0]), rate, int(rest[2]) if len(rest) > 2 else 0)
+        keep_all = int(rest[2]) if len(rest) > 2 else 0
+        topics = int(rest[3]) if len(rest) > 3 else 1
+        flood(naming, channel_name, int(rest[0]), rate, keep_all, topics)
     elif role == "count":
-        count(naming, channel_name, int(rest[0]) if rest else 0)
+        count(
+            naming, channel_name, int(rest[0]) if rest else 0, int(rest[1]) if len(rest) > 1 else 1
+        )
     elif role == "supply":
         pace = float(rest[2]) if len(rest) > 2 else 0.0
         supply(naming, channel_name, int(rest[0]), int(rest[1]), pace)

@@ -27,7 +27,7 @@ import threading
 from typing import NamedTuple
 
 from miro_gen.transport.events import MAX_BATCH_BYTES, EventChannel, StructuredPushSupplier
-from miro_gen.transport.events.credits import FREE, GAVE_UP, TopicCredits
+from miro_gen.transport.events.credits import FREE, GAVE_UP, TopicCredits, share_window
 from miro_gen.transport.events.frames import (
     BATCH_HEADER,
     EVENT_HEADER,
@@ -153,12 +153,10 @@ class ReplaySupplier(StructuredPushSupplier):
         credits = self._credits.get(key)
         if credits is None:
             credits = self._credits[key] = TopicCredits(frame, first.type_name, self.window)
-            # The channel's queue toward a consumer holds every topic's frames: its window is
-            # shared by the topics replayed (a log of many robots and types), not each's own.
-            share = max(1, self.window // len(self._credits))
-            for c in self._credits.values():
-                c.flow.window = share
+        had = bool(credits.readers)
         credits.update(self._keep_all, self._generation)
+        if had != bool(credits.readers):  # the topics replayed share the window (share_window)
+            share_window(self._credits.values(), self.window)
         return credits if credits.readers else None
 
     def _closing(self) -> bool:

@@ -29,7 +29,7 @@ import random
 import struct
 import time
 from bisect import bisect_left
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from typing import Final
 
 from miro_gen.transport import shm
@@ -362,3 +362,13 @@ class TopicCredits:
         if self.flow.stalls != stalls:
             return GAVE_UP
         return WAITED if waited else FREE
+
+
+def share_window(topics: Iterable[TopicCredits], window: int) -> None:
+    """Split `window` among the topics of `topics` that have keep-all consumers: the channel's
+    queue toward a consumer holds the frames of every topic it takes, so the frames in flight
+    toward it, all topics together, must stay within one window (each topic at least one)."""
+    credited = [c for c in topics if c.readers]
+    share = max(1, window // max(1, len(credited)))
+    for c in credited:
+        c.flow.window = share
