@@ -153,9 +153,7 @@ class ReplaySupplier(StructuredPushSupplier):
         credits = self._credits.get(key)
         if credits is None:
             credits = self._credits[key] = TopicCredits(frame, first.type_name, self.window)
-        had = bool(credits.readers)
-        credits.update(self._keep_all, self._generation)
-        if had != bool(credits.readers):  # the topics replayed share the window (share_window)
+        if credits.update(self._keep_all, self._generation):  # the replayed topics share it
             share_window(self._credits.values(), self.window)
         return credits if credits.readers else None
 

@@ -323,11 +323,16 @@ class TopicCredits:
         self.readers: list[CreditReader] = []
         self.generation = -1  # of the supplier's subscriptions that `readers` reflects
 
-    def update(self, consumers: KeepAllConsumers, generation: int) -> None:
-        """Find the topic's keep-all consumers again (the subscriptions changed)."""
-        if generation != self.generation:
-            self.readers = consumers.matching(self.frame) if consumers.marker else []
-            self.generation = generation
+    def update(self, consumers: KeepAllConsumers, generation: int) -> bool:
+        """Find the topic's keep-all consumers again (the subscriptions changed); whether the
+        topic gained its first or lost its last (the window is then shared anew:
+        `share_window`)."""
+        if generation == self.generation:
+            return False
+        had = bool(self.readers)
+        self.readers = consumers.matching(self.frame) if consumers.marker else []
+        self.generation = generation
+        return had != bool(self.readers)
 
     def room(self, supplier: int, wait: float = shm.WAIT_KEEP_ALL) -> bool:
         """Whether a frame of `supplier`'s events of this topic may go now (`Flow.room`)."""

@@ -206,9 +206,7 @@ class StructuredPushSupplier:
                 if t.credits is None:
                     type_name = split_topic(t.frame)[1]
                     t.credits = credits.TopicCredits(t.frame, type_name, self.window)
-                had = bool(t.credits.readers)
-                t.credits.update(self._keep_all, generation)
-                if had != bool(t.credits.readers):  # one more or one fewer credited topic
+                if t.credits.update(self._keep_all, generation):  # one more or fewer credited
                     credits.share_window(
                         (u.credits for u in self._topics.values() if u.credits), self.window
                     )

@@ -179,7 +179,7 @@ class ZenohInvoker:
             if found is not None:
                 return found
         late = wait and time.monotonic() - start >= wait
-        if self.owner and not _cacheable(ref.endpoint) and self._unseen(zid):
+        if self.owner and keys.is_naming(ref.endpoint) and self._unseen(zid):
             raise TIMEOUT(
                 f"{operation}: no reply from the naming service ({ref.endpoint}); "
                 f"{denied_hint(self.owner, key)}",
