@@ -114,15 +114,24 @@ def system_exception_reply(exc: SystemException) -> Reply:
     return Reply(ReplyStatus.SYSTEM_EXCEPTION, bytes(buf), repo_id)
 
 
-def raise_system_exception(reply: Reply) -> None:
-    cls = SYSTEM_EXCEPTIONS.get(reply.repo_id, UNKNOWN)
+def system_exception_parts(reply: Reply) -> tuple[int, CompletionStatus, str] | None:
+    """The minor code, completion status and message a system exception reply carries; None
+    when its body is malformed."""
     try:
         e = header_endianness(reply.body)
         minor, completed = _SYSTEM_BODY[e].unpack_from(reply.body, 4)
         message, _ = get_string(reply.body, 12, e, None, "system exception message")
-        status = CompletionStatus(completed)
-    except Exception:  # a malformed system exception is still a failure of the call
-        minor, status, message = 0, CompletionStatus.MAYBE, f"{reply.repo_id} (malformed)"
+        return minor, CompletionStatus(completed), message
+    except Exception:
+        return None
+
+
+def raise_system_exception(reply: Reply) -> None:
+    cls = SYSTEM_EXCEPTIONS.get(reply.repo_id, UNKNOWN)
+    parts = system_exception_parts(reply)
+    if parts is None:  # a malformed system exception is still a failure of the call
+        parts = 0, CompletionStatus.MAYBE, f"{reply.repo_id} (malformed)"
+    minor, status, message = parts
     raise cls(message, minor, status)
 
 

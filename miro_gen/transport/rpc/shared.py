@@ -26,8 +26,7 @@ import weakref
 from typing import Final
 
 from miro_gen.exceptions import COMM_FAILURE, MARSHAL, CompletionStatus
-from miro_gen.runtime.cdr import header_endianness, pair
-from miro_gen.runtime.rpc import Reply, ReplyStatus
+from miro_gen.runtime.rpc import Reply, ReplyStatus, system_exception_parts
 from miro_gen.transport import shm
 from miro_gen.transport.local import is_local_address
 
@@ -37,7 +36,6 @@ LEASE: Final = 5.0  # seconds a reply's slot waits for its caller to hold it (MI
 # could not read in its caller's shared memory: the caller sends it again in frames.
 UNREADABLE_MINOR: Final = 0x4D470002
 SWEEP_EVERY: Final = 1.0  # seconds between a server's looks for callers gone (their pools)
-_SYSTEM_BODY = pair("II")  # a system exception's minor code and completion status
 
 
 def caller_marker() -> bytes:
@@ -253,11 +251,8 @@ def is_unreadable(reply: Reply) -> bool:
     """Whether `reply` is a server's `unreadable` (then the request is sent again in frames)."""
     if reply.status != ReplyStatus.SYSTEM_EXCEPTION or reply.repo_id != MARSHAL._repo_id:
         return False
-    try:
-        minor, completed = _SYSTEM_BODY[header_endianness(reply.body)].unpack_from(reply.body, 4)
-    except Exception:
-        return False
-    return bool(minor == UNREADABLE_MINOR and completed == CompletionStatus.NO)
+    parts = system_exception_parts(reply)
+    return parts is not None and parts[:2] == (UNREADABLE_MINOR, CompletionStatus.NO)
 
 
 class SharedRequests:
