@@ -41,6 +41,7 @@ from typing import NamedTuple
 
 from miro_gen.eventlog.fileset import Event, FileSet, Key, TopicName, after, at_time
 from miro_gen.eventlog.reader import LogError, Topic
+from miro_gen.log import logger
 
 CLOCK_PERIOD = 0.5  # seconds between clock messages while nothing changes
 MAX_WAIT = 0.1  # seconds the play thread sleeps at most (its clock ticks, a close is seen)
@@ -455,6 +456,10 @@ class Player:
                     return
             except LogError as e:
                 self._failed(e)
+            except Exception as e:  # a defect: said with its traceback, and the player stops
+                # there (ended, with the error) instead of its thread dying with `ended` unset
+                logger().exception("the log player stopped on an internal error")
+                self._failed(LogError(f"internal error: {e!r}"))
 
     def _wait_for(self, event: Event, gen: int) -> int:
         """Under the lock: wait until `event` is due (or a step allows it); what to do."""

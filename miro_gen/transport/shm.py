@@ -147,12 +147,13 @@ def slot_count(variable: str = "MIRO_SHM_SLOTS", default: int = SLOTS) -> int:
 
 def holds_open(pid: int, their_fd: int, fd: int) -> bool:
     """Whether process `pid` still has, as its descriptor `their_fd`, the file this process
-    has open as `fd` (a segment or table it made and we mapped): False once it is gone."""
+    has open as `fd` (a segment or table it made and we mapped): False once it is gone, or
+    once we closed `fd` (another thread may have, meanwhile)."""
     try:
         info = os.stat(f"/proc/{pid}/fd/{their_fd}")
+        mine = os.fstat(fd)
     except OSError:
         return False
-    mine = os.fstat(fd)
     return (info.st_dev, info.st_ino) == (mine.st_dev, mine.st_ino)
 
 

@@ -109,3 +109,15 @@ def test_a_consumer_whose_table_is_gone_is_not_waited_for() -> None:
     assert flow.room([r], 7, 0.0, 1.0)  # at once, not after the bound
     assert flow.stalls == 1
     r.close()
+
+
+def test_a_table_closed_by_another_thread_is_not_alive_and_raises_nothing(
+    table: credits.CreditTable,
+) -> None:
+    """The reactor thread closes a table whose consumer unsubscribed while a replay's thread,
+    with the reader in a list from before, may be asking whether its consumer is alive."""
+    r = reader_of(table)
+    fd = r.fd
+    r.close()
+    assert not r.alive()
+    assert not shm.holds_open(r.pid, r.consumer_fd, fd)  # our descriptor closed: not an error

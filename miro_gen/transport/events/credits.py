@@ -166,8 +166,10 @@ class CreditReader:
             return None
 
     def alive(self) -> bool:
-        """Whether the consumer still has its table open (its process is alive)."""
-        return shm.holds_open(self.pid, self.consumer_fd, self.fd)
+        """Whether the consumer still has its table open (its process is alive). False once
+        closed: the reactor thread closes a table whose consumer unsubscribed while a replay's
+        thread may still hold it in a list from before."""
+        return not self.closed and shm.holds_open(self.pid, self.consumer_fd, self.fd)
 
     def close(self) -> None:
         self.closed = True
