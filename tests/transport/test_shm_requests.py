@@ -26,7 +26,7 @@ from miro_gen.runtime.rpc import Reply, ReplyStatus, raise_system_exception
 from miro_gen.transport import shm
 from miro_gen.transport.rpc import frames
 from miro_gen.transport.rpc.invoker import ZmqInvoker
-from miro_gen.transport.rpc.shared import UNREADABLE_MINOR, ReplyPool, caller_marker
+from miro_gen.transport.rpc.shared import UNREADABLE_MINOR, BodyPool, caller_marker
 
 pytestmark = pytest.mark.skipif(not shm.available(), reason="shared memory needs Linux memfd")
 
@@ -197,7 +197,7 @@ def test_a_stale_or_bogus_descriptor_is_refused_never_run_on_torn_data(
     monkeypatch.setenv("MIRO_SHM_LEASE", "0")
     server = BodyProcess()
     raw = RawCaller(server.endpoint)
-    pool = ReplyPool(MIB, name="miro-requests")
+    pool = BodyPool(MIB, name="miro-requests")
     try:
         first = pool.put(body_of(MIB, 1))
         second = pool.put(body_of(MIB, 2))

@@ -46,7 +46,7 @@ from miro_gen.transport.rpc import frames
 from miro_gen.transport.rpc.caller import Caller, caller_of, serving
 from miro_gen.transport.rpc.dispatch import Dispatcher, Peer
 from miro_gen.transport.rpc.objects import ObjectTable
-from miro_gen.transport.rpc.shared import ReplyPool, SharedRequests, server_marker, unreadable
+from miro_gen.transport.rpc.shared import BodyPool, SharedRequests, server_marker, unreadable
 
 _log = logger("MIRO")
 _peer_warnings = PeerWarnings(_log)  # what peers send: rate-limited, with counts
@@ -89,7 +89,7 @@ class ObjectAdapter(ObjectTable):
         # large replies to callers on this host (none mapped before the first), and large
         # requests from them, in their pools: it says so in its routing id, which each caller
         # learns in the connection's handshake
-        self.pool = ReplyPool(self.max_message_size) if shm.enabled() else None
+        self.pool = BodyPool(self.max_message_size) if shm.enabled() else None
         self.requests = SharedRequests() if self.pool is not None else None
         if self.requests is not None:
             self.socket.setsockopt(zmq.ROUTING_ID, server_marker())

@@ -60,7 +60,7 @@ from miro_gen.transport import shm, sockets
 from miro_gen.transport.buffers import keep_large_buffers
 from miro_gen.transport.rpc import frames
 from miro_gen.transport.rpc.shared import (
-    ReplyPool,
+    BodyPool,
     SharedReplies,
     is_unreadable,
     routing_id,
@@ -187,7 +187,7 @@ class ZmqInvoker:
         self._lock = threading.Lock()
         self._closed = False
         self.shared = SharedReplies()  # servers' pools of large replies, mapped
-        self.requests: ReplyPool | None = None  # this caller's pool of large requests, once used
+        self.requests: BodyPool | None = None  # this caller's pool of large requests, once used
 
     # ---- Invoker protocol -----------------------------------------------------------------------
 
@@ -267,7 +267,7 @@ class ZmqInvoker:
             with self._lock:
                 pool = self.requests
                 if pool is None:
-                    pool = self.requests = ReplyPool(limit, name="miro-requests")
+                    pool = self.requests = BodyPool(limit, name="miro-requests")
         return pool.put(body if type(body) is bytes else bytes(body))  # (any buffer, by hand)
 
     def _connect(self, conn: _Connection, operation: str, deadline: float) -> None:

@@ -1,6 +1,6 @@
 """Large call bodies through shared memory between a caller and a server on one host
 (docs/PROTOCOL.md, "Large replies in shared memory", "Large requests in shared memory"): a
-pool of slots (`ReplyPool`: a server's for its replies, a caller's for its requests), a
+pool of slots (`BodyPool`: a server's for its replies, a caller's for its requests), a
 caller's mappings of its servers' pools (`SharedReplies`) and a server's of its callers'
 (`SharedRequests`), over the rings of `transport.shm`.
 
@@ -86,11 +86,12 @@ def lease() -> float:
         return LEASE
 
 
-class ReplyPool:
-    """A server's slots for large replies to callers on its host, or a caller's for its large
-    requests (`name` "miro-requests"), `slots` (MIRO_SHM_CALL_SLOTS) of up to `slot_size` bytes
-    (the largest message), mapped when the first such body is due. Each slot is for the one
-    reader its descriptor goes to, until it gives the slot back or its lease runs out."""
+class BodyPool:
+    """Slots for large call bodies: a server's for its replies to callers on its host, or a
+    caller's for its requests (`name` "miro-requests"), `slots` (MIRO_SHM_CALL_SLOTS) of up to
+    `slot_size` bytes (the largest message), mapped when the first such body is due. Each slot
+    is for the one reader its descriptor goes to, until it gives the slot back or its lease
+    runs out."""
 
     def __init__(self, slot_size: int, name: str = "miro-calls") -> None:
         self.name = name
@@ -99,8 +100,8 @@ class ReplyPool:
         self._marker = caller_marker()
         self._ring: shm.Ring | None = None
         self._lock = threading.Lock()
-        self.shared = 0  # replies sent as descriptors
-        self.framed = 0  # large replies to callers on this host sent in frames: no free slot
+        self.shared = 0  # bodies sent as descriptors
+        self.framed = 0  # large bodies to peers on this host sent in frames: no free slot
 
     def takes(self, peer: bytes) -> bool:
         """Whether the caller with routing id `peer` may take replies in this pool."""
