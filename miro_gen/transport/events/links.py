@@ -171,11 +171,14 @@ class ZmqPublishing:
                 try:
                     msg = self.socket.recv(_NOBLOCK)
                 except zmq.Again:
+                    # A direct link's ZMQ_FD signals once, and looking at ZMQ_EVENTS resets
+                    # it: a subscription that came since the last receive would wait unseen
+                    # (a player paused, or waiting for subscribers, sends nothing to find it).
+                    if self.direct and int(self.socket.getsockopt(zmq.EVENTS)) & zmq.POLLIN:
+                        continue
                     break
                 if msg:
                     changes.append((msg[0] == 1, msg[1:]))
-            if self.direct:  # every command read, so that its ZMQ_FD stops signalling
-                self.socket.getsockopt(zmq.EVENTS)
         if changes:
             self._on_subscriptions(changes)
 
