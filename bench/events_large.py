@@ -193,7 +193,8 @@ def ours_consumer(naming: str, channel: str, types: str = "Image", views: str = 
     from miro_gen import Server, StructuredEvent, StructuredPushConsumer
     from miro_gen.transport.events import KEEP_ALL
 
-    server = Server(["bench", "--naming", naming, "-MNC", "consumer"])
+    # One name per reader process (several run at once): their service objects are bound apart.
+    server = Server([f"bench-{os.getpid()}", "--naming", naming, "-MNC", "consumer"])
     tallies = {t: Tally() for t in types.split(",")}
 
     class Consumer(StructuredPushConsumer):
