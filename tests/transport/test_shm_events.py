@@ -138,6 +138,16 @@ def dev_shm() -> set[str]:
         return set()
 
 
+def knows_keep_all_consumers(supplier: StructuredPushSupplier, type_name: str, n: int) -> bool:
+    """Whether the supplier has every subscription of `n` keep-all consumers of this host
+    (each sends its credit subscription last): before, the first events may go in full, or
+    to one of them only (the subscriptions reach it in more than one read)."""
+    supplier.has_subscribers(type_name)  # (takes the subscriptions as they are now)
+    t = supplier._topics[type_name]
+    readers = t.credits.readers if t.credits is not None else []
+    return t.shared and t.keep_all == n and len(readers) == n
+
+
 def test_megabyte_images_reach_consumer_processes_through_shared_memory_whole(
     channel_naming: str, procs: Callable[..., Proc]
 ) -> None:
@@ -251,12 +261,12 @@ def test_a_zero_copy_consumer_gets_read_only_views_that_numpy_cannot_write(
     plain = Recorder(channel)
     for c in (viewer, plain):
         c.set_subscriptions([("r", "Image")])
-    eventually(lambda: supplier.has_subscribers("Image"))
+    eventually(lambda: knows_keep_all_consumers(supplier, "Image", 2), 60)
     data = bytes(range(256)) * 4096
     form = Miro.ImageFormatIDL(512, 256, Miro.IMAGE_RGB8, 1536)
     for n in range(3):
         supplier.push("Image", Miro.ImageEventIDL(Miro.TimeIDL(n, 0), n, form, data))
-    eventually(lambda: len(viewer.events) == 3 and len(plain.events) == 3)
+    eventually(lambda: len(viewer.events) == 3 and len(plain.events) == 3, 60)
     assert supplier._topics["Image"].ring is not None
     assert seen == [("memoryview", False, "refused")] * 3
     assert all(type(e.payload.data) is bytes and e.payload.data == data for e in plain.events)
