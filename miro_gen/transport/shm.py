@@ -237,9 +237,10 @@ class Ring:
         with self._lock:
             if self.closed:
                 return None
-            slot = self._free_slot(wait, keep_all)
-            if slot is None:
+            taken = self._take_slot(wait, keep_all)
+            if taken is None:
                 return None
+            slot, gen = taken
             w = self._writes
             self._writes += 1
             self._slot_write[slot] = w
@@ -247,8 +248,6 @@ class Ring:
                 self._written_at[slot] = time.monotonic()
             at = _SLOT_AT + slot * _SLOT.size
             mem = self._mem
-            gen = _Q.unpack_from(mem, at + _GEN)[0] + 1  # odd: being written
-            _Q.pack_into(mem, at + _GEN, gen)
             _Q.pack_into(mem, at + _WRITE, w)
             _Q.pack_into(mem, at + _LEN, n)
             start = self._data_at + slot * self.slot_size
@@ -258,6 +257,30 @@ class Ring:
                 payload.copy_into(mem[start : start + n])
             _Q.pack_into(mem, at + _GEN, gen + 1)
             return Descriptor(os.getpid(), self.fd, self.segment_id, slot, gen + 1, w, n)
+
+    def _take_slot(self, wait: float, keep_all: KeepAll) -> tuple[int, int] | None:
+        """A free slot (`_free_slot`) marked as being written: (slot, its odd generation).
+
+        A reader holds a write, then checks the generation; the ring checks the holds, then
+        writes: a reader that holds the slot's write between the two passed its check, and its
+        handler would read the slot while it is rewritten (with zero_copy, unseen). So the ring
+        marks the slot first and looks at the holds again after (each side writes, then reads
+        what the other wrote): a reader that came meanwhile keeps it, and the ring takes
+        another."""
+        mem = self._mem
+        while True:
+            slot = self._free_slot(wait, keep_all)
+            if slot is None:
+                return None
+            at = _SLOT_AT + slot * _SLOT.size
+            gen = _Q.unpack_from(mem, at + _GEN)[0]
+            _Q.pack_into(mem, at + _GEN, gen + 1)  # odd: being written
+            with _FENCE:  # (a locked instruction: the store is seen before the holds are read)
+                pass
+            w = self._slot_write[slot]
+            if w < 0 or self._reusable(w) != 1:
+                return slot, gen + 1
+            _Q.pack_into(mem, at + _GEN, gen)  # held meanwhile: as it was, for its reader
 
     def _free_slot(self, wait: float, keep_all: KeepAll) -> int | None:
         """The next slot in turn that no consumer holds and every keep-all consumer has read
