@@ -42,6 +42,19 @@ import Miro  # noqa: E402
 from miro_gen import Server, StructuredPushConsumer, StructuredPushSupplier  # noqa: E402
 from miro_gen.transport.events import StructuredEvent  # noqa: E402
 
+# One line at a time: a consumer prints an event's line on its reactor thread while its main
+# thread answers STATS, and print() writes its words one by one (two threads' lines came out
+# mixed, `E 410 STATS 1 2 3 4 5`, which the test's reader cannot parse).
+_say = threading.Lock()
+
+
+def say(*words: object) -> None:
+    """Print one line of the protocol, whole, whatever other thread prints."""
+    line = " ".join(map(str, words)) + "\n"
+    with _say:
+        sys.stdout.write(line)
+        sys.stdout.flush()
+
 
 def image(n: int, size: int) -> Miro.ImageEventIDL:
     data = n.to_bytes(4, "little") * (size // 4)
@@ -66,12 +79,12 @@ def supply(naming: str, channel_name: str, count: int, size: int, pace: float) -
         supplier.push("Image", image(n, size))
         if n == 0:
             ring = supplier._topics["Image"].ring
-            print("RING", "yes" if ring is not None else "no", flush=True)
+            say("RING", "yes" if ring is not None else "no")
         n += 1
         if pace:
             time.sleep(pace)
     time.sleep(0.5)
-    print("SENT", supplier.sent, supplier.dropped, flush=True)
+    say("SENT", supplier.sent, supplier.dropped)
     sys.stdin.read()
     server.shutdown()
 
@@ -86,8 +99,8 @@ class Checker(StructuredPushConsumer):
         if self.delay:
             time.sleep(self.delay)
         if self.zero_copy and type(p.data) is not memoryview:
-            print("NOT-A-VIEW", flush=True)
-        print("E", p.time.sec, int(intact(p)), flush=True)
+            say("NOT-A-VIEW")
+        say("E", p.time.sec, int(intact(p)))
 
 
 def consume(naming: str, channel_name: str, depth: int, delay: float, zero_copy: bool) -> None:
@@ -96,11 +109,11 @@ def consume(naming: str, channel_name: str, depth: int, delay: float, zero_copy:
     c = Checker(channel, depth=depth, delay=delay, zero_copy=zero_copy)
     c.set_subscriptions([("s", "Image")])
     threading.Thread(target=server.run, daemon=True).start()
-    print("READY", flush=True)
+    say("READY")
     for line in sys.stdin:
         if line.strip() == "STATS":
             segments = len(c._segments._by_id)
-            print("STATS", c.received, c.missed, c.dropped, c.torn, segments, flush=True)
+            say("STATS", c.received, c.missed, c.dropped, c.torn, segments)
     server.shutdown()
 
 
@@ -128,7 +141,7 @@ def flood(
             supplier.has_subscribers("Tick")
         time.sleep(0.3)
         supplier.push("Tick", Miro.TimeIDL(0, 0))
-        print("PUSHING", flush=True)
+        say("PUSHING")
         while sys.stdin.readline().strip() != "GO":
             pass
     time.sleep(0.3)
@@ -140,13 +153,13 @@ def flood(
     time.sleep(1.0)
     credits = supplier._topics["Tick"].credits
     stalls = 0 if credits is None else credits.flow.stalls
-    print("SENT", supplier.sent, supplier.dropped, stalls, supplier.waited, flush=True)
+    say("SENT", supplier.sent, supplier.dropped, stalls, supplier.waited)
     for line in sys.stdin:
         if line.strip() == "PUSH":  # one more: a consumer sees what it missed before it
             supplier.push("Tick", Miro.TimeIDL(count, 0))
             count += 1
             time.sleep(0.5)
-            print("SENT", supplier.sent, supplier.dropped, flush=True)
+            say("SENT", supplier.sent, supplier.dropped)
     server.shutdown()
 
 
@@ -155,10 +168,10 @@ def count(naming: str, channel_name: str, depth: int, topics: int = 1) -> None:
     c = StructuredPushConsumer(server.resolve_channel(channel_name), depth=depth)
     c.set_subscriptions([("s", t) for t in TYPES[:topics]])
     threading.Thread(target=server.run, daemon=True).start()
-    print("READY", flush=True)
+    say("READY")
     for line in sys.stdin:
         if line.strip() == "STATS":
-            print("STATS", c.received, c.missed, c.dropped, flush=True)
+            say("STATS", c.received, c.missed, c.dropped)
     server.shutdown()
 
 

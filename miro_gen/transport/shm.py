@@ -19,8 +19,8 @@ No torn data, no slot reused under a reader:
   (`fcntl`), which the kernel releases when the process dies, so the supplier can tell a live
   lane from a dead one. In its lane the consumer says which write it holds (`hold`: while its
   handler reads the slot, never reused meanwhile) and, for a keep-all consumer, how far it has
-  read (`acked`: the credits it returns; the supplier waits for them, for at most
-  `WAIT_KEEP_ALL` seconds, before it reuses a slot a keep-all consumer has not read);
+  read (`acked`: the credits it returns; the supplier never reuses a slot a keep-all consumer
+  has not read: it waits for them, for at most `WAIT_KEEP_ALL` seconds, then drops the event);
 * a keep-last consumer that falls a ring behind finds its slot's generation changed and drops
   the event (the oldest goes first), counted in its `dropped`.
 
@@ -49,6 +49,7 @@ import struct
 import sys
 import threading
 import time
+from collections.abc import Callable
 from typing import Final, NamedTuple, Protocol
 
 MAGIC: Final = b"MIROSHM1"
@@ -85,6 +86,11 @@ class Encoded(Protocol):
     def size(self) -> int: ...
 
     def copy_into(self, out: memoryview) -> int: ...
+
+
+# The keep-all consumers whose lanes a put waits for: a count, or a function that tells it as
+# the subscriptions are now (asked again while the put waits: one may go meanwhile).
+KeepAll = int | Callable[[], int]
 
 
 class Descriptor(NamedTuple):
@@ -218,21 +224,23 @@ class Ring:
         self.closed = False
 
     def put(
-        self, payload: bytes | Encoded, keep_all: int = 0, wait: float = WAIT_KEEP_ALL
+        self, payload: bytes | Encoded, keep_all: KeepAll = 0, wait: float = WAIT_KEEP_ALL
     ) -> Descriptor | None:
         """Write `payload` (bytes, or an encoder's value copied straight in) into a slot; its
         descriptor, or None when no slot frees up within `wait` seconds (keep-all consumers
         behind, every slot held) or it does not fit. `keep_all`: keep-all consumers
-        subscribed, whose lanes a reused slot waits for."""
+        subscribed, whose lanes a reused slot waits for (a function: asked again while the put
+        waits, so that one that has gone meanwhile is not waited for to the end)."""
         n = len(payload) if isinstance(payload, bytes) else payload.size
         if n > self.slot_size:
             return None
         with self._lock:
             if self.closed:
                 return None
-            slot = self._free_slot(wait, keep_all)
-            if slot is None:
+            taken = self._take_slot(wait, keep_all)
+            if taken is None:
                 return None
+            slot, gen = taken
             w = self._writes
             self._writes += 1
             self._slot_write[slot] = w
@@ -240,8 +248,6 @@ class Ring:
                 self._written_at[slot] = time.monotonic()
             at = _SLOT_AT + slot * _SLOT.size
             mem = self._mem
-            gen = _Q.unpack_from(mem, at + _GEN)[0] + 1  # odd: being written
-            _Q.pack_into(mem, at + _GEN, gen)
             _Q.pack_into(mem, at + _WRITE, w)
             _Q.pack_into(mem, at + _LEN, n)
             start = self._data_at + slot * self.slot_size
@@ -252,7 +258,31 @@ class Ring:
             _Q.pack_into(mem, at + _GEN, gen + 1)
             return Descriptor(os.getpid(), self.fd, self.segment_id, slot, gen + 1, w, n)
 
-    def _free_slot(self, wait: float, keep_all: int) -> int | None:
+    def _take_slot(self, wait: float, keep_all: KeepAll) -> tuple[int, int] | None:
+        """A free slot (`_free_slot`) marked as being written: (slot, its odd generation).
+
+        A reader holds a write, then checks the generation; the ring checks the holds, then
+        writes: a reader that holds the slot's write between the two passed its check, and its
+        handler would read the slot while it is rewritten (with zero_copy, unseen). So the ring
+        marks the slot first and looks at the holds again after (each side writes, then reads
+        what the other wrote): a reader that came meanwhile keeps it, and the ring takes
+        another."""
+        mem = self._mem
+        while True:
+            slot = self._free_slot(wait, keep_all)
+            if slot is None:
+                return None
+            at = _SLOT_AT + slot * _SLOT.size
+            gen = _Q.unpack_from(mem, at + _GEN)[0]
+            _Q.pack_into(mem, at + _GEN, gen + 1)  # odd: being written
+            with _FENCE:  # (a locked instruction: the store is seen before the holds are read)
+                pass
+            w = self._slot_write[slot]
+            if w < 0 or self._reusable(w) != 1:
+                return slot, gen + 1
+            _Q.pack_into(mem, at + _GEN, gen)  # held meanwhile: as it was, for its reader
+
+    def _free_slot(self, wait: float, keep_all: KeepAll) -> int | None:
         """The next slot in turn that no consumer holds and every keep-all consumer has read
         (waiting up to `wait` seconds for their credits, and for the lanes of `keep_all`
         consumers to be there)."""
@@ -260,14 +290,18 @@ class Ring:
         pause = 0.0001
         while True:
             blocked = False
-            lanes = self._keep_all_lanes() if keep_all else 0
+            missing: bool | None = None  # a keep-all consumer's lane is not there yet
             first = self._next if self.lease is None else 0
             for k in range(self.slots):
                 slot = (first + k) % self.slots
                 w = self._slot_write[slot]
                 state = self._reusable(w) if self.lease is None else self._returned(slot, w)
-                if state == 0 and w >= 0 and lanes < keep_all:
-                    state = 2  # a keep-all consumer has yet to map the ring: not past it
+                if state == 0 and w >= 0 and keep_all:
+                    if missing is None:  # (after _reusable: the lanes of the dead freed)
+                        expected = keep_all() if callable(keep_all) else keep_all
+                        missing = self._keep_all_lanes() < expected
+                    if missing:
+                        state = 2  # a keep-all consumer has yet to map the ring: not past it
                 if state == 0:
                     self._next = (slot + 1) % self.slots
                     return slot

@@ -121,3 +121,23 @@ def test_a_table_closed_by_another_thread_is_not_alive_and_raises_nothing(
     r.close()
     assert not r.alive()
     assert not shm.holds_open(r.pid, r.consumer_fd, fd)  # our descriptor closed: not an error
+
+
+def test_a_ring_waits_for_one_lane_per_live_keep_all_consumer() -> None:
+    """The lanes a supplier's ring waits for (transport.shm): one per keep-all consumer that
+    takes the topic, not one per subscription, and none for a consumer whose process is gone
+    while its subscriptions still count (they are on their way through the channel)."""
+    a, b = credits.CreditTable(), credits.CreditTable()
+    suppliers = credits.KeepAllConsumers(MARKER)
+    frame = b"s\0Image\0"
+    for t in (a, b):
+        assert suppliers.change(True, t.subscription(MARKER, frame))
+    assert suppliers.change(True, a.subscription(MARKER, b"s\0"))  # a: both s/Image and s/*
+    assert suppliers.lanes(frame, 3) == 2  # three keep-all subscriptions, two consumers
+    assert suppliers.lanes(frame, 4) == 3  # and one whose table is not mapped here: counted
+    assert suppliers.lanes(b"s\0Tick\0", 1) == 1  # a takes it through s/*: one subscription
+    b.close()  # kill -9 of b: nothing of its process holds the table any more
+    assert suppliers.lanes(frame, 3) == 1
+    a.close()
+    assert suppliers.lanes(frame, 3) == 0
+    suppliers.close()

@@ -18,7 +18,7 @@ from miro_cli import REPO
 
 from miro_gen import EventChannelFactory, Server, StructuredPushSupplier
 from miro_gen.transport import shm
-from miro_gen.transport.events import StructuredEvent
+from miro_gen.transport.events import StructuredEvent, credits
 
 pytestmark = pytest.mark.skipif(not shm.available(), reason="shared memory needs Linux memfd")
 
@@ -51,10 +51,10 @@ class Proc:
     def _read(self) -> None:
         assert self.p.stdout is not None
         for line in self.p.stdout:
-            if line.startswith("E "):
-                _, n, ok = line.split()
-                self._events.append((int(n), ok == "1"))
-            else:
+            words = line.split()
+            if len(words) == 3 and words[0] == "E":
+                self._events.append((int(words[1]), words[2] == "1"))
+            else:  # (any other line is kept, not the end of this thread: a test shows it)
                 self.lines.append(line.strip())
 
     def has(self, prefix: str) -> bool:
@@ -138,6 +138,16 @@ def dev_shm() -> set[str]:
         return set()
 
 
+def knows_keep_all_consumers(supplier: StructuredPushSupplier, type_name: str, n: int) -> bool:
+    """Whether the supplier has every subscription of `n` keep-all consumers of this host
+    (each sends its credit subscription last): before, the first events may go in full, or
+    to one of them only (the subscriptions reach it in more than one read)."""
+    supplier.has_subscribers(type_name)  # (takes the subscriptions as they are now)
+    t = supplier._topics[type_name]
+    readers = t.credits.readers if t.credits is not None else []
+    return t.shared and t.keep_all == n and len(readers) == n
+
+
 def test_megabyte_images_reach_consumer_processes_through_shared_memory_whole(
     channel_naming: str, procs: Callable[..., Proc]
 ) -> None:
@@ -168,9 +178,9 @@ def test_a_consumer_lapped_by_its_supplier_never_sees_a_torn_payload(
     eventually(lambda: supplier.has("SENT"), 60)
     assert supplier.line("SENT")[1:] == ["400", "0"]  # keep-last: the supplier never waits
 
-    def settled() -> bool:
-        received, _, dropped, _, _ = slow.stats()
-        return received + dropped >= 400
+    def settled() -> bool:  # every event delivered, or counted as lost or dropped
+        received, missed, dropped, _, _ = slow.stats()
+        return received + dropped + missed >= 400
 
     eventually(settled, 60)
     received, missed, dropped, _, _ = slow.stats()
@@ -251,12 +261,93 @@ def test_a_zero_copy_consumer_gets_read_only_views_that_numpy_cannot_write(
     plain = Recorder(channel)
     for c in (viewer, plain):
         c.set_subscriptions([("r", "Image")])
-    eventually(lambda: supplier.has_subscribers("Image"))
+    eventually(lambda: knows_keep_all_consumers(supplier, "Image", 2), 60)
     data = bytes(range(256)) * 4096
     form = Miro.ImageFormatIDL(512, 256, Miro.IMAGE_RGB8, 1536)
     for n in range(3):
         supplier.push("Image", Miro.ImageEventIDL(Miro.TimeIDL(n, 0), n, form, data))
-    eventually(lambda: len(viewer.events) == 3 and len(plain.events) == 3)
+    eventually(lambda: len(viewer.events) == 3 and len(plain.events) == 3, 60)
     assert supplier._topics["Image"].ring is not None
     assert seen == [("memoryview", False, "refused")] * 3
     assert all(type(e.payload.data) is bytes and e.payload.data == data for e in plain.events)
+
+
+def test_a_keep_all_consumer_killed_with_slots_unread_costs_no_event_before_it_unsubscribes(
+    servers: Callable[[str], Server], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Its lane freed (its lock gone with it), a ring of two slots goes on at once: it does not
+    wait, and drop an event for every consumer, until the dead consumer's subscriptions leave
+    the channel, which a loaded host takes its time over (the subscriptions, credit tables and
+    lanes are made here by hand, so that they stay as long as the test says)."""
+    monkeypatch.setenv("MIRO_SHM", "1")
+    monkeypatch.setenv("MIRO_SHM_SLOTS", "2")
+    supplier = StructuredPushSupplier(EventChannelFactory(servers("r")).create_channel("Lanes"))
+    eventually(lambda: supplier._connected, 30)
+    prefix = supplier._topic("Image").frame
+    tables = [credits.CreditTable() for _ in range(2)]
+    marked = [shm.topic_marker() + prefix, shm.keep_all_marker() + prefix]
+    changes = [
+        (True, sub)
+        for t in tables
+        for sub in (prefix, *marked, t.subscription(credits.credit_marker(), prefix))
+    ]
+    done = threading.Event()
+
+    def subscribe() -> None:
+        supplier._subscriptions_changed(changes)
+        done.set()
+
+    supplier.reactor.call_soon(subscribe)
+    assert done.wait(30) and supplier.has_subscribers("Image")
+    data = bytes(256) * 4096
+    form = Miro.ImageFormatIDL(512, 256, Miro.IMAGE_RGB8, 1536)
+
+    def push(n: int) -> None:
+        supplier.push("Image", Miro.ImageEventIDL(Miro.TimeIDL(n, 0), n, form, data))
+
+    push(0)
+    ring = supplier._topics["Image"].ring
+    assert ring is not None and ring.slots == 2
+    lanes = [shm.Segment(os.getpid(), ring.fd, ring.segment_id, True, 0) for _ in tables]
+    survivor, doomed = lanes
+    survivor.ack(1)
+    doomed.ack(1)  # it read write 0, then dies with write 1 unread
+    push(1)
+    survivor.ack(2)
+    doomed.close()
+    tables[1].close()  # kill -9: its lane's lock and its table go with the process
+    for n in range(2, 6):
+        push(n)
+        survivor.ack(n + 1)
+    assert supplier.dropped == 0
+    survivor.close()
+    tables[0].close()
+
+
+def test_a_keep_all_consumer_of_a_topic_through_two_subscriptions_holds_one_lane(
+    servers: Callable[[str], Server], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Subscribed to r/Image and to r/*, it says twice that it keeps all, and maps the ring
+    once: the ring waits for one lane, not for a second that never comes (every event after the
+    first lap waited the bound and was dropped)."""
+    monkeypatch.setenv("MIRO_SHM", "1")
+    monkeypatch.setenv("MIRO_SHM_SLOTS", "2")
+    channel = EventChannelFactory(servers("r")).create_channel("Twice")
+    supplier = StructuredPushSupplier(channel)
+    everything = Recorder(channel)
+    everything.set_subscriptions([("r", "Image"), ("r", "*")])
+
+    def subscribed() -> bool:
+        supplier.has_subscribers("Image")
+        t = supplier._topics["Image"]
+        return t.shared and t.keep_all == 2 and t.credits is not None and bool(t.credits.readers)
+
+    eventually(subscribed, 60)
+    data = bytes(256) * 4096
+    form = Miro.ImageFormatIDL(512, 256, Miro.IMAGE_RGB8, 1536)
+    for n in range(8):
+        supplier.push("Image", Miro.ImageEventIDL(Miro.TimeIDL(n, 0), n, form, data))
+    eventually(lambda: len(everything.events) + supplier.dropped >= 8, 60)
+    assert supplier.dropped == 0
+    assert [e.payload.frame for e in everything.events] == list(range(8))
+    assert supplier._topics["Image"].ring is not None

@@ -238,6 +238,22 @@ class KeepAllConsumers:
                 found[reader.table_id] = reader
         return list(found.values())
 
+    def lanes(self, frame: bytes, subscriptions: int) -> int:
+        """How many keep-all consumers' lanes a ring of the topic `frame` waits for
+        (transport.shm), given the `subscriptions` after shm.keep_all_marker that match it: one
+        per consumer, so neither a consumer's second subscription that matches the topic nor
+        one of a consumer whose process is gone (kill -9: its unsubscriptions are still on their
+        way through the channel, however loaded the host) is waited for. Only consumers whose
+        table is mapped here are told apart; any other subscription counts. Any thread: a
+        table the reactor thread closes meanwhile is of a consumer that is gone."""
+        per_table: dict[int, tuple[CreditReader, int]] = {}
+        for prefix, reader in self._prefixes:
+            if frame.startswith(prefix):
+                n = per_table.get(reader.table_id, (reader, 0))[1]
+                per_table[reader.table_id] = (reader, n + 1)
+        extra = sum(n - reader.alive() for reader, n in per_table.values())
+        return max(0, subscriptions - extra)
+
     def close(self) -> None:
         for r in self._readers.values():
             r.close()

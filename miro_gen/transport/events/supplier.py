@@ -8,6 +8,7 @@ The overview is transport.events; the bytes are transport.events.frames.
 
 from __future__ import annotations
 
+import functools
 import itertools
 import random
 import threading
@@ -349,7 +350,7 @@ class StructuredPushSupplier:
         # The encoder copies into the slot. On the reactor thread a push does not wait for
         # credits: a keep-all consumer of this process could not return them meanwhile.
         wait = 0.0 if self.reactor.in_reactor_thread() else shm.WAIT_KEEP_ALL
-        d = ring.put(encoded, t.keep_all, wait)
+        d = ring.put(encoded, functools.partial(self._keep_all_lanes, t) if t.keep_all else 0, wait)
         if d is None:
             return b"", b"", None
         frame = b"".join(
@@ -360,6 +361,12 @@ class StructuredPushSupplier:
             )
         )
         return b"", frame, d
+
+    def _keep_all_lanes(self, t: _Topic) -> int:
+        """The keep-all consumers whose lanes `t`'s ring waits for, as the subscriptions are
+        now (a put that waits asks again: a consumer killed meanwhile is not waited for)."""
+        self._subscribed(t)
+        return self._keep_all.lanes(t.frame, t.keep_all) if self._keep_all.marker else t.keep_all
 
     def _batch_head(self, type_hash: str, count: int, flags: int = 0) -> bytes:
         raw = self._raw_hashes.get(type_hash)
