@@ -473,17 +473,18 @@ class Segment:
         finally:
             view.release()
         ok = self.current(d)
+        self.release(d, False)  # (the hold goes first: a slot done is never still held)
         if ok:
             _Q.pack_into(self.mem, _SLOT_AT + d.slot * _SLOT.size + _DONE, d.write + 1)
-        self.release(d, False)
         return data if ok else None
 
     def give_back(self, d: Descriptor) -> None:
         """Done with the reply `d` held in place (`hold`): its slot goes back to the writer."""
         if self.closed:
             return
+        self.release(d, False)  # (the hold goes first: the writer, finding the slot done,
+        # would otherwise find it held too and look again until the hold is gone)
         _Q.pack_into(self.mem, _SLOT_AT + d.slot * _SLOT.size + _DONE, d.write + 1)
-        self.release(d, False)
 
     def supplier_alive(self) -> bool:
         """Whether the supplier still has its segment open (its process is alive)."""
