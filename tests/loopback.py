@@ -4,6 +4,7 @@ they start, a `miro naming` process, and waiting for a condition."""
 from __future__ import annotations
 
 import os
+import random
 import shutil
 import signal
 import socket
@@ -21,8 +22,31 @@ from miro_gen import Server, StructuredEvent, StructuredPushConsumer
 from miro_gen.transport.events import KEEP_ALL
 
 
+def _ephemeral_low() -> int:
+    """The lowest port the kernel hands out to outgoing connections (and to bind(0))."""
+    try:
+        with open("/proc/sys/net/ipv4/ip_local_port_range") as f:
+            return int(f.read().split()[0])
+    except (OSError, ValueError, IndexError):
+        return 32768
+
+
+_EPHEMERAL_LOW = _ephemeral_low()
+
+
 def free_port() -> int:
-    """A TCP port on 127.0.0.1 that nothing listens on (now)."""
+    """A TCP port on 127.0.0.1 that nothing listens on (now), below the kernel's ephemeral
+    range when there is room: a port from bind(0) is one that any process's next connection
+    may take as its source port before the test's process binds it ("Address already in
+    use", seen on a loaded machine)."""
+    for _ in range(50):
+        port = random.randrange(10000, _EPHEMERAL_LOW) if _EPHEMERAL_LOW > 11000 else 0
+        with socket.socket() as s:
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+            return int(s.getsockname()[1])
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
