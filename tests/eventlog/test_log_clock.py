@@ -83,6 +83,29 @@ def test_pause_stops_timers_and_a_jump_keeps_their_phase(
     assert len([t for t in back if t <= back_to + 0.5]) <= 6
 
 
+def test_a_clock_set_back_stands_still_until_the_player_passes_it() -> None:
+    """A player whose sends were held back (a slow keep-all consumer, a thread not scheduled
+    for a while) sets its clock back to the event it sends, in the same epoch. A follower
+    neither goes backwards nor runs on ahead of the replay (it did: a process on --clock log
+    stamped its events with log time past the log's end): it stands still until the player's
+    time passes the time it had reached, and follows it from there."""
+    clock = LogClock()
+    clock.update(T0, 1.0, False, 0)
+    eventually(lambda: clock.time_ns() >= T0 + 300_000_000, 30)
+    clock.update(T0, 0.001, False, 0)  # set back by 0.3 s or more, at a crawl: 300 s behind
+    reached = clock.time_ns()
+    assert reached >= T0 + 300_000_000
+    time.sleep(0.1)
+    assert clock.time_ns() == reached  # standing, not running on from where it was
+    delay = clock.real_delay(0.001)  # a timer due a millisecond on waits for the player
+    assert delay is not None and delay > 100
+    clock.update(T0 + 2 * 10**9, 1.0, False, 0)  # the player passed it: followed again
+    assert clock.time_ns() >= T0 + 2 * 10**9
+    assert clock.real_delay(0.5) == 0.5
+    clock.update(T0 + 10**9, 1.0, True, 0)  # paused behind it: stands where it was
+    assert clock.time_ns() >= T0 + 2 * 10**9 and clock.real_delay(0.1) is None
+
+
 def synthetic_log(path: Path, seconds: float) -> None:
     """A log of ExampleEvents every 0.25 s for `seconds`, logged at 2020-01-01."""
     writer = LogWriter(str(path))
@@ -129,13 +152,20 @@ def test_a_process_on_log_time_publishes_10_events_per_logged_second_at_4x(
     log = tmp_path / "eight_seconds.mcap"
     synthetic_log(log, 8)
     ticks = replay_with_follower(log)
-    stamps = [t["stamp"] / 1e9 for t in ticks]
-    assert all(T0 / 1e9 <= s <= T0 / 1e9 + 8.2 for s in stamps)  # log time, not wall time
-    assert stamps == sorted(stamps)
-    # 10 a logged second, counted rather than timed: at most one each 0.1 s of log time (a
-    # tick that a loaded machine delays skips those it covers), and many more than the 2.5 a
-    # logged second of a publisher on wall time under a 4x replay.
-    assert 40 < len(stamps) <= 83, f"{len(stamps)} events"
+    stamps = [(t["stamp"] - T0) / 1e9 for t in ticks]  # log seconds from the log's start
+    # Log time, not wall time (2020, not now): from the log's start to just past its end (the
+    # follower runs on until the player's pause at the end reaches it, which on a loaded
+    # machine takes a while), never backwards.
+    assert stamps and all(0 <= s <= 8 + 4 for s in stamps), stamps
+    assert stamps == sorted(stamps), stamps
+    # 10 a logged second, counted rather than timed, over the log time it followed (it may
+    # find the player's clock late on a loaded machine; a quarter of the log at least): at
+    # most one each 0.1 s of log time (a tick that a loaded machine delays skips those it
+    # covers), and many more than the 2.5 a logged second of a publisher on wall time under
+    # a 4x replay.
+    span = stamps[-1] - stamps[0]
+    assert span >= 2, stamps
+    assert 5 * span < len(stamps) - 1 <= span / 0.1 + 1, stamps
 
 
 def test_the_clock_option_is_checked() -> None:
