@@ -20,6 +20,11 @@ from collections.abc import Callable
 from typing import NamedTuple
 
 Listener = Callable[[float], object]  # called with the jump of timer time, in seconds
+# Seconds after a player's last clock message that a follower stops extrapolating its time. A
+# player publishes its clock every half second while it plays (eventlog.player.CLOCK_PERIOD):
+# without this bound, a follower of a player that was killed, or whose last message (its pause
+# at the end of the log) was lost as it exited, ran on past the log's end for ever.
+STALE = 2.0
 
 
 class Clock:
@@ -71,7 +76,8 @@ class LogClock(Clock):
     Time never runs backwards within an epoch: a message behind the time this clock has
     reached (a player whose events were held back by a slow keep-all consumer, or that was
     not scheduled for a while, sets its clock back to the event it sends) makes it stand still
-    until the player's time passes it, rather than run on ahead of the replay."""
+    until the player's time passes it, rather than run on ahead of the replay. And it runs on
+    from a message for STALE seconds at most: then it stands until the next one."""
 
     def __init__(self) -> None:
         super().__init__()
@@ -83,7 +89,7 @@ class LogClock(Clock):
         """The player's time, as its last message says."""
         if s.paused or not s.started:
             return s.log_ns
-        return s.log_ns + int((mono - s.anchor) * s.rate * 1e9)
+        return s.log_ns + int(min(mono - s.anchor, STALE) * s.rate * 1e9)
 
     @classmethod
     def _at(cls, s: _State, mono: float) -> int:
@@ -102,8 +108,13 @@ class LogClock(Clock):
         s = self._state
         if s.paused or not s.started:
             return None
-        behind = max(0, s.floor - self._player_at(s, time.monotonic())) / 1e9  # standing
-        return (max(0.0, seconds) + behind) / s.rate
+        mono = time.monotonic()
+        behind = max(0, s.floor - self._player_at(s, mono)) / 1e9  # standing
+        delay = (max(0.0, seconds) + behind) / s.rate
+        vouched = s.anchor + STALE - mono  # real seconds the last message still covers
+        if delay <= vouched:
+            return delay
+        return vouched if vouched > 0 else None  # then it stands until the next message
 
     @property
     def started(self) -> bool:
