@@ -9,6 +9,7 @@ second, received four times as fast as they were logged.
 
 from __future__ import annotations
 
+import itertools
 import signal
 import threading
 import time
@@ -170,16 +171,17 @@ def test_a_process_on_log_time_publishes_10_events_per_logged_second_at_4x(
     # seconds at 4x, should that message be lost), never backwards.
     assert stamps and all(0 <= s <= 8 + STALE * 4 for s in stamps), stamps
     assert stamps == sorted(stamps), stamps
-    # 10 a logged second, counted rather than timed: at most one each 0.1 s of the log time
-    # it reached (a tick that a loaded machine delays skips those it covers; its stamp may
-    # fall in the next period), and, over the log time it followed (it may find the player's
-    # clock late on a loaded machine; a quarter of the log at least), many more than the 2.5
-    # a logged second of a publisher on wall time under a 4x replay.
+    # 10 a logged second, not the 2.5 of a timer on wall time under a 4x replay, counted
+    # rather than timed: at most one each 0.1 s of the log time it reached (a tick that a
+    # loaded machine delays skips those it covers; its stamp may fall in the next period),
+    # and most 0.1 s of log time after the one before (the median gap: a loaded machine that
+    # holds the process back now and then widens some gaps; a wall-time timer's are 0.4 s),
+    # over a quarter of the log at least (it may find the player's clock late).
     said = f"{len(stamps)} ticks from {stamps[0]} to {stamps[-1]} s: {stamps}"
     assert len(stamps) <= stamps[-1] / 0.1 + 0.5, said
-    span = stamps[-1] - stamps[0]
-    assert span >= 2, said
-    assert len(stamps) - 1 > 5 * span, said
+    assert stamps[-1] - stamps[0] >= 2, said
+    gaps = sorted(b - a for a, b in itertools.pairwise(stamps))
+    assert gaps[len(gaps) // 2] < 0.2, said
 
 
 def test_the_clock_option_is_checked() -> None:
