@@ -20,6 +20,11 @@ from collections.abc import Callable
 from typing import NamedTuple
 
 Listener = Callable[[float], object]  # called with the jump of timer time, in seconds
+# Seconds after a player's last clock message that a follower stops extrapolating its time. A
+# player publishes its clock every half second while it plays (eventlog.player.CLOCK_PERIOD):
+# without this bound, a follower of a player that was killed, or whose last message (its pause
+# at the end of the log) was lost as it exited, ran on past the log's end for ever.
+STALE = 2.0
 
 
 class Clock:
@@ -61,11 +66,18 @@ class _State(NamedTuple):
     rate: float
     paused: bool
     epoch: int
+    floor: int = 0  # the time stands here until the player's passes it (a player held back)
 
 
 class LogClock(Clock):
     """The replayed time of a log player, extrapolated between its clock messages. Until the
-    first one arrives, time stands still (at 0): timers wait for the player."""
+    first one arrives, time stands still (at 0): timers wait for the player.
+
+    Time never runs backwards within an epoch: a message behind the time this clock has
+    reached (a player whose events were held back by a slow keep-all consumer, or that was
+    not scheduled for a while, sets its clock back to the event it sends) makes it stand still
+    until the player's time passes it, rather than run on ahead of the replay. And it runs on
+    from a message for STALE seconds at most: then it stands until the next one."""
 
     def __init__(self) -> None:
         super().__init__()
@@ -73,10 +85,15 @@ class LogClock(Clock):
         self._lock = threading.Lock()
 
     @staticmethod
-    def _at(s: _State, mono: float) -> int:
+    def _player_at(s: _State, mono: float) -> int:
+        """The player's time, as its last message says."""
         if s.paused or not s.started:
             return s.log_ns
-        return s.log_ns + int((mono - s.anchor) * s.rate * 1e9)
+        return s.log_ns + int(min(mono - s.anchor, STALE) * s.rate * 1e9)
+
+    @classmethod
+    def _at(cls, s: _State, mono: float) -> int:
+        return max(cls._player_at(s, mono), s.floor)
 
     def time_ns(self) -> int:
         return self._at(self._state, time.monotonic())
@@ -91,7 +108,13 @@ class LogClock(Clock):
         s = self._state
         if s.paused or not s.started:
             return None
-        return max(0.0, seconds) / s.rate
+        mono = time.monotonic()
+        behind = max(0, s.floor - self._player_at(s, mono)) / 1e9  # standing
+        delay = (max(0.0, seconds) + behind) / s.rate
+        vouched = s.anchor + STALE - mono  # real seconds the last message still covers
+        if delay <= vouched:
+            return delay
+        return vouched if vouched > 0 else None  # then it stands until the next message
 
     @property
     def started(self) -> bool:
@@ -110,12 +133,14 @@ class LogClock(Clock):
             old = self._state
             predicted = self._at(old, mono)
             jump = 0.0
+            floor = 0
             if not old.started or epoch != old.epoch:
                 jump = (log_time_ns - predicted) / 1e9
             elif log_time_ns < predicted:
-                # The message took a while to come: never let time run backwards.
-                log_time_ns = predicted
-            self._state = _State(True, log_time_ns, mono, rate, paused, epoch)
+                # Never backwards (the message took a while to come, or the player was held
+                # back): stand still until the player's time passes the time reached.
+                floor = predicted
+            self._state = _State(True, log_time_ns, mono, rate, paused, epoch, floor)
         self._changed(jump)
 
 

@@ -154,9 +154,9 @@ def run_main(main: Callable[[], int | None], prog: str) -> NoReturn:
     SIGTERM (130 for Ctrl-C), also one that came during the imports; one line and status 1
     (2 for a bad command line) for the failures `describe` knows; a traceback for the rest,
     which are defects."""
-    if _install():
-        _State.mode = "raise"
-    try:
+    try:  # (a signal right after the switch to "raise" is caught here too)
+        if _install():
+            _State.mode = "raise"
         if _State.pending is not None:
             _State.pending = None
             raise KeyboardInterrupt

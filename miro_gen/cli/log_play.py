@@ -7,12 +7,16 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
+import threading
 import time
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from miro_gen.cli.eventargs import COMMON, make_server, split_common, topic_arg
 from miro_gen.foxglove import DEFAULT_PORT as FOXGLOVE_PORT
+
+if TYPE_CHECKING:
+    from miro_gen.eventlog.routes import Routes
 
 KEYS = (
     "On a terminal: space pauses and resumes, s (or right) sends the next event, p (or left) "
@@ -191,8 +195,6 @@ def play_main(argv: Sequence[str]) -> int:
 
 
 def _run(p: argparse.ArgumentParser, prog: str, argv: Sequence[str], ns: Any, files: Any) -> int:
-    import threading
-
     from miro_gen.eventlog.keys import key_presses
     from miro_gen.eventlog.player import Player, pace_process
     from miro_gen.eventlog.progress import StatusLine, bar
@@ -290,18 +292,17 @@ def _run(p: argparse.ArgumentParser, prog: str, argv: Sequence[str], ns: Any, fi
     topics = [t.name for t in files.topics() if t.name not in files.excluded]
     topics = [t for t in topics if routes.channel_of(t[0]) is not None]
     try:
-        time.sleep(max(0.0, ns.wait))
-        if ns.wait_subscribed and not all(routes.subscribed(*t) for t in topics):
-            print(f"{prog}: waiting for a consumer of every topic", file=sys.stderr)
-            while not quit_now.is_set() and not all(routes.subscribed(*t) for t in topics):
-                quit_now.wait(0.02)
-        pace_process()  # a replayed event must leave on time
-        player.start()
-        player.play()
-        with key_presses(on_key):
-            while not quit_now.is_set() and not (player.ended.is_set() and not player.loop):
-                quit_now.wait(0.05)
-                progress()
+        quit_now.wait(max(0.0, ns.wait))
+        if ns.wait_subscribed and not quit_now.is_set():
+            _wait_subscribed(prog, routes, topics, quit_now)
+        if not quit_now.is_set():  # (told to stop before it began: nothing is played)
+            pace_process()  # a replayed event must leave on time
+            player.start()
+            player.play()
+            with key_presses(on_key):
+                while not quit_now.is_set() and not (player.ended.is_set() and not player.loop):
+                    quit_now.wait(0.05)
+                    progress()
     except KeyboardInterrupt:
         pass
     finally:
@@ -318,6 +319,25 @@ def _run(p: argparse.ArgumentParser, prog: str, argv: Sequence[str], ns: Any, fi
         print(f"{where}: error: {player.error}", file=sys.stderr)
         return 1
     return 0
+
+
+def _wait_subscribed(
+    prog: str, routes: Routes, topics: list[tuple[str, str]], quit_now: threading.Event
+) -> None:
+    """Wait until every topic played has a consumer (or `quit_now`), saying which have none
+    (again whenever that changes: a consumer that subscribes to some topics only, or that
+    goes away, would otherwise leave the replay waiting without a word)."""
+    said: list[str] = []
+    while not quit_now.is_set():
+        missing = [f"{d}/{t}" for d, t in topics if not routes.subscribed(d, t)]
+        if not missing:
+            return
+        if missing != said:
+            more = f" and {len(missing) - 5} more" if len(missing) > 5 else ""
+            shown = ", ".join(missing[:5]) + more
+            print(f"{prog}: waiting for a consumer of {shown}", file=sys.stderr, flush=True)
+            said = missing
+        quit_now.wait(0.02)
 
 
 def _both(first: Callable[[Any], object], second: Callable[[Any], object]) -> Callable[[Any], None]:

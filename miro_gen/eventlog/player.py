@@ -478,8 +478,9 @@ class Player:
                 if self._playing:
                     if self._fresh and self._now() > event.log_time:
                         # Reading the first events after a start or a seek took time: play
-                        # from them on time, not in a rush to catch up.
+                        # from them on time, not in a rush to catch up (and followers wait).
                         self._rebase(event.log_time)
+                        self._clock_sent = 0.0
                     self._fresh = False
                     ahead = event.log_time - self._now()
                     if ahead <= 0:

@@ -10,12 +10,13 @@ from __future__ import annotations
 import re
 import signal
 import subprocess
+import threading
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
-from eventlog_helpers import T0, proc, read_events, stop, write_log
+from eventlog_helpers import T0, miro, proc, read_events, stop, write_log
 from loopback import NamingProcess, eventually, run_miro
 from mcap.reader import make_reader
 from qt_procs import ServiceProcess
@@ -135,6 +136,51 @@ def test_the_terminal_s_seek_and_speed_keys(naming: str, tmp_path: Path) -> None
         events = received(consumer, sent + 2)
     seqs = [e["seq"] for e in events]
     assert seqs[sent:] == [2, 0], seqs
+
+
+def test_waiting_for_consumers_says_which_topics_have_none_and_stops_on_sigterm(
+    naming: str, tmp_path: Path
+) -> None:
+    """Before: `--wait-subscribed` said "waiting for a consumer of every topic" and nothing
+    more, so a replay left waiting by a consumer of some topics only (or one that went away)
+    looked hung; and SIGTERM while it waited started the replay before it stopped. Now it
+    names the topics without a consumer, again as that changes, and SIGTERM ends it with
+    nothing played."""
+    a = write_log(tmp_path / "a.mcap", [("robot1", n, 10 * n) for n in range(N)])
+    b = write_log(
+        tmp_path / "b.mcap", [("robot1", n, 10 * n + 5) for n in range(N)], type_name="Other"
+    )
+    player = miro(
+        "log", "play", str(a), str(b), "--naming", naming, "--wait", "0", "--wait-subscribed"
+    )
+    said: list[str] = []
+    assert player.stderr is not None
+    reader = threading.Thread(target=lambda: said.extend(player.stderr), daemon=True)  # type: ignore[arg-type]
+    reader.start()
+    consumer = ServiceProcess(
+        "tests/procs/event_printer.py",
+        "--naming",
+        naming,
+        "-MNC",
+        "robot1",
+        "EventChannel",
+        "robot1/ExampleEvent",
+    )
+    try:
+        consumer.wait_line("READY", 60)
+        eventually(lambda: any(line.endswith("consumer of robot1/Other\n") for line in said), 60)
+        player.send_signal(signal.SIGTERM)
+        player.wait(60)
+        reader.join(10)
+    finally:
+        if player.poll() is None:
+            player.kill()
+        consumer.stop()
+    waiting = [line.rstrip() for line in said if "waiting for a consumer of" in line]
+    assert "robot1/ExampleEvent" in waiting[0] and "robot1/Other" in waiting[0], said
+    assert waiting[-1].endswith("waiting for a consumer of robot1/Other"), said
+    assert any("replayed 0 events" in line for line in said), said
+    assert read_events("\n".join(consumer.lines)) == []
 
 
 # ---- cut and merge -----------------------------------------------------------------------------

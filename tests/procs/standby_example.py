@@ -11,6 +11,8 @@ test picks):
                  process, a fork of this one, with no ZeroMQ context before the fork)
     GO N     ->  READY N once server N has bound NAME (taking it over from the run before, as
                  any restart does) and serves
+    GO N S   ->  the same, server N letting the calls it serves take S seconds to finish
+                 when it stops (its drain_timeout; 2 by default)
 
 A server's setData(a, b) with a < 0 prints BUSY N and sleeps -a seconds first. A server ends on
 SIGINT/SIGTERM (unbinding NAME) or SIGKILL, and with this process (PR_SET_PDEATHSIG).
@@ -62,8 +64,11 @@ def serve(number: str, go: int) -> None:
     signal.signal(signal.SIGINT, signal.default_int_handler)
     server = Server(sys.argv)
     say(f"STANDBY {number}")
-    if os.read(go, 16) != b"GO":
+    command, *drain = os.read(go, 64).split()
+    if command != b"GO":
         os._exit(0)
+    if drain:
+        server.drain_timeout = float(drain[0])
     server.add_to_name_service(Example(number), sys.argv[1])
     server.reactor().call_soon(lambda: say(f"READY {number}"))
     server.run()
@@ -84,7 +89,8 @@ def main() -> None:
             pipes[number] = write
             say(f"PID {number} {pid}")
         elif command == "GO":
-            os.write(pipes.pop(number), b"GO")
+            number, _, drain = number.partition(" ")
+            os.write(pipes.pop(number), f"GO {drain}".encode())
 
 
 if __name__ == "__main__":

@@ -49,6 +49,11 @@ TAKEOVER = 0.005  # seconds a servant may keep the leader before another thread 
 WATCH_IDLE = 1.0  # seconds without servants after which the watchdog sleeps until the next one
 STOPPING = "is stopping"  # why a draining server refuses a request
 CLOSE_LINGER_MS = 500  # how long replies sent during a drain may take to leave
+# Seconds a drained server keeps its connections open after answering the calls it was
+# serving: a reply that arrives just before its connection closes is dropped by the caller's
+# ZeroMQ (IMMEDIATE, no reconnection: invoker.py) unless the caller's thread has read it by
+# then, which on a loaded machine it may not have.
+REPLY_GRACE = 0.5
 
 _send, _recv = _Socket.send, _Socket.recv  # without pyzmq's Python wrappers: a call's cost
 _NOBLOCK = int(zmq.NOBLOCK)
@@ -391,12 +396,17 @@ class Dispatcher:
     def drain(self, timeout: float) -> bool:
         """Stop taking requests (each one that comes, or waits in the queue, is answered
         TRANSIENT, completed NO: its caller may go elsewhere) and wait up to `timeout` seconds
-        for the servants that run to finish, their replies sent; whether they all did."""
+        for the servants that run to finish, their replies sent, then REPLY_GRACE seconds for
+        their callers to read them; whether they all did."""
         with self._lock:
             self._draining = True
+            answering = self._serving + self._owed  # calls answered while draining
         self._tell_leader(getattr(self._current, "worker", None), [])  # refuse the queue
         with self._lock:
-            return self._drained.wait_for(lambda: not self._serving and not self._owed, timeout)
+            done = self._drained.wait_for(lambda: not self._serving and not self._owed, timeout)
+        if done and answering:  # their callers read the replies before the connections close
+            time.sleep(REPLY_GRACE)
+        return done
 
     def _paid(self) -> None:
         """(leader) A reply handed back has been sent."""
