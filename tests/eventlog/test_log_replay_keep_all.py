@@ -142,7 +142,7 @@ def test_a_killed_keep_all_consumer_holds_the_replay_back_once_at_most(
     server: Server, naming: str, log: Path
 ) -> None:
     """Killed (kill -9) at its first event, with the replay held back by its credits: the
-    player stops waiting for it at most once (its table's process is gone, or its
+    player stops waiting for it at most once per topic (its table's process is gone, or its
     subscription is), and a keep-all consumer beside it still gets every event."""
     routes, player = player_of(server, log)
     doomed = Counter(naming, 0, delay="0.01")  # a hundred events a second: far behind
@@ -154,8 +154,8 @@ def test_a_killed_keep_all_consumer_holds_the_replay_back_once_at_most(
         assert player.ended.wait(120)
         supplier = routes.routes["robotA"].supplier
         assert (supplier.replayed, supplier.replay_dropped) == (N, 0)
-        stalls = sum(c.flow.stalls for c in supplier._credits.values())
-        assert stalls <= 1  # given up once at most, not per event
+        stalls = [c.flow.stalls for c in supplier._credits.values()]  # a topic per robot
+        assert max(stalls) <= 1, stalls  # given up once at most in each, not per event
         eventually(lambda: beside.stats()[0] >= N, 60, lambda: str(beside.stats()))
         assert beside.stats() == [N, 0, 0, 1]
     finally:

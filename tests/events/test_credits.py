@@ -141,3 +141,22 @@ def test_a_ring_waits_for_one_lane_per_live_keep_all_consumer() -> None:
     a.close()
     assert suppliers.lanes(frame, 3) == 0
     suppliers.close()
+
+
+def test_a_dead_consumer_is_given_up_once_per_flow_when_two_suppliers_share_a_type() -> None:
+    """A replay of two robots has a flow of one type from each (two suppliers): a consumer
+    gone is given up once in each, not again and again as each flow finds the other's credit
+    where it stopped waiting."""
+    t = credits.CreditTable()
+    r = reader_of(t)
+    t.credit(7, "Tick", 20)
+    t.credit(8, "Tick", 21)
+    flows = {s: credits.Flow(credits.type_key("Tick"), window=1) for s in (7, 8)}
+    for s, flow in flows.items():
+        flow.sending(30 + s)  # a frame beyond its credit: the consumer is behind in both
+    t.close()  # gone, as after kill -9
+    for _ in range(5):
+        for s, flow in flows.items():
+            assert flow.room([r], s, 0.0, 1.0)
+    assert [f.stalls for f in flows.values()] == [1, 1]
+    r.close()

@@ -140,7 +140,9 @@ class CreditReader:
         self.entries = entries
         self._seen = 0  # entries looked through so far
         self._found: dict[tuple[int, int], int] = {}  # (supplier, type key) -> entry offset
-        self.stalled: dict[int, int] = {}  # type key -> the credit it stopped being waited at
+        # (supplier, type key) -> the credit it stopped being waited at: per flow, since the
+        # flows of one type from two suppliers (a replay's robots) have credits of their own
+        self.stalled: dict[tuple[int, int], int] = {}
         self.closed = False
 
     def due(self, supplier: int, key: int) -> int | None:
@@ -282,6 +284,7 @@ class Flow:
         """Whether every consumer of `readers` has fewer than `window` frames in flight (or has
         stopped being waited for: dead, or silent for `wait` seconds of waiting)."""
         sent, key = self.sent, self.key
+        mine = (supplier, key)
         lowest: int | None = None
         behind: list[tuple[CreditReader, int]] = []
         for r in readers:
@@ -289,11 +292,11 @@ class Flow:
                 continue
             due = r.due(supplier, key)
             d = -1 if due is None else due  # none read yet: every frame sent is in flight
-            stalled = r.stalled.get(key)
+            stalled = r.stalled.get(mine)
             if stalled is not None:
                 if d == stalled:
                     continue  # not waited for until it returns a credit again
-                del r.stalled[key]
+                del r.stalled[mine]
             if lowest is None or d < lowest:
                 lowest = d
             in_flight = len(sent) - bisect_left(sent, d)
@@ -311,9 +314,9 @@ class Flow:
         waited_out = now - self.blocked_since >= wait
         for r, d in behind:
             if waited_out or not r.alive():
-                r.stalled[key] = d
+                r.stalled[mine] = d
                 self.stalls += 1
-        if waited_out or all(key in r.stalled for r, _ in behind):
+        if waited_out or all(mine in r.stalled for r, _ in behind):
             self.blocked_since = None
             return True
         return False
