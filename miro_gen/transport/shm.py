@@ -278,9 +278,21 @@ class Ring:
             with _FENCE:  # (a locked instruction: the store is seen before the holds are read)
                 pass
             w = self._slot_write[slot]
-            if w < 0 or self._reusable(w) != 1:
+            if w < 0 or not self._held(w) or self._reusable(w) != 1:
                 return slot, gen + 1
             _Q.pack_into(mem, at + _GEN, gen)  # held meanwhile: as it was, for its reader
+
+    def _held(self, w: int) -> bool:
+        """Whether any lane, live or dead, holds write `w`: one look at the hold words, a
+        twentieth of `_reusable`'s walk through the lanes (which then tells a live one)."""
+        if sys.byteorder != "little":
+            return True  # (the words are little-endian: let `_reusable` read them)
+        at = self._lanes_at
+        words = self._mem[at : at + self.lanes * _LANE.size].cast("Q")
+        try:
+            return w + 1 in words[_HOLD // 8 :: _LANE.size // 8].tolist()
+        finally:
+            words.release()
 
     def _free_slot(self, wait: float, keep_all: KeepAll) -> int | None:
         """The next slot in turn that no consumer holds and every keep-all consumer has read
