@@ -14,6 +14,7 @@ import tempfile
 import threading
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 import zmq
 from miro_cli import REPO
@@ -176,6 +177,16 @@ def rss_mb(pid: int) -> float:
             if line.startswith("VmRSS:"):
                 return int(line.split()[1]) / 1024
     raise AssertionError(f"no VmRSS for process {pid}")
+
+
+def alive(pid: int) -> bool:
+    """Whether process `pid` still runs: a zombie waiting for its parent does not, and one its
+    parent reaped between two looks is gone (so read /proc once, and take "no file" as gone)."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except (FileNotFoundError, ProcessLookupError):
+        return False
+    return stat.rsplit(")", 1)[1].split()[0] != "Z"
 
 
 def eventually(

@@ -12,7 +12,7 @@ import textwrap
 from pathlib import Path
 
 import pytest
-from loopback import eventually
+from loopback import alive, eventually
 from miro_cli import REPO
 
 from miro_gen.cli.launch import launch_main
@@ -48,15 +48,6 @@ def said(proc: ServiceProcess) -> list[str]:
 
 def started_pids(proc: ServiceProcess) -> list[int]:
     return [int(re.search(r"started, pid (\d+)", t)[1]) for t in proc.lines if "started, pid" in t]
-
-
-def alive(pid: int) -> bool:
-    """Whether process `pid` still runs (a zombie waiting for its parent does not)."""
-    try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
-    except FileNotFoundError:
-        return False
-    return stat.rsplit(")", 1)[1].split()[0] != "Z"
 
 
 # ---- the file ------------------------------------------------------------------------------------

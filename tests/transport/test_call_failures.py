@@ -15,12 +15,11 @@ import threading
 from collections import Counter
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from pathlib import Path
 
 import Miro
 import pytest
 import zmq
-from loopback import NamingProcess, eventually, service_env
+from loopback import NamingProcess, alive, eventually, service_env
 from repo_paths import TESTS
 
 from miro_gen import Client
@@ -87,11 +86,7 @@ class Servers:
             os.kill(self.pids[number], sig)
 
     def exited(self, number: int) -> bool:
-        try:
-            os.kill(self.pids[number], 0)
-        except ProcessLookupError:
-            return True
-        return Path(f"/proc/{self.pids[number]}/stat").read_text().split(") ")[1][0] == "Z"
+        return not alive(self.pids[number])
 
     def close(self) -> None:
         for number in self.pids:
