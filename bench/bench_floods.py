@@ -31,7 +31,6 @@ from __future__ import annotations
 import argparse
 import os
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -42,14 +41,9 @@ from collections.abc import Callable
 from pathlib import Path
 
 import zmq
+from raw_peers import free_port  # beside this file
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def hwm_mb(pid: int) -> float:

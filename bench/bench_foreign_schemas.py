@@ -31,7 +31,6 @@ import argparse
 import os
 import re
 import shutil
-import socket
 import statistics
 import subprocess
 import sys
@@ -39,15 +38,11 @@ import tempfile
 import time
 from pathlib import Path
 
+from raw_peers import free_port  # beside this file
+
 ROOT = Path(__file__).resolve().parents[1]
 TARGET_S = 1.0
 ROOMY = ["--max-message-size", "64M"]
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def env_for(tree: Path, **extra: str) -> dict[str, str]:

@@ -39,12 +39,13 @@ import argparse
 import json
 import os
 import signal
-import socket
 import statistics
 import subprocess
 import sys
 from pathlib import Path
 from typing import Any
+
+from raw_peers import free_port  # beside this file
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT / "generated"), str(ROOT)]
@@ -164,12 +165,6 @@ client.on("message", (m) => {
   bytes += m.data.byteLength;
 });
 """
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def count(url: str, seconds: float, who: str) -> dict[str, Any]:

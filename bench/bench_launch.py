@@ -32,7 +32,6 @@ import argparse
 import os
 import queue
 import signal
-import socket
 import statistics
 import subprocess
 import sys
@@ -42,16 +41,12 @@ import threading
 import time
 from pathlib import Path
 
+from raw_peers import free_port  # beside this file
+
 ROOT = Path(__file__).resolve().parents[1]
 SERVICES = ROOT / "services"
 TARGET = 0.3  # seconds per service
 READY = "ExampleA is ready"
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def env() -> dict[str, str]:

@@ -46,7 +46,6 @@ import os
 import random
 import shutil
 import signal
-import socket
 import statistics
 import subprocess
 import sys
@@ -55,6 +54,8 @@ import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
+
+from raw_peers import free_port  # beside this file
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT / "generated"), str(ROOT)]
@@ -190,12 +191,6 @@ with open(sys.argv[1], "rb") as f:
 with open("/proc/self/status") as s:
     print(next(l.split()[1] for l in s if l.startswith("VmHWM:")), n)
 """
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def spread(values: list[float], scale: float = 1.0, unit: str = "") -> str:

@@ -29,7 +29,6 @@ import argparse
 import os
 import shutil
 import signal
-import socket
 import statistics
 import subprocess
 import sys
@@ -37,6 +36,8 @@ import tempfile
 import textwrap
 import time
 from pathlib import Path
+
+from raw_peers import free_port  # beside this file
 
 ROOT = Path(__file__).resolve().parents[1]
 LEASE = "3"
@@ -88,12 +89,6 @@ while True:
         time.sleep(0.002)
 print(time.monotonic(), flush=True)
 """
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 class Tree:

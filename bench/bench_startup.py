@@ -28,7 +28,6 @@ import argparse
 import os
 import shutil
 import signal
-import socket
 import statistics
 import subprocess
 import sys
@@ -36,6 +35,8 @@ import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
+
+from raw_peers import free_port  # beside this file
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT / "generated"), str(ROOT)]
@@ -72,12 +73,6 @@ ns = Pyro5.api.locate_ns(host="127.0.0.1", port=int(sys.argv[1]))
 ns.register("bench.Example", daemon.register(Example))
 daemon.requestLoop()
 """
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def rss_mb(pid: int) -> float:

@@ -1,6 +1,6 @@
-"""What the event benches' raw baselines stand on (bench_events.py and events_large.py, which
-runs beside it): a free loopback port, and a raw Zenoh peer's configuration with multicast
-scouting off (nothing leaves loopback)."""
+"""What the benches stand on: a free loopback port (every bench that starts a naming service or
+a raw peer), and a raw Zenoh peer's configuration with multicast scouting off, for the event
+benches' baselines (nothing leaves loopback)."""
 
 from __future__ import annotations
 
