@@ -232,13 +232,18 @@ class KeepAllConsumers:
                 self.refused += 1
         self._prefixes = [(p, self._readers[i]) for p, i in prefixes if i in self._readers]
 
-    def matching(self, frame: bytes) -> list[CreditReader]:
-        """The tables of the consumers that take the topic `frame` (each once)."""
-        found: dict[int, CreditReader] = {}
+    def _matching(self, frame: bytes) -> dict[int, tuple[CreditReader, int]]:
+        """The tables of the consumers that take the topic `frame`, by table id, each with how
+        many of its subscriptions match."""
+        found: dict[int, tuple[CreditReader, int]] = {}
         for prefix, reader in self._prefixes:
             if frame.startswith(prefix):
-                found[reader.table_id] = reader
-        return list(found.values())
+                found[reader.table_id] = (reader, found.get(reader.table_id, (reader, 0))[1] + 1)
+        return found
+
+    def matching(self, frame: bytes) -> list[CreditReader]:
+        """The tables of the consumers that take the topic `frame` (each once)."""
+        return [reader for reader, _ in self._matching(frame).values()]
 
     def lanes(self, frame: bytes, subscriptions: int) -> int:
         """How many keep-all consumers' lanes a ring of the topic `frame` waits for
@@ -248,12 +253,7 @@ class KeepAllConsumers:
         way through the channel, however loaded the host) is waited for. Only consumers whose
         table is mapped here are told apart; any other subscription counts. Any thread: a
         table the reactor thread closes meanwhile is of a consumer that is gone."""
-        per_table: dict[int, tuple[CreditReader, int]] = {}
-        for prefix, reader in self._prefixes:
-            if frame.startswith(prefix):
-                n = per_table.get(reader.table_id, (reader, 0))[1]
-                per_table[reader.table_id] = (reader, n + 1)
-        extra = sum(n - reader.alive() for reader, n in per_table.values())
+        extra = sum(n - reader.alive() for reader, n in self._matching(frame).values())
         return max(0, subscriptions - extra)
 
     def close(self) -> None:
