@@ -64,6 +64,7 @@ def record(naming: str, log: Path) -> list[tuple[str, int, float, str]]:
     recorder = miro("log", "record", "-o", str(log), "--naming", naming, "rover/*")
     channel = EventChannelFactory(camera_process.server).find_or_create_channel("EventChannel")
     camera = StructuredPushSupplier(channel)
+    short = ""  # what the log held when the recorder was not seen to have it all
     try:
         eventually(lambda: sum(camera._subscriptions.values()) >= 2, 30)  # recorder, `seen`
         laser = miro("sim", "laser", "--naming", naming, "-MNC", "rover", "--duration", "2")
@@ -77,11 +78,15 @@ def record(naming: str, log: Path) -> list[tuple[str, int, float, str]]:
         assert laser.returncode == 0, laser_err
         scans = int(laser_out.split("published ")[1].split()[0])
         eventually(lambda: len(seen.events) >= FRAMES + scans, 30)
-        eventually(lambda: logged(log) >= FRAMES + scans, 30)  # the recorder too
+        try:
+            eventually(lambda: logged(log) >= FRAMES + scans, 60)  # the recorder too
+        except AssertionError:
+            short = f"{logged(log)} of {FRAMES + scans} events in the log's closed chunks"
     finally:
         _, record_err = stop(recorder, signal.SIGINT)
         camera_process.stop()
         watcher.stop()
+    assert not short, f"{short}; the recorder said: {record_err}"  # (how many it missed)
     assert recorder.returncode == 0, record_err
     assert seen.missed == 0 and camera.dropped == 0
     return [(e.type_name, e.seq, e.stamp, digest(e)) for e in seen.events]
