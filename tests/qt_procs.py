@@ -25,7 +25,8 @@ class ServiceProcess:
             env=service_env(),
         )
         self.lines: list[str] = []
-        threading.Thread(target=self._read, daemon=True).start()
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
 
     def _read(self) -> None:
         assert self.proc.stdout is not None
@@ -36,13 +37,20 @@ class ServiceProcess:
         """The first line printed so far that starts with `prefix`."""
         return next((x for x in list(self.lines) if x.startswith(prefix)), None)
 
-    def wait_line(self, prefix: str, seconds: float = 15) -> str:
+    def wait_line(self, prefix: str, seconds: float = 60) -> str:
+        """The first line that starts with `prefix`, once printed; fails when the process has
+        ended without it (its output read to the end: a process that printed the line and
+        exited at once is not taken for one that never printed it) or after `seconds` (a
+        guard against a hang)."""
         end = time.monotonic() + seconds
         while time.monotonic() < end:
             found = self.line(prefix)
             if found is not None:
                 return found
-            if self.proc.poll() is not None:
+            if self.proc.poll() is not None and not self._reader.is_alive():
+                found = self.line(prefix)  # (what the reader read before it ended)
+                if found is not None:
+                    return found
                 break
             time.sleep(0.01)
         raise AssertionError(f"{prefix!r} not printed; output: {self.lines}")

@@ -52,8 +52,9 @@ def application() -> QApplication:
     return app
 
 
-def qt_wait(check: Callable[[], bool], seconds: float = 10) -> None:
-    """Process Qt events until check() is true; fail after `seconds`."""
+def qt_wait(check: Callable[[], bool], seconds: float = 30) -> None:
+    """Process Qt events until check() is true; fail after `seconds` (a guard against a hang,
+    not a bound on how long it may take)."""
     app = application()
     end = time.monotonic() + seconds
     while time.monotonic() < end:

@@ -484,8 +484,7 @@ class Player:
                     self._fresh = False
                     ahead = event.log_time - self._now()
                     if ahead <= 0:
-                        self._pos = after(event.key)
-                        self._shown = event.key
+                        self._take(event)
                         return _SEND
                     wait = ahead / 1e9 / self._rate
                     if wait <= SPIN:  # the last fraction of a millisecond: spin, lock free
@@ -501,8 +500,7 @@ class Player:
                 elif self._steps:
                     self._steps.popleft()
                     self._rebase(max(event.log_time, self._anchor_log))
-                    self._pos = after(event.key)
-                    self._shown = event.key
+                    self._take(event)
                     self._clock_sent = 0.0  # followers move to this event's time
                     return _SEND
                 else:
@@ -516,9 +514,16 @@ class Player:
                     continue
                 self._cond.wait(wait)
 
+    def _take(self, event: Event) -> None:
+        """Under the lock: `event` is the next one sent; the position moves past it, and it is
+        counted now, not once its send returns, so that what a pause() leaves counted is what
+        goes out (the send of an event taken before the pause ends after it)."""
+        self._pos = after(event.key)
+        self._shown = event.key
+        self.sent += 1
+
     def _deliver(self, event: Event) -> None:
         self.send(event)
-        self.sent += 1
         self.latest[event.name] = event
         self.history.append(event)
         held = self._hold(event)
@@ -560,7 +565,7 @@ class Player:
                 self._jump(start, at_time(start))
                 return True
             self._jump(target.log_time, after(target.key))
-            self._shown = target.key
+            self._take(target)
         self._deliver(target)
         self._publish()
         return True

@@ -316,6 +316,7 @@ class Server(Client):
         self.drain_timeout = DRAIN_TIMEOUT
         self._armed = False
         self._cleaned = False
+        self._stop_asked = False  # shutdown() was called: run() returns, even if not running yet
         self._on_shutdown: list[Callable[[], object]] = []
         self.hosted_channels: dict[str, EventChannel] = {}  # hosted here, by full name
         # The service object (service/introspection.py): bound when run() starts.
@@ -390,14 +391,22 @@ class Server(Client):
             try:
                 if not signals.pending:
                     bind_service(self, self.service, background=True)  # a consumer's
+                    # The reactor's run() forgets a stop() that came before it: a signal (or
+                    # a shutdown()) from here to its first turn is looked at in that turn.
+                    self._reactor.call_soon(self._stop_if_asked)
                     self._reactor.run()
             finally:
                 signals.cleaning_up()
                 self._cleanup()
 
     def shutdown(self) -> None:
-        """Make `run()` return (from any thread)."""
+        """Make `run()` return (from any thread), also when it has not started serving yet."""
+        self._stop_asked = True
         self._reactor.stop()
+
+    def _stop_if_asked(self) -> None:
+        if self._stop_asked:
+            self._reactor.stop()
 
     def _cleanup(self) -> None:
         if self._cleaned:

@@ -114,7 +114,7 @@ def test_streamed_scans_in_pieces_with_bad_frames(tmp_path: Path, rigs: list[Las
     faults = Faults(corrupt=7, truncate=11, repeat=13)
     rig = LaserRig(tmp_path, faults=faults, split=97)
     rigs.append(rig)
-    eventually(lambda: len(rig.events.events) >= 1, 15)
+    eventually(lambda: len(rig.events.events) >= 1, 60)
     eventually(lambda: rig.device.scans >= 40, 30)
     rig.sim.pause(True)  # the device stops streaming, as if unplugged
     time.sleep(0.2)
@@ -177,14 +177,14 @@ def test_a_scanner_that_disappears_and_returns(
 ) -> None:
     rig = LaserRig(tmp_path, tcp=tcp)
     rigs.append(rig)
-    eventually(lambda: len(rig.events.events) >= 2, 15)
+    eventually(lambda: len(rig.events.events) >= 2, 60)
     rig.sim.pause(True)
     if isinstance(rig.link, PtyLink):
         rig.link.vanish()
     else:  # the scanner's network goes: its connection is reset, it listens again later
         port = rig.link.port
         rig.link.close()
-    eventually(lambda: rig.driver.logged("scanner lost") == 1, 15)
+    eventually(lambda: rig.driver.logged("scanner lost") == 1, 60)
     with pytest.raises(Miro.ETimeOut):
         rig.laser.getWaitFullScan()
     if isinstance(rig.link, PtyLink):
@@ -195,5 +195,5 @@ def test_a_scanner_that_disappears_and_returns(
     rig.sim.pause(False)
     eventually(lambda: rig.driver.logged("scanner connected") == 2, 20)
     before = len(rig.events.events)
-    eventually(lambda: len(rig.events.events) >= before + 3, 15)
+    eventually(lambda: len(rig.events.events) >= before + 3, 60)
     assert rig.laser.getWaitFullScan().range[0].tolist() in expected(rig.scene, rig.geometry)

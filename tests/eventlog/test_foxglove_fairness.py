@@ -61,7 +61,8 @@ def streams(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Streams]:
         yield s
     finally:
         s.stop()
-    assert not any("Traceback" in line for line in s.bridge_err.seen), s.bridge_err.seen
+    said = s.bridge_err.all()
+    assert not any("Traceback" in line for line in said), said
 
 
 def received_share(numbers: list[int]) -> float:

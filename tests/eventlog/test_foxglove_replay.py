@@ -114,7 +114,8 @@ def replay(tmp_path: Path) -> Iterator[Replay]:
         yield r
     finally:
         r.stop()
-    assert not any("Traceback" in line for line in r.player_err.seen), r.player_err.seen
+    said = r.player_err.all()
+    assert not any("Traceback" in line for line in said), said
 
 
 def test_a_seek_from_foxglove_plays_from_the_first_event_after_it(replay: Replay) -> None:

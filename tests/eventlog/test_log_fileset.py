@@ -235,6 +235,36 @@ def test_plays_everything_in_order_and_stops_at_the_end(
     eventually(lambda: p.sent == 160)
 
 
+def test_sent_counts_an_event_being_sent_when_pause_returns(files: FileSet) -> None:
+    """Before: `sent` grew after the send, outside the lock, so an event the play thread had
+    taken but not finished sending when pause() came was counted after pause() had returned;
+    a window's (or the terminal's) count read at the pause was one short of what the
+    consumers then received (a rare failure of the GUI's and the terminal's pause tests).
+    Now an event is counted when it is taken: what pause() leaves counted is what goes out."""
+    inside, release = threading.Event(), threading.Event()
+    sent = Sent()
+
+    def send(event: Event) -> None:
+        sent(event)
+        if len(sent.events) == 3:
+            inside.set()
+            release.wait(30)
+
+    p = Player(files, send, rate=1000.0)
+    p.start()
+    try:
+        p.play()
+        assert inside.wait(30)  # the third event is being sent
+        p.pause()
+        counted = p.sent
+        release.set()
+        p.close(30)  # (its thread joined: the send finished and nothing more was taken)
+        assert counted == p.sent == len(sent.events) == 3, (counted, p.sent)
+    finally:
+        release.set()
+        p.close()
+
+
 def test_next_and_prev_step_through_events_both_ways(player: tuple[Player, Sent]) -> None:
     p, sent = player
     for _ in range(3):

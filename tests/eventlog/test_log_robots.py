@@ -157,16 +157,20 @@ def test_waiting_for_consumers_says_which_topics_have_none_and_stops_on_sigterm(
     assert player.stderr is not None
     reader = threading.Thread(target=lambda: said.extend(player.stderr), daemon=True)  # type: ignore[arg-type]
     reader.start()
-    consumer = ServiceProcess(
-        "tests/procs/event_printer.py",
-        "--naming",
-        naming,
-        "-MNC",
-        "robot1",
-        "EventChannel",
-        "robot1/ExampleEvent",
-    )
+    consumer: ServiceProcess | None = None
     try:
+        # The consumer comes once the player waits (else, started with it, it could subscribe
+        # between the player's binding its channel and its first look, on a loaded machine).
+        eventually(lambda: any("waiting for a consumer of" in line for line in said), 60)
+        consumer = ServiceProcess(
+            "tests/procs/event_printer.py",
+            "--naming",
+            naming,
+            "-MNC",
+            "robot1",
+            "EventChannel",
+            "robot1/ExampleEvent",
+        )
         consumer.wait_line("READY", 60)
         eventually(lambda: any(line.endswith("consumer of robot1/Other\n") for line in said), 60)
         player.send_signal(signal.SIGTERM)
@@ -175,12 +179,13 @@ def test_waiting_for_consumers_says_which_topics_have_none_and_stops_on_sigterm(
     finally:
         if player.poll() is None:
             player.kill()
-        consumer.stop()
+        if consumer is not None:
+            consumer.stop()
     waiting = [line.rstrip() for line in said if "waiting for a consumer of" in line]
     assert "robot1/ExampleEvent" in waiting[0] and "robot1/Other" in waiting[0], said
     assert waiting[-1].endswith("waiting for a consumer of robot1/Other"), said
     assert any("replayed 0 events" in line for line in said), said
-    assert read_events("\n".join(consumer.lines)) == []
+    assert consumer is not None and read_events("\n".join(consumer.lines)) == []
 
 
 # ---- cut and merge -----------------------------------------------------------------------------

@@ -134,7 +134,7 @@ def test_a_robot_on_two_hosts_found_by_discovery_and_operated_live(
         subprocess.run(["kill", "-9", str(pid)], check=True)
         robot.wait_for("exampleA exited with SIGKILL; restart 1")
         robot.wait_for("| ExampleA is ready", count=2)
-        eventually(lambda: shell("nslist").stdout != listing.stdout, 15)
+        eventually(lambda: shell("nslist").stdout != listing.stdout, 60)
         done = shell("call", "robot1/ExampleA", "setData", "7", "8")
         assert done.returncode == 0, done.stderr
         got = shell("call", "robot1/ExampleA", "getData")  # ExampleB sets it too, meanwhile

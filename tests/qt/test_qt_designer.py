@@ -67,7 +67,7 @@ def test_a_designer_form_shows_events_and_makes_calls(naming: str, robot: None) 
         b = form.findChild(QLabel, "event__ExampleEvent__data__b")
         plot = form.findChild(PlotWidget, "event__ExampleEvent__data__b___2")
         assert a is not None and b is not None and plot is not None
-        qt_wait(lambda: a.text() not in ("-", "0"), 15)
+        qt_wait(lambda: a.text() not in ("-", "0"), 60)
         first = float(a.text())
         qt_wait(lambda: float(a.text()) >= first + 5)  # live
         assert float(b.text()) >= 10
@@ -89,7 +89,7 @@ def test_a_designer_form_shows_events_and_makes_calls(naming: str, robot: None) 
         assert not image.isNull() and image.width() > 300
     finally:
         form.close()
-        qt_wait(lambda: not bridge.running, 5)
+        qt_wait(lambda: not bridge.running, 60)
 
 
 def test_calls_that_fail_are_shown_in_the_status_line(naming: str, tmp_path: Path) -> None:
@@ -117,7 +117,7 @@ def test_calls_that_fail_are_shown_in_the_status_line(naming: str, tmp_path: Pat
     setter = form.findChild(QPushButton, "call__ExampleA__setData")
     assert setter is not None
     setter.click()  # refused before any call: the argument is not a number
-    qt_wait(lambda: "'two' is not a float" in status.text(), 5)
+    qt_wait(lambda: "'two' is not a float" in status.text(), 60)
     form.close()
 
 
@@ -208,14 +208,14 @@ def test_a_field_that_events_lack_is_reported_once(
         counter = form.findChild(QLabel, "event__ExampleEvent__counter")
         status = form.findChild(QLabel, "status")
         assert counter is not None and status is not None
-        qt_wait(lambda: counter.text() not in ("", "0"), 15)
+        qt_wait(lambda: counter.text() not in ("", "0"), 60)
         first = int(counter.text())
         qt_wait(lambda: int(counter.text()) >= first + 3)  # the good field goes on
         assert errors == ["event__ExampleEvent__data__c: data has no field 'c' (a, b)"]
         assert status.text() == errors[0]
     finally:
         form.close()
-        qt_wait(lambda: not bridge.running, 5)
+        qt_wait(lambda: not bridge.running, 60)
 
 
 def test_a_form_promoting_to_an_unknown_widget_loads_with_a_warning(

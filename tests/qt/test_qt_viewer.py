@@ -58,7 +58,7 @@ def test_the_viewer_shows_fields_live_and_plots_one(naming: str, example_c: Serv
     window.subscribe()  # retries until ExampleC has bound its channel
     bridge.start()
     try:
-        qt_wait(lambda: window.fields.value_text("counter") is not None, 15)
+        qt_wait(lambda: window.fields.value_text("counter") is not None, 60)
         assert window.fields.paths() == ["counter", "data.a", "data.b"]
         first = int(window.fields.value_text("counter") or 0)
         # Ten events shown, at whatever rate the GUI takes them (a flood is coalesced).
@@ -78,7 +78,7 @@ def test_the_viewer_shows_fields_live_and_plots_one(naming: str, example_c: Serv
         assert distinct_colours(image) > 10  # text, a line, frames: not a blank window
     finally:
         window.close()
-        qt_wait(lambda: not bridge.running, 15)
+        qt_wait(lambda: not bridge.running, 60)
 
 
 def test_the_viewer_command_saves_a_screenshot_and_exits(

@@ -355,3 +355,31 @@ def test_a_parameter_document_that_does_not_fit_is_told_not_traced(tmp_path: Pat
     done = run_script(script, str(doc))
     assert done.returncode == 1
     assert one_line(done.stderr) == f"reader: {doc}:1: error: no Nope"
+
+
+def test_a_stop_that_comes_before_the_reactor_turns_is_not_lost() -> None:
+    """Before: a SIGINT or SIGTERM that came while `Server.run()` started (after its switch to
+    stopping on a signal, before its reactor's loop) called `shutdown()`, whose stop the
+    reactor's `run()` then cleared as it began: the service served on, its Ctrl-C lost (`miro
+    foxglove` stopped just after saying it served ran on in 1 of 10 tries at load 18; a
+    test's server stopped at once ran on as a daemon thread). Now `run()` returns."""
+    import threading
+
+    import zmq
+
+    from miro_gen import Server
+
+    naming = NamingProcess()
+    server = Server(["t", "--naming", naming.endpoint, "-MNC", "early"], context=zmq.Context())
+    running = threading.Thread(target=server.run, daemon=True)
+    try:
+        server.shutdown()  # what the signal's handler does, before the reactor turns
+        running.start()
+        running.join(60)  # (a guard against the hang)
+        assert not running.is_alive(), "run() went on serving after shutdown()"
+    finally:
+        if running.is_alive():
+            server.shutdown()
+            running.join(10)
+        server.close()
+        naming.stop()
