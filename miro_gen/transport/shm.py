@@ -20,7 +20,10 @@ No torn data, no slot reused under a reader:
   lane from a dead one. In its lane the consumer says which write it holds (`hold`: while its
   handler reads the slot, never reused meanwhile) and, for a keep-all consumer, how far it has
   read (`acked`: the credits it returns; the supplier never reuses a slot a keep-all consumer
-  has not read: it waits for them, for at most `WAIT_KEEP_ALL` seconds, then drops the event);
+  has not read: it waits for them, for at most `WAIT_KEEP_ALL` seconds, then goes on without
+  the consumers it waited for, as the credits do (`events.credits`): they are not waited for
+  again until they read on, and the slots they had not read are rewritten, so they drop those
+  events, counted; the others lose none);
 * a keep-last consumer that falls a ring behind finds its slot's generation changed and drops
   the event (the oldest goes first), counted in its `dropped`.
 
@@ -223,16 +226,26 @@ class Ring:
         self._next = 0
         self._lock = threading.Lock()
         self.waited = 0  # puts that waited for a keep-all consumer's credit
+        # lane -> the `acked` it was given up at (waited for `wait` seconds): not waited for
+        # again until it reads on (its acked changes), as the credits' stalled consumers
+        self._stalled: dict[int, int] = {}
+        # (keep-all consumers subscribed, their lanes here) when a put last waited out for the
+        # lanes still missing (a consumer that never maps the ring, or whose subscription
+        # outlived it): as they were then, they are not waited for again
+        self._missing_stalled: tuple[int, int] | None = None
+        self.stalls = 0  # times a keep-all consumer stopped being waited for
         self.closed = False
 
     def put(
         self, payload: bytes | Encoded, keep_all: KeepAll = 0, wait: float = WAIT_KEEP_ALL
     ) -> Descriptor | None:
         """Write `payload` (bytes, or an encoder's value copied straight in) into a slot; its
-        descriptor, or None when no slot frees up within `wait` seconds (keep-all consumers
-        behind, every slot held) or it does not fit. `keep_all`: keep-all consumers
-        subscribed, whose lanes a reused slot waits for (a function: asked again while the put
-        waits, so that one that has gone meanwhile is not waited for to the end)."""
+        descriptor, or None when no slot frees up within `wait` seconds (every slot held, or a
+        keep-all consumer subscribed has not mapped the ring) or it does not fit. Keep-all
+        consumers behind are waited for that long, then given up (`_give_up`). `keep_all`:
+        keep-all consumers subscribed, whose lanes a reused slot waits for (a function: asked
+        again while the put waits, so that one that has gone meanwhile is not waited for to the
+        end)."""
         n = len(payload) if isinstance(payload, bytes) else payload.size
         if n > self.slot_size:
             return None
@@ -286,11 +299,12 @@ class Ring:
     def _free_slot(self, wait: float, keep_all: KeepAll) -> int | None:
         """The next slot in turn that no consumer holds and every keep-all consumer has read
         (waiting up to `wait` seconds for their credits, and for the lanes of `keep_all`
-        consumers to be there)."""
+        consumers to be there; then going on without those waited for, once)."""
         deadline = None
         pause = 0.0001
         while True:
             blocked = False
+            behind = -1  # the write a keep-all consumer's lane has not read yet
             missing: bool | None = None  # a keep-all consumer's lane is not there yet
             first = self._next if self.lease is None else 0
             for k in range(self.slots):
@@ -300,7 +314,8 @@ class Ring:
                 if state == 0 and w >= 0 and keep_all:
                     if missing is None:  # (after _reusable: the lanes of the dead freed)
                         expected = keep_all() if callable(keep_all) else keep_all
-                        missing = self._keep_all_lanes() < expected
+                        lanes = self._keep_all_lanes()
+                        missing = lanes < expected and (expected, lanes) != self._missing_stalled
                     if missing:
                         state = 2  # a keep-all consumer has yet to map the ring: not past it
                 if state == 0:
@@ -308,10 +323,17 @@ class Ring:
                     return slot
                 if state == 2:
                     blocked = True  # a keep-all consumer has not read it: wait, in order
+                    behind = -1 if missing else w
                     break
             if deadline is None:
                 deadline = time.monotonic() + wait
             if time.monotonic() >= deadline:
+                if behind >= 0 and self._give_up(behind):
+                    continue  # the slot is free of them now (unless a reader holds it)
+                if missing:  # waited out too: not waited for again until either count changes
+                    self._missing_stalled = (expected, lanes)
+                    self.stalls += 1
+                    continue
                 return None
             if blocked:
                 self.waited += 1
@@ -330,19 +352,39 @@ class Ring:
 
     def _reusable(self, w: int) -> int:
         """0: a slot last written with write `w` may be written again; 1: a live consumer
-        holds it; 2: a live keep-all consumer has not read it yet."""
+        holds it; 2: a live keep-all consumer (not given up) has not read it yet."""
         if w < 0:
             return 0
-        words = self._lane_words()
+        words, stalled = self._lane_words(), self._stalled
         for lane in itertools.compress(range(self.lanes), words[::4]):  # the claimed lanes
             _, keep_all, acked, hold = words[4 * lane : 4 * lane + 4]
+            if keep_all and lane in stalled:
+                if stalled[lane] != acked:
+                    del stalled[lane]  # it reads on: waited for again
+                elif hold != w + 1:
+                    continue  # given up and not read on since: not waited for
             if hold == w + 1 or (keep_all and acked <= w):
                 base = self._lanes_at + lane * _LANE.size
                 if not self._alive(base):
                     _LANE.pack_into(self._mem, base, 0, 0, 0, 0)  # its process died: free it
+                    stalled.pop(lane, None)
                     continue
                 return 1 if hold == w + 1 else 2
         return 0
+
+    def _give_up(self, w: int) -> bool:
+        """Stop waiting for the keep-all consumers that have not read write `w` after a put
+        waited its time for them (stopped, hung, or too slow): the ring goes on without them
+        until they read on. Whether there was any."""
+        words = self._lane_words()
+        found = False
+        for lane in itertools.compress(range(self.lanes), words[::4]):  # the claimed lanes
+            _, keep_all, acked, _ = words[4 * lane : 4 * lane + 4]
+            if keep_all and acked <= w and lane not in self._stalled:
+                self._stalled[lane] = acked
+                self.stalls += 1
+                found = True
+        return found
 
     def _returned(self, slot: int, w: int) -> int:
         """For a ring with a lease: 0 when the slot last written with write `w` has been

@@ -3,13 +3,14 @@
     python tests/procs/example_server.py [KEY]
 
 Prints `READY <endpoint>` once it serves, then serves until killed. Its servant behaves as
-ExampleA does, plus a test hook: setData(a, b) with a < 0 sleeps for -a seconds first, so that
-tests can catch it in the middle of a call. The key `Quick` serves the same with getData marked
-@nonblocking (run on the reactor thread).
+ExampleA does, plus a test hook: setData(a, b) with a < 0 prints `BUSY` and sleeps for -a
+seconds first, so that tests can catch it in the middle of a call. The key `Quick` serves the
+same with getData marked @nonblocking (run on the reactor thread).
 """
 
 from __future__ import annotations
 
+import os
 import signal
 import sys
 import time
@@ -33,6 +34,7 @@ class Example(Miro__POA.Example):
 
     def setData(self, a: float, b: float) -> None:
         if a < 0:
+            os.write(1, b"BUSY\n")  # the call has reached the servant (one write)
             time.sleep(-a)
         self.data = Miro.ExampleStructIDL(a, b)
 

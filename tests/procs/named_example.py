@@ -3,11 +3,13 @@
     python tests/procs/named_example.py [common options] [NAME ...]
 
 Binds each NAME (default ExampleA) with Server.add_to_name_service, prints `READY`, and serves
-until SIGINT/SIGTERM, then unbinds. setData(a, b) with a < 0 sleeps -a seconds first (a test hook).
+until SIGINT/SIGTERM, then unbinds. setData(a, b) with a < 0 prints `BUSY` and sleeps -a seconds
+first (a test hook: a test that kills the server mid-call waits for that line).
 """
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 from pathlib import Path
@@ -27,6 +29,7 @@ class Example(Miro__POA.Example):
 
     def setData(self, a: float, b: float) -> None:
         if a < 0:
+            os.write(1, b"BUSY\n")  # the call has reached the servant (one write)
             time.sleep(-a)
         self.data = Miro.ExampleStructIDL(a, b)
 
@@ -35,7 +38,7 @@ class Example(Miro__POA.Example):
 
 
 def main() -> None:
-    server = Server(sys.argv, lease=float(__import__("os").environ.get("MIRO_TEST_LEASE", "3")))
+    server = Server(sys.argv, lease=float(os.environ.get("MIRO_TEST_LEASE", "3")))
     for name in sys.argv[1:] or ["ExampleA"]:
         server.add_to_name_service(Example(), name)
     server.reactor().call_soon(lambda: print("READY", flush=True))

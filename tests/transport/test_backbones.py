@@ -182,7 +182,8 @@ def test_a_call_under_way_when_its_server_dies_is_maybe_and_never_sent_again(
 
         t = threading.Thread(target=call)
         t.start()
-        time.sleep(0.5)  # (only to let the request go out; the outcome is not timed)
+        assert proc.stdout is not None
+        assert proc.stdout.readline().strip() == "BUSY"  # the servant runs it now
         proc.send_signal(signal.SIGKILL)
         proc.wait(10)
         t.join(30)
