@@ -16,7 +16,7 @@ import zmq
 
 from miro_gen.eventlog.types import matches
 from miro_gen.log import PeerWarnings, logger
-from miro_gen.transport import sockets
+from miro_gen.transport import shm, sockets
 from miro_gen.transport.events import EventChannel, subscription_prefix
 from miro_gen.transport.events.channel_link import ChannelLink
 from miro_gen.transport.events.frames import (
@@ -76,6 +76,8 @@ class RawEventTap:
         self.socket.setsockopt(zmq.RCVHWM, sockets.queue_limit(context, queue_bytes))
         for prefix in {subscription_prefix(d, t) for d, t in self.filters}:
             self.socket.setsockopt(zmq.SUBSCRIBE, prefix)
+            # It reads no shared memory: its suppliers send it large events in frames.
+            self.socket.setsockopt(zmq.SUBSCRIBE, shm.framed_marker() + prefix)
         resolve = channel.resolve
         self.link = ChannelLink(  # found again when the channel's host restarts
             self.reactor,

@@ -133,11 +133,36 @@ def host_key() -> bytes:
     return b"%s-%x-%x" % (boot.replace(b"-", b"")[:16], pidns, os.getuid())
 
 
+_MARKERS: Final = b"\x01shm-"  # what every topic marker starts with
+
+
 def topic_marker() -> bytes:
     """What precedes the topic of an event sent as a descriptor, and a consumer's subscription
     to them: consumers of other hosts (users, PID namespaces) never match it."""
     key = host_key()
-    return b"\x01shm-" + key + b"\0" if key else b""
+    return _MARKERS + key + b"\0" if key else b""
+
+
+def framed_marker() -> bytes:
+    """What precedes the second subscription to a prefix of a subscriber that takes large
+    events only in frames (shared memory off or unavailable, a raw tap): the marker of no host.
+
+    A supplier cannot count the subscribers of a prefix: the channel's proxy (XSUB) passes a
+    prefix on once to a supplier that connects after its subscribers, and an unsubscription
+    only when the prefix's last subscriber goes. So a subscriber of this host that maps rings
+    and one that needs frames, both subscribed to the same prefix, look like one; a subscriber
+    that needs frames says so with a subscription of its own, as those of other hosts do with
+    their host's marker."""
+    return _MARKERS + b"\0"
+
+
+def marked(subscription: bytes) -> tuple[bytes, bytes] | None:
+    """(marker, prefix) of a subscription after a topic marker (of this host, of another, or
+    `framed_marker`); None for any other subscription."""
+    if not subscription.startswith(_MARKERS):
+        return None
+    end = subscription.find(b"\0", len(_MARKERS))
+    return None if end < 0 else (subscription[: end + 1], subscription[end + 1 :])
 
 
 def keep_all_marker() -> bytes:

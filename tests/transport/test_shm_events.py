@@ -42,7 +42,7 @@ class Proc:
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
             text=True,
-            env=service_env(MIRO_SHM="1", **env),
+            env=service_env(**{"MIRO_SHM": "1", **env}),
         )
         self.lines: list[str] = []
         self._events: list[tuple[int, bool]] = []
@@ -165,6 +165,26 @@ def test_megabyte_images_reach_consumer_processes_through_shared_memory_whole(
     got = keep_last.events()
     assert all(ok for _, ok in got) and [n for n, _ in got] == sorted({n for n, _ in got})
     assert dev_shm() == before  # a memfd: never a file
+
+
+def test_a_supplier_started_after_a_consumer_that_needs_frames_sends_it_every_image(
+    channel_naming: str, procs: Callable[..., Proc]
+) -> None:
+    """A consumer that maps rings and one that does not (shared memory off here; or another
+    host) subscribe to the same prefix, then the camera starts. The channel's proxy passes each
+    prefix on once to a supplier that connects after its subscribers, so by counting them the
+    supplier took the two for one consumer of this host: every image went through shared
+    memory and the other consumer got none (0 of 20). Both get all 20, whole."""
+    mapped = consumer(procs, channel_naming, "0", "0")
+    framed = procs("consume", channel_naming, "Cams", "0", "0", MIRO_SHM="0")
+    eventually(lambda: framed.has("READY"), 30)
+    supplier = procs("supply", channel_naming, "Cams", "20", str(MIB), "0.01")
+    eventually(lambda: supplier.has("SENT"), 60)
+    assert supplier.line("SENT")[1:] == ["20", "0"]
+    for c in (mapped, framed):
+        eventually(lambda c=c: len(c.events()) >= 20, 60)  # type: ignore[misc]
+        assert c.events() == [(n, True) for n in range(20)]
+    assert framed.stats()[4] == 0  # it read no shared memory
 
 
 def test_a_consumer_lapped_by_its_supplier_never_sees_a_torn_payload(

@@ -146,9 +146,12 @@ class StructuredPushConsumer:
         marker = self._marker
         # Large events from this host come through shared memory (its marker); a keep-all
         # consumer says so, so that suppliers wait for it (a prefix no frame starts with).
+        # Without shared memory, on a channel host, it says it needs them in frames.
         markers = [marker] if marker else []
         if marker and self._keep_all:
             markers.append(shm.keep_all_marker())
+        if not marker and self.channel.links is None:
+            markers.append(shm.framed_marker())
         table, credit_marker = self._credits, credits.credit_marker()
 
         def apply() -> None:

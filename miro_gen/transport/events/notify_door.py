@@ -43,7 +43,7 @@ from miro_gen.log import PeerWarnings, logger
 from miro_gen.runtime import registry
 from miro_gen.runtime.cdrstream import encapsulated
 from miro_gen.runtime.rpc import Invoker
-from miro_gen.transport import sockets
+from miro_gen.transport import shm, sockets
 from miro_gen.transport.events.channels import EventChannel
 from miro_gen.transport.events.frames import (
     BATCH_HEADER,
@@ -165,10 +165,13 @@ class _Tap:
 
     def subscribe(self, prefixes: set[bytes]) -> None:
         """Subscribe to exactly `prefixes` (on the reactor thread)."""
+        framed = shm.framed_marker()  # it reads no shared memory: large events in frames
         for p in self.prefixes - prefixes:
             self.socket.setsockopt(zmq.UNSUBSCRIBE, p)
+            self.socket.setsockopt(zmq.UNSUBSCRIBE, framed + p)
         for p in prefixes - self.prefixes:
             self.socket.setsockopt(zmq.SUBSCRIBE, p)
+            self.socket.setsockopt(zmq.SUBSCRIBE, framed + p)
         self.prefixes = prefixes
         self.door.forget_wanted()
 

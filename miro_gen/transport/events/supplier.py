@@ -186,17 +186,23 @@ class StructuredPushSupplier:
         generation = self._generation
         if t.generation != generation:
             subs = list(self._subscriptions.items())
-            plain = sum(n for p, n in subs if t.frame.startswith(p))
-            marker = self._marker
-            # Consumers of this host subscribe to each prefix twice, plainly and after the
-            # marker; anyone else only plainly. All local: large events take shared memory.
-            shared = 0
-            if marker:
-                shared = sum(
-                    n for p, n in subs if p.startswith(marker) and t.shm_frame.startswith(p)
-                )
-            t.subscribed = plain > 0 or shared > 0
-            t.shared = shared > 0 and shared >= plain
+            # Which prefixes are subscribed, not by how many (shm.framed_marker says why).
+            # Consumers of this host subscribe to each prefix twice, plainly and after its
+            # marker; those of other hosts after theirs, and those that need frames after
+            # framed_marker. Large events take shared memory when every plain prefix has its
+            # twin after this host's marker and no subscriber of the topic needs frames.
+            plain = {p for p, _ in subs if t.frame.startswith(p)}
+            mine: set[bytes] = set()
+            framed = False
+            for p, _ in subs:
+                found = shm.marked(p)
+                if found is not None and t.frame.startswith(found[1]):
+                    if self._marker and found[0] == self._marker:
+                        mine.add(found[1])
+                    else:
+                        framed = True
+            t.subscribed = bool(plain or mine)
+            t.shared = bool(mine) and plain <= mine and not framed
             if t.shared:
                 marker = self._keep_all_marker
                 keep_all = marker + t.frame
