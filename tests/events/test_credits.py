@@ -136,6 +136,8 @@ def test_a_ring_waits_for_one_lane_per_live_keep_all_consumer() -> None:
     assert suppliers.lanes(frame, 3) == 2  # three keep-all subscriptions, two consumers
     assert suppliers.lanes(frame, 4) == 3  # and one whose table is not mapped here: counted
     assert suppliers.lanes(b"s\0Tick\0", 1) == 1  # a takes it through s/*: one subscription
+    # A supplier that connected after them heard each keep-all prefix once: still two lanes.
+    assert suppliers.lanes(frame, 2) == 2
     b.close()  # kill -9 of b: nothing of its process holds the table any more
     assert suppliers.lanes(frame, 3) == 1
     a.close()

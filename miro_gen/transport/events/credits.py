@@ -251,10 +251,15 @@ class KeepAllConsumers:
         per consumer, so neither a consumer's second subscription that matches the topic nor
         one of a consumer whose process is gone (kill -9: its unsubscriptions are still on their
         way through the channel, however loaded the host) is waited for. Only consumers whose
-        table is mapped here are told apart; any other subscription counts. Any thread: a
-        table the reactor thread closes meanwhile is of a consumer that is gone."""
-        extra = sum(n - reader.alive() for reader, n in self._matching(frame).values())
-        return max(0, subscriptions - extra)
+        table is mapped here are told apart; any other subscription counts. And never fewer
+        than the live consumers whose tables take it: the channel's proxy passes a prefix on
+        once to a supplier that connects after its subscribers (shm.framed_marker), so two
+        consumers of one prefix may show as one subscription. Any thread: a table the reactor
+        thread closes meanwhile is of a consumer that is gone."""
+        found = self._matching(frame).values()
+        live = sum(reader.alive() for reader, _ in found)
+        extra = sum(n for _, n in found) - live
+        return max(live, subscriptions - extra)
 
     def close(self) -> None:
         for r in self._readers.values():
