@@ -200,3 +200,11 @@ def eventually(
             return
         time.sleep(0.01)
     raise AssertionError(why() if why is not None else "condition not reached in time")
+
+
+def dev_shm() -> set[str]:
+    """Files of ours in /dev/shm (other programs of the machine keep theirs there)."""
+    try:
+        return {n for n in os.listdir("/dev/shm") if "miro" in n}
+    except OSError:
+        return set()

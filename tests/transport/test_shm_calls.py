@@ -11,13 +11,12 @@ import subprocess
 import sys
 import threading
 import zlib
-from collections.abc import Iterator
 from typing import Any
 
 import Miro
 import pytest
 import zmq
-from loopback import eventually, service_env
+from loopback import dev_shm, eventually, service_env
 from procs.camera_server import Camera, pattern
 from repo_paths import TESTS
 
@@ -59,15 +58,6 @@ class CameraProcess:
         self.p.wait(10)
 
 
-@pytest.fixture
-def invoker(monkeypatch: pytest.MonkeyPatch) -> Iterator[ZmqInvoker]:
-    monkeypatch.setenv("MIRO_SHM", "1")
-    invoker = ZmqInvoker(zmq.Context())
-    yield invoker
-    invoker.close()
-    invoker.context.term()
-
-
 def crc(size: int) -> int:
     return zlib.crc32(pattern(size))
 
@@ -76,13 +66,6 @@ def mapped_pools(pid: int | str = "self") -> list[str]:
     """Mappings of servers' pools of replies in a process."""
     with open(f"/proc/{pid}/maps") as f:
         return [line for line in f if "miro-calls" in line]
-
-
-def dev_shm() -> set[str]:
-    try:
-        return {n for n in os.listdir("/dev/shm") if "miro" in n}
-    except OSError:
-        return set()
 
 
 @pytest.mark.parametrize("body", [shm.THRESHOLD - 1, shm.THRESHOLD, shm.THRESHOLD + 1, MIB])

@@ -13,7 +13,7 @@ from collections.abc import Callable, Iterator
 
 import Miro
 import pytest
-from loopback import NamingProcess, Recorder, eventually, service_env
+from loopback import NamingProcess, Recorder, dev_shm, eventually, service_env
 from miro_cli import REPO
 
 from miro_gen import EventChannelFactory, Server, StructuredPushSupplier
@@ -128,14 +128,6 @@ def segments_of(pid: int) -> list[str]:
     except OSError:
         return []
     return found
-
-
-def dev_shm() -> set[str]:
-    """Files of ours in /dev/shm (other programs of the machine keep theirs there)."""
-    try:
-        return {n for n in os.listdir("/dev/shm") if "miro" in n}
-    except OSError:
-        return set()
 
 
 def knows_keep_all_consumers(supplier: StructuredPushSupplier, type_name: str, n: int) -> bool:

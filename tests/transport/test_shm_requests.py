@@ -12,12 +12,11 @@ import struct
 import subprocess
 import sys
 import zlib
-from collections.abc import Iterator
 from typing import Any
 
 import pytest
 import zmq
-from loopback import eventually, service_env
+from loopback import dev_shm, eventually, service_env
 from repo_paths import TESTS
 
 from miro_gen.exceptions import MARSHAL, CompletionStatus
@@ -58,15 +57,6 @@ class BodyProcess:
         self.p.wait(10)
 
 
-@pytest.fixture
-def invoker(monkeypatch: pytest.MonkeyPatch) -> Iterator[ZmqInvoker]:
-    monkeypatch.setenv("MIRO_SHM", "1")
-    invoker = ZmqInvoker(zmq.Context())
-    yield invoker
-    invoker.close()
-    invoker.context.term()
-
-
 def pair_of(reply: Reply | None) -> tuple[int, int]:
     assert reply is not None
     if reply.status is not ReplyStatus.OK:
@@ -82,13 +72,6 @@ def crc_call(invoker: ZmqInvoker, server: BodyProcess, body: bytes, op: str = "c
 def stats(invoker: ZmqInvoker, server: BodyProcess) -> tuple[int, int]:
     """(bodies the server read from callers' shared memory, bodies it could not read)."""
     return pair_of(invoker.invoke(server.ref(), "stats", HEADER_LE))
-
-
-def dev_shm() -> set[str]:
-    try:
-        return {n for n in os.listdir("/dev/shm") if "miro" in n}
-    except OSError:
-        return set()
 
 
 def request_pools(pid: int) -> set[str]:
