@@ -20,6 +20,7 @@ from mcap.records import MessageIndex
 from mcap.stream_reader import StreamReader
 
 from miro_gen import EventChannelFactory, StructuredPushSupplier
+from miro_gen.transport import shm
 
 WIDTH, HEIGHT, FRAMES = 1280, 720, 30
 E = Miro.ImageEncodingIDL
@@ -66,7 +67,12 @@ def record(naming: str, log: Path) -> list[tuple[str, int, float, str]]:
     camera = StructuredPushSupplier(channel)
     short = ""  # what the log held when the recorder was not seen to have it all
     try:
-        eventually(lambda: sum(camera._subscriptions.values()) >= 2, 30)  # recorder, `seen`
+        # The recorder subscribed (a raw tap: after the marker of no host too, which `seen`,
+        # mapping rings here, does not), not only `seen`: the two of its plain and marked
+        # subscriptions were enough before, and a recorder slow to start then missed the first
+        # scans (the log never held them all; once in a CI run at load 11-16).
+        framed = shm.framed_marker()
+        eventually(lambda: any(p.startswith(framed) for p in list(camera._subscriptions)), 60)
         laser = miro("sim", "laser", "--naming", naming, "-MNC", "rover", "--duration", "2")
         eventually(lambda: any(e.type_name == "Laser" for e in seen.events), 30)
         due = time.monotonic()
